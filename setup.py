@@ -1,0 +1,32 @@
+"""Builds the native core, splat_tracer/_core.abi3.so, in place.
+
+    python setup.py build_ext --inplace      (what `make build` runs)
+
+One binary for every Blender from 4.2 to 5.1: it is compiled against the CPython limited
+API of Python 3.11 (abi3), which Python 3.11 to 3.13 all load. This file is only a build
+script; the project is installed as a Blender extension, not as a Python package.
+"""
+from pathlib import Path
+
+from setuptools import Extension, setup
+
+NATIVE = Path("splat_tracer") / "native"
+
+core = Extension(
+    "splat_tracer._core",
+    sources=sorted(str(p) for p in NATIVE.glob("*.cpp")),
+    depends=sorted(str(p) for p in NATIVE.glob("*.h")),
+    language="c++",
+    define_macros=[("Py_LIMITED_API", "0x030B0000")],
+    py_limited_api=True,
+    # Portable x86-64 code (no -march=native): the binary ships inside the extension zip.
+    extra_compile_args=["-std=c++17", "-O3", "-fvisibility=hidden", "-Wall", "-Wextra", "-pthread"],
+    extra_link_args=["-pthread"],
+)
+
+setup(
+    name="splat_tracer_core",
+    version="0.1.0",
+    ext_modules=[core],
+    options={"bdist_wheel": {"py_limited_api": "cp311"}},
+)

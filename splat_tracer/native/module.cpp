@@ -1,0 +1,409 @@
+// Python bindings of the core: `splat_tracer._core`.
+//
+// Built against the CPython limited API (Py_LIMITED_API = 3.11, abi3) so that one binary
+// loads in every Blender from 4.2 (Python 3.11) to 5.1 (Python 3.13). Arrays travel
+// through the buffer protocol: the caller (splat_tracer/core.py) allocates every output
+// with numpy, so this file never needs numpy's C API. Every input is validated here as
+// well, since the module may be called directly: bad input raises, it never crashes.
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <string>
+
+#include "parallel.h"
+#include "render.h"
+#include "splat_scene.h"
+
+namespace {
+
+using namespace splat;
+
+// ---------------------------------------------------------------------------------------
+// Buffers
+
+// A buffer view that releases itself.
+struct View {
+    Py_buffer buf{};
+    bool held = false;
+    ~View() {
+        if (held) PyBuffer_Release(&buf);
+    }
+    template <class T>
+    T *data() const { return static_cast<T *>(buf.buf); }
+    Py_ssize_t dim(int i) const { return buf.shape[i]; }
+};
+
+// Element kinds accepted, by struct-module format letter.
+bool format_matches(const char *format, Py_ssize_t itemsize, char kind) {
+    if (!format) format = "B";
+    char order = '@';
+    if (*format == '@' || *format == '=' || *format == '<' || *format == '>' || *format == '!') order = *format++;
+    const bool little = [] { uint16_t one = 1; return *reinterpret_cast<uint8_t *>(&one) == 1; }();
+    if ((order == '>' || order == '!') && little) return false;
+    if (order == '<' && !little) return false;
+    if (std::strlen(format) != 1) return false;
+    const char f = format[0];
+    switch (kind) {
+        case 'f': return f == 'f' && itemsize == 4;
+        case 'd': return f == 'd' && itemsize == 8;
+        case 'i': return (f == 'i' || f == 'l') && itemsize == 4;
+        case 'B': return (f == 'B' || f == '?') && itemsize == 1;
+    }
+    return false;
+}
+
+const char *kind_name(char kind) {
+    switch (kind) {
+        case 'f': return "float32";
+        case 'd': return "float64";
+        case 'i': return "int32";
+        case 'B': return "uint8 or bool";
+    }
+    return "?";
+}
+
+// Gets a C-contiguous buffer of `kind` with `ndim` dimensions; a positive entry of
+// `shape` must match exactly, -1 means any. Sets a Python exception and returns false
+// otherwise.
+bool get_array(PyObject *obj, const char *name, char kind, int ndim, const Py_ssize_t *shape,
+               bool writable, View &view) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &view.buf, flags) != 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous%s %s array", name,
+                     writable ? " writable" : "", kind_name(kind));
+        return false;
+    }
+    view.held = true;
+    if (!format_matches(view.buf.format, view.buf.itemsize, kind)) {
+        PyErr_Format(PyExc_TypeError, "%s must have dtype %s (got format '%s')", name, kind_name(kind),
+                     view.buf.format ? view.buf.format : "B");
+        return false;
+    }
+    if (view.buf.ndim != ndim) {
+        PyErr_Format(PyExc_ValueError, "%s must have %d dimension(s), got %d", name, ndim, view.buf.ndim);
+        return false;
+    }
+    for (int i = 0; i < ndim; ++i) {
+        if (shape[i] >= 0 && view.buf.shape[i] != shape[i]) {
+            PyErr_Format(PyExc_ValueError, "%s has size %zd along axis %d, expected %zd", name,
+                         view.buf.shape[i], i, shape[i]);
+            return false;
+        }
+    }
+    return true;
+}
+
+// Runs `fn` without the GIL, turning C++ exceptions into Python ones. Returns false with
+// a Python exception set when `fn` threw.
+template <class F>
+bool without_gil(F &&fn) {
+    std::string message;
+    PyObject *type = nullptr;
+    Py_BEGIN_ALLOW_THREADS
+    try {
+        fn();
+    } catch (const InputError &e) {
+        type = PyExc_ValueError, message = e.what();
+    } catch (const std::bad_alloc &) {
+        type = PyExc_MemoryError, message = "out of memory";
+    } catch (const std::exception &e) {
+        type = PyExc_RuntimeError, message = e.what();
+    }
+    Py_END_ALLOW_THREADS
+    if (type) PyErr_SetString(type, message.c_str());
+    return type == nullptr;
+}
+
+// ---------------------------------------------------------------------------------------
+// Scene
+
+struct SceneObject {
+    PyObject_HEAD
+    SplatScene *scene;
+    int threads;
+};
+
+PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "threads", nullptr};
+    PyObject *oc, *on, *orad, *ocol = Py_None;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|Oi", const_cast<char **>(kwlist), &oc, &on, &orad,
+                                     &ocol, &threads))
+        return nullptr;
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    View c, n, r, col;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(oc, "centres", 'f', 2, s3, false, c)) return nullptr;
+    const Py_ssize_t count = c.dim(0);
+    Py_ssize_t sn[2] = {count, 3}, s1[1] = {count};
+    if (!get_array(on, "normals", 'f', 2, sn, false, n)) return nullptr;
+    if (!get_array(orad, "radii", 'f', 1, s1, false, r)) return nullptr;
+    if (ocol != Py_None && !get_array(ocol, "colours", 'f', 2, sn, false, col)) return nullptr;
+
+    SplatScene *scene = nullptr;
+    if (!without_gil([&] {
+            scene = new SplatScene(c.data<float>(), n.data<float>(), r.data<float>(),
+                                   col.held ? col.data<float>() : nullptr, size_t(count), threads);
+        }))
+        return nullptr;
+    auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
+    PyObject *self = alloc(type, 0);
+    if (!self) {
+        delete scene;
+        return nullptr;
+    }
+    reinterpret_cast<SceneObject *>(self)->scene = scene;
+    reinterpret_cast<SceneObject *>(self)->threads = threads;
+    return self;
+}
+
+void Scene_dealloc(PyObject *self) {
+    delete reinterpret_cast<SceneObject *>(self)->scene;
+    PyTypeObject *type = Py_TYPE(self);
+    auto free_fn = reinterpret_cast<freefunc>(PyType_GetSlot(type, Py_tp_free));
+    free_fn(self);
+    Py_DECREF(type);
+}
+
+const SplatScene &scene_of(PyObject *self) { return *reinterpret_cast<SceneObject *>(self)->scene; }
+
+int threads_arg(PyObject *self, int requested) {
+    return requested > 0 ? requested : reinterpret_cast<SceneObject *>(self)->threads;
+}
+
+PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
+                                   "out_front", "out_normal", "threads", "brute_force", nullptr};
+    PyObject *oo, *od, *ot, *oid, *ofr, *onrm = Py_None;
+    double tmin, tmax;
+    int threads = 0, brute = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|Oip", const_cast<char **>(kwlist), &oo, &od, &tmin,
+                                     &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute))
+        return nullptr;
+    if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
+        return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers");
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    View o, d, t, id, fr, nrm;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(oo, "origins", 'f', 2, s3, false, o)) return nullptr;
+    const Py_ssize_t count = o.dim(0);
+    Py_ssize_t sn[2] = {count, 3}, s1[1] = {count};
+    if (!get_array(od, "directions", 'f', 2, sn, false, d)) return nullptr;
+    if (!get_array(ot, "out_t", 'f', 1, s1, true, t)) return nullptr;
+    if (!get_array(oid, "out_id", 'i', 1, s1, true, id)) return nullptr;
+    if (!get_array(ofr, "out_front", 'B', 1, s1, true, fr)) return nullptr;
+    if (onrm != Py_None && !get_array(onrm, "out_normal", 'f', 2, sn, true, nrm)) return nullptr;
+
+    const SplatScene &scene = scene_of(self);
+    const float *po = o.data<float>(), *pd = d.data<float>();
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const float *a = po + 3 * i, *b = pd + 3 * i;
+        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i);
+        if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
+            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i);
+    }
+    float *pt = t.data<float>(), *pn = nrm.held ? nrm.data<float>() : nullptr;
+    int32_t *pid = id.data<int32_t>();
+    uint8_t *pfr = fr.data<uint8_t>();
+    constexpr size_t kChunk = 1024;  // rays per task: small enough to balance, large enough to amortise
+    const size_t chunks = (size_t(count) + kChunk - 1) / kChunk;
+    if (!without_gil([&] {
+            parallel_for(
+                chunks, threads_arg(self, threads),
+                [&](size_t chunk) {
+                    const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
+                    for (size_t i = chunk * kChunk; i < end; ++i) {
+                        Ray ray;
+                        ray.o = Vec3(po[3 * i], po[3 * i + 1], po[3 * i + 2]);
+                        ray.d = normalize(Vec3(pd[3 * i], pd[3 * i + 1], pd[3 * i + 2]));
+                        ray.tmin = float(tmin), ray.tmax = float(tmax);
+                        const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray);
+                        pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+                        if (pn) {
+                            const Vec3 n = h.valid() ? scene.normal(h.id) : Vec3();
+                            pn[3 * i] = n.x, pn[3 * i + 1] = n.y, pn[3 * i + 2] = n.z;
+                        }
+                    }
+                },
+                [](size_t) { return true; });
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window",
+                                   "background", "out_rgba", "out_depth", "out_normal", "threads",
+                                   "progress", "tile_size", nullptr};
+    PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = 32;
+    float bg[4];
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOi", const_cast<char **>(kwlist), &om,
+                                     &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
+                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size))
+        return nullptr;
+    if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive");
+    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || x0 + w > width || y0 + h > height)
+        return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w,
+                            h, width, height);
+    if (tile_size <= 0 || tile_size > 4096) return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096");
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (progress != Py_None && !PyCallable_Check(progress))
+        return PyErr_Format(PyExc_TypeError, "progress must be callable or None");
+
+    View m, pos, fwd, rgba, depth, normal;
+    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3}, sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
+    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m)) return nullptr;
+    if (!get_array(opos, "position", 'd', 1, s3, false, pos)) return nullptr;
+    if (!get_array(ofwd, "forward", 'd', 1, s3, false, fwd)) return nullptr;
+    if (!get_array(orgba, "out_rgba", 'f', 3, sr, true, rgba)) return nullptr;
+    if (odepth != Py_None && !get_array(odepth, "out_depth", 'f', 2, sd, true, depth)) return nullptr;
+    if (onormal != Py_None && !get_array(onormal, "out_normal", 'f', 3, sn, true, normal)) return nullptr;
+
+    Camera cam;
+    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
+    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
+    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
+    for (double v : cam.local_from_ndc)
+        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite");
+    for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
+            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite");
+    for (float v : bg)
+        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "background must be finite");
+
+    RenderTarget target;
+    target.width = width, target.height = height, target.x0 = x0, target.y0 = y0, target.w = w, target.h = h;
+    target.rgba = rgba.data<float>();
+    target.depth = depth.held ? depth.data<float>() : nullptr;
+    target.normal = normal.held ? normal.data<float>() : nullptr;
+    RenderSettings settings;
+    std::copy(bg, bg + 4, settings.background);
+    settings.tile_size = tile_size;
+    Renderer renderer(scene_of(self), cam, target, settings);
+    const size_t tiles = renderer.tile_count();
+
+    // The progress callback runs on this (the calling) thread, with the GIL, between
+    // waits; it returns True to stop. An exception from it stops the render and is
+    // re-raised.
+    bool callback_failed = false, completed = false;
+    PyThreadState *saved = nullptr;
+    auto poll = [&](size_t done) {
+        if (progress == Py_None) return true;
+        PyEval_RestoreThread(saved);
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
+        bool go_on = false;
+        if (!res) {
+            callback_failed = true;
+        } else {
+            int stop = PyObject_IsTrue(res);
+            Py_DECREF(res);
+            if (stop < 0) callback_failed = true;
+            go_on = stop == 0;
+        }
+        saved = PyEval_SaveThread();
+        return go_on;
+    };
+    std::string message;
+    PyObject *error_type = nullptr;
+    saved = PyEval_SaveThread();
+    try {
+        completed = parallel_for(tiles, threads_arg(self, threads), [&](size_t t) { renderer.render_tile(t); }, poll);
+    } catch (const std::bad_alloc &) {
+        error_type = PyExc_MemoryError, message = "out of memory";
+    } catch (const std::exception &e) {
+        error_type = PyExc_RuntimeError, message = e.what();
+    }
+    PyEval_RestoreThread(saved);
+    if (callback_failed) return nullptr;  // the callback's exception is still set
+    if (error_type) {
+        PyErr_SetString(error_type, message.c_str());
+        return nullptr;
+    }
+    if (progress != Py_None) {  // a last report, so that callers see 100 %
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(completed ? tiles : 0), Py_ssize_t(tiles));
+        if (!res) return nullptr;
+        Py_DECREF(res);
+    }
+    return PyBool_FromLong(completed);
+}
+
+PyObject *Scene_len(PyObject *self, void *) { return PyLong_FromSize_t(scene_of(self).size()); }
+
+PyObject *Scene_bounds(PyObject *self, void *) {
+    const AABB &b = scene_of(self).bounds();
+    if (b.empty()) Py_RETURN_NONE;
+    return Py_BuildValue("((ddd)(ddd))", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
+}
+
+PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
+    const BVH &bvh = scene_of(self).bvh();
+    Py_ssize_t leaves = 0, max_leaf = 0;
+    for (const BVHNode &n : bvh.nodes)
+        if (n.leaf()) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count);
+    return Py_BuildValue("{s:n,s:n,s:i,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
+                         bvh.depth(), "max_leaf_size", max_leaf);
+}
+
+PyMethodDef Scene_methods[] = {
+    {"trace", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace)), METH_VARARGS | METH_KEYWORDS,
+     "trace(origins, directions, tmin, tmax, out_t, out_id, out_front, out_normal=None, threads=0, "
+     "brute_force=False)\n--\n\nNearest hit per ray, written into the out_ arrays (see core.py)."},
+    {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_render)), METH_VARARGS | METH_KEYWORDS,
+     "render(local_from_ndc, position, forward, width, height, window, background, out_rgba, "
+     "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32)\n--\n\n"
+     "Renders a window of an image; returns False when progress() asked to stop."},
+    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH."},
+    {nullptr, nullptr, 0, nullptr},
+};
+
+PyGetSetDef Scene_getset[] = {
+    {"size", Scene_len, nullptr, "Number of splats.", nullptr},
+    {"bounds", Scene_bounds, nullptr, "((xmin, ymin, zmin), (xmax, ymax, zmax)) of all discs, or None.", nullptr},
+    {nullptr, nullptr, nullptr, nullptr, nullptr},
+};
+
+PyType_Slot Scene_slots[] = {
+    {Py_tp_new, reinterpret_cast<void *>(Scene_new)},
+    {Py_tp_dealloc, reinterpret_cast<void *>(Scene_dealloc)},
+    {Py_tp_methods, Scene_methods},
+    {Py_tp_getset, Scene_getset},
+    {Py_tp_doc, const_cast<char *>("Scene(centres, normals, radii, colours=None, threads=0): splats and their BVH.")},
+    {0, nullptr},
+};
+
+PyType_Spec Scene_spec = {"splat_tracer._core.Scene", sizeof(SceneObject), 0, Py_TPFLAGS_DEFAULT, Scene_slots};
+
+PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(resolve_threads(0)); }
+
+PyMethodDef module_methods[] = {
+    {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
+    {nullptr, nullptr, 0, nullptr},
+};
+
+int module_exec(PyObject *module) {
+    PyObject *type = PyType_FromSpec(&Scene_spec);
+    if (!type) return -1;
+    if (PyModule_AddObject(module, "Scene", type) < 0) {
+        Py_DECREF(type);
+        return -1;
+    }
+    if (PyModule_AddObject(module, "PARALLEL_COSINE", PyFloat_FromDouble(kParallelCosine)) < 0) return -1;
+    return 0;
+}
+
+PyModuleDef_Slot module_slots[] = {{Py_mod_exec, reinterpret_cast<void *>(module_exec)}, {0, nullptr}};
+
+PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_tracer (see core.py).", 0,
+                          module_methods, module_slots, nullptr, nullptr, nullptr};
+
+}  // namespace
+
+PyMODINIT_FUNC PyInit__core(void) { return PyModuleDef_Init(&module_def); }

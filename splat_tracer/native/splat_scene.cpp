@@ -1,0 +1,108 @@
+#include "splat_scene.h"
+
+#include <cmath>
+
+namespace splat {
+namespace {
+
+bool finite3(const float *v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+[[noreturn]] void bad_splat(size_t i, const char *what) {
+    throw InputError("splat " + std::to_string(i) + ": " + what);
+}
+
+}  // namespace
+
+SplatScene::SplatScene(const float *centres, const float *normals, const float *radii,
+                       const float *colours, size_t n, int threads) {
+    if (n >= size_t(INT32_MAX)) throw InputError("too many splats (ids are 32-bit)");
+    normals_.resize(n);
+    colours_.assign(n, Vec3(1.f, 1.f, 1.f));
+    radii_.assign(radii, radii + n);
+    std::vector<AABB> boxes(n);
+    std::vector<Vec3> centre(n);
+    for (size_t i = 0; i < n; ++i) {
+        const float *c = centres + 3 * i, *nv = normals + 3 * i;
+        if (!finite3(c)) bad_splat(i, "centre is not finite");
+        if (!finite3(nv)) bad_splat(i, "normal is not finite");
+        if (!(std::isfinite(radii[i]) && radii[i] > 0.f)) bad_splat(i, "radius must be finite and > 0");
+        const double len = std::sqrt(double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2]);
+        if (!(len > 0.0)) bad_splat(i, "normal has zero length");
+        normals_[i] = Vec3(float(nv[0] / len), float(nv[1] / len), float(nv[2] / len));
+        if (colours) {
+            const float *col = colours + 3 * i;
+            if (!finite3(col)) bad_splat(i, "colour is not finite");
+            colours_[i] = Vec3(col[0], col[1], col[2]);
+        }
+        centre[i] = Vec3(c[0], c[1], c[2]);
+        boxes[i] = disc_bounds(centre[i], normals_[i], radii[i]);
+        bounds_.grow(boxes[i]);
+    }
+    bvh_.build(boxes, threads);
+    splats_.resize(n);
+    for (size_t k = 0; k < n; ++k) {
+        const uint32_t i = bvh_.prim_order[k];
+        splats_[k] = PackedSplat{centre[i], radii_[i], normals_[i], int32_t(i)};
+    }
+}
+
+Hit SplatScene::intersect(const Ray &ray) const {
+    Hit best;
+    if (splats_.empty()) return best;
+    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
+    const BVHNode *nodes = bvh_.nodes.data();
+    struct Pending {
+        uint32_t node;
+        float entry;
+    } stack[kStackSize];
+    int sp = 0;
+    uint32_t node = 0;
+    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return best;
+    for (;;) {
+        const BVHNode &nd = nodes[node];
+        if (nd.leaf()) {
+            for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
+                const PackedSplat &s = splats_[k];
+                DiscHit h;
+                if (intersect_disc(ray, s.c, s.n, s.r, &h) && closer(h.t, s.id, best)) {
+                    best.t = h.t, best.id = s.id, best.front = h.front;
+                }
+            }
+        } else {
+            // Boxes are cut at the best hit so far (inclusive, so equal-t hits with a
+            // smaller id are still found); the nearer child is visited first.
+            const float tmax = std::fmin(ray.tmax, best.t);
+            uint32_t a = nd.first, b = nd.first + 1;
+            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
+            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
+            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
+            if (ta != kInfinity) {
+                if (tb != kInfinity) stack[sp++] = {b, tb};
+                node = a;
+                continue;
+            }
+        }
+        // Pop, skipping nodes that the best hit has since moved in front of.
+        for (;;) {
+            if (sp == 0) return best;
+            --sp;
+            if (stack[sp].entry <= best.t) {
+                node = stack[sp].node;
+                break;
+            }
+        }
+    }
+}
+
+Hit SplatScene::intersect_brute_force(const Ray &ray) const {
+    Hit best;
+    for (const PackedSplat &s : splats_) {
+        DiscHit h;
+        if (intersect_disc(ray, s.c, s.n, s.r, &h) && closer(h.t, s.id, best)) {
+            best.t = h.t, best.id = s.id, best.front = h.front;
+        }
+    }
+    return best;
+}
+
+}  // namespace splat

@@ -1,0 +1,59 @@
+// The splat scene: discs (centre, unit normal, radius, colour) in one local frame, and
+// the BVH over their tight bounds. Immutable once built, so any number of threads may
+// trace it at once.
+#pragma once
+
+#include <cstddef>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "bvh.h"
+#include "disc.h"
+
+namespace splat {
+
+// One splat as the traversal reads it: 32 bytes, stored in BVH leaf order.
+struct PackedSplat {
+    Vec3 c;
+    float r;
+    Vec3 n;
+    int32_t id;  // index in the input arrays
+};
+
+// Raised for input that cannot be a splat scene; the bindings turn it into ValueError.
+struct InputError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+class SplatScene {
+  public:
+    // `centres`, `normals` (any non-zero length; normalised here) and `colours` are n x 3
+    // row-major, `radii` has n entries; `colours` may be null (white). Throws InputError
+    // naming the first offending splat when a value is not finite, a normal is zero or a
+    // radius is not positive.
+    SplatScene(const float *centres, const float *normals, const float *radii,
+               const float *colours, size_t n, int threads);
+
+    size_t size() const { return splats_.size(); }
+    const AABB &bounds() const { return bounds_; }
+    const BVH &bvh() const { return bvh_; }
+
+    Vec3 normal(int32_t id) const { return normals_[id]; }
+    Vec3 colour(int32_t id) const { return colours_[id]; }
+    float radius(int32_t id) const { return radii_[id]; }
+
+    // Nearest hit in (ray.tmin, ray.tmax), either facing.
+    Hit intersect(const Ray &ray) const;
+    // The same answer by testing every splat: the reference the tests compare against.
+    Hit intersect_brute_force(const Ray &ray) const;
+
+  private:
+    std::vector<PackedSplat> splats_;  // BVH order
+    std::vector<Vec3> normals_, colours_;
+    std::vector<float> radii_;
+    AABB bounds_;
+    BVH bvh_;
+};
+
+}  // namespace splat
