@@ -1,0 +1,18 @@
+"""Operators: importing clouds (File > Import, drag-and-drop)."""
+import bpy
+
+from .import_cloud import SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_import_cloud, menu_import
+
+classes = (SPLAT_TRACER_OT_import_cloud, SPLAT_TRACER_FH_ply)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.TOPBAR_MT_file_import.append(menu_import)
+
+
+def unregister():
+    bpy.types.TOPBAR_MT_file_import.remove(menu_import)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

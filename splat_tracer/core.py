@@ -1,0 +1,194 @@
+"""The splat ray tracer's core, usable from plain Python (no Blender needed).
+
+    from splat_tracer import core
+    scene = core.Scene(centres, normals, radii)            # (N,3), (N,3), (N,) arrays
+    hits = scene.trace(origins, directions)                 # nearest hit per ray
+    cam = core.Camera.look_at(eye, target, fov_y=40, aspect=4/3)
+    image = scene.render(cam, 640, 480)                     # image.rgba, .depth, .normal
+
+Everything heavy runs in the compiled module `_core` (BVH, intersection, threads). This
+file turns numpy arrays into the contiguous float32 buffers it wants and allocates the
+outputs. Coordinates are those of one local frame: a caller with georeferenced data
+subtracts a float64 origin first (see `local_frame`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from . import _core
+
+PARALLEL_COSINE = _core.PARALLEL_COSINE
+hardware_threads = _core.hardware_threads
+
+
+def _f32(a, name: str, shape: tuple) -> np.ndarray:
+    arr = np.ascontiguousarray(a, dtype=np.float32)
+    if arr.ndim != len(shape) or any(s not in (-1, d) for s, d in zip(shape, arr.shape)):
+        want = "x".join("N" if s == -1 else str(s) for s in shape)
+        raise ValueError(f"{name} must have shape {want}, got {arr.shape}")
+    return arr
+
+
+def local_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Splits float64 points into (origin, float32 offsets from it).
+
+    The origin is the centre of the bounding box, rounded to a float32 value so that it
+    can be stored exactly (e.g. as a Blender object location). Subtracting it in float64
+    before the cast keeps full precision for georeferenced scans (1e5 to 1e7 metres).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.size == 0:
+        return np.zeros(3), np.zeros((0, 3), np.float32)
+    origin = ((pts.min(axis=0) + pts.max(axis=0)) * 0.5).astype(np.float32).astype(np.float64)
+    return origin, (pts - origin).astype(np.float32)
+
+
+class TraceResult(NamedTuple):
+    t: np.ndarray       # (N,) float32 distance along the normalised direction; inf on a miss
+    id: np.ndarray      # (N,) int32 splat index, -1 on a miss
+    front: np.ndarray   # (N,) bool, the ray meets the side the splat normal points to
+    normal: Optional[np.ndarray]  # (N,3) float32 splat normal (zeros on a miss), if asked for
+
+
+class RenderResult(NamedTuple):
+    rgba: np.ndarray                # (h, w, 4) float32, top row first
+    depth: Optional[np.ndarray]     # (h, w) planar depth along the view axis; 1e10 on background
+    normal: Optional[np.ndarray]    # (h, w, 3) unit normals; zeros on background
+    completed: bool                 # False when progress() asked to stop
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole or orthographic camera, as the core consumes it.
+
+    local_from_ndc: 4x4 float64 mapping OpenGL normalised device coordinates (z = -1 on the
+    near clipping plane, +1 on the far one) to points of the scene's local frame.
+    position / forward: camera centre and unit view axis, for planar depth.
+    """
+
+    local_from_ndc: np.ndarray
+    position: np.ndarray
+    forward: np.ndarray
+
+    @classmethod
+    def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0)) -> "Camera":
+        """From a projection matrix (camera space to clip space, OpenGL convention, as
+        Blender's `Object.calc_matrix_camera` returns) and the camera's rigid world matrix
+        (looking down its local -Z); `origin` is the scene's local-frame origin."""
+        proj = np.asarray(projection, dtype=np.float64).reshape(4, 4)
+        w_c = np.asarray(world_from_camera, dtype=np.float64).reshape(4, 4)
+        local_from_world = np.eye(4)
+        local_from_world[:3, 3] = -np.asarray(origin, dtype=np.float64)
+        local_from_ndc = local_from_world @ w_c @ np.linalg.inv(proj)
+        forward = -w_c[:3, 2] / np.linalg.norm(w_c[:3, 2])
+        return cls(np.ascontiguousarray(local_from_ndc), w_c[:3, 3] - np.asarray(origin, np.float64), forward)
+
+    @classmethod
+    def look_at(cls, eye, target, up=(0.0, 0.0, 1.0), fov_y: float = 40.0, aspect: float = 4 / 3,
+                near: float = 1e-3, far: float = 1e4, ortho_height: Optional[float] = None) -> "Camera":
+        """A camera at `eye` looking at `target`. Perspective with vertical field of view
+        `fov_y` (degrees), or orthographic when `ortho_height` (the view's height) is given."""
+        eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+        fwd = target - eye
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, up)
+        if np.linalg.norm(right) < 1e-12:
+            raise ValueError("up is parallel to the view direction")
+        right /= np.linalg.norm(right)
+        cam_up = np.cross(right, fwd)
+        w_c = np.eye(4)
+        w_c[:3, 0], w_c[:3, 1], w_c[:3, 2], w_c[:3, 3] = right, cam_up, -fwd, eye
+        proj = np.zeros((4, 4))
+        if ortho_height is None:
+            f = 1.0 / np.tan(np.radians(fov_y) / 2)
+            proj[0, 0], proj[1, 1] = f / aspect, f
+            proj[2, 2], proj[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
+            proj[3, 2] = -1.0
+        else:
+            proj[0, 0], proj[1, 1] = 2.0 / (ortho_height * aspect), 2.0 / ortho_height
+            proj[2, 2], proj[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
+            proj[3, 3] = 1.0
+        return cls.from_view_projection(proj, w_c)
+
+    def rays(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+        """Pixel-centre rays (origins on the near plane, unit directions), row-major from
+        the top row: the same rays `Scene.render` traces, for use with `Scene.trace`."""
+        j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+        ndc = np.stack([2 * j / width - 1, 1 - 2 * i / height], axis=-1).reshape(-1, 2)
+        def unproject(z):
+            p = np.column_stack([ndc, np.full(len(ndc), z), np.ones(len(ndc))]) @ self.local_from_ndc.T
+            return p[:, :3] / p[:, 3:]
+        a, b = unproject(-1.0), unproject(1.0)
+        d = b - a
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        return a.astype(np.float32), d.astype(np.float32)
+
+
+class Scene:
+    """Splats (oriented discs) and the BVH over them. Immutable; safe to share.
+
+    centres (N,3), normals (N,3, any non-zero length), radii (N,) > 0 and optional colours
+    (N,3, scene-linear RGB) in one local frame. Raises ValueError naming the first bad
+    splat (non-finite value, zero normal, radius <= 0), TypeError for unusable arrays.
+    threads: default thread count for tracing and rendering (0: all cores).
+    """
+
+    def __init__(self, centres, normals, radii, colours=None, threads: int = 0):
+        c = _f32(centres, "centres", (-1, 3))
+        n = _f32(normals, "normals", (len(c), 3))
+        r = _f32(radii, "radii", (len(c),))
+        col = None if colours is None else _f32(colours, "colours", (len(c), 3))
+        self._scene = _core.Scene(c, n, r, col, threads)
+
+    def __len__(self) -> int:
+        return self._scene.size
+
+    @property
+    def bounds(self):
+        """((xmin, ymin, zmin), (xmax, ymax, zmax)) over every disc, or None when empty."""
+        return self._scene.bounds
+
+    def bvh_stats(self) -> dict:
+        return self._scene.bvh_stats()
+
+    def trace(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf, normals: bool = True,
+              threads: int = 0, brute_force: bool = False) -> TraceResult:
+        """Nearest splat hit (either facing) per ray, in the open interval (tmin, tmax).
+
+        Directions need not be unit length; they are normalised and `t` is a distance.
+        brute_force tests every splat: the slow reference the BVH is checked against.
+        """
+        o = _f32(origins, "origins", (-1, 3))
+        d = _f32(directions, "directions", (len(o), 3))
+        n = len(o)
+        t = np.empty(n, np.float32)
+        ids = np.empty(n, np.int32)
+        front = np.empty(n, np.bool_)
+        nrm = np.empty((n, 3), np.float32) if normals else None
+        self._scene.trace(o, d, float(tmin), float(tmax), t, ids, front, nrm, threads, brute_force)
+        return TraceResult(t, ids, front, nrm)
+
+    def render(self, camera: Camera, width: int, height: int, window: Optional[Sequence[int]] = None,
+               background: Sequence[float] = (0.0, 0.0, 0.0, 0.0), depth: bool = True, normal: bool = True,
+               threads: int = 0, progress: Optional[Callable[[int, int], bool]] = None,
+               tile_size: int = 32) -> RenderResult:
+        """Renders one ray per pixel centre with a headlight.
+
+        window: (x0, y0, w, h) sub-rectangle of the width x height image (x0, y0: column
+        and row of its top-left pixel), default the whole image. progress(done, total) is
+        called from this thread every ~50 ms; returning True stops the render.
+        """
+        x0, y0, w, h = window if window is not None else (0, 0, width, height)
+        rgba = np.empty((h, w, 4), np.float32)
+        dep = np.empty((h, w), np.float32) if depth else None
+        nrm = np.empty((h, w, 3), np.float32) if normal else None
+        done = self._scene.render(
+            np.ascontiguousarray(camera.local_from_ndc, np.float64),
+            np.ascontiguousarray(camera.position, np.float64),
+            np.ascontiguousarray(camera.forward, np.float64),
+            int(width), int(height), (int(x0), int(y0), int(w), int(h)),
+            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size)
+        return RenderResult(rgba, dep, nrm, done)

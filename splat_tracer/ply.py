@@ -1,0 +1,155 @@
+"""Reading point clouds with normals from PLY files (ascii, binary little/big endian).
+
+Parsing is plyfile's (a maintained PLY library); this module checks what the file means
+for a splat renderer and turns every problem into a `CloudFileError` that names the file
+and the problem, so that the importer can refuse it before creating anything.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+
+class CloudFileError(ValueError):
+    """A point-cloud file that cannot be imported; the message names file and problem."""
+
+
+@dataclass
+class PointCloud:
+    positions: np.ndarray            # (N,3) float64, file coordinates
+    normals: np.ndarray              # (N,3) float32, unit length
+    colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
+    radii: Optional[np.ndarray]      # (N,) float32 from the file, or None
+    dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 transfer function: file colours are display (sRGB) values."""
+    c = np.asarray(c, dtype=np.float32)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def _unit_colour(values: np.ndarray) -> np.ndarray:
+    """Integer channels scale by their type's maximum; float channels are taken as 0..1."""
+    if np.issubdtype(values.dtype, np.integer):
+        return values.astype(np.float32) / np.iinfo(values.dtype).max
+    return np.clip(values.astype(np.float32), 0.0, 1.0)
+
+
+def _check_trailing_data(path: str, ply, vertex_count: int) -> None:
+    """plyfile stops reading after the declared counts; a file with more data than its
+    header declares has a count that lies, which we refuse rather than silently drop."""
+    if ply.text:
+        with open(path, "rb") as f:
+            for line in f:
+                if line.strip() == b"end_header":
+                    break
+            rows = sum(1 for line in f if line.strip())
+        declared = sum(e.count for e in ply.elements)
+        if rows > declared:
+            raise CloudFileError(f"{path}: the header declares {declared} rows but the file has {rows}")
+        return
+    if any(p.__class__.__name__ == "PlyListProperty" for e in ply.elements for p in e.properties):
+        return  # variable-size rows: the expected size cannot be computed from the header
+    with open(path, "rb") as f:
+        head = f.read(1 << 16)
+    header_len = head.find(b"end_header")
+    header_len = head.index(b"\n", header_len) + 1
+    expected = header_len + sum(e.count * e.data.dtype.itemsize for e in ply.elements)
+    actual = os.path.getsize(path)
+    if actual > expected:
+        raise CloudFileError(f"{path}: {actual - expected} bytes follow the {vertex_count} declared vertices "
+                             "(the vertex count in the header is wrong)")
+
+
+def read_ply(path: str) -> PointCloud:
+    """Reads vertices with x y z, nx ny nz, optional red green blue [alpha], optional radius."""
+    from plyfile import PlyData  # imported here: only reading needs it
+
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise CloudFileError(f"{path}: no such file")
+    try:
+        ply = PlyData.read(path)
+    except Exception as e:  # plyfile raises several types; all mean "malformed"
+        raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+    if "vertex" not in ply:
+        raise CloudFileError(f"{path}: has no 'vertex' element")
+    v = ply["vertex"].data
+    names = set(v.dtype.names or ())
+    missing = [c for c in "xyz" if c not in names]
+    if missing:
+        raise CloudFileError(f"{path}: vertices lack the coordinate(s) {', '.join(missing)}")
+    if not {"nx", "ny", "nz"} <= names:
+        raise CloudFileError(f"{path}: vertices have no normals (nx, ny, nz); "
+                             "clouds without normals are not supported yet")
+    n = len(v)
+    if n == 0:
+        raise CloudFileError(f"{path}: contains no vertices")
+    _check_trailing_data(path, ply, n)
+
+    pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
+    bad = ~np.isfinite(pos).all(axis=1)
+    if bad.any():
+        rows = np.flatnonzero(bad)
+        raise CloudFileError(f"{path}: {len(rows)} vertices have non-finite coordinates (first: row {rows[0]})")
+
+    radii = None
+    if "radius" in names:
+        radii = v["radius"].astype(np.float32)
+        bad = ~(np.isfinite(radii) & (radii > 0))
+        if bad.any():
+            raise CloudFileError(f"{path}: {int(bad.sum())} vertices have a radius that is not a positive "
+                                 f"number (first: row {np.flatnonzero(bad)[0]})")
+
+    colours = None
+    if {"red", "green", "blue"} <= names:
+        rgb = np.column_stack([_unit_colour(v[c]) for c in ("red", "green", "blue")])
+        alpha = _unit_colour(v["alpha"]) if "alpha" in names else np.ones(n, np.float32)
+        if not np.isfinite(rgb).all() or not np.isfinite(alpha).all():
+            raise CloudFileError(f"{path}: some colours are not finite")
+        colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
+
+    # A zero or non-finite normal is an error of that point alone (ALGORITHM.md): the
+    # point is dropped and counted, never rendered with a garbage orientation.
+    nrm = np.column_stack([v[c].astype(np.float64) for c in ("nx", "ny", "nz")])
+    length = np.linalg.norm(nrm, axis=1)
+    ok = np.isfinite(length) & (length > 0)
+    dropped = int(n - ok.sum())
+    if not ok.any():
+        raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
+    nrm = (nrm[ok] / length[ok, None]).astype(np.float32)
+    keep = (lambda a: a if a is None or dropped == 0 else a[ok])
+    return PointCloud(pos[ok] if dropped else pos, nrm, keep(colours), keep(radii), dropped)
+
+
+def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,
+              byte_order: str = "<") -> None:
+    """Writes a point cloud as PLY (tests, the demo and benchmarks use it). Colours are
+    written as 8-bit sRGB from scene-linear floats."""
+    from plyfile import PlyData, PlyElement
+
+    pos = np.asarray(positions, dtype=np.float64)
+    fields = [("x", "f8"), ("y", "f8"), ("z", "f8"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
+    if colours is not None:
+        fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
+    if radii is not None:
+        fields += [("radius", "f4")]
+    rows = np.empty(len(pos), dtype=fields)
+    for k, c in enumerate("xyz"):
+        rows[c] = pos[:, k]
+        rows["n" + c] = np.asarray(normals)[:, k]
+    if colours is not None:
+        lin = np.clip(np.asarray(colours, dtype=np.float64)[:, :3], 0, 1)
+        srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055)
+        for k, c in enumerate(("red", "green", "blue")):
+            rows[c] = np.round(srgb[:, k] * 255)
+    if radii is not None:
+        rows["radius"] = radii
+    PlyData([PlyElement.describe(rows, "vertex")], text=not binary, byte_order=byte_order).write(path)
