@@ -30,6 +30,19 @@ def _read(attribute, key: str, width: int, n: int) -> np.ndarray:
     return buf.reshape(n, width) if width > 1 else buf
 
 
+def _check_cloud(name: str, pos, nrm, rad) -> None:
+    """Names the object and point for the errors the core would report by global index."""
+    problems = (
+        (~np.isfinite(pos).all(axis=1), "a position that is not finite"),
+        (~(np.isfinite(nrm).all(axis=1) & (np.abs(nrm).max(axis=1) > 0)), "a zero or non-finite normal"),
+        (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
+    )
+    for bad, what in problems:
+        if bad.any():
+            raise ValueError(f"point cloud '{name}': point {int(np.flatnonzero(bad)[0])} has {what} "
+                             f"({int(bad.sum())} such points)")
+
+
 def base_colour(obj: bpy.types.Object) -> np.ndarray:
     """Scene-linear RGB of a cloud without point colours: the active material's viewport
     colour when it has one, else the object's own viewport colour."""
@@ -56,6 +69,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, radius_factor: float = 1.0, thr
         nrm = _read(attrs[NORMAL], "vector", 3, n)
         rad = _read(attrs[RADIUS] if RADIUS in attrs else attrs["radius"], "value", 1, n)
         col = _read(attrs[COLOUR], "color", 4, n)[:, :3] if COLOUR in attrs else np.tile(base_colour(obj), (n, 1))
+        _check_cloud(obj.name, pos, nrm, rad)
         clouds.append((np.array(inst.matrix_world, dtype=np.float64), pos, nrm, rad, col))
 
     world_pos, normals, radii, colours = [], [], [], []

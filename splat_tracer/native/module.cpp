@@ -327,8 +327,8 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         PyErr_SetString(error_type, message.c_str());
         return nullptr;
     }
-    if (progress != Py_None) {  // a last report, so that callers see 100 %
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(completed ? tiles : 0), Py_ssize_t(tiles));
+    if (progress != Py_None && completed) {  // a last report, so that callers see 100 %
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
         if (!res) return nullptr;
         Py_DECREF(res);
     }

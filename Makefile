@@ -1,0 +1,45 @@
+# splat_tracer: one entry point for set-up, build, demo, tests, packaging and benchmarks.
+# Every target sets up what it needs: a virtual environment with the pinned packages
+# (.venv) and the native core (splat_tracer/_core.abi3.so).
+
+PYTHON ?= python3
+VENV   := .venv
+VPY    := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed-stamp
+CORE   := splat_tracer/_core.abi3.so
+NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
+
+.PHONY: all venv build demo test dist bench bench-quick clean
+
+all: build
+
+$(STAMP): requirements.txt requirements-dev.txt
+	$(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --upgrade pip
+	$(VPY) -m pip install --quiet -r requirements-dev.txt
+	touch $@
+
+venv: $(STAMP)
+
+$(CORE): $(STAMP) setup.py $(NATIVE)
+	$(VPY) setup.py --quiet build_ext --inplace
+
+build: $(CORE)
+
+demo: build
+	$(VPY) tools/demo.py --output demo.png
+
+test: build
+	$(VPY) -m pytest tests
+
+dist: build
+	$(VPY) tools/build_dist.py --output-dir dist
+
+bench-quick: build
+	$(VPY) benchmarks/trace_throughput.py --quick
+
+bench: build
+	$(VPY) benchmarks/trace_throughput.py
+
+clean:
+	rm -rf build dist wheels $(CORE) .pytest_cache
