@@ -4,6 +4,7 @@ Thin on purpose: export the scene and camera, let the core render, write the pas
 """
 from __future__ import annotations
 
+import math
 import time
 import traceback
 
@@ -25,8 +26,9 @@ def border_window(render, width: int, height: int) -> tuple[int, int, int, int]:
     """(x0, y0 from the top, w, h) of the rendered region: the border when one is set."""
     if not render.use_border:
         return 0, 0, width, height
-    x0, x1 = int(render.border_min_x * width), int(render.border_max_x * width)
-    yb0, yb1 = int(render.border_min_y * height), int(render.border_max_y * height)
+    # Blender rounds the border edges to the nearest pixel (round_fl_to_int).
+    x0, x1 = (math.floor(v * width + 0.5) for v in (render.border_min_x, render.border_max_x))
+    yb0, yb1 = (math.floor(v * height + 0.5) for v in (render.border_min_y, render.border_max_y))
     x1, yb1 = max(x1, x0 + 1), max(yb1, yb0 + 1)
     return x0, height - yb1, x1 - x0, yb1 - yb0
 

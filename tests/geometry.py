@@ -30,3 +30,45 @@ def angle_deg(a, b):
     a = a / np.linalg.norm(a, axis=-1, keepdims=True)
     b = b / np.linalg.norm(b, axis=-1, keepdims=True)
     return np.degrees(np.arccos(np.clip(np.einsum("...i,...i->...", a, b), -1, 1)))
+
+
+def blender_camera_rays(world_from_camera, width, height, *, lens=50.0, sensor_width=36.0, sensor_height=24.0,
+                        sensor_fit="AUTO", shift_x=0.0, shift_y=0.0, ortho_scale=None):
+    """Pixel-centre rays of a Blender camera, written from Blender's documented model
+    (BKE_camera_params_compute_viewplane), independently of the add-on's code: the fitted
+    sensor side spans `width` (horizontal fit) or `height` pixels, shift is in units of
+    that side, and the camera looks down its local -Z. Square pixels. Returns world-space
+    origins, unit directions and the unit view axis, row-major from the top row."""
+    if sensor_fit == "AUTO":
+        fit, sensor = ("HORIZONTAL" if width >= height else "VERTICAL"), sensor_width
+    else:
+        fit, sensor = sensor_fit, (sensor_width if sensor_fit == "HORIZONTAL" else sensor_height)
+    fitted = width if fit == "HORIZONTAL" else height
+    # Size of one pixel on the plane at unit distance (perspective) or in world units (ortho).
+    pix = (ortho_scale if ortho_scale is not None else sensor / lens) / fitted
+    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    x = (j - width / 2 + shift_x * fitted) * pix
+    y = (height / 2 - i + shift_y * fitted) * pix
+    m = np.asarray(world_from_camera, dtype=np.float64)
+    rot, eye = m[:3, :3] / np.linalg.norm(m[:3, :3], axis=0), m[:3, 3]
+    if ortho_scale is None:
+        local_d = np.stack([x, y, -np.ones_like(x)], axis=-1).reshape(-1, 3)
+        origins = np.tile(eye, (len(local_d), 1))
+    else:
+        local_d = np.tile([0.0, 0.0, -1.0], (x.size, 1))
+        origins = eye + np.stack([x, y, np.zeros_like(x)], axis=-1).reshape(-1, 3) @ rot.T
+    d = local_d @ rot.T
+    return origins, d / np.linalg.norm(d, axis=1, keepdims=True), -rot[:, 2]
+
+
+def sphere_truth(origins, directions, axis, centre, radius):
+    """Per ray: hit mask, planar depth, world normal, and how far (in world units) the
+    ray passes from the silhouette (|distance to centre - radius|)."""
+    t = ray_sphere(origins, directions, centre, radius)
+    hit = np.isfinite(t)
+    p = origins + directions * np.where(hit, t, 0)[:, None]
+    depth = (p - origins) @ axis
+    oc = np.asarray(centre) - origins
+    along = np.einsum("ij,ij->i", oc, directions)
+    miss_distance = np.linalg.norm(oc - directions * along[:, None], axis=1)
+    return hit, depth, (p - centre) / radius, np.abs(miss_distance - radius), along

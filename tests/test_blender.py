@@ -1,0 +1,287 @@
+"""The extension inside real Blender (bpy): import, export, render engine, passes."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_camera, render_to_exr
+from geometry import angle_deg, blender_camera_rays, fibonacci_sphere, sphere_truth
+from splat_tracer import ply
+
+N_SPHERE = 20000
+# The cloud object is placed with this transform: the render must apply world matrices.
+LOCATION, SCALE, ROTATION = (0.3, 0.5, -0.2), 1.2, (0.4, -0.7, 1.1)
+CENTRE, RADIUS = np.array(LOCATION), SCALE
+
+
+@pytest.fixture
+def sphere_ply(tmp_path):
+    path = tmp_path / "sphere.ply"
+    p, n = fibonacci_sphere(N_SPHERE)
+    ply.write_ply(str(path), p, n)
+    return path
+
+
+def import_sphere(bpy, path):
+    assert bpy.ops.splat_tracer.import_cloud(filepath=str(path)) == {"FINISHED"}
+    obj = bpy.context.active_object
+    obj.location, obj.scale, obj.rotation_euler = LOCATION, (SCALE,) * 3, ROTATION
+    return obj
+
+
+def test_extension_registers_everything(blender):
+    bpy = blender
+    assert "SPLAT_TRACER" in {getattr(e, "bl_idname", None) for e in bpy.types.RenderEngine.__subclasses__()}
+    assert hasattr(bpy.ops.splat_tracer, "import_cloud")
+    assert hasattr(bpy.types, "SPLAT_TRACER_FH_ply")
+    assert hasattr(bpy.types, "SPLAT_TRACER_PT_render")
+    assert bpy.types.Scene.bl_rna.properties.get("splat_tracer") is not None
+
+
+def test_import_creates_mesh_with_attributes_and_points_modifier(blender, empty_scene, tmp_path):
+    bpy = blender
+    p, n = fibonacci_sphere(500)
+    colours = np.column_stack([np.linspace(0, 1, 500), np.full(500, 0.5), np.zeros(500)])
+    radii = np.linspace(0.05, 0.1, 500)
+    path = tmp_path / "coloured.ply"
+    ply.write_ply(str(path), p, n, colours=colours, radii=radii, binary=False)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    obj = bpy.context.active_object
+    assert obj.name == "coloured" and obj.type == "MESH" and len(obj.data.vertices) == 500
+    assert obj.modifiers[0].type == "NODES"
+    evaluated = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    clouds = [i.object for i in bpy.context.evaluated_depsgraph_get().object_instances
+              if i.object.type == "POINTCLOUD" and i.object.original == obj]
+    assert evaluated is not None and len(clouds) == 1 and len(clouds[0].data.points) == 500
+    attrs = clouds[0].data.attributes
+    got_r = np.empty(500, np.float32)
+    attrs["splat_radius"].data.foreach_get("value", got_r)
+    np.testing.assert_allclose(got_r, radii, rtol=1e-6)  # a radius in the file is used as is
+    got_c = np.empty(2000, np.float32)
+    attrs["splat_color"].data.foreach_get("color", got_c)
+    # 8-bit sRGB in the file, scene-linear in Blender: 0.5 linear survives to ~1 %.
+    np.testing.assert_allclose(got_c.reshape(-1, 4)[:, 1], 0.5, rtol=0.01)
+    got_n = np.empty(1500, np.float32)
+    attrs["splat_normal"].data.foreach_get("vector", got_n)
+    np.testing.assert_allclose(got_n.reshape(-1, 3), n, atol=1e-6)
+
+
+def test_import_without_radius_uses_knn_spacing(blender, empty_scene, sphere_ply):
+    bpy = blender
+    bpy.ops.splat_tracer.import_cloud(filepath=str(sphere_ply), neighbours=6)
+    obj = bpy.context.active_object
+    r = np.empty(N_SPHERE, np.float32)
+    obj.data.attributes["splat_radius"].data.foreach_get("value", r)
+    spacing = math.sqrt(4 * math.pi / N_SPHERE)  # mean spacing of an even sampling
+    assert 0.8 * spacing < np.median(r) < 1.6 * spacing
+    assert r.min() > 0
+
+
+def test_georeferenced_coordinates_keep_their_precision(blender, empty_scene, tmp_path):
+    """Scan coordinates around 5e6 m: points 1 cm apart must stay 1 cm apart."""
+    bpy = blender
+    offset = np.array([4.5e6, 5.5e6, 250.0])
+    grid = np.stack(np.meshgrid(np.arange(30), np.arange(30)), -1).reshape(-1, 2) * 0.01
+    p = np.column_stack([grid, np.zeros(len(grid))]) + offset
+    n = np.tile([0.0, 0.0, 1.0], (len(p), 1))
+    path = tmp_path / "geo.ply"
+    ply.write_ply(str(path), p, n)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    obj = bpy.context.active_object
+    local = np.empty(len(p) * 3, np.float32)
+    obj.data.vertices.foreach_get("co", local)
+    world = local.reshape(-1, 3).astype(np.float64) + np.array(obj.location, dtype=np.float64)
+    assert np.abs(world - p).max() < 1e-5  # float32 offsets from an exactly stored origin
+    r = np.empty(len(p), np.float32)
+    obj.data.attributes["splat_radius"].data.foreach_get("value", r)
+    assert np.median(r) == pytest.approx(0.01 * math.sqrt(2), rel=1e-3)  # 6th neighbour on a grid
+
+
+MALFORMED = {
+    "bad_header": b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_hedaer\n1\n",
+    "not_ply": b"this is not a point cloud\n",
+    "no_normals": b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                  b"property float z\nend_header\n0 0 0\n1 1 1\n",
+    "truncated": None,     # made from a valid binary file below
+    "count_too_high": None,
+    "count_too_low": None,
+    "nan_row": None,
+}
+MESSAGES = {"bad_header": "not a valid PLY", "not_ply": "not a valid PLY", "no_normals": "no normals",
+            "truncated": "end-of-file", "count_too_high": "end-of-file", "count_too_low": "header declares",
+            "nan_row": "non-finite coordinates"}
+
+
+def make_malformed(kind: str, tmp_path) -> str:
+    path = tmp_path / f"{kind}.ply"
+    if MALFORMED[kind] is not None:
+        path.write_bytes(MALFORMED[kind])
+        return str(path)
+    p, n = fibonacci_sphere(50)
+    if kind == "truncated":
+        ply.write_ply(str(path), p, n)
+        path.write_bytes(path.read_bytes()[:-37])
+    else:
+        ply.write_ply(str(path), p, n, binary=False)
+        text = path.read_text()
+        if kind == "count_too_high":
+            text = text.replace("element vertex 50", "element vertex 60")
+        elif kind == "count_too_low":
+            text = text.replace("element vertex 50", "element vertex 40")
+        else:
+            lines = text.splitlines()
+            k = lines.index("end_header") + 12
+            lines[k] = "nan " + lines[k].split(" ", 1)[1]
+            text = "\n".join(lines) + "\n"
+        path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize("kind", sorted(MALFORMED))
+def test_malformed_files_are_refused_and_create_nothing(blender, empty_scene, tmp_path, kind):
+    bpy = blender
+    path = make_malformed(kind, tmp_path)
+    before = (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.node_groups))
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.splat_tracer.import_cloud(filepath=path)
+    assert path in str(err.value) and MESSAGES[kind] in str(err.value)
+    assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.node_groups)) == before
+
+
+def test_one_bad_file_in_a_multi_file_import_imports_nothing(blender, empty_scene, tmp_path, sphere_ply):
+    bpy = blender
+    bad = make_malformed("truncated", tmp_path)
+    with pytest.raises(RuntimeError, match="truncated.ply"):
+        bpy.ops.splat_tracer.import_cloud(directory=str(tmp_path),
+                                          files=[{"name": sphere_ply.name}, {"name": "truncated.ply"}])
+    assert len(bpy.data.objects) == 0 and len(bpy.data.meshes) == 0
+    bpy.ops.splat_tracer.import_cloud(directory=str(tmp_path), files=[{"name": sphere_ply.name}])
+    assert len(bpy.data.objects) == 1
+
+
+def check_sphere_render(out, origins, dirs, axis, width, height, splat_radius, pixel_angle=None, pixel_width=None):
+    """Coverage, planar depth and world normals against the analytic sphere.
+
+    Tolerances, for 20,000 splats on a sphere of radius 1.2 (splat radius ~0.035):
+    - coverage may differ only within 1.5 pixels of the true silhouette;
+    - depth within 0.3 % of the radius where the view is not grazing (ray within 80 % of
+      the radius from the centre): a flat disc tangent to the sphere deviates from it by
+      at most r^2 / 2R ~ 0.05 % of R, divided by the cosine of the view angle (>= 0.6);
+    - normals (flat: the hit splat's own normal): a splat whose centre is a distance rho
+      from the hit point has a normal rho / R off the true one, and the nearest hit favours
+      the outermost disc, rho ~ r. So the mean error is about r / R (1.7 degrees here), and
+      no error exceeds 1.8 r / R (r: median splat radius; neighbours' radii vary).
+    """
+    hit, depth, normal, margin, along = sphere_truth(origins, dirs, axis, CENTRE, RADIUS)
+    hit, depth = hit.reshape(height, width), depth.reshape(height, width)
+    normal, margin = normal.reshape(height, width, 3), margin.reshape(height, width)
+    # A pixel's width where the ray passes the sphere: grows with distance in perspective.
+    footprint = pixel_angle * along.reshape(height, width) if pixel_angle else pixel_width
+    covered = out["depth"] < 1e9
+    wrong = covered != hit
+    assert hit.sum() > 5000  # the sphere fills a good part of the frame
+    assert not np.any(wrong & (margin > 1.5 * footprint)), "coverage differs away from the silhouette"
+    assert wrong.sum() < 0.03 * hit.sum()
+    interior = hit & covered & (margin > 0.2 * RADIUS)
+    assert interior.sum() > 0.5 * hit.sum()
+    np.testing.assert_array_less(np.abs(out["depth"][interior] - depth[interior]), 0.003 * RADIUS)
+    err = angle_deg(out["normal"][interior], normal[interior])
+    flat = math.degrees(splat_radius / RADIUS)
+    assert err.max() < 1.8 * flat and err.mean() < 1.2 * flat, (err.max(), err.mean(), flat)
+    assert np.all(out["depth"][~covered] == pytest.approx(1e10))
+
+
+@pytest.mark.parametrize("camera", [
+    dict(name="perspective"),
+    dict(name="portrait_vertical_fit", sensor_fit="VERTICAL", size=(240, 320)),
+    dict(name="lens_shift", shift_x=0.08, shift_y=-0.05, lens=60.0),
+    dict(name="orthographic", type="ORTHO", ortho_scale=3.5),
+])
+def test_sphere_render_matches_the_analytic_sphere(blender, empty_scene, sphere_ply, tmp_path, camera):
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    radii = np.empty(N_SPHERE, np.float32)
+    obj.data.attributes["splat_radius"].data.foreach_get("value", radii)
+    splat_radius = float(np.median(radii)) * SCALE
+    settings = dict(camera)
+    name = settings.pop("name")
+    width, height = settings.pop("size", (320, 240))
+    cam = add_camera(bpy, scene, (0.3 + 1.0, 0.5 - 6.0, -0.2 + 1.5), (math.radians(76), 0.0, math.radians(9.5)),
+                     **settings)
+    out = render_to_exr(bpy, scene, tmp_path / f"{name}.exr", width, height)
+    origins, dirs, axis = blender_camera_rays(
+        np.array(cam.matrix_world), width, height, lens=cam.data.lens, sensor_width=cam.data.sensor_width,
+        sensor_height=cam.data.sensor_height, sensor_fit=cam.data.sensor_fit, shift_x=cam.data.shift_x,
+        shift_y=cam.data.shift_y, ortho_scale=cam.data.ortho_scale if cam.data.type == "ORTHO" else None)
+    pixel = np.linalg.norm(dirs[1] - dirs[0]) if cam.data.type != "ORTHO" else np.linalg.norm(origins[1] - origins[0])
+    if cam.data.type == "ORTHO":
+        check_sphere_render(out, origins, dirs, axis, width, height, splat_radius, pixel_width=pixel)
+    else:
+        check_sphere_render(out, origins, dirs, axis, width, height, splat_radius, pixel_angle=pixel)
+
+
+def test_resolution_percentage_and_border(blender, empty_scene, sphere_ply, tmp_path):
+    bpy = blender
+    scene = empty_scene
+    import_sphere(bpy, sphere_ply)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    scene.render.film_transparent = True
+    full = render_to_exr(bpy, scene, tmp_path / "full.exr", 320, 240)
+    half = render_to_exr(bpy, scene, tmp_path / "half.exr", 640, 480, percentage=50)
+    np.testing.assert_array_equal(half["depth"], full["depth"])  # 50 % of 640x480 is 320x240
+    r = scene.render
+    r.use_border, r.use_crop_to_border = True, True
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.25, 0.7, 0.3, 0.85
+    crop = render_to_exr(bpy, scene, tmp_path / "crop.exr", 320, 240)
+    # Border rows count from the bottom: y 0.3..0.85 of 240 rows is rows 72..204 from the
+    # bottom, 36..168 from the top; x 0.25..0.7 of 320 columns is 80..224.
+    assert crop["depth"].shape == (168 - 36, 224 - 80)
+    np.testing.assert_array_equal(crop["depth"], full["depth"][36:168, 80:224])
+    np.testing.assert_array_equal(crop["rgba"], full["rgba"][36:168, 80:224])
+
+
+def test_background_film_and_base_colour(blender, empty_scene, sphere_ply, tmp_path):
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    obj.color = (1.0, 0.5, 0.25, 1.0)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    scene.world = bpy.data.worlds.new("World")
+    scene.world.color = (0.1, 0.2, 0.3)
+    scene.render.film_transparent = False
+    out = render_to_exr(bpy, scene, tmp_path / "opaque.exr", passes=False)
+    bg = out["rgba"][0, 0]
+    np.testing.assert_allclose(bg, [0.1, 0.2, 0.3, 1.0], rtol=1e-6)
+    centre = out["rgba"][120, 160]
+    assert centre[3] == 1.0 and centre[0] > 0.5
+    np.testing.assert_allclose(centre[:3] / centre[0], [1.0, 0.5, 0.25], rtol=1e-5)  # headlight x base colour
+    scene.render.film_transparent = True
+    out = render_to_exr(bpy, scene, tmp_path / "transparent.exr", passes=False)
+    np.testing.assert_array_equal(out["rgba"][0, 0], [0, 0, 0, 0])
+
+
+def test_hidden_clouds_are_not_rendered_and_skipped_clouds_warn(blender, empty_scene, sphere_ply, tmp_path):
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    obj.hide_render = True
+    out = render_to_exr(bpy, scene, tmp_path / "hidden.exr")
+    assert np.all(out["depth"] == pytest.approx(1e10))
+
+
+def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_ply, tmp_path):
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    obj.data.attributes["splat_radius"].data[7].value = -1.0
+    with pytest.raises(RuntimeError, match=r"Splat Tracer: point cloud 'sphere': point 7 has a radius"):
+        bpy.ops.render.render()
+    obj.data.attributes["splat_radius"].data[7].value = 0.03
+    scene.camera.data.type = "PANO"
+    with pytest.raises(RuntimeError, match="panoramic cameras are not supported"):
+        bpy.ops.render.render()
