@@ -11,9 +11,11 @@ struct Vec3 {
     Vec3() = default;
     Vec3(float x_, float y_, float z_) : x(x_), y(y_), z(z_) {}
 
-    float operator[](int i) const { return i == 0 ? x : (i == 1 ? y : z); }
-    float &operator[](int i) { return i == 0 ? x : (i == 1 ? y : z); }
+    // x, y, z are laid out like float[3] (checked below): index without branches.
+    float operator[](int i) const { return (&x)[i]; }
+    float &operator[](int i) { return (&x)[i]; }
 };
+static_assert(sizeof(Vec3) == 3 * sizeof(float), "Vec3 must be three packed floats");
 
 inline Vec3 operator+(Vec3 a, Vec3 b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
 inline Vec3 operator-(Vec3 a, Vec3 b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
@@ -28,11 +30,11 @@ inline Vec3 normalize(Vec3 a) {
     float l = length(a);
     return l > 0.f ? a * (1.f / l) : a;
 }
-inline Vec3 vmin(Vec3 a, Vec3 b) {
-    return {std::fmin(a.x, b.x), std::fmin(a.y, b.y), std::fmin(a.z, b.z)};
-}
-inline Vec3 vmax(Vec3 a, Vec3 b) {
-    return {std::fmax(a.x, b.x), std::fmax(a.y, b.y), std::fmax(a.z, b.z)};
-}
+// Plain comparisons (one minss/maxss each) rather than std::fmin, which is a libm call:
+// every coordinate reaching the core has been checked to be finite.
+inline float fmin2(float a, float b) { return a < b ? a : b; }
+inline float fmax2(float a, float b) { return a > b ? a : b; }
+inline Vec3 vmin(Vec3 a, Vec3 b) { return {fmin2(a.x, b.x), fmin2(a.y, b.y), fmin2(a.z, b.z)}; }
+inline Vec3 vmax(Vec3 a, Vec3 b) { return {fmax2(a.x, b.x), fmax2(a.y, b.y), fmax2(a.z, b.z)}; }
 
 }  // namespace splat

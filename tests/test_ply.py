@@ -1,0 +1,82 @@
+"""PLY reading (no Blender): formats, optional properties, malformed files."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from geometry import fibonacci_sphere
+from splat_tracer import ply, spacing
+
+
+@pytest.mark.parametrize("binary, order", [(False, "="), (True, "<"), (True, ">")])
+def test_formats_round_trip(tmp_path, binary, order):
+    p, n = fibonacci_sphere(300, radius=2.0, centre=(1e6, -3e5, 12.0))
+    colours = np.random.default_rng(0).uniform(size=(300, 3))
+    radii = np.linspace(0.01, 0.02, 300)
+    path = tmp_path / "cloud.ply"
+    ply.write_ply(str(path), p, n, colours=colours, radii=radii, binary=binary, byte_order=order)
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)  # x y z written as double: exact
+    np.testing.assert_allclose(cloud.normals, n, atol=1e-6)
+    np.testing.assert_allclose(cloud.radii, radii, rtol=1e-6)
+    np.testing.assert_allclose(cloud.colours[:, :3], colours, atol=0.01)  # 8-bit sRGB steps
+    np.testing.assert_array_equal(cloud.colours[:, 3], 1.0)
+
+
+def test_float_normals_of_any_length_and_bad_normals_dropped(tmp_path):
+    path = tmp_path / "n.ply"
+    path.write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                    "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+                    "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n"
+                    "end_header\n0 0 0 0 0 3 255 0 0 128\n1 0 0 0 0 0 0 255 0 255\n"
+                    "2 0 0 nan 0 1 0 0 255 255\n3 0 0 1 0 0 255 255 255 0\n")
+    cloud = ply.read_ply(str(path))
+    assert cloud.dropped_normals == 2 and len(cloud) == 2
+    np.testing.assert_array_equal(cloud.positions[:, 0], [0, 3])
+    np.testing.assert_allclose(cloud.normals, [[0, 0, 1], [1, 0, 0]])
+    np.testing.assert_allclose(cloud.colours[0], [1, 0, 0, 128 / 255], atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[1], [1, 1, 1, 0], atol=1e-6)
+
+
+def test_srgb_to_linear_reference_values():
+    np.testing.assert_allclose(ply.srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
+                               [0.0, 0.04045 / 12.92, 0.21404, 1.0], rtol=1e-4)
+
+
+@pytest.mark.parametrize("body, message", [
+    ("element face 0\nproperty list uchar int vertex_indices\nend_header\n", "no 'vertex' element"),
+    ("element vertex 0\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\n"
+     "property float ny\nproperty float nz\nend_header\n", "contains no vertices"),
+    ("element vertex 1\nproperty float x\nproperty float y\nproperty float nx\nproperty float ny\n"
+     "property float nz\nend_header\n0 0 0 0 1\n", "lack the coordinate(s) z"),
+    ("element vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\n"
+     "property float ny\nproperty float nz\nproperty float radius\nend_header\n0 0 0 0 0 1 -2\n", "radius"),
+    ("element vertex 1\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\n"
+     "property float ny\nproperty float nz\nend_header\n0 0 0 0 0 0\n", "no vertex has a usable normal"),
+])
+def test_meaningless_files_are_refused_with_the_file_named(tmp_path, body, message):
+    path = tmp_path / "bad.ply"
+    path.write_text("ply\nformat ascii 1.0\n" + body)
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value) and message in str(err.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ply.CloudFileError, match="no such file"):
+        ply.read_ply(str(tmp_path / "nope.ply"))
+
+
+def test_knn_spacing_on_a_grid_and_with_duplicates():
+    grid = np.stack(np.meshgrid(np.arange(20), np.arange(20)), -1).reshape(-1, 2).astype(float)
+    pts = np.column_stack([grid, np.zeros(len(grid))])
+    s, degenerate = spacing.knn_spacing(pts, k=4)
+    inner = (grid > 0).all(1) & (grid < 19).all(1)
+    np.testing.assert_allclose(s[inner], 1.0)  # 4 neighbours at distance 1
+    dup = np.concatenate([pts, np.repeat(pts[:1], 10, axis=0)])
+    s, degenerate = spacing.knn_spacing(dup, k=4)
+    assert degenerate == 11 and (s > 0).all()
+    with pytest.raises(spacing.SpacingError):
+        spacing.knn_spacing(pts[:1])
+    with pytest.raises(spacing.SpacingError, match="coincide"):
+        spacing.knn_spacing(np.zeros((10, 3)))
