@@ -22,7 +22,7 @@ $(STAMP): requirements.txt requirements-dev.txt
 venv: $(STAMP)
 
 $(CORE): $(STAMP) setup.py $(NATIVE)
-	$(VPY) setup.py --quiet build_ext --inplace
+	$(VPY) setup.py --quiet build_ext --inplace --force
 
 build: $(CORE)
 

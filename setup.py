@@ -19,9 +19,11 @@ core = Extension(
     language="c++",
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,
-    # Portable x86-64 code (no -march=native): the binary ships inside the extension zip.
-    extra_compile_args=["-std=c++17", "-O3", "-fvisibility=hidden", "-Wall", "-Wextra", "-pthread"],
-    extra_link_args=["-pthread"],
+    # The binary ships inside the extension zip: portable x86-64 code (no -march=native),
+    # no debug info, and the C++ runtime linked in, so that it does not depend on the
+    # libstdc++ of whatever system Blender runs on.
+    extra_compile_args=["-std=c++17", "-O3", "-g0", "-fvisibility=hidden", "-Wall", "-Wextra", "-pthread"],
+    extra_link_args=["-pthread", "-static-libstdc++", "-static-libgcc", "-s"],
 )
 
 setup(

@@ -3,6 +3,8 @@ import bpy
 
 
 class SplatTracerSceneSettings(bpy.types.PropertyGroup):
+    __slots__ = ()  # Blender 5 warns about registered classes that allow arbitrary attributes
+
     radius_factor: bpy.props.FloatProperty(
         name="Radius Factor",
         description="Scales every splat radius at render time (1: each disc reaches its neighbours' centres)",

@@ -228,7 +228,7 @@ def test_render_agrees_with_trace_and_planar_depth():
         hits = scene.trace(o, d)
         hit = hits.id.reshape(h, w) >= 0
         np.testing.assert_array_equal(img.rgba[..., 3] == 1.0, hit)
-        planar = ((o + d * hits.t[:, None]) - cam.position) @ cam.forward
+        planar = ((o + d * np.where(hits.id >= 0, hits.t, 0)[:, None]) - cam.position) @ cam.forward
         np.testing.assert_allclose(img.depth[hit], planar.reshape(h, w)[hit], rtol=1e-5)
         np.testing.assert_array_equal(img.depth[~hit], 1e10)
         np.testing.assert_array_equal(img.normal.reshape(-1, 3)[hits.id >= 0], hits.normal[hits.id >= 0])
