@@ -1,10 +1,11 @@
 """The splat ray tracer's core, usable from plain Python (no Blender needed).
 
     from splat_tracer import core
-    scene = core.Scene(centres, normals, radii)            # (N,3), (N,3), (N,) arrays
-    hits = scene.trace(origins, directions)                 # nearest hit per ray
+    scene = core.Scene(centres, normals, radii, closed=True)  # (N,3), (N,3), (N,) arrays
+    surf = scene.trace_surface(origins, directions)            # the paper's visibility method
+    hits = scene.trace(origins, directions)                    # plain nearest hit per ray
     cam = core.Camera.look_at(eye, target, fov_y=40, aspect=4/3)
-    image = scene.render(cam, 640, 480)                     # image.rgba, .depth, .normal
+    image = scene.render(cam, 640, 480, method=core.Method.preset("FULL"))
 
 Everything heavy runs in the compiled module `_core` (BVH, intersection, threads). This
 file turns numpy arrays into the contiguous float32 buffers it wants and allocates the
@@ -21,7 +22,63 @@ import numpy as np
 from . import _core
 
 PARALLEL_COSINE = _core.PARALLEL_COSINE
+MAX_LAYER_HITS = _core.MAX_LAYER_HITS  # per-ray hit buffer of the ε-window query
 hardware_threads = _core.hardware_threads
+
+POSITION_RULES = ("FIRST", "NEAR_PHASE", "NEAREST_CENTRE")
+KERNELS = ("LINEAR", "SMOOTH")
+PRESETS = ("GENERAL", "NEAREST_CENTRE", "FULL")
+
+
+@dataclass(frozen=True)
+class Method:
+    """Which surface a ray sees and how it is shaded (ALGORITHM.md); each rule a switch.
+
+    eliminate_wrong_hits: hits of the wrong facing before the first layer are ignored.
+    interpolate_normals: normal and colour blended over the layer's splats, weighted by
+        `kernel` ('LINEAR': the paper's (r - d)/r; 'SMOOTH': (1 - (d/r)^2)^2); off: flat.
+    far_phase: on closed objects, a layer counts only if the next hit after it leaves the
+        object (has the other facing); otherwise the search goes on along the ray.
+    position: the surface point within the layer: 'FIRST' hit, 'NEAR_PHASE' (the paper's
+        convex/concave rule) or 'NEAREST_CENTRE' (Linsen et al.).
+    epsilon: depth of a layer, in radii of its first splat.
+    """
+
+    eliminate_wrong_hits: bool = True
+    interpolate_normals: bool = True
+    far_phase: bool = True
+    position: str = "NEAR_PHASE"
+    kernel: str = "LINEAR"
+    epsilon: float = 1.0
+
+    def __post_init__(self):
+        if self.position not in POSITION_RULES:
+            raise ValueError(f"position must be one of {POSITION_RULES}, got {self.position!r}")
+        if self.kernel not in KERNELS:
+            raise ValueError(f"kernel must be one of {KERNELS}, got {self.kernel!r}")
+        if not (np.isfinite(self.epsilon) and self.epsilon >= 0):
+            raise ValueError(f"epsilon must be a finite number >= 0, got {self.epsilon!r}")
+
+    @classmethod
+    def preset(cls, name: str, **overrides) -> "Method":
+        """'GENERAL': nearest hit, any facing, flat normal. 'NEAREST_CENTRE' (Linsen et al.):
+        wrong hits eliminated, interpolated normals, the layer hit nearest its disc centre.
+        'FULL': every rule of the paper."""
+        presets = {
+            "GENERAL": dict(eliminate_wrong_hits=False, interpolate_normals=False, far_phase=False,
+                            position="FIRST"),
+            "NEAREST_CENTRE": dict(eliminate_wrong_hits=True, interpolate_normals=True, far_phase=False,
+                                   position="NEAREST_CENTRE"),
+            "FULL": dict(eliminate_wrong_hits=True, interpolate_normals=True, far_phase=True,
+                         position="NEAR_PHASE"),
+        }
+        if name not in presets:
+            raise ValueError(f"preset must be one of {PRESETS}, got {name!r}")
+        return cls(**{**presets[name], **overrides})
+
+    def as_tuple(self) -> tuple:
+        return (self.eliminate_wrong_hits, self.interpolate_normals, self.far_phase,
+                POSITION_RULES.index(self.position), KERNELS.index(self.kernel), float(self.epsilon))
 
 
 def _f32(a, name: str, shape: tuple) -> np.ndarray:
@@ -51,6 +108,15 @@ class TraceResult(NamedTuple):
     id: np.ndarray      # (N,) int32 splat index, -1 on a miss
     front: np.ndarray   # (N,) bool, the ray meets the side the splat normal points to
     normal: Optional[np.ndarray]  # (N,3) float32 splat normal (zeros on a miss), if asked for
+
+
+class SurfaceResult(NamedTuple):
+    t: np.ndarray        # (N,) distance to the surface point; inf on a miss
+    id: np.ndarray       # (N,) the splat whose hit is the surface point, -1 on a miss
+    front: np.ndarray    # (N,) bool, facing of that hit
+    normal: np.ndarray   # (N,3) shading normal (interpolated or flat); zeros on a miss
+    colour: np.ndarray   # (N,3) blended colour
+    members: Optional[np.ndarray]  # (N, MAX_LAYER_HITS) int32: the layer's splats, -1 padded
 
 
 class RenderResult(NamedTuple):
@@ -131,17 +197,20 @@ class Scene:
     """Splats (oriented discs) and the BVH over them. Immutable; safe to share.
 
     centres (N,3), normals (N,3, any non-zero length), radii (N,) > 0 and optional colours
-    (N,3, scene-linear RGB) in one local frame. Raises ValueError naming the first bad
-    splat (non-finite value, zero normal, radius <= 0), TypeError for unusable arrays.
+    (N,3, scene-linear RGB) in one local frame. closed: whether each splat belongs to a
+    closed, hole-free object (bool for all, or (N,) flags; the far phase applies to those
+    only). Raises ValueError naming the first bad splat (non-finite value, zero normal,
+    radius <= 0), TypeError for unusable arrays.
     threads: default thread count for tracing and rendering (0: all cores).
     """
 
-    def __init__(self, centres, normals, radii, colours=None, threads: int = 0):
+    def __init__(self, centres, normals, radii, colours=None, closed=False, threads: int = 0):
         c = _f32(centres, "centres", (-1, 3))
         n = _f32(normals, "normals", (len(c), 3))
         r = _f32(radii, "radii", (len(c),))
         col = None if colours is None else _f32(colours, "colours", (len(c), 3))
-        self._scene = _core.Scene(c, n, r, col, threads)
+        flags = np.broadcast_to(np.asarray(closed, dtype=np.uint8), (len(c),))
+        self._scene = _core.Scene(c, n, r, col, np.ascontiguousarray(flags), threads)
 
     def __len__(self) -> int:
         return self._scene.size
@@ -171,11 +240,41 @@ class Scene:
         self._scene.trace(o, d, float(tmin), float(tmax), t, ids, front, nrm, threads, brute_force)
         return TraceResult(t, ids, front, nrm)
 
+    def trace_surface(self, origins, directions, method: Method = Method(), tmin: float = 0.0,
+                      tmax: float = np.inf, inside=None, exclude=None, members: bool = False,
+                      threads: int = 0, brute_force: bool = False) -> SurfaceResult:
+        """The surface each ray sees under `method`, with its shading normal and colour.
+
+        inside: (N,) flags (or one bool) for rays travelling inside an object (refracted):
+            their layer begins with a back-facing hit, the exit.
+        exclude: (N, M) int32 splat ids each ray must not hit, -1 for none: a secondary ray
+            (reflection, shadow, refraction) passes the `members` of the hit it starts from.
+        members: also return the splats that made each surface point.
+        brute_force: offer every splat to the query (the tests' reference for the BVH).
+        """
+        o = _f32(origins, "origins", (-1, 3))
+        d = _f32(directions, "directions", (len(o), 3))
+        n = len(o)
+        out = SurfaceResult(np.empty(n, np.float32), np.empty(n, np.int32), np.empty(n, np.bool_),
+                            np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
+                            np.empty((n, MAX_LAYER_HITS), np.int32) if members else None)
+        inside_arr = None
+        if inside is not None:
+            inside_arr = np.ascontiguousarray(np.broadcast_to(np.asarray(inside, dtype=np.uint8), (n,)))
+        ex = None
+        if exclude is not None:
+            ex = np.ascontiguousarray(exclude, dtype=np.int32)
+            if ex.ndim != 2 or len(ex) != n:
+                raise ValueError(f"exclude must have shape ({n}, M), got {ex.shape}")
+        self._scene.trace_surface(o, d, float(tmin), float(tmax), method.as_tuple(), out.t, out.id, out.front,
+                                  out.normal, out.colour, out.members, inside_arr, ex, threads, brute_force)
+        return out
+
     def render(self, camera: Camera, width: int, height: int, window: Optional[Sequence[int]] = None,
                background: Sequence[float] = (0.0, 0.0, 0.0, 0.0), depth: bool = True, normal: bool = True,
                threads: int = 0, progress: Optional[Callable[[int, int], bool]] = None,
-               tile_size: int = 32) -> RenderResult:
-        """Renders one ray per pixel centre with a headlight.
+               tile_size: int = 32, method: Method = Method()) -> RenderResult:
+        """Renders one ray per pixel centre with a headlight, the surface chosen by `method`.
 
         window: (x0, y0, w, h) sub-rectangle of the width x height image (x0, y0: column
         and row of its top-left pixel), default the whole image. progress(done, total) is
@@ -190,5 +289,5 @@ class Scene:
             np.ascontiguousarray(camera.position, np.float64),
             np.ascontiguousarray(camera.forward, np.float64),
             int(width), int(height), (int(x0), int(y0), int(w), int(h)),
-            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size)
+            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method.as_tuple())
         return RenderResult(rgba, dep, nrm, done)

@@ -223,7 +223,7 @@ def test_render_agrees_with_trace_and_planar_depth():
     for cam in (core.Camera.look_at((0.3, -4, 0.5), (0, 0, 0), fov_y=50),
                 core.Camera.look_at((0.3, -4, 0.5), (0, 0, 0), ortho_height=2.5)):
         w, h = 64, 48
-        img = scene.render(cam, w, h)
+        img = scene.render(cam, w, h, method=core.Method.preset("GENERAL"))
         o, d = cam.rays(w, h)
         hits = scene.trace(o, d)
         hit = hits.id.reshape(h, w) >= 0

@@ -129,14 +129,14 @@ struct SceneObject {
 };
 
 PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "threads", nullptr};
-    PyObject *oc, *on, *orad, *ocol = Py_None;
+    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", nullptr};
+    PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|Oi", const_cast<char **>(kwlist), &oc, &on, &orad,
-                                     &ocol, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOi", const_cast<char **>(kwlist), &oc, &on, &orad,
+                                     &ocol, &oclosed, &threads))
         return nullptr;
     if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
-    View c, n, r, col;
+    View c, n, r, col, closed;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(oc, "centres", 'f', 2, s3, false, c)) return nullptr;
     const Py_ssize_t count = c.dim(0);
@@ -144,11 +144,13 @@ PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (!get_array(on, "normals", 'f', 2, sn, false, n)) return nullptr;
     if (!get_array(orad, "radii", 'f', 1, s1, false, r)) return nullptr;
     if (ocol != Py_None && !get_array(ocol, "colours", 'f', 2, sn, false, col)) return nullptr;
+    if (oclosed != Py_None && !get_array(oclosed, "closed", 'B', 1, s1, false, closed)) return nullptr;
 
     SplatScene *scene = nullptr;
     if (!without_gil([&] {
             scene = new SplatScene(c.data<float>(), n.data<float>(), r.data<float>(),
-                                   col.held ? col.data<float>() : nullptr, size_t(count), threads);
+                                   col.held ? col.data<float>() : nullptr,
+                                   closed.held ? closed.data<uint8_t>() : nullptr, size_t(count), threads);
         }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
@@ -238,16 +240,110 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
+// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon), as
+// core.Method.as_tuple() builds it. Returns false with an exception set when invalid.
+bool parse_method(PyObject *obj, Method &m) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj)) return PyErr_Format(PyExc_TypeError, "method must be a tuple (see core.Method)"), false;
+    int elim, interp, far, position, kernel;
+    float eps;
+    if (!PyArg_ParseTuple(obj, "pppiif;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon)",
+                          &elim, &interp, &far, &position, &kernel, &eps))
+        return false;
+    if (position < 0 || position > 2) return PyErr_Format(PyExc_ValueError, "method position must be 0, 1 or 2"), false;
+    if (kernel < 0 || kernel > 1) return PyErr_Format(PyExc_ValueError, "method kernel must be 0 or 1"), false;
+    if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
+    m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
+    m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
+    return true;
+}
+
+PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "method", "out_t", "out_id",
+                                   "out_front", "out_normal", "out_colour", "out_members", "inside", "exclude",
+                                   "threads", "brute_force", nullptr};
+    PyObject *oo, *od, *ometh, *ot, *oid, *ofr, *onrm, *ocol, *omem = Py_None, *oin = Py_None, *oex = Py_None;
+    double tmin, tmax;
+    int threads = 0, brute = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOOOOO|OOOip", const_cast<char **>(kwlist), &oo, &od, &tmin,
+                                     &tmax, &ometh, &ot, &oid, &ofr, &onrm, &ocol, &omem, &oin, &oex, &threads, &brute))
+        return nullptr;
+    if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
+        return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers");
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    Method method;
+    if (ometh == Py_None) return PyErr_Format(PyExc_TypeError, "method is required");
+    if (!parse_method(ometh, method)) return nullptr;
+    View o, d, t, id, fr, nrm, col, mem, in, ex;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(oo, "origins", 'f', 2, s3, false, o)) return nullptr;
+    const Py_ssize_t count = o.dim(0);
+    Py_ssize_t sn[2] = {count, 3}, s1[1] = {count}, sm[2] = {count, kMaxLayerHits}, sx[2] = {count, -1};
+    if (!get_array(od, "directions", 'f', 2, sn, false, d)) return nullptr;
+    if (!get_array(ot, "out_t", 'f', 1, s1, true, t)) return nullptr;
+    if (!get_array(oid, "out_id", 'i', 1, s1, true, id)) return nullptr;
+    if (!get_array(ofr, "out_front", 'B', 1, s1, true, fr)) return nullptr;
+    if (!get_array(onrm, "out_normal", 'f', 2, sn, true, nrm)) return nullptr;
+    if (!get_array(ocol, "out_colour", 'f', 2, sn, true, col)) return nullptr;
+    if (omem != Py_None && !get_array(omem, "out_members", 'i', 2, sm, true, mem)) return nullptr;
+    if (oin != Py_None && !get_array(oin, "inside", 'B', 1, s1, false, in)) return nullptr;
+    if (oex != Py_None && !get_array(oex, "exclude", 'i', 2, sx, false, ex)) return nullptr;
+    const int n_ex = ex.held ? int(ex.dim(1)) : 0;
+
+    const float *po = o.data<float>(), *pd = d.data<float>();
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const float *a = po + 3 * i, *b = pd + 3 * i;
+        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i);
+        if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
+            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i);
+    }
+    const SplatScene &scene = scene_of(self);
+    float *pt = t.data<float>(), *pn = nrm.data<float>(), *pc = col.data<float>();
+    int32_t *pid = id.data<int32_t>(), *pm = mem.held ? mem.data<int32_t>() : nullptr;
+    const int32_t *pex = ex.held ? ex.data<int32_t>() : nullptr;
+    const uint8_t *pin = in.held ? in.data<uint8_t>() : nullptr;
+    uint8_t *pfr = fr.data<uint8_t>();
+    constexpr size_t kChunk = 512;
+    const size_t chunks = (size_t(count) + kChunk - 1) / kChunk;
+    if (!without_gil([&] {
+            parallel_for(
+                chunks, threads_arg(self, threads),
+                [&](size_t chunk) {
+                    const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
+                    for (size_t i = chunk * kChunk; i < end; ++i) {
+                        Ray ray;
+                        ray.o = Vec3(po[3 * i], po[3 * i + 1], po[3 * i + 2]);
+                        ray.d = normalize(Vec3(pd[3 * i], pd[3 * i + 1], pd[3 * i + 2]));
+                        ray.tmin = float(tmin), ray.tmax = float(tmax);
+                        const SurfaceHit h = find_surface(scene, ray, method, pin && pin[i], pex ? pex + i * n_ex : nullptr,
+                                                          n_ex, brute);
+                        pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+                        for (int k = 0; k < 3; ++k) pn[3 * i + k] = h.normal[k], pc[3 * i + k] = h.colour[k];
+                        if (pm) {
+                            int32_t *row = pm + i * kMaxLayerHits;
+                            for (int k = 0; k < kMaxLayerHits; ++k) row[k] = k < h.n_members ? h.members[k] : -1;
+                        }
+                    }
+                },
+                [](size_t) { return true; });
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
 PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window",
                                    "background", "out_rgba", "out_depth", "out_normal", "threads",
-                                   "progress", "tile_size", nullptr};
-    PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None;
+                                   "progress", "tile_size", "method", nullptr};
+    PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None,
+             *ometh = Py_None;
     int width, height, x0, y0, w, h, threads = 0, tile_size = 32;
     float bg[4];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOi", const_cast<char **>(kwlist), &om,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOiO", const_cast<char **>(kwlist), &om,
                                      &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
-                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size))
+                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh))
         return nullptr;
     if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive");
     if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || x0 + w > width || y0 + h > height)
@@ -285,6 +381,7 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     target.depth = depth.held ? depth.data<float>() : nullptr;
     target.normal = normal.held ? normal.data<float>() : nullptr;
     RenderSettings settings;
+    if (!parse_method(ometh, settings.method)) return nullptr;
     std::copy(bg, bg + 4, settings.background);
     settings.tile_size = tile_size;
     Renderer renderer(scene_of(self), cam, target, settings);
@@ -360,6 +457,11 @@ PyMethodDef Scene_methods[] = {
      "render(local_from_ndc, position, forward, width, height, window, background, out_rgba, "
      "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32)\n--\n\n"
      "Renders a window of an image; returns False when progress() asked to stop."},
+    {"trace_surface", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace_surface)),
+     METH_VARARGS | METH_KEYWORDS,
+     "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
+     "out_members=None, inside=None, exclude=None, threads=0, brute_force=False)\n--\n\n"
+     "The surface each ray sees under the visibility method (see core.py)."},
     {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH."},
     {nullptr, nullptr, 0, nullptr},
 };
@@ -396,6 +498,7 @@ int module_exec(PyObject *module) {
         return -1;
     }
     if (PyModule_AddObject(module, "PARALLEL_COSINE", PyFloat_FromDouble(kParallelCosine)) < 0) return -1;
+    if (PyModule_AddIntConstant(module, "MAX_LAYER_HITS", kMaxLayerHits) < 0) return -1;
     return 0;
 }
 

@@ -23,7 +23,7 @@ void Renderer::render_tile(size_t tile) const {
 void Renderer::shade_pixel(int col, int row) const {
     const size_t p = size_t(row) * target_.w + col;
     const Ray ray = camera_.ray(target_.x0 + col + 0.5, target_.y0 + row + 0.5, target_.width, target_.height);
-    const Hit hit = scene_.intersect(ray);
+    const SurfaceHit hit = find_surface(scene_, ray, settings_.method);
     float *rgba = target_.rgba + 4 * p;
     if (!hit.valid()) {
         std::copy(settings_.background, settings_.background + 4, rgba);
@@ -31,8 +31,8 @@ void Renderer::shade_pixel(int col, int row) const {
         if (target_.normal) std::fill(target_.normal + 3 * p, target_.normal + 3 * p + 3, 0.f);
         return;
     }
-    const Vec3 n = scene_.normal(hit.id);
-    const Vec3 c = scene_.colour(hit.id) * std::fabs(dot(n, ray.d));
+    const Vec3 n = hit.normal;
+    const Vec3 c = hit.colour * std::fabs(dot(n, ray.d));
     rgba[0] = c.x, rgba[1] = c.y, rgba[2] = c.z, rgba[3] = 1.f;
     if (target_.depth) target_.depth[p] = float(camera_.planar_depth(ray, hit.t));
     if (target_.normal) {

@@ -5,6 +5,7 @@
 
 #include "camera.h"
 #include "splat_scene.h"
+#include "visibility.h"
 
 namespace splat {
 
@@ -24,6 +25,7 @@ struct RenderSettings {
     float background[4] = {0.f, 0.f, 0.f, 0.f};  // RGBA written where no splat is hit
     float background_depth = 1e10f;             // Cycles writes 1e10 in Z where nothing is hit
     int tile_size = 32;
+    Method method;  // which surface each pixel shows (visibility.h)
 };
 
 class Renderer {

@@ -14,13 +14,17 @@ bool finite3(const float *v) { return std::isfinite(v[0]) && std::isfinite(v[1])
 }  // namespace
 
 SplatScene::SplatScene(const float *centres, const float *normals, const float *radii,
-                       const float *colours, size_t n, int threads) {
+                       const float *colours, const uint8_t *closed, size_t n, int threads) {
     if (n >= size_t(INT32_MAX)) throw InputError("too many splats (ids are 32-bit)");
     normals_.resize(n);
+    closed_.assign(n, 0);
+    if (closed)
+        for (size_t i = 0; i < n; ++i) closed_[i] = closed[i] ? 1 : 0;
     colours_.assign(n, Vec3(1.f, 1.f, 1.f));
     radii_.assign(radii, radii + n);
     std::vector<AABB> boxes(n);
-    std::vector<Vec3> centre(n);
+    std::vector<Vec3> &centre = centres_;
+    centre.resize(n);
     for (size_t i = 0; i < n; ++i) {
         const float *c = centres + 3 * i, *nv = normals + 3 * i;
         if (!finite3(c)) bad_splat(i, "centre is not finite");
@@ -87,6 +91,58 @@ Hit SplatScene::intersect(const Ray &ray) const {
             if (sp == 0) return best;
             --sp;
             if (stack[sp].entry <= best.t) {
+                node = stack[sp].node;
+                break;
+            }
+        }
+    }
+}
+
+void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) const {
+    if (splats_.empty()) return;
+    if (brute_force) {
+        for (const PackedSplat &s : splats_) {
+            DiscHit h;
+            if (intersect_disc(ray, s.c, s.n, s.r, &h) && !q.excluded(s.id))
+                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+        }
+        return;
+    }
+    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
+    const BVHNode *nodes = bvh_.nodes.data();
+    struct Pending {
+        uint32_t node;
+        float entry;
+    } stack[kStackSize];
+    int sp = 0;
+    uint32_t node = 0;
+    q.cut = ray.tmax;
+    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return;
+    for (;;) {
+        const BVHNode &nd = nodes[node];
+        if (nd.leaf()) {
+            for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
+                const PackedSplat &s = splats_[k];
+                DiscHit h;
+                if (intersect_disc(ray, s.c, s.n, s.r, &h) && !q.excluded(s.id))
+                    q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+            }
+        } else {
+            const float tmax = std::fmin(ray.tmax, q.cut);
+            uint32_t a = nd.first, b = nd.first + 1;
+            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
+            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
+            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
+            if (ta != kInfinity) {
+                if (tb != kInfinity) stack[sp++] = {b, tb};
+                node = a;
+                continue;
+            }
+        }
+        for (;;) {
+            if (sp == 0) return;
+            --sp;
+            if (stack[sp].entry <= q.cut) {
                 node = stack[sp].node;
                 break;
             }

@@ -10,6 +10,7 @@
 
 #include "bvh.h"
 #include "disc.h"
+#include "layer.h"
 
 namespace splat {
 
@@ -29,17 +30,21 @@ struct InputError : std::runtime_error {
 class SplatScene {
   public:
     // `centres`, `normals` (any non-zero length; normalised here) and `colours` are n x 3
-    // row-major, `radii` has n entries; `colours` may be null (white). Throws InputError
-    // naming the first offending splat when a value is not finite, a normal is zero or a
-    // radius is not positive.
+    // row-major, `radii` has n entries; `colours` may be null (white); `closed` (n flags:
+    // the splat belongs to a closed, hole-free object) may be null (all open). Throws
+    // InputError naming the first offending splat when a value is not finite, a normal is
+    // zero or a radius is not positive.
     SplatScene(const float *centres, const float *normals, const float *radii,
-               const float *colours, size_t n, int threads);
+               const float *colours, const uint8_t *closed, size_t n, int threads);
 
     size_t size() const { return splats_.size(); }
     const AABB &bounds() const { return bounds_; }
     const BVH &bvh() const { return bvh_; }
 
+    Vec3 centre(int32_t id) const { return centres_[id]; }
     Vec3 normal(int32_t id) const { return normals_[id]; }
+    bool closed(int32_t id) const { return closed_[id] != 0; }
+    const uint8_t *closed_flags() const { return closed_.data(); }
     Vec3 colour(int32_t id) const { return colours_[id]; }
     float radius(int32_t id) const { return radii_[id]; }
 
@@ -48,9 +53,14 @@ class SplatScene {
     // The same answer by testing every splat: the reference the tests compare against.
     Hit intersect_brute_force(const Ray &ray) const;
 
+    // The ε-window query (layer.h): fills q with the first layer and the hit after it.
+    // brute_force offers every splat to the query instead: the tests' reference.
+    void gather_layer(const Ray &ray, LayerQuery &q, bool brute_force = false) const;
+
   private:
     std::vector<PackedSplat> splats_;  // BVH order
-    std::vector<Vec3> normals_, colours_;
+    std::vector<Vec3> centres_, normals_, colours_;
+    std::vector<uint8_t> closed_;
     std::vector<float> radii_;
     AABB bounds_;
     BVH bvh_;

@@ -1,0 +1,49 @@
+#include "layer.h"
+
+namespace splat {
+
+void LayerQuery::add(const LayerHit &h) {
+    if (h.t > cut) return;
+    // Sorted insertion; equal distances ordered by id, as everywhere in the core.
+    int pos = count;
+    while (pos > 0 && (hits[pos - 1].t > h.t || (hits[pos - 1].t == h.t && hits[pos - 1].id > h.id))) --pos;
+    if (count == kMaxLayerHits) {
+        overflow = true;
+        if (pos == count) return;  // farther than every kept hit: dropped
+        --count;                   // else the farthest kept hit is dropped
+    }
+    for (int i = count; i > pos; --i) hits[i] = hits[i - 1];
+    hits[pos] = h;
+    ++count;
+    update();
+}
+
+// Hits before `first` are kept: they have the wrong facing, but a hit found later may
+// become the new first in front of them, and then one of them may be its `next`.
+void LayerQuery::update() {
+    first = -1;
+    for (int i = 0; i < count; ++i) {
+        if (any_facing || hits[i].front == layer_front) {
+            first = i;
+            break;
+        }
+    }
+    if (first < 0) return;  // cut stays where it was (tmax)
+    facing = hits[first].front;
+    layer_end = hits[first].t + epsilon * hits[first].radius;
+    next = -1;
+    for (int i = first + 1; i < count; ++i) {
+        if (!member(i)) {
+            next = i;
+            break;
+        }
+    }
+    const bool want_next = far_phase && closed && closed[hits[first].id];
+    if (!want_next)
+        cut = layer_end;
+    else
+        cut = next >= 0 ? (hits[next].t > layer_end ? hits[next].t : layer_end) : kInfinity;
+    while (count > 0 && hits[count - 1].t > cut) --count;
+}
+
+}  // namespace splat

@@ -1,0 +1,63 @@
+// Which surface a ray sees, and its normal and colour: the paper's visibility method
+// (ALGORITHM.md) on top of the ε-window query, with each rule a switch.
+#pragma once
+
+#include "layer.h"
+#include "splat_scene.h"
+
+namespace splat {
+
+// Where on the layer the surface point is.
+enum class PositionRule : int {
+    First = 0,          // the layer's first hit (the general method's nearest hit)
+    NearPhase = 1,      // the paper's pairwise convex/concave rule (omega)
+    NearestCentre = 2,  // Linsen et al.: the member hit closest to its own disc centre
+};
+
+// Weight of a member splat in the interpolated normal and colour, d = distance of the hit
+// from the disc centre, r = disc radius.
+enum class Kernel : int {
+    Linear = 0,  // (r - d) / r, the paper's
+    Smooth = 1,  // (1 - (d / r)^2)^2, C1 at the rim
+};
+
+struct Method {
+    bool eliminate_wrong_hits = true;
+    bool interpolate = true;
+    bool far_phase = true;  // applied to splats of closed objects only
+    PositionRule position = PositionRule::NearPhase;
+    Kernel kernel = Kernel::Linear;
+    float epsilon = 1.f;  // layer depth in radii of the layer's first splat
+    // Far-phase rejections a ray may go through before it is declared a miss: each one is a
+    // fringe or a grazed edge in front of the surface, a handful at most in practice.
+    int max_layers = 8;
+
+    // Nearest hit, any facing, flat normal: no layer needs to be gathered.
+    bool is_general() const {
+        return !eliminate_wrong_hits && !interpolate && !far_phase && position == PositionRule::First;
+    }
+};
+
+struct SurfaceHit {
+    float t = kInfinity;
+    int32_t id = -1;  // the splat whose hit is the surface point
+    bool front = false;
+    Vec3 normal, colour;
+    int n_members = 0;  // the splats that contributed (secondary rays exclude them)
+    int32_t members[kMaxLayerHits];
+    bool overflow = false;
+
+    bool valid() const { return id >= 0; }
+};
+
+// `inside`: the ray travels inside an object (a refracted ray), so a layer begins with a
+// back-facing hit (the exit). `exclude`: splats the ray must not hit (the ones that made
+// its origin point, for reflected, refracted and shadow rays).
+SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, bool inside = false,
+                        const int32_t *exclude = nullptr, int n_exclude = 0, bool brute_force = false);
+
+// The omega of the near phase for two member splats j (nearer) and k: the sum of the
+// angles (c_k - c_j, n_j) and (c_j - c_k, n_k), in radians. Above pi: convex.
+float near_phase_omega(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk);
+
+}  // namespace splat
