@@ -1,9 +1,10 @@
-"""Operators: importing clouds (File > Import, drag-and-drop)."""
+"""Operators: importing clouds (File > Import, drag-and-drop), A/B comparison."""
 import bpy
 
+from .compare import SPLAT_TRACER_OT_compare
 from .import_cloud import SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_import_cloud, menu_import
 
-classes = (SPLAT_TRACER_OT_import_cloud, SPLAT_TRACER_FH_ply)
+classes = (SPLAT_TRACER_OT_import_cloud, SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_compare)
 
 
 def register():

@@ -11,16 +11,16 @@ from ..splat_tracer.cloud_object import create_cloud_object
 
 
 def load_cloud(path: str, k: int):
-    """Reads and prepares one file; raises ply.CloudFileError with the file named."""
+    """Reads and prepares one file; raises ply.CloudFileError with the file named.
+    Returns (cloud, origin, local positions, radii, neighbourhood analysis)."""
     cloud = ply.read_ply(path)
     origin, local = core.local_frame(cloud.positions)
-    radii, degenerate = cloud.radii, 0
-    if radii is None:
-        try:
-            radii, degenerate = spacing.knn_spacing(local, k)
-        except spacing.SpacingError as e:
-            raise ply.CloudFileError(f"{path}: {e}") from None
-    return cloud, origin, local, radii, degenerate
+    try:
+        hood = spacing.analyse(local, cloud.normals, k)
+    except spacing.SpacingError as e:
+        raise ply.CloudFileError(f"{path}: {e}") from None
+    radii = cloud.radii if cloud.radii is not None else hood.spacing
+    return cloud, origin, local, radii, hood
 
 
 class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
@@ -56,17 +56,19 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
                 return {"CANCELLED"}
         created = []
         try:
-            for path, cloud, origin, local, radii, degenerate in loaded:
+            for path, cloud, origin, local, radii, hood in loaded:
                 name = os.path.splitext(os.path.basename(path))[0] or "Splats"
                 obj = create_cloud_object(name, local, cloud.normals, radii, cloud.colours,
                                           location=tuple(origin), collection=context.collection)
                 obj["splat_tracer_source"] = path
+                obj.splat_tracer.closed = hood.closed_guess
+                obj["splat_tracer_closed_guess"] = hood.describe()
                 created.append(obj)
                 if cloud.dropped_normals:
                     self.report({"WARNING"}, f"{path}: {cloud.dropped_normals} points with a zero or "
                                              "non-finite normal were dropped")
-                if degenerate:
-                    self.report({"WARNING"}, f"{path}: {degenerate} points share their position with "
+                if hood.degenerate and cloud.radii is None:
+                    self.report({"WARNING"}, f"{path}: {hood.degenerate} points share their position with "
                                              f"{self.neighbours}+ others; they got the median radius")
         except Exception:
             for obj in created:

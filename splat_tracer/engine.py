@@ -7,11 +7,12 @@ from __future__ import annotations
 import math
 import time
 import traceback
+from dataclasses import dataclass
 
 import bpy
 import numpy as np
 
-from . import export
+from . import core, export
 
 BACKGROUND_DEPTH = 1e10  # what Cycles writes in Z where nothing is hit
 
@@ -74,41 +75,58 @@ class SplatTracerEngine(bpy.types.RenderEngine):
 
     def _render(self, depsgraph):
         scene = depsgraph.scene
-        settings = scene.splat_tracer
-        width, height = image_size(scene.render)
-        x0, y0, w, h = border_window(scene.render, width, height)
-        threads = scene.render.threads
-
-        t0 = time.perf_counter()
-        self.update_stats("", "Splat Tracer | exporting splats")
-        exported = export.export_scene(depsgraph, settings.radius_factor, threads)
-        for name in exported.skipped:
-            self.report({"WARNING"}, f"Splat Tracer: point cloud '{name}' has no splat normals; not rendered")
-        camera = export.export_camera(depsgraph, width, height, exported.origin)
-        t_export = time.perf_counter() - t0
-
         layer_settings = depsgraph.view_layer
         want_depth, want_normal = layer_settings.use_pass_z, layer_settings.use_pass_normal
-        stats = f"Splat Tracer | {len(exported.scene):,} splats in {exported.objects} clouds"
-        self.update_stats("", stats + " | rendering")
 
         def progress(done: int, total: int) -> bool:
             self.update_progress(done / max(total, 1))
             return self.test_break()
 
-        image = exported.scene.render(camera, width, height, window=(x0, y0, w, h),
-                                      background=background_rgba(scene), depth=want_depth,
-                                      normal=want_normal, threads=threads, progress=progress)
+        frame = render_frame(depsgraph, scene.splat_tracer.core_method(), depth=want_depth, normal=want_normal,
+                             progress=progress, report=self.report, stats=lambda s: self.update_stats("", s))
+        x0, y0, w, h = frame.window
         result = self.begin_result(0, 0, w, h)
         layer = result.layers[0]
-        _set_pass(layer, "Combined", image.rgba)
+        _set_pass(layer, "Combined", frame.image.rgba)
         if want_depth:
-            _set_pass(layer, "Depth", image.depth)
+            _set_pass(layer, "Depth", frame.image.depth)
         if want_normal:
-            _set_pass(layer, "Normal", image.normal)
-        self.end_result(result, cancel=not image.completed)
-        total = time.perf_counter() - t0
-        self.update_stats("", f"{stats} | export {t_export:.2f} s, total {total:.2f} s")
+            _set_pass(layer, "Normal", frame.image.normal)
+        self.end_result(result, cancel=not frame.image.completed)
+
+
+@dataclass
+class Frame:
+    image: core.RenderResult
+    window: tuple  # (x0, y0 from the top, w, h) within the width x height frame
+    width: int
+    height: int
+
+
+def render_frame(depsgraph, method: core.Method, depth=True, normal=True, progress=None, report=None,
+                 stats=None, use_border=True) -> Frame:
+    """Exports the visible clouds and the camera and renders the frame (or its border) with
+    `method`: what F12 does, and what the A/B compare operator does twice."""
+    scene = depsgraph.scene
+    width, height = image_size(scene.render)
+    x0, y0, w, h = border_window(scene.render, width, height) if use_border else (0, 0, width, height)
+    threads = scene.render.threads
+    say = stats or (lambda s: None)
+
+    t0 = time.perf_counter()
+    say("Splat Tracer | exporting splats")
+    exported = export.export_scene(depsgraph, scene.splat_tracer.radius_factor, threads)
+    for name in exported.skipped:
+        if report:
+            report({"WARNING"}, f"Splat Tracer: point cloud '{name}' has no splat normals; not rendered")
+    camera = export.export_camera(depsgraph, width, height, exported.origin)
+    t_export = time.perf_counter() - t0
+    summary = f"Splat Tracer | {len(exported.scene):,} splats in {exported.objects} clouds"
+    say(summary + " | rendering")
+    image = exported.scene.render(camera, width, height, window=(x0, y0, w, h), background=background_rgba(scene),
+                                  depth=depth, normal=normal, threads=threads, progress=progress, method=method)
+    say(f"{summary} | export {t_export:.2f} s, total {time.perf_counter() - t0:.2f} s")
+    return Frame(image, (x0, y0, w, h), width, height)
 
 
 classes = (SplatTracerEngine,)

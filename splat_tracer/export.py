@@ -43,10 +43,15 @@ def _check_cloud(name: str, pos, nrm, rad) -> None:
                              f"({int(bad.sum())} such points)")
 
 
+def _source(obj: bpy.types.Object) -> bpy.types.Object:
+    """The original object of an evaluated one: where the user's settings live."""
+    return obj.original if obj.original is not None else obj
+
+
 def base_colour(obj: bpy.types.Object) -> np.ndarray:
     """Scene-linear RGB of a cloud without point colours: the active material's viewport
     colour when it has one, else the object's own viewport colour."""
-    source = obj.original if obj.original is not None else obj
+    source = _source(obj)
     material = source.active_material
     rgba = material.diffuse_color if material is not None else source.color
     return np.array(rgba[:3], dtype=np.float32)
@@ -70,10 +75,11 @@ def export_scene(depsgraph: bpy.types.Depsgraph, radius_factor: float = 1.0, thr
         rad = _read(attrs[RADIUS] if RADIUS in attrs else attrs["radius"], "value", 1, n)
         col = _read(attrs[COLOUR], "color", 4, n)[:, :3] if COLOUR in attrs else np.tile(base_colour(obj), (n, 1))
         _check_cloud(obj.name, pos, nrm, rad)
-        clouds.append((np.array(inst.matrix_world, dtype=np.float64), pos, nrm, rad, col))
+        closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
+        clouds.append((np.array(inst.matrix_world, dtype=np.float64), pos, nrm, rad, col, closed))
 
-    world_pos, normals, radii, colours = [], [], [], []
-    for m, pos, nrm, rad, col in clouds:
+    world_pos, normals, radii, colours, closed_flags = [], [], [], [], []
+    for m, pos, nrm, rad, col, closed in clouds:
         lin = m[:3, :3]
         world_pos.append(pos @ lin.T + m[:3, 3])
         # Normals transform by the inverse transpose; discs scale by the cube root of the
@@ -82,12 +88,14 @@ def export_scene(depsgraph: bpy.types.Depsgraph, radius_factor: float = 1.0, thr
         normals.append(nrm_w / np.linalg.norm(nrm_w, axis=1, keepdims=True))
         radii.append(rad * abs(np.linalg.det(lin)) ** (1.0 / 3.0) * radius_factor)
         colours.append(col)
+        closed_flags.append(np.full(len(pos), closed))
     if world_pos:
         origin, local = core.local_frame(np.concatenate(world_pos))
-        arrays = (local, np.concatenate(normals), np.concatenate(radii), np.concatenate(colours))
+        arrays = (local, np.concatenate(normals), np.concatenate(radii), np.concatenate(colours),
+                  np.concatenate(closed_flags))
     else:
         origin = np.zeros(3)
-        arrays = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)))
+        arrays = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), False)
     return ExportedScene(core.Scene(*arrays, threads=threads), origin, len(clouds), skipped)
 
 

@@ -1,27 +1,130 @@
-"""Settings stored in .blend files: scene.splat_tracer."""
+"""Settings stored in .blend files: scene.splat_tracer and object.splat_tracer."""
 import bpy
+
+from . import core
+
+_PRESET_ITEMS = (
+    ("GENERAL", "General", "Plain splat ray tracing: nearest hit of any facing, flat splat normal"),
+    ("NEAREST_CENTRE", "Nearest Centre",
+     "Linsen et al.: wrong hits eliminated, interpolated normals, the layer hit nearest its splat centre"),
+    ("FULL", "Full", "The paper's method: every visibility rule and normal interpolation"),
+    ("CUSTOM", "Custom", "The switches below do not match a preset"),
+)
+# Switch values of each preset (core.Method.preset is the single source of truth).
+_SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
+             "use_nearest_centre")
+_syncing = False  # set while one property's update writes the others
+
+
+def _switches_of(preset: str) -> dict:
+    m = core.Method.preset(preset)
+    return dict(use_wrong_hit_elimination=m.eliminate_wrong_hits, use_normal_interpolation=m.interpolate_normals,
+                use_far_phase=m.far_phase, use_near_phase=m.position == "NEAR_PHASE",
+                use_nearest_centre=m.position == "NEAREST_CENTRE")
+
+
+def _on_method(self, context):
+    global _syncing
+    if _syncing or self.method == "CUSTOM":
+        return
+    _syncing = True
+    try:
+        for key, value in _switches_of(self.method).items():
+            setattr(self, key, value)
+    finally:
+        _syncing = False
+
+
+def _on_switch(self, context):
+    global _syncing
+    if _syncing:
+        return
+    current = {key: getattr(self, key) for key in _SWITCHES}
+    match = next((p for p in core.PRESETS if _switches_of(p) == current), "CUSTOM")
+    _syncing = True
+    try:
+        self.method = match
+    finally:
+        _syncing = False
 
 
 class SplatTracerSceneSettings(bpy.types.PropertyGroup):
     __slots__ = ()  # Blender 5 warns about registered classes that allow arbitrary attributes
 
+    method: bpy.props.EnumProperty(
+        name="Method", items=_PRESET_ITEMS, default="FULL", update=_on_method,
+        description="Preset of the visibility switches below",
+    )
+    epsilon: bpy.props.FloatProperty(
+        name="Epsilon",
+        description="Depth of a surface layer, in radii of its first splat: hits this close count as one surface",
+        default=core.Method().epsilon, min=0.0, soft_max=4.0, precision=3,
+    )
     radius_factor: bpy.props.FloatProperty(
         name="Radius Factor",
         description="Scales every splat radius at render time (1: each disc reaches its neighbours' centres)",
         default=1.0, min=0.01, soft_min=0.25, soft_max=4.0, precision=3,
     )
+    use_wrong_hit_elimination: bpy.props.BoolProperty(
+        name="Wrong Hit Elimination", default=True, update=_on_switch,
+        description="Ignore back-facing discs that poke out in front of the surface (and, for rays leaving a "
+                    "surface, the splats they start from)",
+    )
+    use_normal_interpolation: bpy.props.BoolProperty(
+        name="Normal Interpolation", default=True, update=_on_switch,
+        description="Blend the normals and colours of the overlapping splats for smooth shading (off: flat splats)",
+    )
+    use_far_phase: bpy.props.BoolProperty(
+        name="Far Phase", default=True, update=_on_switch,
+        description="On closed objects, accept a layer only if the ray leaves the object after it, which removes "
+                    "the fringe at silhouettes",
+    )
+    use_near_phase: bpy.props.BoolProperty(
+        name="Near Phase", default=True, update=_on_switch,
+        description="Place the surface point in a layer by the convex/concave rule, which keeps sharp edges sharp",
+    )
+    use_nearest_centre: bpy.props.BoolProperty(
+        name="Nearest Centre", default=False, update=_on_switch,
+        description="Without the near phase, take the layer hit closest to its splat centre (Linsen et al.) "
+                    "instead of the first one",
+    )
+    kernel: bpy.props.EnumProperty(
+        name="Kernel",
+        items=(("LINEAR", "Linear", "The paper's weight (r - d) / r"),
+               ("SMOOTH", "Smooth", "(1 - (d / r)^2)^2, smooth at the splat rim")),
+        default="LINEAR",
+        description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
+    )
+
+    def core_method(self) -> core.Method:
+        position = "NEAR_PHASE" if self.use_near_phase else ("NEAREST_CENTRE" if self.use_nearest_centre else "FIRST")
+        return core.Method(eliminate_wrong_hits=self.use_wrong_hit_elimination,
+                           interpolate_normals=self.use_normal_interpolation, far_phase=self.use_far_phase,
+                           position=position, kernel=self.kernel, epsilon=self.epsilon)
 
 
-classes = (SplatTracerSceneSettings,)
+class SplatTracerObjectSettings(bpy.types.PropertyGroup):
+    __slots__ = ()
+
+    closed: bpy.props.BoolProperty(
+        name="Closed Surface", default=False,
+        description="The cloud samples a closed, hole-free surface, so the far phase may use where rays leave it "
+                    "(turn off for open scans: terrain, facades, one-sided scans)",
+    )
+
+
+classes = (SplatTracerSceneSettings, SplatTracerObjectSettings)
 
 
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.splat_tracer = bpy.props.PointerProperty(type=SplatTracerSceneSettings)
+    bpy.types.Object.splat_tracer = bpy.props.PointerProperty(type=SplatTracerObjectSettings)
 
 
 def unregister():
+    del bpy.types.Object.splat_tracer
     del bpy.types.Scene.splat_tracer
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

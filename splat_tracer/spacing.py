@@ -1,17 +1,31 @@
-"""Splat radii from the local point spacing (ALGORITHM.md, "Radius").
+"""Neighbourhood analysis on import: splat radii and the "closed surface" guess.
 
-The spacing s_i of point i is the distance to its k-th nearest neighbour (k = 6 by
-default: on an evenly sampled surface a point has about six neighbours at distance D, so
-s_i ~ D and radius factor 1 gives the paper's "size update", full overlap).
+Radii (ALGORITHM.md, "Radius"): the spacing s_i of point i is the distance to its k-th
+nearest neighbour (k = 6 by default: on an evenly sampled surface a point has about six
+neighbours at distance D, so s_i ~ D and radius factor 1 gives the paper's "size update",
+full overlap).
+
+Closed guess: a point is on a boundary (a hole's rim, a scan's border) when its
+neighbours, seen in its tangent plane, leave an angular gap wider than BOUNDARY_GAP: inside
+a surface they surround it. A closed surface has no boundary points, an open one about as
+many as the square root of its point count (its rim); the cloud is guessed closed when
+fewer than CLOSED_MAX_BOUNDARY x sqrt(N) points are on a boundary, which tolerates a few
+noisy points but not a rim. Sharp edges do not count: neighbours on the other face project
+beyond the edge and close the gap.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
 DEFAULT_K = 6
+BOUNDARY_K = 12                     # neighbours looked at for the boundary test
+BOUNDARY_GAP = np.radians(150.0)    # inside a surface the widest gap is ~60-90 degrees
+CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sqrt(N)
 # Queries go in chunks of this many points, in the kd-tree's own (spatially coherent)
 # order, so that each chunk walks the same few branches: this is what keeps 10M-point
-# scans within seconds and bounds the memory of the (chunk, k+1) distance arrays.
+# scans within seconds and bounds the memory of the (chunk, k+1) arrays.
 _CHUNK = 1 << 16
 
 
@@ -19,12 +33,31 @@ class SpacingError(ValueError):
     pass
 
 
-def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tuple[np.ndarray, int]:
-    """Distance from each point to its k-th nearest other point.
+@dataclass
+class Neighbourhood:
+    spacing: np.ndarray      # (N,) float32 distance to the k-th nearest other point
+    degenerate: int          # points whose spacing was 0 (k+ duplicates): given the median
+    boundary: int            # points on a boundary (only when normals were given)
+    closed_guess: bool       # boundary < CLOSED_MAX_BOUNDARY x sqrt(N)
 
-    Returns (spacing float32 (N,), number of points whose spacing was 0 because at least k
-    other points share their position; those get the median spacing instead).
-    """
+    def describe(self) -> str:
+        return (f"{self.boundary} of {len(self.spacing)} points look like a boundary "
+                f"(limit {CLOSED_MAX_BOUNDARY * np.sqrt(len(self.spacing)):.0f} for a closed surface)")
+
+
+def _boundary_mask(offsets: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """offsets (n, k, 3) from each point to its neighbours; normals (n, 3) unit."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(normals, u)
+    ang = np.sort(np.arctan2(np.einsum("nkj,nj->nk", offsets, v), np.einsum("nkj,nj->nk", offsets, u)), axis=1)
+    gaps = np.diff(np.concatenate([ang, ang[:, :1] + 2 * np.pi], axis=1), axis=1)
+    return gaps.max(axis=1) > BOUNDARY_GAP
+
+
+def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1) -> Neighbourhood:
+    """k-NN spacing of every point and, with normals, the boundary count and closed guess."""
     from scipy.spatial import cKDTree  # imported here: only import needs scipy
 
     pts = np.asarray(points, dtype=np.float64)
@@ -32,13 +65,18 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
     if n < 2:
         raise SpacingError("need at least 2 points to estimate the spacing (or a 'radius' property)")
     k = int(min(k, n - 1))
+    kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
+    nrm = None if normals is None else np.asarray(normals, dtype=np.float64)
     tree = cKDTree(pts)
     order = tree.indices  # leaf order of the tree: neighbouring points are adjacent
     spacing = np.empty(n, np.float32)
+    boundary = 0
     for start in range(0, n, _CHUNK):
         idx = order[start:start + _CHUNK]
-        dist, _ = tree.query(pts[idx], k=k + 1, workers=workers)  # +1: the point itself
+        dist, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)  # +1: the point itself
         spacing[idx] = dist[:, k]
+        if nrm is not None:
+            boundary += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx]).sum())
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
     if n_degenerate:
@@ -46,4 +84,11 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
         if good.size == 0:
             raise SpacingError("all points coincide: the spacing is zero everywhere")
         spacing[degenerate] = np.median(good)
-    return spacing, n_degenerate
+    closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
+    return Neighbourhood(spacing, n_degenerate, boundary, bool(closed))
+
+
+def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tuple[np.ndarray, int]:
+    """(spacing, number of degenerate points): see `analyse`."""
+    hood = analyse(points, None, k, workers)
+    return hood.spacing, hood.degenerate

@@ -72,3 +72,40 @@ def sphere_truth(origins, directions, axis, centre, radius):
     along = np.einsum("ij,ij->i", oc, directions)
     miss_distance = np.linalg.norm(oc - directions * along[:, None], axis=1)
     return hit, depth, (p - centre) / radius, np.abs(miss_distance - radius), along
+
+
+def cube_cloud(per_edge: int, half: float = 1.0):
+    """Points on the six faces of the cube [-half, half]^3 on a grid offset from the edges by
+    half a step, with exact face normals: sharp edges and corners."""
+    h = 2 * half / per_edge
+    g = (np.arange(per_edge) + 0.5) * h - half
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    pts, nrm = [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = np.zeros((len(u), 3))
+            others = [k for k in range(3) if k != axis]
+            p[:, others[0]], p[:, others[1]], p[:, axis] = u, v, sign * half
+            n = np.zeros_like(p)
+            n[:, axis] = sign
+            pts.append(p)
+            nrm.append(n)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+def ray_box(origins, directions, half: float = 1.0):
+    """Nearest positive hit distance on the cube [-half, half]^3 (inf on a miss), and the
+    face normal there."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / directions
+        t0 = (-half - origins) * inv
+        t1 = (half - origins) * inv
+    tn = np.minimum(t0, t1).max(axis=1)
+    tf = np.maximum(t0, t1).min(axis=1)
+    hit = (tn <= tf) & (tf > 0) & (tn > 0)
+    t = np.where(hit, tn, np.inf)
+    axis = np.argmax(np.minimum(t0, t1), axis=1)
+    normal = np.zeros_like(origins)
+    rows = np.arange(len(origins))
+    normal[rows, axis] = -np.sign(directions[rows, axis])
+    return t, normal

@@ -22,16 +22,72 @@ class SPLAT_TRACER_PT_render(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         settings = context.scene.splat_tracer
+        layout.prop(settings, "method")
+        layout.prop(settings, "epsilon")
         layout.prop(settings, "radius_factor")
+        layout.prop(context.scene.render, "film_transparent")
+        if context.scene.world is not None:
+            layout.prop(context.scene.world, "color", text="Background")
+        layout.operator("splat_tracer.compare", icon="IMAGE_REFERENCE")
+
+
+class SPLAT_TRACER_PT_visibility(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Visibility"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        settings = context.scene.splat_tracer
+        col = layout.column(heading="Rules")
+        col.prop(settings, "use_wrong_hit_elimination")
+        col.prop(settings, "use_far_phase")
+        col.prop(settings, "use_near_phase")
+        sub = col.column()
+        sub.active = not settings.use_near_phase
+        sub.prop(settings, "use_nearest_centre")
+        col = layout.column(heading="Shading")
+        col.prop(settings, "use_normal_interpolation")
+        sub = col.column()
+        sub.active = settings.use_normal_interpolation
+        sub.prop(settings, "kernel")
+
+
+class SPLAT_TRACER_PT_performance(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Performance"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
         render = context.scene.render
         col = layout.column(heading="Threads")
         col.prop(render, "threads_mode", expand=True)
         sub = col.column()
         sub.enabled = render.threads_mode == "FIXED"
         sub.prop(render, "threads")
-        layout.prop(render, "film_transparent")
-        if context.scene.world is not None:
-            layout.prop(context.scene.world, "color", text="Background")
+
+
+class SPLAT_TRACER_PT_object(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Splat Cloud"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return super().poll(context) and obj is not None and obj.type in {"MESH", "POINTCLOUD"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        obj = context.object
+        layout.prop(obj.splat_tracer, "closed")
+        guess = obj.get("splat_tracer_closed_guess")
+        if guess:
+            layout.label(text=f"Import guess: {guess}", icon="INFO")
 
 
 class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
@@ -46,7 +102,8 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         layout.prop(view_layer, "use_pass_normal", text="Normal")
 
 
-classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_passes)
+classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_visibility, SPLAT_TRACER_PT_performance,
+           SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_passes)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
 # show for; the ones that show for the built-in BLENDER_RENDER also make sense here.

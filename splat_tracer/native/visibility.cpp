@@ -101,8 +101,12 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
             // A ray that truly enters a closed surface leaves it: the next hit after the
             // layer must have the other facing. Otherwise the layer is a fringe disc or a
             // grazed edge: look further along the ray.
-            const bool leaves = q.next >= 0 && q.hits[q.next].front != q.facing;
-            if (!leaves) {
+            // A ray inside an object (roles swapped) meets the exit layer, after which there
+            // may be nothing at all; the layer is a fringe only when another layer of the
+            // same facing (a further exit) follows it.
+            const bool next_same = q.next >= 0 && q.hits[q.next].front == q.facing;
+            const bool accepted = inside ? !next_same : (q.next >= 0 && !next_same);
+            if (!accepted) {
                 ray.tmin = q.layer_end;
                 if (!(ray.tmin < ray.tmax)) return SurfaceHit();
                 continue;
