@@ -13,6 +13,7 @@ def add_camera(bpy, scene, location, rotation, **camera_settings):
     for key, value in camera_settings.items():
         setattr(cam.data, key, value)
     scene.camera = cam
+    bpy.context.view_layer.update()  # so that cam.matrix_world reflects the new transform
     return cam
 
 

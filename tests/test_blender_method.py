@@ -1,0 +1,131 @@
+"""The visibility method inside Blender: settings, panels, the closed guess, A/B compare."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.ndimage import distance_transform_edt
+
+from blender_helpers import add_camera
+from geometry import blender_camera_rays, cube_cloud, fibonacci_sphere, ray_box
+from splat_tracer import core, ply
+
+SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
+            "use_nearest_centre")
+
+
+def test_presets_set_the_switches_and_switches_set_the_preset(blender, empty_scene):
+    s = empty_scene.splat_tracer
+    # The add-on has its own copy of the core module (bl_ext.dev...): compare as tuples.
+    method = lambda: s.core_method().as_tuple()  # noqa: E731
+    assert s.method == "FULL" and method() == core.Method.preset("FULL").as_tuple()
+    s.method = "GENERAL"
+    assert not any(getattr(s, k) for k in SWITCHES)
+    assert method() == core.Method.preset("GENERAL").as_tuple()
+    s.method = "NEAREST_CENTRE"
+    assert method() == core.Method.preset("NEAREST_CENTRE").as_tuple()
+    s.use_far_phase = True  # no preset has this combination
+    assert s.method == "CUSTOM" and s.core_method().far_phase
+    s.use_far_phase = False
+    assert s.method == "NEAREST_CENTRE"
+    s.epsilon, s.kernel = 2.5, "SMOOTH"
+    assert method() == core.Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
+
+
+def test_panels_show_only_for_this_engine_and_every_setting_says_what_it_does(blender, empty_scene):
+    bpy = blender
+    panels = [bpy.types.SPLAT_TRACER_PT_render, bpy.types.SPLAT_TRACER_PT_visibility,
+              bpy.types.SPLAT_TRACER_PT_passes]
+    assert all(p.poll(bpy.context) for p in panels)
+    empty_scene.render.engine = "CYCLES"
+    assert not any(p.poll(bpy.context) for p in panels)
+    for group in (bpy.types.Scene.bl_rna.properties["splat_tracer"].fixed_type,
+                  bpy.types.Object.bl_rna.properties["splat_tracer"].fixed_type):
+        for prop in group.properties:
+            if prop.identifier == "rna_type":
+                continue
+            text = prop.description
+            assert text and text[0].isupper() and text.count(". ") == 0, (prop.identifier, text)
+
+
+def test_import_guesses_whether_the_surface_is_closed(blender, empty_scene, tmp_path):
+    bpy = blender
+    p, n = fibonacci_sphere(5000)
+    ply.write_ply(str(tmp_path / "ball.ply"), p, n)
+    g = np.stack(np.meshgrid(np.linspace(-1, 1, 70), np.linspace(-1, 1, 70)), -1).reshape(-1, 2)
+    patch = np.column_stack([g, 0.1 * np.sin(2 * g[:, 0])])
+    ply.write_ply(str(tmp_path / "terrain.ply"), patch, np.tile([0.0, 0.0, 1.0], (len(patch), 1)))
+    bpy.ops.splat_tracer.import_cloud(directory=str(tmp_path), files=[{"name": "ball.ply"}, {"name": "terrain.ply"}])
+    assert bpy.data.objects["ball"].splat_tracer.closed is True
+    assert bpy.data.objects["terrain"].splat_tracer.closed is False
+    assert "boundary" in bpy.data.objects["terrain"]["splat_tracer_closed_guess"]
+
+
+def image_pixels(image) -> np.ndarray:
+    w, h = image.size
+    buf = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(buf)
+    return buf.reshape(h, w, 4)[::-1]  # top row first
+
+
+def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, empty_scene, tmp_path):
+    """General (no correction) against the full method on a cube: the two differ at the
+    silhouette fringe and along the edges, and nowhere on the faces' interiors."""
+    bpy = blender
+    scene = empty_scene
+    p, n = cube_cloud(50)
+    ply.write_ply(str(tmp_path / "cube.ply"), p, n)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "cube.ply"))
+    obj = bpy.context.active_object
+    assert obj.splat_tracer.closed  # guessed: a cube has edges but no boundary
+    radii = np.empty(len(p), np.float32)
+    obj.data.attributes["splat_radius"].data.foreach_get("value", radii)
+    cam = add_camera(bpy, scene, (3.2, -5.0, 3.6), (math.radians(55), 0.0, math.radians(33)))
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 240, 100
+    out = tmp_path / "compare"
+    assert bpy.ops.splat_tracer.compare(a="GENERAL", b="FULL", directory=str(out)) == {"FINISHED"}
+    a, b, diff = (image_pixels(bpy.data.images[name]) for name in
+                  ("Splat Compare A", "Splat Compare B", "Splat Compare Difference"))
+    assert sorted(f.name for f in out.iterdir()) == ["compare_a.png", "compare_b.png", "compare_difference.png"]
+    delta = np.abs(a - b).max(axis=2)
+    differs = delta > 1e-3
+    np.testing.assert_allclose(diff[..., 0], delta / delta.max(), atol=1e-4)  # image storage rounds
+
+    origins, dirs, _ = blender_camera_rays(np.array(cam.matrix_world), 320, 240)
+    t, _ = ray_box(origins, dirs)
+    truth = np.isfinite(t).reshape(240, 320)
+    hit = origins + dirs * np.where(np.isfinite(t), t, 0)[:, None]
+    # Distance of each true surface point to the nearest cube edge (on its face).
+    sorted_abs = np.sort(np.abs(hit), axis=1)  # the largest coordinate is the face's
+    to_edge = (1.0 - sorted_abs[:, 1]).reshape(240, 320)
+    interior = truth & (to_edge > 3 * radii.max()) & (distance_transform_edt(truth) > 3)
+    assert interior.sum() > 5000 and not differs[interior].any()
+    fringe = differs & ~truth
+    assert fringe.sum() > 100  # the general method's fringe, gone in the full method
+    assert differs[truth & ~interior].sum() > 100  # along the edges
+    outside = ~truth & (distance_transform_edt(~truth) > 2)
+    assert b[..., :3][outside].max() == 0.0  # B shows only the (black) background there: no fringe
+
+
+def test_full_render_through_blender_has_the_true_cube_silhouette(blender, empty_scene, tmp_path):
+    from blender_helpers import render_to_exr
+
+    bpy = blender
+    scene = empty_scene
+    p, n = cube_cloud(50)
+    ply.write_ply(str(tmp_path / "cube.ply"), p, n)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "cube.ply"))
+    cam = add_camera(bpy, scene, (3.2, -5.0, 3.6), (math.radians(55), 0.0, math.radians(33)))
+    origins, dirs, _ = blender_camera_rays(np.array(cam.matrix_world), 320, 240)
+    truth = np.isfinite(ray_box(origins, dirs)[0]).reshape(240, 320)
+    edge = np.maximum(distance_transform_edt(truth), distance_transform_edt(~truth))
+    wrong = {}
+    for method in ("FULL", "GENERAL"):
+        scene.splat_tracer.method = method
+        out = render_to_exr(bpy, scene, tmp_path / f"{method}.exr", 320, 240)
+        wrong[method] = (out["depth"] < 1e9) != truth
+    # Full: a handful of pixels, each within about a pixel of the silhouette (2 at most).
+    assert wrong["FULL"].sum() < 30 and edge[wrong["FULL"]].max() <= 2.0
+    # General: the fringe runs along every silhouette edge.
+    assert wrong["GENERAL"].sum() > 10 * max(wrong["FULL"].sum(), 20)
