@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
 
-.PHONY: all venv build demo test dist bench bench-quick clean
+.PHONY: all venv build demo test dist docs bench bench-quick clean
 
 all: build
 
@@ -31,6 +31,9 @@ demo: build
 
 test: build
 	$(VPY) -m pytest tests
+
+docs: build
+	$(VPY) tools/switch_images.py --output-dir docs/switches
 
 dist: build
 	$(VPY) tools/build_dist.py --output-dir dist

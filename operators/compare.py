@@ -3,6 +3,7 @@ differencing, Figs. 13-14): images A, B and their difference, in the UI or headl
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import bpy
 import numpy as np
@@ -13,6 +14,12 @@ from ..splat_tracer.engine import render_frame
 _CHOICES = tuple((p, p.replace("_", " ").title(), f"The {p.replace('_', ' ').lower()} preset")
                  for p in core.PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)
 IMAGE_NAMES = ("Splat Compare A", "Splat Compare B", "Splat Compare Difference")
+_TOGGLES = (("NONE", "None", "Compare the A and B settings"),
+            ("use_wrong_hit_elimination", "Wrong Hit Elimination", "The scene's settings without and with it"),
+            ("use_normal_interpolation", "Normal Interpolation", "The scene's settings without and with it"),
+            ("use_far_phase", "Far Phase", "The scene's settings without and with it"),
+            ("use_near_phase", "Near Phase", "The scene's settings without and with it"),
+            ("use_nearest_centre", "Nearest Centre", "The scene's settings without and with it"))
 
 
 def _method(choice: str, scene) -> core.Method:
@@ -20,6 +27,23 @@ def _method(choice: str, scene) -> core.Method:
     if choice == "SCENE":
         return settings.core_method()
     return core.Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel)
+
+
+def _scene_method_with(scene, switch: str, value: bool) -> core.Method:
+    """The scene's method with one switch forced, leaving the scene's settings untouched."""
+    m = scene.splat_tracer.core_method()
+    if switch == "use_wrong_hit_elimination":
+        return replace(m, eliminate_wrong_hits=value)
+    if switch == "use_normal_interpolation":
+        return replace(m, interpolate_normals=value)
+    if switch == "use_far_phase":
+        return replace(m, far_phase=value)
+    near, centre = scene.splat_tracer.use_near_phase, scene.splat_tracer.use_nearest_centre
+    if switch == "use_near_phase":
+        near = value
+    else:
+        centre = value
+    return replace(m, position="NEAR_PHASE" if near else ("NEAREST_CENTRE" if centre else "FIRST"))
 
 
 def _store_image(name: str, rgba_top_first: np.ndarray) -> bpy.types.Image:
@@ -57,6 +81,9 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
                               description="Settings of image A (default: no visibility correction)")
     b: bpy.props.EnumProperty(name="B", items=_CHOICES, default="FULL",
                               description="Settings of image B (default: the full method)")
+    toggle: bpy.props.EnumProperty(name="Toggle", items=_TOGGLES, default="NONE",
+                                   description="Instead of A and B: the scene's settings with this switch off (A) "
+                                               "and on (B)")
     threshold: bpy.props.FloatProperty(name="Threshold", default=1e-3, min=0.0,
                                        description="A pixel differs when a channel changes by more than this")
     directory: bpy.props.StringProperty(name="Save To", subtype="DIR_PATH", default="",
@@ -71,9 +98,15 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
     def execute(self, context):
         depsgraph = context.evaluated_depsgraph_get()
         scene = context.scene
+        if self.toggle == "NONE":
+            methods = [_method(choice, scene) for choice in (self.a, self.b)]
+            names = (self.a, self.b)
+        else:
+            methods = [_scene_method_with(scene, self.toggle, value) for value in (False, True)]
+            names = (f"{self.toggle} off", "on")
         try:
-            frames = [render_frame(depsgraph, _method(choice, scene), depth=False, normal=False, report=self.report,
-                                   use_border=False) for choice in (self.a, self.b)]
+            frames = [render_frame(depsgraph, m, depth=False, normal=False, report=self.report, use_border=False)
+                      for m in methods]
         except Exception as e:  # noqa: BLE001 - every failure is reported to the user
             self.report({"ERROR"}, f"Splat Tracer compare: {e}")
             return {"CANCELLED"}
@@ -90,5 +123,5 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
         if context.area is not None and context.area.type == "IMAGE_EDITOR":
             context.area.spaces.active.image = images[2]
         self.report({"INFO"}, f"{self.differing_pixels:,} of {mask.size:,} pixels differ "
-                              f"({100.0 * self.differing_pixels / mask.size:.2f} %) between {self.a} and {self.b}")
+                              f"({100.0 * self.differing_pixels / mask.size:.2f} %) between {names[0]} and {names[1]}")
         return {"FINISHED"}

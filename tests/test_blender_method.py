@@ -69,9 +69,19 @@ def image_pixels(image) -> np.ndarray:
     return buf.reshape(h, w, 4)[::-1]  # top row first
 
 
-def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, empty_scene, tmp_path):
-    """General (no correction) against the full method on a cube: the two differ at the
-    silhouette fringe and along the edges, and nowhere on the faces' interiors."""
+def face_interiors(origins, dirs, t, radii):
+    """(true coverage, pixels whose true surface point is more than 3 splat radii from any
+    cube edge and 3 pixels inside the silhouette): where no rule can change anything."""
+    truth = np.isfinite(t).reshape(240, 320)
+    hit = origins + dirs * np.where(np.isfinite(t), t, 0)[:, None]
+    sorted_abs = np.sort(np.abs(hit), axis=1)  # the largest coordinate is the face's
+    to_edge = (1.0 - sorted_abs[:, 1]).reshape(240, 320)
+    return truth, truth & (to_edge > 3 * radii.max()) & (distance_transform_edt(truth) > 3)
+
+
+@pytest.fixture
+def cube_in_blender(blender, empty_scene, tmp_path):
+    """An imported cube cloud, a camera, and the analytic coverage of the cube."""
     bpy = blender
     scene = empty_scene
     p, n = cube_cloud(50)
@@ -83,6 +93,16 @@ def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, 
     obj.data.attributes["splat_radius"].data.foreach_get("value", radii)
     cam = add_camera(bpy, scene, (3.2, -5.0, 3.6), (math.radians(55), 0.0, math.radians(33)))
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 240, 100
+    origins, dirs, _ = blender_camera_rays(np.array(cam.matrix_world), 320, 240)
+    t, _ = ray_box(origins, dirs)
+    return scene, radii, origins, dirs, t
+
+
+def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, cube_in_blender, tmp_path):
+    """General (no correction) against the full method on a cube: the two differ at the
+    silhouette fringe and along the edges, and nowhere on the faces' interiors."""
+    bpy = blender
+    scene, radii, origins, dirs, t = cube_in_blender
     out = tmp_path / "compare"
     assert bpy.ops.splat_tracer.compare(a="GENERAL", b="FULL", directory=str(out)) == {"FINISHED"}
     a, b, diff = (image_pixels(bpy.data.images[name]) for name in
@@ -92,20 +112,29 @@ def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, 
     differs = delta > 1e-3
     np.testing.assert_allclose(diff[..., 0], delta / delta.max(), atol=1e-4)  # image storage rounds
 
-    origins, dirs, _ = blender_camera_rays(np.array(cam.matrix_world), 320, 240)
-    t, _ = ray_box(origins, dirs)
-    truth = np.isfinite(t).reshape(240, 320)
-    hit = origins + dirs * np.where(np.isfinite(t), t, 0)[:, None]
-    # Distance of each true surface point to the nearest cube edge (on its face).
-    sorted_abs = np.sort(np.abs(hit), axis=1)  # the largest coordinate is the face's
-    to_edge = (1.0 - sorted_abs[:, 1]).reshape(240, 320)
-    interior = truth & (to_edge > 3 * radii.max()) & (distance_transform_edt(truth) > 3)
+    truth, interior = face_interiors(origins, dirs, t, radii)
     assert interior.sum() > 5000 and not differs[interior].any()
     fringe = differs & ~truth
     assert fringe.sum() > 100  # the general method's fringe, gone in the full method
     assert differs[truth & ~interior].sum() > 100  # along the edges
     outside = ~truth & (distance_transform_edt(~truth) > 2)
     assert b[..., :3][outside].max() == 0.0  # B shows only the (black) background there: no fringe
+
+
+def test_compare_toggle_shows_one_switch(blender, cube_in_blender):
+    """Toggle mode: the scene's settings without and with one switch. The far phase on a
+    closed cube removes the fringe outside the silhouette and the fringe discs seen in
+    front of the cube's own faces along its edges; face interiors do not change."""
+    bpy = blender
+    scene, radii, origins, dirs, t = cube_in_blender
+    scene.splat_tracer.method = "FULL"
+    assert bpy.ops.splat_tracer.compare(toggle="use_far_phase") == {"FINISHED"}
+    a, b = (image_pixels(bpy.data.images[name]) for name in ("Splat Compare A", "Splat Compare B"))
+    differs = np.abs(a - b).max(axis=2) > 1e-3
+    truth, interior = face_interiors(origins, dirs, t, radii)
+    assert (differs & ~truth).sum() > 100 and (differs & truth).sum() > 50
+    assert not differs[interior].any()
+    assert scene.splat_tracer.use_far_phase and scene.splat_tracer.method == "FULL"  # settings untouched
 
 
 def test_full_render_through_blender_has_the_true_cube_silhouette(blender, empty_scene, tmp_path):
