@@ -1,11 +1,13 @@
-"""Ray throughput of the core's nearest-hit trace on the paper's experiment.
+"""Ray throughput of the core on the paper's experiment: nearest hit and each method preset.
 
     python benchmarks/trace_throughput.py [--quick]     (`make bench`, `make bench-quick`)
 
 The Stanford bunny's 35,947 vertices with area-weighted normals and k-NN radii (the
-paper's 35,945-point cloud), one ray per pixel at 640x480, nearest hit. Prints one table:
-BVH build time, trace() and render() rays per second on 1 thread and on all cores, and
-the paper's own figure as the reference row. Without ../shared (a user's clone), an
+paper's 35,945-point cloud), one ray per pixel at 640x480. Prints one table: BVH build
+time; rays per second of the plain nearest-hit trace(), of trace_surface() under each
+method preset (the ε-window query and the visibility rules; the cloud treated as closed,
+as the paper does), and of render() with the full method, on 1 thread and on all cores;
+and the paper's own figure as the reference row. Without ../shared (a user's clone), an
 analytic sphere of the same size stands in for the bunny, and the table says so.
 """
 from __future__ import annotations
@@ -59,16 +61,22 @@ def main(argv=None) -> int:
     origin, local = core.local_frame(positions)
     radii, _ = spacing.knn_spacing(local)
     cores = core.hardware_threads()
-    build_s, scene = timed(lambda: core.Scene(local, normals, radii), repeats)
+    build_s, scene = timed(lambda: core.Scene(local, normals, radii, closed=True), repeats)
     cam = fit_camera(core, local, WIDTH, HEIGHT)
     origins, dirs = cam.rays(WIDTH, HEIGHT)
     n_rays = len(origins)
 
+    full = core.Method.preset("FULL")
     rows = []
     for threads in sorted({1, cores}):
         t_trace, hits = timed(lambda: scene.trace(origins, dirs, normals=False, threads=threads), repeats)
-        t_render, _ = timed(lambda: scene.render(cam, WIDTH, HEIGHT, threads=threads), repeats)
-        rows.append((threads, t_trace, t_render))
+        rows.append(("core trace(), nearest hit", threads, t_trace))
+        for preset in core.PRESETS:
+            method = core.Method.preset(preset)
+            t, _ = timed(lambda: scene.trace_surface(origins, dirs, method, threads=threads), repeats)
+            rows.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads, t))
+        t_render, _ = timed(lambda: scene.render(cam, WIDTH, HEIGHT, threads=threads, method=full), repeats)
+        rows.append(("core render(), full method, headlight shading", threads, t_render))
     coverage = float((hits.id >= 0).mean())
 
     stats = scene.bvh_stats()
@@ -76,14 +84,14 @@ def main(argv=None) -> int:
           f"{coverage:.1%} of pixels hit")
     print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} nodes, "
           f"depth {stats['depth']}, median of {repeats} runs each\n")
-    print("| renderer | threads | time (s) | Mrays/s |")
-    print("|---|---:|---:|---:|")
-    for threads, t_trace, t_render in rows:
-        print(f"| core trace(), nearest hit | {threads} | {t_trace:.3f} | {n_rays / t_trace / 1e6:.2f} |")
-        print(f"| core render(), headlight shading | {threads} | {t_render:.3f} | {n_rays / t_render / 1e6:.2f} |")
+    print("| renderer | threads | time (s) | Mrays/s | vs nearest hit |")
+    print("|---|---:|---:|---:|---:|")
+    nearest = {threads: t for name, threads, t in rows if name.startswith("core trace()")}
+    for name, threads, t in rows:
+        print(f"| {name} | {threads} | {t:.3f} | {n_rays / t / 1e6:.2f} | {t / nearest[threads]:.2f}x |")
     lo, hi = PAPER_SECONDS
     print(f"| paper (Beddiaf & Babahenini), full method, 35,945 points | ? | {lo:.0f}-{hi:.0f} | "
-          f"{n_rays / hi / 1e6:.3f}-{n_rays / lo / 1e6:.3f} |")
+          f"{n_rays / hi / 1e6:.3f}-{n_rays / lo / 1e6:.3f} | |")
     return 0
 
 

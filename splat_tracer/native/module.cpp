@@ -120,6 +120,31 @@ bool without_gil(F &&fn) {
 }
 
 // ---------------------------------------------------------------------------------------
+// Rays
+
+// Origins and directions must be finite, directions non-zero; sets ValueError naming the
+// first bad ray otherwise.
+bool check_rays(const float *origins, const float *directions, Py_ssize_t count) {
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const float *a = origins + 3 * i, *b = directions + 3 * i;
+        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i), false;
+        if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
+            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i), false;
+    }
+    return true;
+}
+
+Ray make_ray(const float *origins, const float *directions, size_t i, double tmin, double tmax) {
+    Ray ray;
+    ray.o = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
+    ray.d = normalize(Vec3(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]));
+    ray.tmin = float(tmin), ray.tmax = float(tmax);
+    return ray;
+}
+
+// ---------------------------------------------------------------------------------------
 // Scene
 
 struct SceneObject {
@@ -203,14 +228,7 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     const SplatScene &scene = scene_of(self);
     const float *po = o.data<float>(), *pd = d.data<float>();
-    for (Py_ssize_t i = 0; i < count; ++i) {
-        const float *a = po + 3 * i, *b = pd + 3 * i;
-        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
-            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i);
-        if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
-            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
-            return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i);
-    }
+    if (!check_rays(po, pd, count)) return nullptr;
     float *pt = t.data<float>(), *pn = nrm.held ? nrm.data<float>() : nullptr;
     int32_t *pid = id.data<int32_t>();
     uint8_t *pfr = fr.data<uint8_t>();
@@ -222,10 +240,7 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
                 [&](size_t chunk) {
                     const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
                     for (size_t i = chunk * kChunk; i < end; ++i) {
-                        Ray ray;
-                        ray.o = Vec3(po[3 * i], po[3 * i + 1], po[3 * i + 2]);
-                        ray.d = normalize(Vec3(pd[3 * i], pd[3 * i + 1], pd[3 * i + 2]));
-                        ray.tmin = float(tmin), ray.tmax = float(tmax);
+                        const Ray ray = make_ray(po, pd, i, tmin, tmax);
                         const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray);
                         pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
                         if (pn) {
@@ -291,14 +306,7 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     const int n_ex = ex.held ? int(ex.dim(1)) : 0;
 
     const float *po = o.data<float>(), *pd = d.data<float>();
-    for (Py_ssize_t i = 0; i < count; ++i) {
-        const float *a = po + 3 * i, *b = pd + 3 * i;
-        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
-            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i);
-        if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
-            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
-            return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i);
-    }
+    if (!check_rays(po, pd, count)) return nullptr;
     const SplatScene &scene = scene_of(self);
     float *pt = t.data<float>(), *pn = nrm.data<float>(), *pc = col.data<float>();
     int32_t *pid = id.data<int32_t>(), *pm = mem.held ? mem.data<int32_t>() : nullptr;
@@ -313,10 +321,7 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
                 [&](size_t chunk) {
                     const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
                     for (size_t i = chunk * kChunk; i < end; ++i) {
-                        Ray ray;
-                        ray.o = Vec3(po[3 * i], po[3 * i + 1], po[3 * i + 2]);
-                        ray.d = normalize(Vec3(pd[3 * i], pd[3 * i + 1], pd[3 * i + 2]));
-                        ray.tmin = float(tmin), ray.tmax = float(tmax);
+                        const Ray ray = make_ray(po, pd, i, tmin, tmax);
                         const SurfaceHit h = find_surface(scene, ray, method, pin && pin[i], pex ? pex + i * n_ex : nullptr,
                                                           n_ex, brute);
                         pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;

@@ -50,64 +50,13 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     }
 }
 
-Hit SplatScene::intersect(const Ray &ray) const {
-    Hit best;
-    if (splats_.empty()) return best;
-    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
-    const BVHNode *nodes = bvh_.nodes.data();
-    struct Pending {
-        uint32_t node;
-        float entry;
-    } stack[kStackSize];
-    int sp = 0;
-    uint32_t node = 0;
-    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return best;
-    for (;;) {
-        const BVHNode &nd = nodes[node];
-        if (nd.leaf()) {
-            for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
-                const PackedSplat &s = splats_[k];
-                DiscHit h;
-                if (intersect_disc(ray, s.c, s.n, s.r, &h) && closer(h.t, s.id, best)) {
-                    best.t = h.t, best.id = s.id, best.front = h.front;
-                }
-            }
-        } else {
-            // Boxes are cut at the best hit so far (inclusive, so equal-t hits with a
-            // smaller id are still found); the nearer child is visited first.
-            const float tmax = std::fmin(ray.tmax, best.t);
-            uint32_t a = nd.first, b = nd.first + 1;
-            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
-            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
-            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
-            if (ta != kInfinity) {
-                if (tb != kInfinity) stack[sp++] = {b, tb};
-                node = a;
-                continue;
-            }
-        }
-        // Pop, skipping nodes that the best hit has since moved in front of.
-        for (;;) {
-            if (sp == 0) return best;
-            --sp;
-            if (stack[sp].entry <= best.t) {
-                node = stack[sp].node;
-                break;
-            }
-        }
-    }
-}
-
-void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) const {
+// Front-to-back BVH traversal shared by every query: `visit(splat, hit)` is called for each
+// disc the ray meets in (tmin, tmax), and boxes entered beyond `limit` are skipped. The
+// visitor may lower `limit` as it learns (nearest hit so far, the layer query's cut); the
+// comparison is inclusive so that equal-t hits with a smaller id are still found.
+template <class Visit>
+void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit) const {
     if (splats_.empty()) return;
-    if (brute_force) {
-        for (const PackedSplat &s : splats_) {
-            DiscHit h;
-            if (intersect_disc(ray, s.c, s.n, s.r, &h) && !q.excluded(s.id))
-                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
-        }
-        return;
-    }
     const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
     const BVHNode *nodes = bvh_.nodes.data();
     struct Pending {
@@ -116,7 +65,6 @@ void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) c
     } stack[kStackSize];
     int sp = 0;
     uint32_t node = 0;
-    q.cut = ray.tmax;
     if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return;
     for (;;) {
         const BVHNode &nd = nodes[node];
@@ -124,11 +72,11 @@ void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) c
             for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
                 const PackedSplat &s = splats_[k];
                 DiscHit h;
-                if (intersect_disc(ray, s.c, s.n, s.r, &h) && !q.excluded(s.id))
-                    q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+                if (intersect_disc(ray, s.c, s.n, s.r, &h)) visit(s, h);
             }
         } else {
-            const float tmax = std::fmin(ray.tmax, q.cut);
+            // The nearer child is visited first, the other one pushed with its entry.
+            const float tmax = std::fmin(ray.tmax, limit);
             uint32_t a = nd.first, b = nd.first + 1;
             float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
             float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
@@ -139,15 +87,39 @@ void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) c
                 continue;
             }
         }
+        // Pop, skipping nodes that the limit has since moved in front of.
         for (;;) {
             if (sp == 0) return;
             --sp;
-            if (stack[sp].entry <= q.cut) {
+            if (stack[sp].entry <= limit) {
                 node = stack[sp].node;
                 break;
             }
         }
     }
+}
+
+Hit SplatScene::intersect(const Ray &ray) const {
+    Hit best;
+    traverse(ray, best.t, [&](const PackedSplat &s, const DiscHit &h) {
+        if (closer(h.t, s.id, best)) best.t = h.t, best.id = s.id, best.front = h.front;
+    });
+    return best;
+}
+
+void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) const {
+    auto offer = [&](const PackedSplat &s, const DiscHit &h) {
+        if (!q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+    };
+    q.cut = ray.tmax;
+    if (brute_force) {
+        for (const PackedSplat &s : splats_) {
+            DiscHit h;
+            if (intersect_disc(ray, s.c, s.n, s.r, &h)) offer(s, h);
+        }
+        return;
+    }
+    traverse(ray, q.cut, offer);
 }
 
 Hit SplatScene::intersect_brute_force(const Ray &ray) const {

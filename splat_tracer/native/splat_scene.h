@@ -58,6 +58,9 @@ class SplatScene {
     void gather_layer(const Ray &ray, LayerQuery &q, bool brute_force = false) const;
 
   private:
+    template <class Visit>
+    void traverse(const Ray &ray, const float &limit, Visit &&visit) const;
+
     std::vector<PackedSplat> splats_;  // BVH order
     std::vector<Vec3> centres_, normals_, colours_;
     std::vector<uint8_t> closed_;
