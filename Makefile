@@ -40,9 +40,11 @@ dist: build
 
 bench-quick: build
 	$(VPY) benchmarks/trace_throughput.py --quick
+	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
 
 bench: build
 	$(VPY) benchmarks/trace_throughput.py
+	$(VPY) benchmarks/accuracy.py --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache
