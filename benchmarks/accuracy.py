@@ -174,6 +174,8 @@ def main(argv=None) -> int:
 
     print()
     print(report.summary(rows))
+    print("\nThe README's selection:\n")
+    print(report.readme_table(rows))
     print(f"\naccuracy: {len(rows)} rows in {time.perf_counter() - t0:.0f} s -> {args.output}")
     return 0
 

@@ -48,6 +48,24 @@ def summary(rows) -> str:
     return table(keep)
 
 
+README_CLOUDS = [("stanford-bunny", "vertices"), ("fandisk", "samples 50k"), ("cube", "vertices"),
+                 ("torus", "samples 50k"), ("spot", "samples 50k")]
+
+
+def readme_table(rows) -> str:
+    """The README's selection: the paper's experiment (the bunny's vertices), fandisk's sharp
+    edges, and three more models; the presets at default settings, the full method with the
+    cloud forced closed, Blender's own render, Cycles and the paper."""
+    keep = []
+    for model, cloud in README_CLOUDS:
+        for r in rows:
+            if (r.get("model"), r.get("cloud")) != (model, cloud):
+                continue
+            if r.get("renderer") != "splat_tracer core" or r.get("method") in SUMMARY_METHODS | {"full, forced closed"}:
+                keep.append(r)
+    return table(keep)
+
+
 def markdown(rows) -> str:
     return ("# Run time against error\n\nMade by `python benchmarks/accuracy.py` (see its docstring for what "
             "each column measures).\n\n## Summary\n\n" + summary(rows) + "\n## Every configuration\n\n" + table(rows))

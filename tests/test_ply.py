@@ -80,3 +80,44 @@ def test_knn_spacing_on_a_grid_and_with_duplicates():
         spacing.knn_spacing(pts[:1])
     with pytest.raises(spacing.SpacingError, match="coincide"):
         spacing.knn_spacing(np.zeros((10, 3)))
+
+
+def _random_sphere(n, seed=0):
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return p, p
+
+
+def _cube_with_shared_edges(n=20):
+    """A cube grid whose edge and corner points exist once per face, each with that face's
+    normal: what a CAD mesh's vertex cloud looks like."""
+    g = np.linspace(-1, 1, n + 1)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    pts, nrm = [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            p = np.zeros((len(u), 3))
+            others = [k for k in range(3) if k != axis]
+            p[:, others[0]], p[:, others[1]], p[:, axis] = u, v, sign
+            n_ = np.zeros_like(p)
+            n_[:, axis] = sign
+            pts.append(p)
+            nrm.append(n_)
+    return np.concatenate(pts), np.concatenate(nrm)
+
+
+@pytest.mark.parametrize("name, make, closed", [
+    ("randomly sampled sphere", lambda: _random_sphere(30000), True),
+    ("even sphere", lambda: fibonacci_sphere(20000), True),
+    ("cube with duplicated edge points", _cube_with_shared_edges, True),
+    ("dome (open hemisphere)", lambda: tuple(a[fibonacci_sphere(20000)[0][:, 2] > 0] for a in fibonacci_sphere(20000)),
+     False),
+    ("sphere with a hole", lambda: tuple(a[fibonacci_sphere(20000)[0][:, 2] < 0.9] for a in fibonacci_sphere(20000)),
+     False),
+    ("flat patch", lambda: (np.column_stack([np.random.default_rng(1).uniform(-1, 1, (20000, 2)), np.zeros(20000)]),
+                            np.tile([0.0, 0.0, 1.0], (20000, 1))), False),
+])
+def test_closed_guess(name, make, closed):
+    points, normals = make()
+    hood = spacing.analyse(points, normals)
+    assert hood.closed_guess is closed, (name, hood.describe())
