@@ -74,11 +74,13 @@ def sphere_truth(origins, directions, axis, centre, radius):
     return hit, depth, (p - centre) / radius, np.abs(miss_distance - radius), along
 
 
-def cube_cloud(per_edge: int, half: float = 1.0):
+def cube_cloud(per_edge: int, half: float = 1.0, on_edges: bool = False):
     """Points on the six faces of the cube [-half, half]^3 on a grid offset from the edges by
-    half a step, with exact face normals: sharp edges and corners."""
+    half a step, with exact face normals: sharp edges and corners. on_edges: the grid runs
+    onto the edges instead, so edge and corner points exist once per face, each with that
+    face's normal (what a CAD mesh's vertex cloud looks like)."""
     h = 2 * half / per_edge
-    g = (np.arange(per_edge) + 0.5) * h - half
+    g = np.linspace(-half, half, per_edge + 1) if on_edges else (np.arange(per_edge) + 0.5) * h - half
     u, v = (a.ravel() for a in np.meshgrid(g, g))
     pts, nrm = [], []
     for axis in range(3):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry import fibonacci_sphere
+from geometry import cube_cloud, fibonacci_sphere
 from splat_tracer import ply, spacing
 
 
@@ -88,28 +88,10 @@ def _random_sphere(n, seed=0):
     return p, p
 
 
-def _cube_with_shared_edges(n=20):
-    """A cube grid whose edge and corner points exist once per face, each with that face's
-    normal: what a CAD mesh's vertex cloud looks like."""
-    g = np.linspace(-1, 1, n + 1)
-    u, v = (a.ravel() for a in np.meshgrid(g, g))
-    pts, nrm = [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            p = np.zeros((len(u), 3))
-            others = [k for k in range(3) if k != axis]
-            p[:, others[0]], p[:, others[1]], p[:, axis] = u, v, sign
-            n_ = np.zeros_like(p)
-            n_[:, axis] = sign
-            pts.append(p)
-            nrm.append(n_)
-    return np.concatenate(pts), np.concatenate(nrm)
-
-
 @pytest.mark.parametrize("name, make, closed", [
     ("randomly sampled sphere", lambda: _random_sphere(30000), True),
     ("even sphere", lambda: fibonacci_sphere(20000), True),
-    ("cube with duplicated edge points", _cube_with_shared_edges, True),
+    ("cube with duplicated edge points", lambda: cube_cloud(20, on_edges=True), True),
     ("dome (open hemisphere)", lambda: tuple(a[fibonacci_sphere(20000)[0][:, 2] > 0] for a in fibonacci_sphere(20000)),
      False),
     ("sphere with a hole", lambda: tuple(a[fibonacci_sphere(20000)[0][:, 2] < 0.9] for a in fibonacci_sphere(20000)),
