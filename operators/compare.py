@@ -3,7 +3,6 @@ differencing, Figs. 13-14): images A, B and their difference, in the UI or headl
 from __future__ import annotations
 
 import os
-from dataclasses import replace
 
 import bpy
 import numpy as np
@@ -27,23 +26,6 @@ def _method(choice: str, scene) -> core.Method:
     if choice == "SCENE":
         return settings.core_method()
     return core.Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel)
-
-
-def _scene_method_with(scene, switch: str, value: bool) -> core.Method:
-    """The scene's method with one switch forced, leaving the scene's settings untouched."""
-    m = scene.splat_tracer.core_method()
-    if switch == "use_wrong_hit_elimination":
-        return replace(m, eliminate_wrong_hits=value)
-    if switch == "use_normal_interpolation":
-        return replace(m, interpolate_normals=value)
-    if switch == "use_far_phase":
-        return replace(m, far_phase=value)
-    near, centre = scene.splat_tracer.use_near_phase, scene.splat_tracer.use_nearest_centre
-    if switch == "use_near_phase":
-        near = value
-    else:
-        centre = value
-    return replace(m, position="NEAR_PHASE" if near else ("NEAREST_CENTRE" if centre else "FIRST"))
 
 
 def _store_image(name: str, rgba_top_first: np.ndarray) -> bpy.types.Image:
@@ -102,7 +84,7 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
             methods = [_method(choice, scene) for choice in (self.a, self.b)]
             names = (self.a, self.b)
         else:
-            methods = [_scene_method_with(scene, self.toggle, value) for value in (False, True)]
+            methods = [scene.splat_tracer.core_method(**{self.toggle: value}) for value in (False, True)]
             names = (f"{self.toggle} off", "on")
         try:
             frames = [render_frame(depsgraph, m, depth=False, normal=False, report=self.report, use_border=False)

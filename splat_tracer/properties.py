@@ -16,6 +16,17 @@ _SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_p
 _syncing = False  # set while one property's update writes the others
 
 
+def method_from_switches(switches: dict, epsilon: float, kernel: str) -> core.Method:
+    """The core method for a set of switch values (keys as in _SWITCHES)."""
+    if switches["use_near_phase"]:
+        position = "NEAR_PHASE"
+    else:
+        position = "NEAREST_CENTRE" if switches["use_nearest_centre"] else "FIRST"
+    return core.Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
+                       interpolate_normals=switches["use_normal_interpolation"],
+                       far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon)
+
+
 def _switches_of(preset: str) -> dict:
     m = core.Method.preset(preset)
     return dict(use_wrong_hit_elimination=m.eliminate_wrong_hits, use_normal_interpolation=m.interpolate_normals,
@@ -39,7 +50,7 @@ def _on_switch(self, context):
     global _syncing
     if _syncing:
         return
-    current = {key: getattr(self, key) for key in _SWITCHES}
+    current = self.switches()
     match = next((p for p in core.PRESETS if _switches_of(p) == current), "CUSTOM")
     _syncing = True
     try:
@@ -96,11 +107,13 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
     )
 
-    def core_method(self) -> core.Method:
-        position = "NEAR_PHASE" if self.use_near_phase else ("NEAREST_CENTRE" if self.use_nearest_centre else "FIRST")
-        return core.Method(eliminate_wrong_hits=self.use_wrong_hit_elimination,
-                           interpolate_normals=self.use_normal_interpolation, far_phase=self.use_far_phase,
-                           position=position, kernel=self.kernel, epsilon=self.epsilon)
+    def switches(self) -> dict:
+        return {key: getattr(self, key) for key in _SWITCHES}
+
+    def core_method(self, **overrides) -> core.Method:
+        """The method these settings describe; `overrides` force switches (by property name)
+        without touching the stored settings."""
+        return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel)
 
 
 class SplatTracerObjectSettings(bpy.types.PropertyGroup):
