@@ -136,6 +136,14 @@ bool check_rays(const float *origins, const float *directions, Py_ssize_t count)
     return true;
 }
 
+// The scalar arguments every ray batch takes; sets ValueError when they are unusable.
+bool check_batch_args(double tmin, double tmax, int threads) {
+    if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
+        return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers"), false;
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    return true;
+}
+
 Ray make_ray(const float *origins, const float *directions, size_t i, double tmin, double tmax) {
     Ray ray;
     ray.o = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
@@ -203,6 +211,22 @@ int threads_arg(PyObject *self, int requested) {
     return requested > 0 ? requested : reinterpret_cast<SceneObject *>(self)->threads;
 }
 
+// Calls per_ray(i) for every ray of a batch of `count`, in chunks of `chunk` rays spread over
+// the threads, without the GIL. Returns false with a Python exception set on failure.
+template <class PerRay>
+bool for_each_ray(PyObject *self, int threads, Py_ssize_t count, size_t chunk, PerRay &&per_ray) {
+    const size_t chunks = (size_t(count) + chunk - 1) / chunk;
+    return without_gil([&] {
+        parallel_for(
+            chunks, threads_arg(self, threads),
+            [&](size_t c) {
+                const size_t end = std::min(size_t(count), (c + 1) * chunk);
+                for (size_t i = c * chunk; i < end; ++i) per_ray(i);
+            },
+            [](size_t) { return true; });
+    });
+}
+
 PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
                                    "out_front", "out_normal", "threads", "brute_force", nullptr};
@@ -212,9 +236,7 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|Oip", const_cast<char **>(kwlist), &oo, &od, &tmin,
                                      &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute))
         return nullptr;
-    if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
-        return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers");
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (!check_batch_args(tmin, tmax, threads)) return nullptr;
     View o, d, t, id, fr, nrm;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(oo, "origins", 'f', 2, s3, false, o)) return nullptr;
@@ -232,24 +254,16 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     float *pt = t.data<float>(), *pn = nrm.held ? nrm.data<float>() : nullptr;
     int32_t *pid = id.data<int32_t>();
     uint8_t *pfr = fr.data<uint8_t>();
-    constexpr size_t kChunk = 1024;  // rays per task: small enough to balance, large enough to amortise
-    const size_t chunks = (size_t(count) + kChunk - 1) / kChunk;
-    if (!without_gil([&] {
-            parallel_for(
-                chunks, threads_arg(self, threads),
-                [&](size_t chunk) {
-                    const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
-                    for (size_t i = chunk * kChunk; i < end; ++i) {
-                        const Ray ray = make_ray(po, pd, i, tmin, tmax);
-                        const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray);
-                        pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
-                        if (pn) {
-                            const Vec3 n = h.valid() ? scene.normal(h.id) : Vec3();
-                            pn[3 * i] = n.x, pn[3 * i + 1] = n.y, pn[3 * i + 2] = n.z;
-                        }
-                    }
-                },
-                [](size_t) { return true; });
+    // Rays per task: small enough to balance the threads, large enough to amortise a task.
+    constexpr size_t kChunk = 1024;
+    if (!for_each_ray(self, threads, count, kChunk, [&](size_t i) {
+            const Ray ray = make_ray(po, pd, i, tmin, tmax);
+            const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray);
+            pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+            if (pn) {
+                const Vec3 n = h.valid() ? scene.normal(h.id) : Vec3();
+                pn[3 * i] = n.x, pn[3 * i + 1] = n.y, pn[3 * i + 2] = n.z;
+            }
         }))
         return nullptr;
     Py_RETURN_NONE;
@@ -283,9 +297,7 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOOOOO|OOOip", const_cast<char **>(kwlist), &oo, &od, &tmin,
                                      &tmax, &ometh, &ot, &oid, &ofr, &onrm, &ocol, &omem, &oin, &oex, &threads, &brute))
         return nullptr;
-    if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
-        return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers");
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (!check_batch_args(tmin, tmax, threads)) return nullptr;
     Method method;
     if (ometh == Py_None) return PyErr_Format(PyExc_TypeError, "method is required");
     if (!parse_method(ometh, method)) return nullptr;
@@ -313,26 +325,18 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     const int32_t *pex = ex.held ? ex.data<int32_t>() : nullptr;
     const uint8_t *pin = in.held ? in.data<uint8_t>() : nullptr;
     uint8_t *pfr = fr.data<uint8_t>();
+    // Fewer rays per task than trace(): a layer query costs more and varies more per ray.
     constexpr size_t kChunk = 512;
-    const size_t chunks = (size_t(count) + kChunk - 1) / kChunk;
-    if (!without_gil([&] {
-            parallel_for(
-                chunks, threads_arg(self, threads),
-                [&](size_t chunk) {
-                    const size_t end = std::min(size_t(count), (chunk + 1) * kChunk);
-                    for (size_t i = chunk * kChunk; i < end; ++i) {
-                        const Ray ray = make_ray(po, pd, i, tmin, tmax);
-                        const SurfaceHit h = find_surface(scene, ray, method, pin && pin[i], pex ? pex + i * n_ex : nullptr,
-                                                          n_ex, brute);
-                        pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
-                        for (int k = 0; k < 3; ++k) pn[3 * i + k] = h.normal[k], pc[3 * i + k] = h.colour[k];
-                        if (pm) {
-                            int32_t *row = pm + i * kMaxLayerHits;
-                            for (int k = 0; k < kMaxLayerHits; ++k) row[k] = k < h.n_members ? h.members[k] : -1;
-                        }
-                    }
-                },
-                [](size_t) { return true; });
+    if (!for_each_ray(self, threads, count, kChunk, [&](size_t i) {
+            const Ray ray = make_ray(po, pd, i, tmin, tmax);
+            const SurfaceHit h = find_surface(scene, ray, method, pin && pin[i], pex ? pex + i * n_ex : nullptr, n_ex,
+                                              brute);
+            pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+            for (int k = 0; k < 3; ++k) pn[3 * i + k] = h.normal[k], pc[3 * i + k] = h.colour[k];
+            if (pm) {
+                int32_t *row = pm + i * kMaxLayerHits;
+                for (int k = 0; k < kMaxLayerHits; ++k) row[k] = k < h.n_members ? h.members[k] : -1;
+            }
         }))
         return nullptr;
     Py_RETURN_NONE;
