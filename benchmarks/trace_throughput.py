@@ -18,13 +18,11 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
-from meshes import SHARED_MESHES, fit_camera, read_obj, vertex_cloud  # noqa: E402
+from meshes import SHARED_MESHES, area_samples, fit_camera, icosphere, read_obj, vertex_cloud  # noqa: E402
 from splat_tracer import core, spacing  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
@@ -35,11 +33,7 @@ def load_cloud():
     bunny = SHARED_MESHES / "stanford-bunny.obj"
     if bunny.is_file():
         return "stanford bunny (vertices)", *vertex_cloud(*read_obj(bunny))
-    n = 35947
-    i = np.arange(n) + 0.5
-    phi, theta = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
-    p = np.column_stack([np.cos(theta) * np.sin(phi), np.sin(theta) * np.sin(phi), np.cos(phi)])
-    return "sphere stand-in (no ../shared)", p, p
+    return "sphere stand-in (no ../shared)", *area_samples(*icosphere(5), 35947)
 
 
 def timed(fn, repeats):
