@@ -158,7 +158,19 @@ class Camera:
         """A camera at `eye` looking at `target`. Perspective with vertical field of view
         `fov_y` (degrees), or orthographic when `ortho_height` (the view's height) is given."""
         eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+        if not all(np.isfinite(v).all() and v.shape == (3,) for v in (eye, target, up)):
+            raise ValueError("eye, target and up must be three finite numbers each")
+        if ortho_height is None and not 0.0 < fov_y < 180.0:
+            raise ValueError(f"fov_y must be between 0 and 180 degrees (exclusive), got {fov_y!r}")
+        if ortho_height is not None and not (np.isfinite(ortho_height) and ortho_height > 0):
+            raise ValueError(f"ortho_height must be a positive number, got {ortho_height!r}")
+        if not (np.isfinite(aspect) and aspect > 0):
+            raise ValueError(f"aspect must be a positive number, got {aspect!r}")
+        if not (0.0 < near < far < np.inf):
+            raise ValueError(f"need 0 < near < far (finite), got near={near!r}, far={far!r}")
         fwd = target - eye
+        if not np.linalg.norm(fwd) > 0:
+            raise ValueError("eye and target are the same point")
         fwd /= np.linalg.norm(fwd)
         right = np.cross(fwd, up)
         if np.linalg.norm(right) < 1e-12:
@@ -223,6 +235,17 @@ class Scene:
     def bvh_stats(self) -> dict:
         return self._scene.bvh_stats()
 
+    def traversal_cost(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf) -> dict:
+        """Work the BVH does for these nearest-hit rays: {'nodes': nodes entered, 'discs':
+        disc tests}, summed over the rays. Tests compare costs with it instead of timings."""
+        o = _f32(origins, "origins", (-1, 3))
+        d = _f32(directions, "directions", (len(o), 3))
+        n = len(o)
+        stats = np.zeros(2, np.int64)
+        self._scene.trace(o, d, float(tmin), float(tmax), np.empty(n, np.float32), np.empty(n, np.int32),
+                          np.empty(n, np.bool_), None, 0, False, stats)
+        return {"nodes": int(stats[0]), "discs": int(stats[1])}
+
     def trace(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf, normals: bool = True,
               threads: int = 0, brute_force: bool = False) -> TraceResult:
         """Nearest splat hit (either facing) per ray, in the open interval (tmin, tmax).
@@ -263,7 +286,12 @@ class Scene:
             inside_arr = np.ascontiguousarray(np.broadcast_to(np.asarray(inside, dtype=np.uint8), (n,)))
         ex = None
         if exclude is not None:
-            ex = np.ascontiguousarray(exclude, dtype=np.int32)
+            raw = np.asarray(exclude)
+            if raw.size and not np.issubdtype(raw.dtype, np.integer):
+                raise TypeError(f"exclude must hold integer splat ids, got dtype {raw.dtype}")
+            if raw.size and (raw.min() < -1 or raw.max() >= len(self)):
+                raise ValueError(f"exclude holds ids outside -1..{len(self) - 1} (min {raw.min()}, max {raw.max()})")
+            ex = np.ascontiguousarray(raw, dtype=np.int32)
             if ex.ndim != 2 or len(ex) != n:
                 raise ValueError(f"exclude must have shape ({n}, M), got {ex.shape}")
         self._scene.trace_surface(o, d, float(tmin), float(tmax), method.as_tuple(), out.t, out.id, out.front,

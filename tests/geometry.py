@@ -13,6 +13,15 @@ def fibonacci_sphere(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
     return normals * radius + np.asarray(centre, dtype=np.float64), normals
 
 
+def sphere_cloud(n: int, radius: float = 1.0, seed: int = 0):
+    """A closed unit-sphere splat cloud: (centres, normals, radii), randomly rotated by `seed`.
+    Radii are 1.5x the mean spacing sqrt(4 pi r^2 / n), so the discs overlap without holes."""
+    centres, normals = fibonacci_sphere(n, radius)
+    q, _ = np.linalg.qr(np.random.default_rng(seed).normal(size=(3, 3)))
+    spacing = np.sqrt(4 * np.pi * radius**2 / n)
+    return centres @ q.T, normals @ q.T, np.full(n, 1.5 * spacing)
+
+
 def ray_sphere(origins, directions, centre, radius):
     """Nearest positive hit distance per ray (inf on a miss); directions are unit."""
     oc = origins - np.asarray(centre)

@@ -135,7 +135,7 @@ def test_empty_scene_misses_everything():
     (lambda c, n, r: (c, n, r[:-1]), "radii must have shape"),
     (lambda c, n, r: (np.where(np.arange(len(c))[:, None] == 3, np.nan, c), n, r), "splat 3: centre is not finite"),
     (lambda c, n, r: (c, np.where(np.arange(len(c))[:, None] == 4, 0.0, n), r), "splat 4: normal has zero length"),
-    (lambda c, n, r: (c, n, np.where(np.arange(len(r)) == 5, -1.0, r)), "splat 5: radius must be finite and > 0"),
+    (lambda c, n, r: (c, n, np.where(np.arange(len(r)) == 5, -1.0, r)), "splat 5: radius must be > 0"),
     (lambda c, n, r: (c, n, np.where(np.arange(len(r)) == 6, np.inf, r)), "splat 6: radius"),
 ])
 def test_invalid_scene_input_raises(bad, message):

@@ -16,7 +16,8 @@ struct AABB {
     void grow(const AABB &b) { lo = vmin(lo, b.lo), hi = vmax(hi, b.hi); }
     bool empty() const { return !(lo.x <= hi.x); }
     Vec3 extent() const { return hi - lo; }
-    Vec3 centre() const { return (lo + hi) * 0.5f; }
+    // Halves first: lo + hi would overflow for boxes near the float range's ends.
+    Vec3 centre() const { return lo * 0.5f + hi * 0.5f; }
     float half_area() const {
         if (empty()) return 0.f;
         Vec3 e = extent();
@@ -47,13 +48,18 @@ inline AABB disc_bounds(Vec3 c, Vec3 n, float r) {
 // later than a hit inside it (the BVH prunes on that entry distance).
 inline float intersect_box(const AABB &b, Vec3 o, Vec3 inv_d, float tmin, float tmax) {
     constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
+    constexpr float kShrink = 1.f - kGamma3x2, kGrow = 1.f + kGamma3x2;
     float t0 = tmin, t1 = tmax;
     for (int k = 0; k < 3; ++k) {
         float tn = (b.lo[k] - o[k]) * inv_d[k];
         float tf = (b.hi[k] - o[k]) * inv_d[k];
         if (tn > tf) std::swap(tn, tf);
-        tn -= std::fabs(tn) * kGamma3x2;
-        tf += std::fabs(tf) * kGamma3x2;
+        // Widened by scaling, not by adding |t| * gamma: for a ray parallel to the slab the
+        // distances are +-inf, and inf - inf * gamma would be NaN, which the comparisons
+        // below skip -- the box was then never rejected and axis-aligned orthographic
+        // views traced every box of the tree (500-1000x slower).
+        tn *= tn > 0.f ? kShrink : kGrow;
+        tf *= tf > 0.f ? kGrow : kShrink;
         // NaN (0 * inf when the origin lies on a slab plane of a parallel ray) is skipped:
         // the comparisons below are false for NaN, leaving t0/t1 unchanged.
         t0 = tn > t0 ? tn : t0;

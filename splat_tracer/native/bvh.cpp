@@ -5,7 +5,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <system_error>
 #include <thread>
+#include <utility>
+
+#include "parallel.h"
 
 namespace splat {
 namespace {
@@ -110,8 +114,11 @@ struct Builder {
         return uint32_t(mid - prims.begin());
     }
 
+    // Clamped on both sides, and computed before the int conversion: a float outside
+    // int's range (or NaN) converted to int is undefined behaviour.
     static int bin_of(float x, float lo, float scale, int bins) {
-        return std::min(bins - 1, int((x - lo) * scale));
+        const float b = (x - lo) * scale;
+        return b > 0.f ? (b < float(bins - 1) ? int(b) : bins - 1) : 0;
     }
 
     void build(uint32_t node_index, uint32_t begin, uint32_t end, int depth, int spare_threads) {
@@ -138,7 +145,16 @@ struct Builder {
         node.count = 0;
         if (spare_threads > 0 && count > kParallelThreshold) {
             const int give = spare_threads / 2;
-            std::thread t([&, left, begin, mid, depth, give] { build(left, begin, mid, depth + 1, give); });
+            std::thread t;
+            try {
+                t = start_thread([&, left, begin, mid, depth, give] { build(left, begin, mid, depth + 1, give); });
+            } catch (const std::system_error &) {
+                // The system refused a thread: build this subtree here, and the rest with
+                // no more threads.
+                build(left, begin, mid, depth + 1, 0);
+                build(left + 1, mid, end, depth + 1, 0);
+                return;
+            }
             build(left + 1, mid, end, depth + 1, spare_threads - 1 - give);
             t.join();
         } else {
@@ -148,24 +164,33 @@ struct Builder {
     }
 };
 
-int depth_of(const std::vector<BVHNode> &nodes, uint32_t i) {
-    if (nodes[i].leaf()) return 1;
-    return 1 + std::max(depth_of(nodes, nodes[i].first), depth_of(nodes, nodes[i].first + 1));
+// Iterative (an explicit stack): a recursion would follow whatever `first` says.
+int depth_of(const std::vector<BVHNode> &nodes) {
+    int deepest = 0;
+    std::vector<std::pair<uint32_t, int>> stack{{0u, 1}};
+    while (!stack.empty()) {
+        const auto [i, d] = stack.back();
+        stack.pop_back();
+        deepest = std::max(deepest, d);
+        if (!nodes[i].leaf()) stack.push_back({nodes[i].first, d + 1}), stack.push_back({nodes[i].first + 1, d + 1});
+    }
+    return deepest;
 }
 
 }  // namespace
 
 void BVH::build(const std::vector<AABB> &bounds, int threads) {
     const uint32_t n = uint32_t(bounds.size());
-    nodes.assign(n > 0 ? 2 * size_t(n) - 1 : 1, BVHNode{AABB(), 0, 0});
+    nodes.clear();
     prim_order.resize(n);
-    if (n == 0) return;
+    if (n == 0) return;  // no nodes at all: traversals check for that
+    nodes.assign(2 * size_t(n) - 1, BVHNode{AABB(), 0, 0});
     Builder b(bounds, nodes);
     b.build(0, 0, n, 0, std::max(0, threads - 1));
     nodes.resize(b.used.load());
     for (uint32_t i = 0; i < n; ++i) prim_order[i] = b.prims[i].id;
 }
 
-int BVH::depth() const { return nodes.empty() ? 0 : depth_of(nodes, 0); }
+int BVH::depth() const { return nodes.empty() ? 0 : depth_of(nodes); }
 
 }  // namespace splat

@@ -8,6 +8,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -52,6 +53,7 @@ bool format_matches(const char *format, Py_ssize_t itemsize, char kind) {
         case 'd': return f == 'd' && itemsize == 8;
         case 'i': return (f == 'i' || f == 'l') && itemsize == 4;
         case 'B': return (f == 'B' || f == '?') && itemsize == 1;
+        case 'q': return (f == 'q' || f == 'l' || f == 'Q' || f == 'L') && itemsize == 8;
     }
     return false;
 }
@@ -62,6 +64,7 @@ const char *kind_name(char kind) {
         case 'd': return "float64";
         case 'i': return "int32";
         case 'B': return "uint8 or bool";
+        case 'q': return "int64";
     }
     return "?";
 }
@@ -127,10 +130,11 @@ bool without_gil(F &&fn) {
 bool check_rays(const float *origins, const float *directions, Py_ssize_t count) {
     for (Py_ssize_t i = 0; i < count; ++i) {
         const float *a = origins + 3 * i, *b = directions + 3 * i;
-        if (!(std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2])))
-            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite", i), false;
+        if (!(within_range(a[0]) && within_range(a[1]) && within_range(a[2])))
+            return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite or beyond 1e18", i), false;
+        // Length in double: a float direction of length 1e20 squares to inf in float.
         if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
-            !(b[0] * b[0] + b[1] * b[1] + b[2] * b[2] > 0.f))
+            !(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2] > 0.0))
             return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i), false;
     }
     return true;
@@ -147,7 +151,10 @@ bool check_batch_args(double tmin, double tmax, int threads) {
 Ray make_ray(const float *origins, const float *directions, size_t i, double tmin, double tmax) {
     Ray ray;
     ray.o = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
-    ray.d = normalize(Vec3(directions[3 * i], directions[3 * i + 1], directions[3 * i + 2]));
+    // Normalised in double: any finite non-zero float direction (1e-30 or 1e30 long) works.
+    const double dx = directions[3 * i], dy = directions[3 * i + 1], dz = directions[3 * i + 2];
+    const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+    ray.d = Vec3(float(dx / len), float(dy / len), float(dz / len));
     ray.tmin = float(tmin), ray.tmax = float(tmax);
     return ray;
 }
@@ -229,13 +236,16 @@ bool for_each_ray(PyObject *self, int threads, Py_ssize_t count, size_t chunk, P
 
 PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
-                                   "out_front", "out_normal", "threads", "brute_force", nullptr};
-    PyObject *oo, *od, *ot, *oid, *ofr, *onrm = Py_None;
+                                   "out_front", "out_normal", "threads", "brute_force", "out_stats", nullptr};
+    PyObject *oo, *od, *ot, *oid, *ofr, *onrm = Py_None, *ostats = Py_None;
     double tmin, tmax;
     int threads = 0, brute = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|Oip", const_cast<char **>(kwlist), &oo, &od, &tmin,
-                                     &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|OipO", const_cast<char **>(kwlist), &oo, &od, &tmin,
+                                     &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute, &ostats))
         return nullptr;
+    View stats_view;
+    Py_ssize_t s2[1] = {2};
+    if (ostats != Py_None && !get_array(ostats, "out_stats", 'q', 1, s2, true, stats_view)) return nullptr;
     if (!check_batch_args(tmin, tmax, threads)) return nullptr;
     View o, d, t, id, fr, nrm;
     Py_ssize_t s3[2] = {-1, 3};
@@ -256,9 +266,12 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     uint8_t *pfr = fr.data<uint8_t>();
     // Rays per task: small enough to balance the threads, large enough to amortise a task.
     constexpr size_t kChunk = 1024;
+    std::atomic<uint64_t> total_nodes{0}, total_discs{0};
     if (!for_each_ray(self, threads, count, kChunk, [&](size_t i) {
             const Ray ray = make_ray(po, pd, i, tmin, tmax);
-            const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray);
+            TraversalStats st;
+            const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray, &st);
+            if (stats_view.held) total_nodes += st.nodes, total_discs += st.discs;
             pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
             if (pn) {
                 const Vec3 n = h.valid() ? scene.normal(h.id) : Vec3();
@@ -266,6 +279,10 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
             }
         }))
         return nullptr;
+    if (stats_view.held) {
+        int64_t *out = stats_view.data<int64_t>();
+        out[0] = int64_t(total_nodes.load()), out[1] = int64_t(total_discs.load());
+    }
     Py_RETURN_NONE;
 }
 
@@ -316,6 +333,14 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (oin != Py_None && !get_array(oin, "inside", 'B', 1, s1, false, in)) return nullptr;
     if (oex != Py_None && !get_array(oex, "exclude", 'i', 2, sx, false, ex)) return nullptr;
     const int n_ex = ex.held ? int(ex.dim(1)) : 0;
+    if (ex.held) {
+        const int32_t *e = ex.data<int32_t>();
+        const int64_t n_splats = int64_t(scene_of(self).size());
+        for (Py_ssize_t k = 0; k < count * n_ex; ++k)
+            if (e[k] < -1 || e[k] >= n_splats)
+                return PyErr_Format(PyExc_ValueError, "exclude[%zd, %zd] = %d is not a splat id (0..%lld) or -1",
+                                    k / n_ex, k % n_ex, int(e[k]), (long long)(n_splats - 1));
+    }
 
     const float *po = o.data<float>(), *pd = d.data<float>();
     if (!check_rays(po, pd, count)) return nullptr;
@@ -355,7 +380,8 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                      &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh))
         return nullptr;
     if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive");
-    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || x0 + w > width || y0 + h > height)
+    // In 64 bits: x0 + w may overflow int for a window near 2^31.
+    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || int64_t(x0) + w > width || int64_t(y0) + h > height)
         return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w,
                             h, width, height);
     if (tile_size <= 0 || tile_size > 4096) return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096");
@@ -494,8 +520,19 @@ PyType_Spec Scene_spec = {"splat_tracer._core.Scene", sizeof(SceneObject), 0, Py
 
 PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(resolve_threads(0)); }
 
+PyObject *set_thread_budget(PyObject *, PyObject *arg) {
+    const long budget = PyLong_AsLong(arg);
+    if (budget == -1 && PyErr_Occurred()) return nullptr;
+    if (budget < -1 || budget > INT32_MAX) return PyErr_Format(PyExc_ValueError, "budget must be >= -1");
+    thread_budget() = int(budget);
+    Py_RETURN_NONE;
+}
+
 PyMethodDef module_methods[] = {
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
+    {"_set_thread_budget", set_thread_budget, METH_O,
+     "Test seam: the core may start this many more threads, then thread creation fails as if the system "
+     "refused it (-1: no limit)."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -8,10 +8,30 @@
 #include <condition_variable>
 #include <exception>
 #include <mutex>
+#include <system_error>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace splat {
+
+// Test seam: how many more threads the core may start before thread creation fails as if
+// the system had refused it (-1: no limit). The tests use it to prove that a refused
+// thread degrades to fewer threads instead of aborting the process.
+inline std::atomic<int> &thread_budget() {
+    static std::atomic<int> budget{-1};
+    return budget;
+}
+
+// std::thread(f), or std::system_error when the system (or the test seam) refuses one.
+template <class F>
+std::thread start_thread(F &&f) {
+    for (int b = thread_budget().load(); b >= 0;) {
+        if (b == 0) throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again));
+        if (thread_budget().compare_exchange_weak(b, b - 1)) break;
+    }
+    return std::thread(std::forward<F>(f));
+}
 
 inline int resolve_threads(int requested) {
     if (requested > 0) return requested;
@@ -30,7 +50,7 @@ bool parallel_for(size_t count, int threads, Task &&task, Poll &&poll, int poll_
     std::exception_ptr error;
     std::mutex mutex;
     std::condition_variable finished;
-    int running = n_workers;
+    int running = 0;  // workers started and not yet finished (guarded by mutex)
 
     auto worker = [&] {
         for (;;) {
@@ -51,9 +71,38 @@ bool parallel_for(size_t count, int threads, Task &&task, Poll &&poll, int poll_
         finished.notify_all();
     };
 
+    // Workers the system refuses are simply not there: the others take their tasks. An
+    // exception escaping here with threads running would abort the process (their
+    // std::thread destructors call std::terminate).
     std::vector<std::thread> pool;
     pool.reserve(n_workers);
-    for (int w = 0; w < n_workers; ++w) pool.emplace_back(worker);
+    for (int w = 0; w < n_workers; ++w) {
+        {
+            std::lock_guard<std::mutex> lock(mutex);
+            ++running;
+        }
+        try {
+            pool.push_back(start_thread(worker));
+        } catch (const std::system_error &) {
+            std::lock_guard<std::mutex> lock(mutex);
+            --running;
+            break;
+        }
+    }
+    if (pool.empty()) {
+        // Not a single thread: run the tasks here, polling between them.
+        auto last = std::chrono::steady_clock::now();
+        for (size_t i = 0; i < count && !cancel; ++i) {
+            task(i);  // an exception propagates: nothing is running
+            done.fetch_add(1);
+            const auto now = std::chrono::steady_clock::now();
+            if (now - last >= std::chrono::milliseconds(poll_ms)) {
+                last = now;
+                if (!poll(done.load())) cancel = true;
+            }
+        }
+        return !cancel;
+    }
     {
         std::unique_lock<std::mutex> lock(mutex);
         while (running > 0) {

@@ -6,6 +6,7 @@ namespace splat {
 namespace {
 
 bool finite3(const float *v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+bool in_range3(const float *v) { return within_range(v[0]) && within_range(v[1]) && within_range(v[2]); }
 
 [[noreturn]] void bad_splat(size_t i, const char *what) {
     throw InputError("splat " + std::to_string(i) + ": " + what);
@@ -28,8 +29,9 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     for (size_t i = 0; i < n; ++i) {
         const float *c = centres + 3 * i, *nv = normals + 3 * i;
         if (!finite3(c)) bad_splat(i, "centre is not finite");
+        if (!in_range3(c)) bad_splat(i, "centre is beyond 1e18 (recentre the coordinates first)");
         if (!finite3(nv)) bad_splat(i, "normal is not finite");
-        if (!(std::isfinite(radii[i]) && radii[i] > 0.f)) bad_splat(i, "radius must be finite and > 0");
+        if (!(within_range(radii[i]) && radii[i] > 0.f)) bad_splat(i, "radius must be > 0 and at most 1e18");
         const double len = std::sqrt(double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2]);
         if (!(len > 0.0)) bad_splat(i, "normal has zero length");
         normals_[i] = Vec3(float(nv[0] / len), float(nv[1] / len), float(nv[2] / len));
@@ -55,8 +57,16 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
 // visitor may lower `limit` as it learns (nearest hit so far, the layer query's cut); the
 // comparison is inclusive so that equal-t hits with a smaller id are still found.
 template <class Visit>
-void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit) const {
+void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats) const {
     if (splats_.empty()) return;
+    uint64_t n_nodes = 0, n_discs = 0;
+    struct Flush {  // adds the counts on every way out
+        TraversalStats *stats;
+        uint64_t &nodes, &discs;
+        ~Flush() {
+            if (stats) stats->nodes += nodes, stats->discs += discs;
+        }
+    } flush{stats, n_nodes, n_discs};
     const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
     const BVHNode *nodes = bvh_.nodes.data();
     struct Pending {
@@ -68,7 +78,9 @@ void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit) con
     if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return;
     for (;;) {
         const BVHNode &nd = nodes[node];
+        ++n_nodes;
         if (nd.leaf()) {
+            n_discs += nd.count;
             for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
                 const PackedSplat &s = splats_[k];
                 DiscHit h;
@@ -99,11 +111,14 @@ void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit) con
     }
 }
 
-Hit SplatScene::intersect(const Ray &ray) const {
+Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
     Hit best;
-    traverse(ray, best.t, [&](const PackedSplat &s, const DiscHit &h) {
-        if (closer(h.t, s.id, best)) best.t = h.t, best.id = s.id, best.front = h.front;
-    });
+    traverse(
+        ray, best.t,
+        [&](const PackedSplat &s, const DiscHit &h) {
+            if (closer(h.t, s.id, best)) best.t = h.t, best.id = s.id, best.front = h.front;
+        },
+        stats);
     return best;
 }
 

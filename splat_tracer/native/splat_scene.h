@@ -23,6 +23,15 @@ struct PackedSplat {
 };
 
 // Raised for input that cannot be a splat scene; the bindings turn it into ValueError.
+// Work done by traversals, summed by the caller: what the tests and benchmarks compare
+// instead of timings (e.g. every view direction must cost about the same).
+struct TraversalStats {
+    uint64_t nodes = 0;  // BVH nodes entered
+    uint64_t discs = 0;  // ray/disc tests
+
+    void add(const TraversalStats &o) { nodes += o.nodes, discs += o.discs; }
+};
+
 struct InputError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
@@ -49,7 +58,7 @@ class SplatScene {
     float radius(int32_t id) const { return radii_[id]; }
 
     // Nearest hit in (ray.tmin, ray.tmax), either facing.
-    Hit intersect(const Ray &ray) const;
+    Hit intersect(const Ray &ray, TraversalStats *stats = nullptr) const;
     // The same answer by testing every splat: the reference the tests compare against.
     Hit intersect_brute_force(const Ray &ray) const;
 
@@ -59,7 +68,7 @@ class SplatScene {
 
   private:
     template <class Visit>
-    void traverse(const Ray &ray, const float &limit, Visit &&visit) const;
+    void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
 
     std::vector<PackedSplat> splats_;  // BVH order
     std::vector<Vec3> centres_, normals_, colours_;
