@@ -1,0 +1,237 @@
+"""What a scene looks like, as the native core consumes it: materials, lights, the world and
+the render settings. Plain dataclasses (no Blender needed); `pack()` turns each into the flat
+float32 row the core reads, whose layout is mirrored in `native/shading.h` (keep both in step:
+the `*_FIELDS` tuples below are the single list of columns).
+
+Units are Blender's, so that a scene lit for Cycles renders at the same brightness:
+- point and spot lamps: `power` in watts (radiant intensity P / (4 pi) W/sr, like Cycles);
+- sun: `strength` in W/m^2 (irradiance on a surface facing it);
+- area lamps: `power` in watts, emitted from one side;
+- emission and the world background: radiance, colour x strength.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+# --------------------------------------------------------------------------------------
+# Materials: a simplified Principled BSDF.
+
+MATERIAL_FIELDS = (
+    "base_r", "base_g", "base_b", "metallic", "roughness", "ior", "transmission", "alpha",
+    "emission_r", "emission_g", "emission_b", "specular_level", "use_point_colour", "use_point_alpha",
+)
+
+
+@dataclass(frozen=True)
+class Material:
+    """The subset of Blender's Principled BSDF the engine renders.
+
+    base_colour: scene-linear RGB (replaced by the point colours when `use_point_colour`).
+    metallic, roughness, transmission, alpha: 0..1, as the Principled BSDF's sockets.
+    ior: index of refraction (glass and the dielectric Fresnel).
+    specular_level: the Principled BSDF's 'Specular IOR Level' (0.5: the IOR's own Fresnel;
+        0: no specular reflection on dielectrics; 1: twice it).
+    emission: emitted radiance, colour x strength.
+    use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
+    """
+
+    base_colour: Sequence[float] = (0.8, 0.8, 0.8)
+    metallic: float = 0.0
+    roughness: float = 0.5
+    ior: float = 1.5
+    transmission: float = 0.0
+    alpha: float = 1.0
+    emission: Sequence[float] = (0.0, 0.0, 0.0)
+    specular_level: float = 0.5
+    use_point_colour: bool = False
+    use_point_alpha: bool = False
+
+    def __post_init__(self):
+        for name in ("metallic", "roughness", "transmission", "alpha"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+                raise ValueError(f"material {name} must be in 0..1, got {v!r}")
+        if not (math.isfinite(self.ior) and self.ior > 0):
+            raise ValueError(f"material ior must be a positive number, got {self.ior!r}")
+        if not (math.isfinite(self.specular_level) and self.specular_level >= 0):
+            raise ValueError(f"material specular_level must be >= 0, got {self.specular_level!r}")
+        for name in ("base_colour", "emission"):
+            v = getattr(self, name)
+            if len(v) != 3 or not all(math.isfinite(c) and c >= 0 for c in v):
+                raise ValueError(f"material {name} must be three non-negative numbers, got {v!r}")
+
+    def pack(self) -> np.ndarray:
+        return np.array([*self.base_colour, self.metallic, self.roughness, self.ior, self.transmission, self.alpha,
+                         *self.emission, self.specular_level, float(self.use_point_colour),
+                         float(self.use_point_alpha)], np.float32)
+
+
+# --------------------------------------------------------------------------------------
+# Lights.
+
+LIGHT_TYPES = ("POINT", "SPOT", "SUN", "AREA")
+AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
+LIGHT_FIELDS = (
+    "type", "r", "g", "b",           # type index; colour x power (W) or x strength (sun, W/m^2)
+    "px", "py", "pz",                # position (local frame)
+    "dx", "dy", "dz",                # emission axis: the lamp's local -Z, unit
+    "ux", "uy", "uz",                # area: first edge axis (lamp's local X), unit
+    "radius",                        # point/spot: sphere radius; sun: half the angular diameter (radians)
+    "size_u", "size_v",              # area: full sizes along u and v (the lamp's X and Y)
+    "shape",                         # area: AREA_SHAPES index
+    "spot_half_angle", "spot_blend", # spot: half the cone angle (radians), blend 0..1
+    "cast_shadow",                   # 0 or 1
+    "soft_falloff",                  # point/spot/area with a size: Blender 4's Soft Falloff
+)
+
+
+@dataclass(frozen=True)
+class Light:
+    """One lamp, in the scene's local frame (see RenderScene's origin).
+
+    type: 'POINT', 'SPOT', 'SUN' or 'AREA'. colour: linear RGB multiplier. power: watts for
+    point, spot and area lamps; for 'SUN' it is the strength in W/m^2.
+    position: lamp centre; direction: the way it shines (the lamp's local -Z axis);
+    u_axis: the area lamp's local X axis (its local Y is direction x u_axis... taken as
+    cross(u_axis, direction) by the core, so any right-handed frame works).
+    radius: point/spot soft-shadow radius; for the sun, `angle` (full angular diameter, rad).
+    size, size_y: area lamp size along X and Y (SQUARE and DISK use `size` for both).
+    spot_size: full cone angle (radians), spot_blend: 0..1.
+    """
+
+    type: str = "POINT"
+    colour: Sequence[float] = (1.0, 1.0, 1.0)
+    power: float = 1000.0
+    position: Sequence[float] = (0.0, 0.0, 0.0)
+    direction: Sequence[float] = (0.0, 0.0, -1.0)
+    u_axis: Sequence[float] = (1.0, 0.0, 0.0)
+    radius: float = 0.0
+    angle: float = 0.0
+    size: float = 1.0
+    size_y: float = 1.0
+    shape: str = "SQUARE"
+    spot_size: float = math.radians(45.0)
+    spot_blend: float = 0.15
+    cast_shadow: bool = True
+    soft_falloff: bool = True
+
+    def __post_init__(self):
+        if self.type not in LIGHT_TYPES:
+            raise ValueError(f"light type must be one of {LIGHT_TYPES}, got {self.type!r}")
+        if self.shape not in AREA_SHAPES:
+            raise ValueError(f"area shape must be one of {AREA_SHAPES}, got {self.shape!r}")
+        vectors = (self.colour, self.position, self.direction, self.u_axis)
+        if not all(len(v) == 3 and all(math.isfinite(c) for c in v) for v in vectors):
+            raise ValueError("light colour, position, direction and u_axis must be three finite numbers each")
+        scalars = (self.power, self.radius, self.angle, self.size, self.size_y, self.spot_size, self.spot_blend)
+        if not all(math.isfinite(v) and v >= 0 for v in scalars):
+            raise ValueError("light power, radius, angle, sizes and spot settings must be finite and >= 0")
+        if not math.hypot(*self.direction) > 0:
+            raise ValueError("light direction must not be zero")
+
+    def pack(self) -> np.ndarray:
+        d = np.asarray(self.direction, np.float64)
+        d = d / np.linalg.norm(d)
+        u = np.asarray(self.u_axis, np.float64)
+        u = u - d * np.dot(u, d)  # make u perpendicular to the emission axis
+        if np.linalg.norm(u) < 1e-9:
+            u = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+        u = u / np.linalg.norm(u)
+        square = self.shape in ("SQUARE", "DISK")
+        radius = self.angle / 2 if self.type == "SUN" else self.radius
+        rgb = np.asarray(self.colour, np.float64) * self.power
+        return np.array([LIGHT_TYPES.index(self.type), *rgb, *self.position, *d, *u, radius, self.size,
+                         self.size if square else self.size_y, AREA_SHAPES.index(self.shape),
+                         min(self.spot_size, math.pi) / 2, min(self.spot_blend, 1.0), float(self.cast_shadow),
+                         float(self.soft_falloff)], np.float32)
+
+
+# --------------------------------------------------------------------------------------
+# World and render settings.
+
+@dataclass(frozen=True)
+class World:
+    """The background: a uniform radiance (colour x strength) seen by rays that leave the
+    scene, which also lights it (through diffuse bounces). `transparent`: camera rays that
+    miss get alpha 0 (Film > Transparent)."""
+
+    colour: Sequence[float] = (0.05, 0.05, 0.05)
+    strength: float = 1.0
+    transparent: bool = False
+
+    def radiance(self) -> tuple:
+        return tuple(float(c) * float(self.strength) for c in self.colour)
+
+
+PIXEL_FILTERS = ("BOX", "GAUSSIAN", "BLACKMAN_HARRIS")
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How a frame is sampled (Blender's Sampling and Light Paths panels).
+
+    samples: camera rays per pixel (anti-aliasing; every secondary effect shares them).
+    pixel_filter / filter_width: Blender's pixel filter type and width (pixels).
+    shadow_samples: shadow rays per lamp per camera sample (soft shadows).
+    max_bounces, diffuse_bounces, glossy_bounces, transmission_bounces,
+    transparent_bounces: path depth limits, as in Cycles' Light Paths.
+    seed: varies the noise pattern (Blender's seed).
+    """
+
+    samples: int = 16
+    pixel_filter: str = "BLACKMAN_HARRIS"
+    filter_width: float = 1.5
+    shadow_samples: int = 1
+    max_bounces: int = 12
+    diffuse_bounces: int = 1
+    glossy_bounces: int = 4
+    transmission_bounces: int = 12
+    transparent_bounces: int = 8
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.pixel_filter not in PIXEL_FILTERS:
+            raise ValueError(f"pixel_filter must be one of {PIXEL_FILTERS}, got {self.pixel_filter!r}")
+        if not 1 <= self.samples <= 1 << 16:
+            raise ValueError(f"samples must be in 1..65536, got {self.samples!r}")
+        if not 1 <= self.shadow_samples <= 1024:
+            raise ValueError(f"shadow_samples must be in 1..1024, got {self.shadow_samples!r}")
+        if not (math.isfinite(self.filter_width) and 0.01 <= self.filter_width <= 10):
+            raise ValueError(f"filter_width must be in 0.01..10 pixels, got {self.filter_width!r}")
+        for name in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+                     "transparent_bounces"):
+            if not 0 <= getattr(self, name) <= 1024:
+                raise ValueError(f"{name} must be in 0..1024")
+
+    def pack(self) -> tuple:
+        return (self.samples, PIXEL_FILTERS.index(self.pixel_filter), float(self.filter_width), self.shadow_samples,
+                self.max_bounces, self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces,
+                self.transparent_bounces, self.seed & 0x7FFFFFFF)
+
+
+# Passes the core can write, by the name Blender shows, with their channel count.
+PASSES = {
+    "Combined": 4,
+    "Depth": 1,        # planar depth along the view axis, of the pixel-centre sample
+    "Normal": 3,       # world-space shading normal, pixel-centre sample
+    "DiffCol": 3,      # albedo of the diffuse lobe, averaged over the samples
+    "Emit": 3,         # emitted radiance seen by camera rays, averaged
+    "Shadow": 3,       # direct light received / direct light unshadowed (1: fully lit or no lamp)
+    "IndexOB": 1,      # the object's pass index, pixel-centre sample
+    "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
+}
+
+
+@dataclass
+class Report:
+    """Approximations made while exporting a scene, each said once in the render report."""
+
+    lines: list = field(default_factory=list)
+
+    def once(self, line: str) -> None:
+        if line not in self.lines:
+            self.lines.append(line)
