@@ -319,3 +319,134 @@ class Scene:
             int(width), int(height), (int(x0), int(y0), int(w), int(h)),
             tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method.as_tuple())
         return RenderResult(rgba, dep, nrm, done)
+
+
+# --------------------------------------------------------------------------------------
+# Scenes of several objects: meshes beside clouds, instances, materials, lamps, a world.
+
+from .shading import (LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material,  # noqa: E402
+                      RenderSettings, World)
+
+SplatCloud = Scene  # a cloud is a Scene of splats; as geometry of a RenderScene it is this type
+
+RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
+
+
+class Mesh:
+    """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
+    corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
+    normals express them; None: flat) and material_index (T,) slots. Immutable; share one
+    Mesh between any number of instances."""
+
+    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0):
+        v = _f32(vertices, "vertices", (-1, 3))
+        t = np.asarray(triangles)
+        if t.size and not np.issubdtype(t.dtype, np.integer):
+            raise TypeError(f"triangles must hold integer vertex indices, got dtype {t.dtype}")
+        if t.size and (t.min() < 0 or t.max() >= len(v)):
+            raise ValueError(f"triangles index vertices outside 0..{len(v) - 1}")
+        t = np.ascontiguousarray(t.reshape(-1, 3), dtype=np.int32)
+        n = None if corner_normals is None else _f32(np.asarray(corner_normals).reshape(-1, 3, 3), "corner_normals",
+                                                     (len(t), 3, 3))
+        m = None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32)
+        self._mesh = _core.Mesh(v, t, n, m, threads)
+
+    def __len__(self) -> int:
+        return self._mesh.size
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One placement of a geometry (a splat Scene or a Mesh) in the scene's local frame.
+
+    matrix: 4x4 object-to-local transform (any affine: scale, shear, mirror). materials: the
+    object's slots (a cloud uses the first). visibility: ray kinds that see it (keys of
+    RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
+    pass_index: the Object Index pass value."""
+
+    geometry: object
+    matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    materials: tuple = (Material(),)
+    visibility: frozenset = frozenset(RAY_VISIBILITY)
+    holdout: bool = False
+    pass_index: int = 0
+
+
+class FrameResult(NamedTuple):
+    passes: dict      # pass name -> (h, w[, c]) float32 array, top row first
+    completed: bool   # False when progress() asked to stop
+    counters: dict    # rays traced by kind, and the queries' work
+
+
+class RenderScene:
+    """Instances of clouds and meshes with their materials, the lamps and the world: what a
+    Blender frame is, for the core. Geometry is referenced, not copied: a hundred instances
+    of one cloud cost one BVH. Build a new RenderScene when instances, materials or lamps
+    change (cheap: only the top-level tree over the instances is built)."""
+
+    def __init__(self, instances: Sequence[Instance], lights: Sequence[Light] = (), world: World = World(),
+                 threads: int = 0):
+        geometries, index_of = [], {}
+        rows = []
+        materials = []
+        for inst in instances:
+            geo = inst.geometry
+            native = geo._scene if isinstance(geo, Scene) else geo._mesh if isinstance(geo, Mesh) else None
+            if native is None:
+                raise TypeError(f"instance geometry must be a core.Scene or core.Mesh, got {type(geo).__name__}")
+            if id(native) not in index_of:
+                index_of[id(native)] = len(geometries)
+                geometries.append(native)
+            m = np.asarray(inst.matrix, np.float64).reshape(4, 4)
+            if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-300:
+                raise ValueError("instance matrix must be finite and invertible")
+            inv = np.linalg.inv(m)
+            unknown = set(inst.visibility) - set(RAY_VISIBILITY)
+            if unknown:
+                raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")
+            mats = tuple(inst.materials) or (Material(),)
+            rows.append((index_of[id(native)], m[:3].ravel(), inv[:3].ravel(), (len(materials), len(mats)),
+                         sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index))
+            materials.extend(mats)
+        n = len(rows)
+        col = lambda k, dtype: np.array([r[k] for r in rows], dtype).reshape((n,) + np.shape(rows[0][k]) if n else (0,))
+        self._world = world
+        self.lights = tuple(lights)
+        self._scene = _core.RenderScene(
+            geometries,
+            np.ascontiguousarray(col(0, np.int32)),
+            np.ascontiguousarray(col(1, np.float32).reshape(n, 12)),
+            np.ascontiguousarray(col(2, np.float32).reshape(n, 12)),
+            np.ascontiguousarray(col(3, np.int32).reshape(n, 2)),
+            np.ascontiguousarray(col(4, np.int32)),
+            np.ascontiguousarray(col(5, np.uint8)),
+            np.ascontiguousarray(col(6, np.float32)),
+            np.ascontiguousarray(np.array([m.pack() for m in materials], np.float32).reshape(-1, len(MATERIAL_FIELDS))),
+            np.ascontiguousarray(np.array([l.pack() for l in lights], np.float32).reshape(-1, len(LIGHT_FIELDS))),
+            threads)
+        self.geometry_count = len(geometries)
+
+    def render(self, camera: Camera, width: int, height: int, settings: RenderSettings = RenderSettings(),
+               method: Method = Method(), passes: Sequence[str] = ("Combined",),
+               window: Optional[Sequence[int]] = None, threads: int = 0,
+               progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32) -> FrameResult:
+        """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
+        image (x0, y0, w, h; default all). progress(done, total) as for Scene.render."""
+        unknown = set(passes) - set(PASSES)
+        if unknown:
+            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
+        x0, y0, w, h = window if window is not None else (0, 0, width, height)
+        buffers = {}
+        for name in ("Combined", *passes):
+            c = PASSES[name]
+            buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
+        key = {"Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit", "Shadow": "shadow",
+               "IndexOB": "index", "Splat Count": "splat_count"}
+        optional = {key[name]: buf for name, buf in buffers.items() if name != "Combined"}
+        done, counters = self._scene.render(
+            np.ascontiguousarray(camera.local_from_ndc, np.float64), np.ascontiguousarray(camera.position, np.float64),
+            np.ascontiguousarray(camera.forward, np.float64), int(width), int(height),
+            (int(x0), int(y0), int(w), int(h)), settings.pack(), method.as_tuple(), self._world.radiance(),
+            bool(self._world.transparent), buffers["Combined"], threads=threads, progress=progress,
+            tile_size=tile_size, **optional)
+        return FrameResult(buffers, bool(done), counters)

@@ -4,7 +4,10 @@
 // splat_scene.h, which stores its splats in the order of `prim_order`).
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "aabb.h"
@@ -37,5 +40,81 @@ struct BVH {
 // kSahMaxDepth + 32 for up to 2^32 primitives.
 constexpr int kSahMaxDepth = 64;
 constexpr int kStackSize = kSahMaxDepth + 40;
+
+}  // namespace splat
+
+namespace splat {
+
+// Work done by queries, summed by the caller: what the tests and benchmarks compare instead
+// of timings (every view direction must cost about the same; a scene without lamps traces
+// no shadow rays; ...).
+struct TraversalStats {
+    uint64_t nodes = 0;           // BVH nodes entered (both levels)
+    uint64_t discs = 0;           // ray/disc tests
+    uint64_t triangles = 0;       // ray/triangle tests
+    uint64_t layer_queries = 0;   // epsilon-window gathers (general-method rays need none)
+    uint64_t far_rejections = 0;  // layers the far phase rejected (fringes, grazed edges)
+    uint64_t interpolations = 0;  // surface points whose normal blended more than one splat
+
+    void add(const TraversalStats &o) {
+        nodes += o.nodes, discs += o.discs, triangles += o.triangles, layer_queries += o.layer_queries;
+        far_rejections += o.far_rejections, interpolations += o.interpolations;
+    }
+};
+
+// Front-to-back traversal shared by every query of every tree: `leaf(first, count)` is called
+// for each leaf the ray enters within (tmin, min(tmax, limit)), nearer child first; it returns
+// true to stop at once (occlusion queries). The leaf may lower `limit` as it learns (nearest
+// hit so far, the layer query's cut); boxes entered beyond it are skipped. The comparison is
+// inclusive so that equal-t hits with a smaller id are still found.
+template <class Leaf>
+void traverse_bvh(const BVH &bvh, const Ray &ray, const float &limit, Leaf &&leaf, uint64_t *node_count) {
+    if (bvh.nodes.empty()) return;
+    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
+    const BVHNode *nodes = bvh.nodes.data();
+    struct Pending {
+        uint32_t node;
+        float entry;
+    } stack[kStackSize];
+    int sp = 0;
+    uint32_t node = 0;
+    uint64_t visited = 0;
+    struct Flush {  // adds the count on every way out
+        uint64_t *out;
+        const uint64_t &n;
+        ~Flush() {
+            if (out) *out += n;
+        }
+    } flush{node_count, visited};
+    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, std::fmin(ray.tmax, limit)) == kInfinity) return;
+    for (;;) {
+        const BVHNode &nd = nodes[node];
+        ++visited;
+        if (nd.leaf()) {
+            if (leaf(nd.first, nd.count)) return;
+        } else {
+            // The nearer child is visited first, the other one pushed with its entry.
+            const float tmax = std::fmin(ray.tmax, limit);
+            uint32_t a = nd.first, b = nd.first + 1;
+            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
+            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
+            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
+            if (ta != kInfinity) {
+                if (tb != kInfinity) stack[sp++] = {b, tb};
+                node = a;
+                continue;
+            }
+        }
+        // Pop, skipping nodes that the limit has since moved in front of.
+        for (;;) {
+            if (sp == 0) return;
+            --sp;
+            if (stack[sp].entry <= limit) {
+                node = stack[sp].node;
+                break;
+            }
+        }
+    }
+}
 
 }  // namespace splat

@@ -16,111 +16,14 @@
 #include <string>
 
 #include "parallel.h"
+#include "py_util.h"
 #include "render.h"
 #include "splat_scene.h"
 
 namespace {
 
 using namespace splat;
-
-// ---------------------------------------------------------------------------------------
-// Buffers
-
-// A buffer view that releases itself.
-struct View {
-    Py_buffer buf{};
-    bool held = false;
-    ~View() {
-        if (held) PyBuffer_Release(&buf);
-    }
-    template <class T>
-    T *data() const { return static_cast<T *>(buf.buf); }
-    Py_ssize_t dim(int i) const { return buf.shape[i]; }
-};
-
-// Element kinds accepted, by struct-module format letter.
-bool format_matches(const char *format, Py_ssize_t itemsize, char kind) {
-    if (!format) format = "B";
-    char order = '@';
-    if (*format == '@' || *format == '=' || *format == '<' || *format == '>' || *format == '!') order = *format++;
-    const bool little = [] { uint16_t one = 1; return *reinterpret_cast<uint8_t *>(&one) == 1; }();
-    if ((order == '>' || order == '!') && little) return false;
-    if (order == '<' && !little) return false;
-    if (std::strlen(format) != 1) return false;
-    const char f = format[0];
-    switch (kind) {
-        case 'f': return f == 'f' && itemsize == 4;
-        case 'd': return f == 'd' && itemsize == 8;
-        case 'i': return (f == 'i' || f == 'l') && itemsize == 4;
-        case 'B': return (f == 'B' || f == '?') && itemsize == 1;
-        case 'q': return (f == 'q' || f == 'l' || f == 'Q' || f == 'L') && itemsize == 8;
-    }
-    return false;
-}
-
-const char *kind_name(char kind) {
-    switch (kind) {
-        case 'f': return "float32";
-        case 'd': return "float64";
-        case 'i': return "int32";
-        case 'B': return "uint8 or bool";
-        case 'q': return "int64";
-    }
-    return "?";
-}
-
-// Gets a C-contiguous buffer of `kind` with `ndim` dimensions; a positive entry of
-// `shape` must match exactly, -1 means any. Sets a Python exception and returns false
-// otherwise.
-bool get_array(PyObject *obj, const char *name, char kind, int ndim, const Py_ssize_t *shape,
-               bool writable, View &view) {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, &view.buf, flags) != 0) {
-        PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous%s %s array", name,
-                     writable ? " writable" : "", kind_name(kind));
-        return false;
-    }
-    view.held = true;
-    if (!format_matches(view.buf.format, view.buf.itemsize, kind)) {
-        PyErr_Format(PyExc_TypeError, "%s must have dtype %s (got format '%s')", name, kind_name(kind),
-                     view.buf.format ? view.buf.format : "B");
-        return false;
-    }
-    if (view.buf.ndim != ndim) {
-        PyErr_Format(PyExc_ValueError, "%s must have %d dimension(s), got %d", name, ndim, view.buf.ndim);
-        return false;
-    }
-    for (int i = 0; i < ndim; ++i) {
-        if (shape[i] >= 0 && view.buf.shape[i] != shape[i]) {
-            PyErr_Format(PyExc_ValueError, "%s has size %zd along axis %d, expected %zd", name,
-                         view.buf.shape[i], i, shape[i]);
-            return false;
-        }
-    }
-    return true;
-}
-
-// Runs `fn` without the GIL, turning C++ exceptions into Python ones. Returns false with
-// a Python exception set when `fn` threw.
-template <class F>
-bool without_gil(F &&fn) {
-    std::string message;
-    PyObject *type = nullptr;
-    Py_BEGIN_ALLOW_THREADS
-    try {
-        fn();
-    } catch (const InputError &e) {
-        type = PyExc_ValueError, message = e.what();
-    } catch (const std::bad_alloc &) {
-        type = PyExc_MemoryError, message = "out of memory";
-    } catch (const std::exception &e) {
-        type = PyExc_RuntimeError, message = e.what();
-    }
-    Py_END_ALLOW_THREADS
-    if (type) PyErr_SetString(type, message.c_str());
-    return type == nullptr;
-}
+using namespace splat::py;
 
 // ---------------------------------------------------------------------------------------
 // Rays
@@ -286,24 +189,6 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
-// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon), as
-// core.Method.as_tuple() builds it. Returns false with an exception set when invalid.
-bool parse_method(PyObject *obj, Method &m) {
-    if (obj == Py_None) return true;
-    if (!PyTuple_Check(obj)) return PyErr_Format(PyExc_TypeError, "method must be a tuple (see core.Method)"), false;
-    int elim, interp, far, position, kernel;
-    float eps;
-    if (!PyArg_ParseTuple(obj, "pppiif;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon)",
-                          &elim, &interp, &far, &position, &kernel, &eps))
-        return false;
-    if (position < 0 || position > 2) return PyErr_Format(PyExc_ValueError, "method position must be 0, 1 or 2"), false;
-    if (kernel < 0 || kernel > 1) return PyErr_Format(PyExc_ValueError, "method kernel must be 0 or 1"), false;
-    if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
-    m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
-    m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
-    return true;
-}
-
 PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "method", "out_t", "out_id",
                                    "out_front", "out_normal", "out_colour", "out_members", "inside", "exclude",
@@ -422,48 +307,9 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     Renderer renderer(scene_of(self), cam, target, settings);
     const size_t tiles = renderer.tile_count();
 
-    // The progress callback runs on this (the calling) thread, with the GIL, between
-    // waits; it returns True to stop. An exception from it stops the render and is
-    // re-raised.
-    bool callback_failed = false, completed = false;
-    PyThreadState *saved = nullptr;
-    auto poll = [&](size_t done) {
-        if (progress == Py_None) return true;
-        PyEval_RestoreThread(saved);
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
-        bool go_on = false;
-        if (!res) {
-            callback_failed = true;
-        } else {
-            int stop = PyObject_IsTrue(res);
-            Py_DECREF(res);
-            if (stop < 0) callback_failed = true;
-            go_on = stop == 0;
-        }
-        saved = PyEval_SaveThread();
-        return go_on;
-    };
-    std::string message;
-    PyObject *error_type = nullptr;
-    saved = PyEval_SaveThread();
-    try {
-        completed = parallel_for(tiles, threads_arg(self, threads), [&](size_t t) { renderer.render_tile(t); }, poll);
-    } catch (const std::bad_alloc &) {
-        error_type = PyExc_MemoryError, message = "out of memory";
-    } catch (const std::exception &e) {
-        error_type = PyExc_RuntimeError, message = e.what();
-    }
-    PyEval_RestoreThread(saved);
-    if (callback_failed) return nullptr;  // the callback's exception is still set
-    if (error_type) {
-        PyErr_SetString(error_type, message.c_str());
-        return nullptr;
-    }
-    if (progress != Py_None && completed) {  // a last report, so that callers see 100 %
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
-        if (!res) return nullptr;
-        Py_DECREF(res);
-    }
+    const int completed = run_tiles(tiles, threads_arg(self, threads), progress,
+                                    [&](size_t t) { renderer.render_tile(t); });
+    if (completed < 0) return nullptr;
     return PyBool_FromLong(completed);
 }
 
@@ -536,16 +382,19 @@ PyMethodDef module_methods[] = {
     {nullptr, nullptr, 0, nullptr},
 };
 
+PyObject *scene_type = nullptr;  // the Scene type object, for as_splat_scene()
+
 int module_exec(PyObject *module) {
     PyObject *type = PyType_FromSpec(&Scene_spec);
     if (!type) return -1;
+    scene_type = type;
     if (PyModule_AddObject(module, "Scene", type) < 0) {
         Py_DECREF(type);
         return -1;
     }
     if (PyModule_AddObject(module, "PARALLEL_COSINE", PyFloat_FromDouble(kParallelCosine)) < 0) return -1;
     if (PyModule_AddIntConstant(module, "MAX_LAYER_HITS", kMaxLayerHits) < 0) return -1;
-    return 0;
+    return add_render_types(module);
 }
 
 PyModuleDef_Slot module_slots[] = {{Py_mod_exec, reinterpret_cast<void *>(module_exec)}, {0, nullptr}};
@@ -554,5 +403,10 @@ PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_
                           module_methods, module_slots, nullptr, nullptr, nullptr};
 
 }  // namespace
+
+const SplatScene *splat::py::as_splat_scene(PyObject *obj) {
+    if (!scene_type || !PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(scene_type))) return nullptr;
+    return reinterpret_cast<SceneObject *>(obj)->scene;
+}
 
 PyMODINIT_FUNC PyInit__core(void) { return PyModuleDef_Init(&module_def); }

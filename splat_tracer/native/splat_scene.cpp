@@ -20,7 +20,8 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     normals_.resize(n);
     closed_.assign(n, 0);
     if (closed)
-        for (size_t i = 0; i < n; ++i) closed_[i] = closed[i] ? 1 : 0;
+        for (size_t i = 0; i < n; ++i) closed_[i] = closed[i] ? 1 : 0, any_closed_ |= closed[i] != 0;
+    has_colours_ = colours != nullptr;
     colours_.assign(n, Vec3(1.f, 1.f, 1.f));
     radii_.assign(radii, radii + n);
     std::vector<AABB> boxes(n);
@@ -52,63 +53,23 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     }
 }
 
-// Front-to-back BVH traversal shared by every query: `visit(splat, hit)` is called for each
-// disc the ray meets in (tmin, tmax), and boxes entered beyond `limit` are skipped. The
-// visitor may lower `limit` as it learns (nearest hit so far, the layer query's cut); the
-// comparison is inclusive so that equal-t hits with a smaller id are still found.
+// Every splat query is the shared BVH traversal with a visitor per disc hit.
 template <class Visit>
 void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats) const {
-    if (splats_.empty()) return;
-    uint64_t n_nodes = 0, n_discs = 0;
-    struct Flush {  // adds the counts on every way out
-        TraversalStats *stats;
-        uint64_t &nodes, &discs;
-        ~Flush() {
-            if (stats) stats->nodes += nodes, stats->discs += discs;
-        }
-    } flush{stats, n_nodes, n_discs};
-    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
-    const BVHNode *nodes = bvh_.nodes.data();
-    struct Pending {
-        uint32_t node;
-        float entry;
-    } stack[kStackSize];
-    int sp = 0;
-    uint32_t node = 0;
-    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, ray.tmax) == kInfinity) return;
-    for (;;) {
-        const BVHNode &nd = nodes[node];
-        ++n_nodes;
-        if (nd.leaf()) {
-            n_discs += nd.count;
-            for (uint32_t k = nd.first, end = nd.first + nd.count; k < end; ++k) {
+    uint64_t discs = 0;
+    traverse_bvh(
+        bvh_, ray, limit,
+        [&](uint32_t first, uint32_t count) {
+            discs += count;
+            for (uint32_t k = first, end = first + count; k < end; ++k) {
                 const PackedSplat &s = splats_[k];
                 DiscHit h;
                 if (intersect_disc(ray, s.c, s.n, s.r, &h)) visit(s, h);
             }
-        } else {
-            // The nearer child is visited first, the other one pushed with its entry.
-            const float tmax = std::fmin(ray.tmax, limit);
-            uint32_t a = nd.first, b = nd.first + 1;
-            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
-            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
-            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
-            if (ta != kInfinity) {
-                if (tb != kInfinity) stack[sp++] = {b, tb};
-                node = a;
-                continue;
-            }
-        }
-        // Pop, skipping nodes that the limit has since moved in front of.
-        for (;;) {
-            if (sp == 0) return;
-            --sp;
-            if (stack[sp].entry <= limit) {
-                node = stack[sp].node;
-                break;
-            }
-        }
-    }
+            return false;
+        },
+        stats ? &stats->nodes : nullptr);
+    if (stats) stats->discs += discs;
 }
 
 Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
@@ -122,7 +83,7 @@ Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
     return best;
 }
 
-void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) const {
+void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, TraversalStats *stats) const {
     auto offer = [&](const PackedSplat &s, const DiscHit &h) {
         if (!q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
     };
@@ -134,7 +95,7 @@ void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force) c
         }
         return;
     }
-    traverse(ray, q.cut, offer);
+    traverse(ray, q.cut, offer, stats);
 }
 
 Hit SplatScene::intersect_brute_force(const Ray &ray) const {

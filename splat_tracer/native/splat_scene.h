@@ -23,15 +23,6 @@ struct PackedSplat {
 };
 
 // Raised for input that cannot be a splat scene; the bindings turn it into ValueError.
-// Work done by traversals, summed by the caller: what the tests and benchmarks compare
-// instead of timings (e.g. every view direction must cost about the same).
-struct TraversalStats {
-    uint64_t nodes = 0;  // BVH nodes entered
-    uint64_t discs = 0;  // ray/disc tests
-
-    void add(const TraversalStats &o) { nodes += o.nodes, discs += o.discs; }
-};
-
 struct InputError : std::runtime_error {
     using std::runtime_error::runtime_error;
 };
@@ -54,6 +45,8 @@ class SplatScene {
     Vec3 normal(int32_t id) const { return normals_[id]; }
     bool closed(int32_t id) const { return closed_[id] != 0; }
     const uint8_t *closed_flags() const { return closed_.data(); }
+    bool any_closed() const { return any_closed_; }    // the far phase has work here
+    bool has_colours() const { return has_colours_; }  // per-point colours were given
     Vec3 colour(int32_t id) const { return colours_[id]; }
     float radius(int32_t id) const { return radii_[id]; }
 
@@ -64,7 +57,7 @@ class SplatScene {
 
     // The ε-window query (layer.h): fills q with the first layer and the hit after it.
     // brute_force offers every splat to the query instead: the tests' reference.
-    void gather_layer(const Ray &ray, LayerQuery &q, bool brute_force = false) const;
+    void gather_layer(const Ray &ray, LayerQuery &q, bool brute_force = false, TraversalStats *stats = nullptr) const;
 
   private:
     template <class Visit>
@@ -74,6 +67,7 @@ class SplatScene {
     std::vector<Vec3> centres_, normals_, colours_;
     std::vector<uint8_t> closed_;
     std::vector<float> radii_;
+    bool any_closed_ = false, has_colours_ = false;
     AABB bounds_;
     BVH bvh_;
 };

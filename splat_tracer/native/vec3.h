@@ -30,6 +30,10 @@ inline Vec3 normalize(Vec3 a) {
     float l = length(a);
     return l > 0.f ? a * (1.f / l) : a;
 }
+inline Vec3 cross(Vec3 a, Vec3 b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
+inline Vec3 vabs(Vec3 a) { return {std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)}; }
+inline float max_component(Vec3 a) { return a.x > a.y ? (a.x > a.z ? a.x : a.z) : (a.y > a.z ? a.y : a.z); }
+
 // Plain comparisons (one minss/maxss each) rather than std::fmin, which is a libm call:
 // every coordinate reaching the core has been checked to be finite.
 inline float fmin2(float a, float b) { return a < b ? a : b; }

@@ -83,9 +83,9 @@ float near_phase_omega(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk) {
 }
 
 SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool inside, const int32_t *exclude,
-                        int n_exclude, bool brute_force) {
+                        int n_exclude, bool brute_force, TraversalStats *stats) {
     if (m.is_general() && !inside && n_exclude == 0)
-        return single_splat(scene, brute_force ? scene.intersect_brute_force(ray) : scene.intersect(ray));
+        return single_splat(scene, brute_force ? scene.intersect_brute_force(ray) : scene.intersect(ray, stats));
     for (int attempt = 0; attempt < m.max_layers; ++attempt) {
         LayerQuery q;
         q.layer_front = !inside;
@@ -94,7 +94,8 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
         q.exclude = exclude, q.n_exclude = n_exclude;
         q.far_phase = m.far_phase;
         q.closed = scene.closed_flags();
-        scene.gather_layer(ray, q, brute_force);
+        scene.gather_layer(ray, q, brute_force, stats);
+        if (stats) ++stats->layer_queries;
         if (q.first < 0) return SurfaceHit();
         const bool closed = scene.closed(q.hits[q.first].id);
         if (m.far_phase && closed) {
@@ -107,12 +108,15 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
             const bool next_same = q.next >= 0 && q.hits[q.next].front == q.facing;
             const bool accepted = inside ? !next_same : (q.next >= 0 && !next_same);
             if (!accepted) {
+                if (stats) ++stats->far_rejections;
                 ray.tmin = q.layer_end;
                 if (!(ray.tmin < ray.tmax)) return SurfaceHit();
                 continue;
             }
         }
-        return resolve_layer(scene, q, m);
+        SurfaceHit s = resolve_layer(scene, q, m);
+        if (stats && m.interpolate && s.n_members > 1) ++stats->interpolations;
+        return s;
     }
     return SurfaceHit();
 }

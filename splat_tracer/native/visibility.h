@@ -53,8 +53,11 @@ struct SurfaceHit {
 // `inside`: the ray travels inside an object (a refracted ray), so a layer begins with a
 // back-facing hit (the exit). `exclude`: splats the ray must not hit (the ones that made
 // its origin point, for reflected, refracted and shadow rays).
+// `stats` (may be null) counts the traversal's work, the layer queries, the far phase's
+// rejections and the interpolated points.
 SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, bool inside = false,
-                        const int32_t *exclude = nullptr, int n_exclude = 0, bool brute_force = false);
+                        const int32_t *exclude = nullptr, int n_exclude = 0, bool brute_force = false,
+                        TraversalStats *stats = nullptr);
 
 // The omega of the near phase for two member splats j (nearer) and k: the sum of the
 // angles (c_k - c_j, n_j) and (c_j - c_k, n_k), in radians. Above pi: convex.

@@ -1,0 +1,72 @@
+// Rendering a frame of a RenderScene: camera samples spread by the pixel filter, a path per
+// sample (lamps with shadow rays, recursive mirror and glass rays, sampled rough and diffuse
+// bounces, the world as background and sky light), passes and counters.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+
+#include "camera.h"
+#include "render_scene.h"
+#include "sampling.h"
+
+namespace splat {
+
+struct IntegratorSettings {
+    int samples = 1;
+    int filter_type = PixelFilter::BlackmanHarris;
+    float filter_width = 1.5f;
+    int shadow_samples = 1;
+    int max_bounces = 12, diffuse_bounces = 1, glossy_bounces = 4, transmission_bounces = 12,
+        transparent_bounces = 8;
+    uint32_t seed = 0;
+    Method method;
+    Vec3 world;  // background radiance
+    bool film_transparent = false;
+    int tile_size = 32;
+    float background_depth = 1e10f;  // what Cycles writes in Z where nothing is hit
+};
+
+// Output buffers of the rendered window (w x h, top row first); any may be null (not wanted,
+// and then not computed). Channels: combined 4, normal/diffcol/emit/shadow 3, others 1.
+struct Film {
+    int width = 0, height = 0, x0 = 0, y0 = 0, w = 0, h = 0;
+    float *combined = nullptr, *depth = nullptr, *normal = nullptr, *diffcol = nullptr, *emit = nullptr,
+          *shadow = nullptr, *index = nullptr, *splat_count = nullptr;
+};
+
+// Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
+struct RenderCounters {
+    std::atomic<uint64_t> camera{0}, shadow{0}, reflection{0}, refraction{0}, diffuse{0}, transparent{0};
+    std::atomic<uint64_t> nodes{0}, discs{0}, triangles{0}, layer_queries{0}, far_rejections{0},
+        interpolations{0};
+};
+
+class Integrator {
+  public:
+    Integrator(const RenderScene &scene, const Camera &camera, const Film &film, const IntegratorSettings &settings,
+               RenderCounters &counters);
+
+    size_t tile_count() const;
+    void render_tile(size_t tile) const;
+
+  private:
+    struct Tally;       // per-tile ray counts
+    struct PathState;   // bounce counters, where the ray starts, its throughput
+    struct Primary;     // what the passes want from the camera ray's first hit
+
+    Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally) const;
+    Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 wo, const Material &m, Vec3 base,
+                      bool delta, Sampler &rng, Primary *primary, Tally &tally) const;
+    Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
+    void shade_pixel(int col, int row, Tally &tally) const;
+
+    const RenderScene &scene_;
+    const Camera &camera_;
+    const Film &film_;
+    const IntegratorSettings &settings_;
+    RenderCounters &counters_;
+    PixelFilter filter_;
+};
+
+}  // namespace splat

@@ -1,0 +1,156 @@
+#include "render_scene.h"
+
+#include <cmath>
+
+namespace splat {
+
+RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
+                         int threads)
+    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
+    if (materials_.empty()) materials_.push_back(Material());
+    for (const Material &m : materials_) any_transparent_ |= m.alpha < 1.f || m.use_point_alpha;
+    std::vector<AABB> boxes(instances_.size());
+    for (size_t i = 0; i < instances_.size(); ++i) {
+        Instance &inst = instances_[i];
+        const AABB local = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
+        AABB world;
+        if (!local.empty()) {
+            for (int c = 0; c < 8; ++c)
+                world.grow(inst.to_world.point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
+                                                    c & 4 ? local.hi.z : local.lo.z)));
+            // The corners went through float arithmetic: widen by a few ulps of their size.
+            const Vec3 pad = (vabs(world.lo) + vabs(world.hi)) * 4e-7f;
+            world.lo = world.lo - pad, world.hi = world.hi + pad;
+        }
+        inst.bounds = world;
+        // An empty geometry gets a degenerate box far away from nothing: never entered.
+        boxes[i] = world.empty() ? AABB{Vec3(0, 0, 0), Vec3(0, 0, 0)} : world;
+    }
+    top_.build(boxes, threads);
+}
+
+Ray RenderScene::to_object(const Instance &inst, const Ray &ray, float *scale) {
+    Ray r;
+    r.o = inst.to_object.point(ray.o);
+    const Vec3 d = inst.to_object.vector(ray.d);
+    const float s = length(d);
+    r.d = d * (1.f / s);
+    r.tmin = ray.tmin * s;
+    r.tmax = ray.tmax * s;  // inf stays inf
+    *scale = s;
+    return r;
+}
+
+void RenderScene::locate_camera(Vec3 eye) {
+    // A point is inside a closed surface when rays from it in every direction first meet the
+    // surface from behind. Six axis rays, five of which must agree: one may slip through a
+    // gap between discs or graze an edge.
+    for (Instance &inst : instances_) {
+        inst.camera_inside = false;
+        if (!inst.splats || !inst.splats->any_closed()) continue;
+        const Vec3 o = inst.to_object.point(eye);
+        int behind = 0;
+        for (int k = 0; k < 6; ++k) {
+            Ray r;
+            r.o = o;
+            r.d = Vec3(k == 0 ? 1.f : k == 1 ? -1.f : 0.f, k == 2 ? 1.f : k == 3 ? -1.f : 0.f,
+                       k == 4 ? 1.f : k == 5 ? -1.f : 0.f);
+            const Hit h = inst.splats->intersect(r);
+            behind += h.valid() && !h.front && inst.splats->closed(h.id);
+        }
+        inst.camera_inside = behind >= 5;
+    }
+}
+
+SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
+                                    bool camera_ray, TraversalStats *stats) const {
+    SurfacePoint best;
+    if (instances_.empty()) return best;
+    float limit = ray.tmax;
+    traverse_bvh(
+        top_, ray, limit,
+        [&](uint32_t first, uint32_t count) {
+            for (uint32_t k = first; k < first + count; ++k) {
+                const int index = int(top_.prim_order[k]);
+                const Instance &inst = instances_[index];
+                if (!(inst.visibility & ray_kind)) continue;
+                float s;
+                Ray local = to_object(inst, ray, &s);
+                const bool self = from.instance == index;
+                if (inst.mesh) {
+                    local.tmax = std::fmin(local.tmax, limit * s);
+                    const MeshHit h = inst.mesh->intersect(local, self ? from.triangle : -1, stats);
+                    if (!h.valid() || !(h.t / s < best.t)) continue;
+                    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+                    best.n_members = 0, best.has_point_colour = false;
+                    const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
+                    const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+                    best.ng = ng, best.ns = ns;
+                    best.p = ray.o + ray.d * best.t;
+                    // Start secondary rays off the surface by the interpolation's error bound
+                    // (object space, scaled to the scene) plus the scene-frame rounding of p.
+                    const float obj_err = max_component(inst.mesh->point_error(h)) / s;
+                    best.offset = 2.f * (obj_err + max_component(vabs(best.p)) * 1.2e-7f);
+                    const int slot = inst.mesh->material(h.tri);
+                    best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
+                    limit = best.t;
+                } else {
+                    // The far phase of a closed cloud needs the hit after the layer, which may
+                    // lie beyond the nearest surface so far: only then is the full ray kept.
+                    const bool needs_exit = method.far_phase && inst.splats->any_closed();
+                    if (!needs_exit) local.tmax = std::fmin(local.tmax, limit * s);
+                    const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
+                    const SurfaceHit h =
+                        find_surface(*inst.splats, local, method, inside, self ? from.members : nullptr,
+                                     self ? from.n_members : 0, false, stats);
+                    if (!h.valid() || !(h.t / s < best.t)) continue;
+                    best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
+                    best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
+                    best.ns = normalize(inst.to_object.transposed_vector(h.normal));
+                    best.p = ray.o + ray.d * best.t;
+                    best.offset = 0;  // splat rays leave by excluding the members instead
+                    best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
+                    best.material = inst.material_offset;
+                    best.n_members = h.n_members;
+                    for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
+                    limit = best.t;
+                }
+            }
+            return false;
+        },
+        stats ? &stats->nodes : nullptr);
+    return best;
+}
+
+bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {
+    if (instances_.empty()) return false;
+    bool blocked = false;
+    const float limit = ray.tmax;
+    traverse_bvh(
+        top_, ray, limit,
+        [&](uint32_t first, uint32_t count) {
+            for (uint32_t k = first; k < first + count; ++k) {
+                const int index = int(top_.prim_order[k]);
+                const Instance &inst = instances_[index];
+                if (!(inst.visibility & kVisShadow)) continue;
+                float s;
+                const Ray local = to_object(inst, ray, &s);
+                const bool self = from.instance == index;
+                if (inst.mesh) {
+                    if (inst.mesh->occluded(local, self ? from.triangle : -1, stats)) return blocked = true;
+                } else {
+                    // Splats block only where the visibility rules put a surface: a fringe
+                    // disc (far phase) or the splats the ray starts from never cast a shadow.
+                    const SurfaceHit h = find_surface(*inst.splats, local, method, from.inside == index,
+                                                      self ? from.members : nullptr, self ? from.n_members : 0,
+                                                      false, stats);
+                    if (h.valid() && h.t < local.tmax) return blocked = true;
+                }
+            }
+            return false;
+        },
+        stats ? &stats->nodes : nullptr);
+    return blocked;
+}
+
+}  // namespace splat
