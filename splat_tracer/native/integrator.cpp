@@ -11,6 +11,10 @@ constexpr int kMaxDepth = 64;
 // Below this throughput (luminance) a path continues only by Russian roulette, with the
 // survivors weighted up: unbiased, and branching mirror/glass paths stop multiplying.
 constexpr float kRouletteThroughput = 0.02f;
+// The origin offset of secondary rays from splats in plain splat ray tracing (no wrong-hit
+// elimination), in radii of the splat: the usual epsilon of that method, small enough not to
+// skip thin features and large enough to clear the disc it starts on.
+constexpr float kPlainSplatOffset = 1e-3f;
 
 struct Integrator::Tally {
     TraversalStats stats;
@@ -83,7 +87,8 @@ struct Lobes {
 Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Film &film,
                        const IntegratorSettings &settings, RenderCounters &counters)
     : scene_(scene), camera_(camera), film_(film), settings_(settings), counters_(counters),
-      filter_(settings.filter_type, settings.filter_width) {}
+      filter_(settings.filter_type, settings.filter_width),
+      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
 
 size_t Integrator::tile_count() const {
     const int64_t ts = settings_.tile_size;
@@ -198,9 +203,17 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     }
     Vec3 L = mat.emission;  // emission is two-sided, like Cycles' Emission shader
 
-    // Where rays leave this point from: the splats that formed it are excluded, and a
-    // triangle's point is moved off the surface on the side the new ray goes.
+    // Where rays leave this point from: the splats that formed it are excluded (the paper's
+    // wrong-reflection rule), and a triangle's point is moved off the surface on the side
+    // the new ray goes. Without wrong-hit elimination (the general method, the baseline of
+    // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
+    // the origin moved off the disc by a small fraction of its radius -- and they do hit the
+    // neighbouring discs, which is what the paper's wrong shadows and reflections are.
     Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
+    if (!cfg.method.eliminate_wrong_hits && sp.n_members > 0) {
+        here.members = nullptr, here.n_members = 0;
+        sp.offset = kPlainSplatOffset * sp.radius;
+    }
     auto spawn = [&](Vec3 dir) {
         Ray r;
         const Vec3 side = (dot(dir, ng) >= 0.f) ? ng : ng * -1.f;
@@ -213,6 +226,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
 
     L = L + direct_light(sp, here, n, wo, mat, base, lobes.delta, rng, st.camera ? primary : nullptr, tally);
 
+    // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
+    // can bring any back, so none is traced.
+    if (!lit_scene_) return L;
     if (st.bounces >= cfg.max_bounces || st.bounces >= kMaxDepth) return L;
 
     // Continues the path with `weight`, by Russian roulette when its throughput is small.

@@ -67,6 +67,7 @@ class Integrator {
     const IntegratorSettings &settings_;
     RenderCounters &counters_;
     PixelFilter filter_;
+    bool lit_scene_;  // something emits light: secondary rays can matter
 };
 
 }  // namespace splat

@@ -8,7 +8,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
                          int threads)
     : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (const Material &m : materials_) any_transparent_ |= m.alpha < 1.f || m.use_point_alpha;
+    for (const Material &m : materials_) any_transparent_ |= m.alpha < 1.f, any_emission_ |= m.emits();
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
         Instance &inst = instances_[i];
@@ -109,6 +109,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                     best.ns = normalize(inst.to_object.transposed_vector(h.normal));
                     best.p = ray.o + ray.d * best.t;
                     best.offset = 0;  // splat rays leave by excluding the members instead
+                    best.radius = inst.splats->radius(h.id) / s;
                     best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
                     best.material = inst.material_offset;
                     best.n_members = h.n_members;

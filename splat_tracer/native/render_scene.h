@@ -71,7 +71,9 @@ struct SurfacePoint {
     int32_t prim = -1;   // splat or triangle id within the instance's geometry
     bool front = false;  // the side the normal points to faces the ray
     Vec3 p, ng, ns;      // point, geometric and shading normal (scene frame, unit)
-    float offset = 0;    // triangles: how far a secondary ray must start off the surface
+    float offset = 0;    // how far a secondary ray must start off the surface (triangles always;
+                         // splats only without wrong-hit elimination, see the integrator)
+    float radius = 0;    // splats: the chosen splat's radius in the scene frame
     Vec3 point_colour;
     bool has_point_colour = false;
     int material = 0;    // index in the material table
@@ -91,6 +93,7 @@ class RenderScene {
     const Material &material(int i) const { return materials_[i]; }
     const std::vector<Light> &lights() const { return lights_; }
     bool any_transparent() const { return any_transparent_; }
+    bool any_emission() const { return any_emission_; }  // a material emits light
 
     // Marks the closed clouds that enclose `eye`: their camera rays start inside them.
     void locate_camera(Vec3 eye);
@@ -109,7 +112,7 @@ class RenderScene {
     std::vector<Material> materials_;
     std::vector<Light> lights_;
     BVH top_;
-    bool any_transparent_ = false;
+    bool any_transparent_ = false, any_emission_ = false;
 };
 
 }  // namespace splat
