@@ -397,7 +397,8 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
                   power=max(float(light.energy) * 2.0 ** getattr(light, "exposure", 0.0), 0.0),
                   position=tuple(float(c) for c in m[:3, 3]), direction=_unit(-m[:3, 2]), u_axis=_unit(m[:3, 0]),
                   cast_shadow=bool(light.use_shadow),
-                  soft_falloff=bool(getattr(light, "use_soft_falloff", shading.Light.soft_falloff)))
+                  # Only point and spot lamps have Soft Falloff; Cycles' area lamps have none.
+                  soft_falloff=bool(getattr(light, "use_soft_falloff", False)))
     if light.type in ("POINT", "SPOT"):
         fields["radius"] = float(light.shadow_soft_size)
     if light.type == "SPOT":

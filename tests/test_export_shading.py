@@ -262,6 +262,7 @@ def test_rotated_scaled_area_lamp(blender, empty_scene, es, report):
                     shape="RECTANGLE", size=1.5, size_y=0.5, energy=400.0)
     a = lamp_of(bpy, es, area, report)
     assert (a.shape, a.size, a.size_y, a.power) == ("RECTANGLE", approx(3.0), approx(1.5), 400.0)
+    assert not a.soft_falloff  # a Blender option of point and spot lamps only
     assert a.u_axis == approx((0, 1, 0)) and a.direction == approx((0, 0, -1)) and a.position == approx((0, 0, 4))
     # A square stretched unevenly is a rectangle (the contract packs one size for squares).
     square = add_lamp(bpy, empty_scene, "AREA", scale=(1, 2, 1), shape="DISK", size=1.0)
