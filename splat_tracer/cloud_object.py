@@ -4,7 +4,9 @@ A vertex-only mesh with point attributes (`splat_normal`, `splat_radius`, option
 `splat_color`) and a Geometry Nodes "Mesh to Points" modifier: the viewport shows the
 points at their splat radius, and the evaluated object is a point cloud that keeps every
 attribute, which is what the render engine reads. Python cannot resize a PointCloud
-datablock, which is why the stored geometry is a mesh.
+datablock, which is why the stored geometry is a mesh. The node group also gives clouds that
+carry `splat_color` the "Splat Cloud" material, so that Cycles and EEVEE show the point
+colours too.
 """
 from __future__ import annotations
 
@@ -15,11 +17,42 @@ NORMAL = "splat_normal"
 RADIUS = "splat_radius"
 COLOUR = "splat_color"
 NODE_GROUP_TAG = "splat_tracer_points"  # custom property marking our node group
-NODE_GROUP_VERSION = 1
+# 1: Mesh to Points only. 2: also Set Material ("Splat Cloud") where `splat_color` exists.
+# Objects in older files keep the group they were made with, which still renders.
+NODE_GROUP_VERSION = 2
+MATERIAL_TAG = "splat_tracer_material"  # custom property marking our material
+MATERIAL_VERSION = 1
+MATERIAL_NAME = "Splat Cloud"
+
+
+def cloud_material() -> bpy.types.Material:
+    """The shared "Splat Cloud" material, created on first use: a Principled BSDF whose Base
+    Color is the points' `splat_color` (an Attribute node), so Cycles and EEVEE show the
+    point colours."""
+    for material in bpy.data.materials:
+        if material.get(MATERIAL_TAG) == MATERIAL_VERSION:
+            return material
+    material = bpy.data.materials.new(MATERIAL_NAME)
+    material[MATERIAL_TAG] = MATERIAL_VERSION
+    if bpy.app.version < (5, 0, 0):
+        material.use_nodes = True  # always on (and deprecated) from Blender 5.0
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    colour = nodes.new("ShaderNodeAttribute")
+    colour.attribute_type = "GEOMETRY"
+    colour.attribute_name = COLOUR
+    shader = nodes.new("ShaderNodeBsdfPrincipled")
+    output = nodes.new("ShaderNodeOutputMaterial")
+    links.new(colour.outputs["Color"], shader.inputs["Base Color"])
+    links.new(shader.outputs["BSDF"], output.inputs["Surface"])
+    colour.location, shader.location, output.location = (-300, 0), (0, 0), (300, 0)
+    return material
 
 
 def points_node_group() -> bpy.types.NodeTree:
-    """The shared "Mesh to Points" node group, created on first use."""
+    """The shared "Mesh to Points" node group, created on first use. Points of a mesh that
+    has `splat_color` get the "Splat Cloud" material; without colours they keep none, so
+    Cycles shows its default grey rather than a missing attribute's black."""
     for group in bpy.data.node_groups:
         if group.get(NODE_GROUP_TAG) == NODE_GROUP_VERSION:
             return group
@@ -35,10 +68,29 @@ def points_node_group() -> bpy.types.NodeTree:
     radius = nodes.new("GeometryNodeInputNamedAttribute")
     radius.data_type = "FLOAT"
     radius.inputs["Name"].default_value = RADIUS
+    # Cycles shades a missing attribute black: only clouds that carry colours get the material.
+    # The switch needs one value, not a field: the sum of `Exists` over the points (a sum, as
+    # the statistic's min/max would sort every point on each evaluation).
+    has_colour = nodes.new("GeometryNodeInputNamedAttribute")
+    has_colour.data_type = "FLOAT_COLOR"
+    has_colour.inputs["Name"].default_value = COLOUR
+    count = nodes.new("GeometryNodeAttributeStatistic")
+    set_material = nodes.new("GeometryNodeSetMaterial")
+    set_material.inputs["Material"].default_value = cloud_material()
+    switch = nodes.new("GeometryNodeSwitch")
+    switch.input_type = "GEOMETRY"
     links.new(inp.outputs[0], to_points.inputs["Mesh"])
     links.new(radius.outputs["Attribute"], to_points.inputs["Radius"])
-    links.new(to_points.outputs["Points"], out.inputs[0])
-    inp.location, radius.location, to_points.location, out.location = (-400, 0), (-400, -150), (-150, 0), (100, 0)
+    links.new(to_points.outputs["Points"], set_material.inputs["Geometry"])
+    links.new(to_points.outputs["Points"], count.inputs["Geometry"])
+    links.new(has_colour.outputs["Exists"], count.inputs["Attribute"])
+    links.new(count.outputs["Sum"], switch.inputs["Switch"])  # float to bool: sum > 0
+    links.new(to_points.outputs["Points"], switch.inputs["False"])
+    links.new(set_material.outputs["Geometry"], switch.inputs["True"])
+    links.new(switch.outputs[0], out.inputs[0])
+    inp.location, radius.location, to_points.location, out.location = (-400, 0), (-400, -150), (-150, 0), (500, 0)
+    has_colour.location, count.location, set_material.location, switch.location = \
+        (-150, -250), (100, -200), (100, 0), (300, 0)
     return group
 
 

@@ -1,7 +1,11 @@
 """Settings stored in .blend files: scene.splat_tracer and object.splat_tracer."""
 import bpy
 
-from . import core
+from . import core, shading
+
+# Hard limits are the ones shading.RenderSettings accepts.
+_MAX_SAMPLES = 1 << 16
+_MAX_SHADOW_SAMPLES = 1024
 
 _PRESET_ITEMS = (
     ("GENERAL", "General", "Plain splat ray tracing: nearest hit of any facing, flat splat normal"),
@@ -105,6 +109,19 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
                ("SMOOTH", "Smooth", "(1 - (d / r)^2)^2, smooth at the splat rim")),
         default="LINEAR",
         description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
+    )
+
+    samples: bpy.props.IntProperty(
+        name="Samples",
+        description="Camera rays per pixel: anti-aliasing, and every soft shadow, glossy reflection and diffuse "
+                    "bounce shares them (more is smoother and slower)",
+        default=shading.RenderSettings.samples, min=1, soft_max=1024, max=_MAX_SAMPLES,
+    )
+    shadow_samples: bpy.props.IntProperty(
+        name="Shadow Samples",
+        description="Shadow rays per lamp for each camera sample: softens the penumbra of lamps with a size "
+                    "without raising the samples",
+        default=shading.RenderSettings.shadow_samples, min=1, soft_max=16, max=_MAX_SHADOW_SAMPLES,
     )
 
     def switches(self) -> dict:

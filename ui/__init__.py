@@ -54,6 +54,52 @@ class SPLAT_TRACER_PT_visibility(SplatTracerPanel, bpy.types.Panel):
         sub.prop(settings, "kernel")
 
 
+class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_render"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        scene = context.scene
+        col = layout.column()
+        col.prop(scene.splat_tracer, "samples")
+        col.prop(scene.splat_tracer, "shadow_samples")
+        # The filter, seed and bounces are Cycles' own settings, read when the add-on is on;
+        # shown here because Cycles' panels hide for other engines.
+        cycles = getattr(scene, "cycles", None)
+        col = layout.column()
+        if cycles is not None:
+            col.prop(cycles, "pixel_filter_type", text="Pixel Filter")
+        col.prop(scene.render, "filter_size", text="Filter Width")
+        if cycles is not None:
+            col.prop(cycles, "seed")
+            col.prop(cycles, "use_animated_seed")
+
+
+class SPLAT_TRACER_PT_light_paths(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Light Paths"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and hasattr(context.scene, "cycles")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        cycles = context.scene.cycles
+        col = layout.column(heading="Max Bounces")
+        col.prop(cycles, "max_bounces", text="Total")
+        col.prop(cycles, "diffuse_bounces", text="Diffuse")
+        col.prop(cycles, "glossy_bounces", text="Glossy")
+        col.prop(cycles, "transmission_bounces", text="Transmission")
+        col.prop(cycles, "transparent_max_bounces", text="Transparent")
+
+
 class SPLAT_TRACER_PT_performance(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Performance"
     bl_context = "render"
@@ -102,7 +148,8 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         layout.prop(view_layer, "use_pass_normal", text="Normal")
 
 
-classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_visibility, SPLAT_TRACER_PT_performance,
+classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
+           SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_passes)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they

@@ -1,0 +1,513 @@
+"""Blender materials, lamps, world and render settings -> the plain contract in shading.py.
+
+Pure reading: nothing here renders or changes the file. Whatever the engine cannot render
+is approximated, and said once in a `shading.Report` line that names the datablock.
+
+Where a node tree has outputs for several engines, the one Cycles uses is read (an output
+whose target is 'CYCLES' beats 'ALL', the active one beats the others): Splat Tracer is a
+ray tracer, and a scene lit for Cycles should render alike.
+
+Materials are read from their node tree, following the Material Output's Surface input:
+- Principled BSDF: Base Color, Metallic, Roughness, IOR, Specular IOR Level, Transmission
+  Weight, Alpha, Emission Color x Emission Strength (the names since Blender 4.0).
+- Diffuse BSDF (no specular), Glossy BSDF (metallic), Metallic BSDF, Glass BSDF
+  (transmission with its IOR), Refraction BSDF (transmission, no reflection), Emission
+  (emission only, black surface), Transparent BSDF (alpha 0).
+- Mix and Add Shader (approximated, said once per material): each branch weighs w (Mix:
+  1 - factor and factor; Add: 1 and 1). Emission is the weighted sum and alpha the summed
+  opaque share k = w x alpha (at most 1), which is exact. Base colour and specular level
+  are the k-weighted sum over the branches divided by that alpha: an Emission or unlinked
+  branch (a black surface) darkens them, a Transparent one does not count, and Add adds
+  the reflectances. Metallic, roughness, IOR and transmission are the k-weighted mean over
+  the branches that are BSDFs. The point-colour flags are on when a weighted branch has them.
+- A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
+  name; through reroutes) means the points' own colours; an Alpha fed by such a node's
+  Alpha output means the points' own alpha.
+Any other link into a socket the engine reads falls back to that socket's default value.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import zlib
+
+import bpy
+import numpy as np
+
+from . import shading
+
+# The output target this renderer reads (see the module docstring).
+_TARGET = "CYCLES"
+# From Blender 5.0, Material.use_nodes and World.use_nodes are deprecated and always on
+# (setting them has no effect): node trees are read whatever the flag says.
+_ALWAYS_NODES = bpy.app.version >= (5, 0, 0)
+# What Cycles renders for a surface without a shader (no output, nothing linked): black.
+_BLACK = dict(base_colour=(0.0, 0.0, 0.0), specular_level=0.0)
+# Marks the shader fields of a branch that reflects light (a BSDF), for Mix and Add.
+_IS_BSDF = "_bsdf"
+# Smallest IOR passed on: the contract needs a positive one (IOR < 1 is valid: a bubble).
+_MIN_IOR = 1e-3
+# The default Sky Texture (Multiple Scattering, sun 15 degrees up) as one uniform radiance:
+# the one giving the same irradiance on an upward-facing surface, measured by rendering the
+# sky with Cycles 5.0.1 (an equirectangular 256x128 image; without the sun disc).
+SKY_RADIANCE = (1.7, 2.9, 4.8)
+# Principled BSDF lobes the engine does not render, by the socket that turns each on.
+_PRINCIPLED_EXTRAS = {"Subsurface Weight": "subsurface", "Coat Weight": "coat", "Sheen Weight": "sheen",
+                      "Anisotropic": "anisotropy", "Thin Film Thickness": "thin film"}
+# Node types whose outputs are per-point data (Color Attribute, Attribute).
+_POINT_DATA_NODES = ("VERTEX_COLOR", "ATTRIBUTE")
+
+
+# --------------------------------------------------------------------------------------
+# Node-tree helpers.
+
+def _fmt(value) -> str:
+    """A socket value as the report shows it: 3 significant digits, RGB only."""
+    if isinstance(value, (int, float)):
+        return f"{value:.3g}"
+    return "(" + ", ".join(f"{v:.3g}" for v in tuple(value)[:3]) + ")"
+
+
+def _node_tree(idblock):
+    """The node tree Blender renders `idblock` (a material or world) with, or None when it
+    uses its viewport settings instead (no tree; `use_nodes` off before Blender 5.0)."""
+    tree = idblock.node_tree
+    if tree is None or (not _ALWAYS_NODES and not idblock.use_nodes):
+        return None
+    return tree
+
+
+def _output_node(tree, node_type: str):
+    """The output node of `node_type` that Cycles renders (Blender's ntreeShaderOutputNode):
+    a 'CYCLES' target beats 'ALL', then the active output beats the others."""
+    best, best_rank = None, None
+    for node in tree.nodes:
+        target = getattr(node, "target", "ALL")
+        if node.type != node_type or target not in ("ALL", _TARGET):
+            continue
+        rank = (target == _TARGET, bool(node.is_active_output))
+        if best is None or rank > best_rank:
+            best, best_rank = node, rank
+    return best
+
+
+def _link_into(socket):
+    """The link feeding an input socket, ignoring muted and invalid links."""
+    return next((link for link in socket.links if link.is_valid and not link.is_muted), None)
+
+
+def _upstream(socket):
+    """(node, output socket) feeding an input, through reroutes and muted nodes (which pass
+    their input on); None when nothing is connected."""
+    link = _link_into(socket)
+    while link is not None:
+        node = link.from_node
+        if node.type == "REROUTE":
+            link = _link_into(node.inputs[0])
+        elif node.mute:
+            passed = next((l for l in node.internal_links if l.to_socket == link.from_socket), None)
+            link = _link_into(passed.from_socket) if passed is not None else None
+        else:
+            return node, link.from_socket
+    return None
+
+
+def _is_point_data(source, output: str) -> bool:
+    """Whether `source` (from _upstream) is the `output` socket of a per-point attribute."""
+    if source is None:
+        return False
+    node, socket = source
+    if node.type not in _POINT_DATA_NODES or socket.name != output:
+        return False
+    return node.type == "VERTEX_COLOR" or node.attribute_type == "GEOMETRY"
+
+
+class _Sockets:
+    """Reads socket values of one datablock's nodes. A linked socket it cannot follow falls
+    back to its default value, said once in the report."""
+
+    def __init__(self, kind: str, name: str, report: shading.Report):
+        self.prefix = f"{kind} '{name}'"
+        self.report = report
+
+    def say(self, text: str) -> None:
+        self.report.once(f"{self.prefix}{text}")
+
+    def _default(self, node, name):
+        """The default value of an input (by name, or the socket itself)."""
+        socket = node.inputs[name] if isinstance(name, str) else name
+        source = _upstream(socket)
+        if source is not None:
+            self.say(f": {socket.name} is driven by a '{source[0].bl_label}' node; "
+                     f"using its default value {_fmt(socket.default_value)}")
+        return socket.default_value
+
+    def value(self, node, name) -> float:
+        return float(self._default(node, name))
+
+    def colour(self, node, name: str) -> tuple:
+        return tuple(float(c) for c in self._default(node, name)[:3])
+
+    def point_colour(self, node, name: str) -> tuple:
+        """(colour, True) when the points' colours feed the socket, else (colour, False)."""
+        socket = node.inputs[name]
+        if _is_point_data(_upstream(socket), "Color"):
+            return tuple(float(c) for c in socket.default_value[:3]), True
+        return self.colour(node, name), False
+
+    def point_alpha(self, node, name: str) -> tuple:
+        """(1, True) when the points' alpha feeds the socket (it replaces the value), else
+        (value, False)."""
+        if _is_point_data(_upstream(node.inputs[name]), "Alpha"):
+            return 1.0, True
+        return self.value(node, name), False
+
+    @staticmethod
+    def linked_inputs(node, names) -> list:
+        """Which of the named inputs of `node` have something connected."""
+        return [name for name in names if name in node.inputs and _upstream(node.inputs[name]) is not None]
+
+
+# --------------------------------------------------------------------------------------
+# Materials. Each shader reader returns a dict of shading.Material fields (unset: the
+# contract's defaults), so that Mix and Add can blend them before the Material is made.
+
+_DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()}
+
+
+def _principled(node, sockets: _Sockets) -> dict:
+    base, point_colour = sockets.point_colour(node, "Base Color")
+    alpha, point_alpha = sockets.point_alpha(node, "Alpha")
+    emission = sockets.colour(node, "Emission Color")
+    strength = sockets.value(node, "Emission Strength")
+    extras = [label for name, label in _PRINCIPLED_EXTRAS.items()
+              if name in node.inputs and (node.inputs[name].default_value > 0 or sockets.linked_inputs(node, [name]))]
+    if extras:
+        sockets.say(f": the Principled BSDF's {', '.join(extras)} {'is' if len(extras) == 1 else 'are'} ignored")
+    return dict(base_colour=base, metallic=sockets.value(node, "Metallic"),
+                roughness=sockets.value(node, "Roughness"), ior=sockets.value(node, "IOR"),
+                transmission=sockets.value(node, "Transmission Weight"), alpha=alpha,
+                emission=tuple(c * strength for c in emission),
+                specular_level=sockets.value(node, "Specular IOR Level"),
+                use_point_colour=point_colour, use_point_alpha=point_alpha)
+
+
+def _diffuse(node, sockets: _Sockets) -> dict:
+    base, point_colour = sockets.point_colour(node, "Color")
+    return dict(base_colour=base, specular_level=0.0, use_point_colour=point_colour)
+
+
+def _glossy(node, sockets: _Sockets, colour: str = "Color") -> dict:
+    base, point_colour = sockets.point_colour(node, colour)
+    return dict(base_colour=base, metallic=1.0, roughness=sockets.value(node, "Roughness"),
+                use_point_colour=point_colour)
+
+
+def _glass(node, sockets: _Sockets) -> dict:
+    base, point_colour = sockets.point_colour(node, "Color")
+    return dict(base_colour=base, transmission=1.0, ior=sockets.value(node, "IOR"),
+                roughness=sockets.value(node, "Roughness"), use_point_colour=point_colour)
+
+
+def _refraction(node, sockets: _Sockets) -> dict:
+    return {**_glass(node, sockets), "specular_level": 0.0}
+
+
+def _emission(node, sockets: _Sockets) -> dict:
+    strength = sockets.value(node, "Strength")
+    return dict(_BLACK, emission=tuple(c * strength for c in sockets.colour(node, "Color")))
+
+
+def _transparent(node, sockets: _Sockets) -> dict:
+    if sockets.colour(node, "Color") != (1.0, 1.0, 1.0):
+        sockets.say(": a tinted Transparent BSDF is rendered fully transparent (untinted)")
+    return dict(alpha=0.0)
+
+
+_SHADERS = {
+    "BSDF_PRINCIPLED": _principled,
+    "BSDF_DIFFUSE": _diffuse,
+    "BSDF_GLOSSY": _glossy,
+    "BSDF_METALLIC": lambda node, sockets: _glossy(node, sockets, "Base Color"),
+    "BSDF_GLASS": _glass,
+    "BSDF_REFRACTION": _refraction,
+    "EMISSION": _emission,
+    "BSDF_TRANSPARENT": _transparent,
+}
+_LINEAR = ("base_colour", "specular_level")        # k-weighted sums (see the module docstring)
+_AVERAGED = ("metallic", "roughness", "ior", "transmission")  # k-weighted means over the BSDFs
+
+
+def _combine(branches) -> dict:
+    """Mix or Add of shader fields: `branches` is [(weight, fields)] (module docstring)."""
+    branches = [(w, {**_DEFAULTS, _IS_BSDF: True, **f}) for w, f in branches if w > 0]
+    if not branches:
+        return dict(_BLACK, **{_IS_BSDF: False})
+    opaque = [w * f["alpha"] for w, f in branches]
+    alpha = min(sum(opaque), 1.0)
+    out = {"alpha": alpha, _IS_BSDF: any(f[_IS_BSDF] for _, f in branches),
+           "emission": tuple(sum(w * f["emission"][i] for w, f in branches) for i in range(3))}
+    for key in _LINEAR:
+        total = sum(k * np.asarray(f[key], np.float64) for k, (_, f) in zip(opaque, branches))
+        value = total / alpha if alpha > 0 else np.asarray(_DEFAULTS[key], np.float64)
+        out[key] = tuple(float(c) for c in value) if value.ndim else float(value)
+    reflecting = [(k, f) for k, (_, f) in zip(opaque, branches) if f[_IS_BSDF] and k > 0]
+    weight = sum(k for k, _ in reflecting)
+    for key in _AVERAGED:
+        out[key] = sum(k * f[key] for k, f in reflecting) / weight if weight > 0 else _DEFAULTS[key]
+    for key in ("use_point_colour", "use_point_alpha"):
+        out[key] = any(f[key] for _, f in branches)
+    return out
+
+
+def _shader(socket, sockets: _Sockets) -> dict:
+    """The shader fields (Material fields, and _IS_BSDF) of what feeds a shader socket."""
+    source = _upstream(socket)
+    if source is None:
+        return dict(_BLACK, **{_IS_BSDF: False})
+    node = source[0]
+    if node.type in ("MIX_SHADER", "ADD_SHADER"):
+        sockets.say(": Mix and Add Shaders are approximated by blending their shaders' parameters")
+        first, second = (_shader(s, sockets) for s in node.inputs if s.type == "SHADER")
+        if node.type == "ADD_SHADER":
+            return _combine([(1.0, first), (1.0, second)])
+        factor = min(max(sockets.value(node, node.inputs[0]), 0.0), 1.0)
+        return _combine([(1.0 - factor, first), (factor, second)])
+    reader = _SHADERS.get(node.type)
+    if reader is None:
+        sockets.say(f": the '{node.bl_label}' shader is not supported; using a default grey material")
+        return {}
+    return {_IS_BSDF: node.type not in ("EMISSION", "BSDF_TRANSPARENT"), **reader(node, sockets)}
+
+
+def _clamped(fields: dict) -> shading.Material:
+    """The Material for shader fields, held to the contract's ranges (as Cycles clamps)."""
+    f = {**_DEFAULTS, **fields}
+    unit = lambda v: min(max(float(v), 0.0), 1.0)  # noqa: E731
+    return shading.Material(
+        base_colour=tuple(max(float(c), 0.0) for c in f["base_colour"]), metallic=unit(f["metallic"]),
+        roughness=unit(f["roughness"]), ior=max(float(f["ior"]), _MIN_IOR), transmission=unit(f["transmission"]),
+        alpha=unit(f["alpha"]), emission=tuple(max(float(c), 0.0) for c in f["emission"]),
+        specular_level=max(float(f["specular_level"]), 0.0), use_point_colour=bool(f["use_point_colour"]),
+        use_point_alpha=bool(f["use_point_alpha"]))
+
+
+def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
+    """A material without nodes: its viewport display settings, as Cycles renders it."""
+    sockets.say(" does not use nodes; using its viewport display colour, metallic and roughness")
+    return _clamped(dict(base_colour=tuple(bl_material.diffuse_color[:3]), metallic=bl_material.metallic,
+                         roughness=bl_material.roughness))
+
+
+def material_of(bl_material, report: shading.Report) -> shading.Material:
+    """The engine's Material for a Blender material (None, an empty slot: default grey).
+
+    Reads the node tree Cycles would render (see the module docstring for what maps to
+    what). Without an output for Cycles, or with nothing in its Surface, the material is
+    black, as in Cycles; Volume and Displacement are ignored. Every approximation is said
+    once in `report`."""
+    if bl_material is None:
+        return shading.Material()
+    sockets = _Sockets("material", bl_material.name, report)
+    tree = _node_tree(bl_material)
+    if tree is None:
+        return _viewport_material(bl_material, sockets)
+    output = _output_node(tree, "OUTPUT_MATERIAL")
+    if output is None:
+        sockets.say(" has no Material Output; rendered black, as Cycles does")
+        return _clamped(_BLACK)
+    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
+    if ignored:
+        sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
+    if _upstream(output.inputs["Surface"]) is None:
+        sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
+    return _clamped(_shader(output.inputs["Surface"], sockets))
+
+
+# --------------------------------------------------------------------------------------
+# Lamps.
+
+def _unit(v) -> tuple:
+    v = np.asarray(v, np.float64)
+    return tuple(float(c) for c in v / np.linalg.norm(v))
+
+
+def _has_custom_nodes(light) -> bool:
+    """Whether a lamp's node tree does more than the default: one Emission node (white,
+    strength 1) into the Light Output."""
+    if not light.use_nodes or light.node_tree is None:
+        return False
+    tree = light.node_tree
+    if sorted(n.type for n in tree.nodes) != ["EMISSION", "OUTPUT_LIGHT"] or len(tree.links) != 1:
+        return True
+    emission = next(n for n in tree.nodes if n.type == "EMISSION")
+    return (tuple(emission.inputs["Color"].default_value[:3]) != (1.0, 1.0, 1.0)
+            or emission.inputs["Strength"].default_value != 1.0)
+
+
+def _report_lamp_extras(obj, light, say) -> None:
+    """One line each for what the engine ignores on a lamp."""
+    if _has_custom_nodes(light):
+        say("light node trees are ignored")
+    linking = getattr(obj, "light_linking", None)
+    if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
+        say("light linking is ignored")
+    if getattr(obj, "lightgroup", ""):
+        say(f"light group '{obj.lightgroup}' is ignored")
+    if light.type != "SUN" and not getattr(light, "normalize", True):
+        say("'Normalize' off is ignored (rendered as if on)")
+
+
+def _area_fields(light, matrix: np.ndarray, say) -> dict:
+    """Shape and sizes of an area lamp, scaled by the lamp object's X and Y axes. A square
+    or disk scaled unevenly becomes a rectangle or ellipse."""
+    scale_x, scale_y = (float(np.linalg.norm(matrix[:3, i])) for i in (0, 1))
+    square = light.shape in ("SQUARE", "DISK")
+    size_x = light.size * scale_x
+    size_y = (light.size if square else light.size_y) * scale_y
+    shape = light.shape
+    if square and not math.isclose(size_x, size_y, rel_tol=1e-6):
+        shape = "RECTANGLE" if light.shape == "SQUARE" else "ELLIPSE"
+    if light.spread < math.pi * (1 - 1e-6):
+        say(f"a spread of {math.degrees(light.spread):.3g} degrees is ignored (rendered as 180)")
+    return dict(shape=shape, size=size_x, size_y=size_y)
+
+
+def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | None:
+    """The engine's Light for a lamp object (None for any other object).
+
+    `matrix_world`: the lamp's 4x4 world matrix in the scene's local frame (float64).
+    Power: energy x 2^exposure (W; W/m^2 for a sun), colour x the blackbody colour when
+    'Temperature' is on, as in Cycles. Position: the matrix translation; direction: its -Z
+    column; u_axis: its X column; area sizes scale with the X and Y columns' lengths.
+    Portals emit nothing and give None."""
+    if obj_eval.type != "LIGHT":
+        return None
+    light = obj_eval.data
+    say = lambda text: report.once(f"light '{obj_eval.name}': {text}")  # noqa: E731
+    if light.type == "AREA" and getattr(getattr(light, "cycles", None), "is_portal", False):
+        say("portals are ignored")
+        return None
+    _report_lamp_extras(obj_eval, light, say)
+    m = np.asarray(matrix_world, np.float64)
+    colour = np.array(light.color[:3], np.float64)
+    if getattr(light, "use_temperature", False):
+        colour = colour * np.array(light.temperature_color[:3], np.float64)
+    fields = dict(type=light.type, colour=tuple(float(c) for c in colour),
+                  power=max(float(light.energy) * 2.0 ** getattr(light, "exposure", 0.0), 0.0),
+                  position=tuple(float(c) for c in m[:3, 3]), direction=_unit(-m[:3, 2]), u_axis=_unit(m[:3, 0]),
+                  cast_shadow=bool(light.use_shadow),
+                  # Only point and spot lamps have Soft Falloff; Cycles' area lamps have none.
+                  soft_falloff=bool(getattr(light, "use_soft_falloff", False)))
+    if light.type in ("POINT", "SPOT"):
+        fields["radius"] = float(light.shadow_soft_size)
+    if light.type == "SPOT":
+        fields.update(spot_size=float(light.spot_size), spot_blend=float(light.spot_blend))
+    elif light.type == "SUN":
+        fields["angle"] = float(light.angle)
+    elif light.type == "AREA":
+        fields.update(_area_fields(light, m, say))
+    return shading.Light(**fields)
+
+
+# --------------------------------------------------------------------------------------
+# World.
+
+def _background(node, sockets: _Sockets) -> tuple:
+    """(colour, strength) of a Background (or Emission) node of the world."""
+    strength = sockets.value(node, "Strength")
+    source = _upstream(node.inputs["Color"])
+    if source is not None and source[0].type == "TEX_SKY":
+        sockets.say(f": the Sky Texture is approximated by a uniform sky of radiance {_fmt(SKY_RADIANCE)} "
+                    f"x strength (the default sky's dome, as an upward-facing surface sees it)")
+        return SKY_RADIANCE, strength
+    return sockets.colour(node, "Color"), strength
+
+
+def world_of(scene, report: shading.Report) -> shading.World:
+    """The engine's World: the Background feeding the World Output Cycles renders (its
+    colour and strength), or the world's viewport colour without nodes; black without a
+    world. Transparency is Film > Transparent."""
+    transparent = bool(scene.render.film_transparent)
+    world = scene.world
+    if world is None:
+        return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
+    sockets = _Sockets("world", world.name, report)
+    viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, transparent=transparent)
+    tree = _node_tree(world)
+    if tree is None:
+        return viewport
+    output = _output_node(tree, "OUTPUT_WORLD")
+    source = _upstream(output.inputs["Surface"]) if output is not None else None
+    if source is None:
+        sockets.say(": nothing is connected to a World Output's Surface; rendered black, as Cycles does")
+        return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
+    if sockets.linked_inputs(output, ["Volume"]):
+        sockets.say(": Volume is ignored")
+    if source[0].type not in ("BACKGROUND", "EMISSION"):
+        sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
+        return viewport
+    colour, strength = _background(source[0], sockets)
+    return shading.World(colour=tuple(max(float(c), 0.0) for c in colour), strength=max(strength, 0.0),
+                         transparent=transparent)
+
+
+# --------------------------------------------------------------------------------------
+# Render settings and object visibility.
+
+_BOUNCES = {"max_bounces": "max_bounces", "diffuse_bounces": "diffuse_bounces",
+            "glossy_bounces": "glossy_bounces", "transmission_bounces": "transmission_bounces",
+            "transparent_bounces": "transparent_max_bounces"}  # RenderSettings field: Cycles property
+_MAX_BOUNCES = 1024  # the contract's limit (Cycles' own)
+_FILTER_WIDTH = (0.01, 10.0)  # pixels: the contract's range (Blender allows 0..500)
+
+
+def _seed(cycles, frame: int) -> int:
+    """Cycles' seed; with 'Animated Seed', mixed with the frame so the noise changes per
+    frame (any mix does: the pattern is this engine's own, not Cycles')."""
+    if not cycles.use_animated_seed:
+        return int(cycles.seed)
+    return zlib.crc32(struct.pack("<ii", int(cycles.seed), int(frame)))
+
+
+def render_settings_of(scene) -> shading.RenderSettings:
+    """The engine's RenderSettings: samples and shadow samples are its own settings
+    (scene.splat_tracer); filter, bounces and seed are Cycles' when the Cycles add-on is on
+    (else the contract's defaults and Blackman-Harris); the filter width is Blender's."""
+    settings = scene.splat_tracer
+    width = min(max(float(scene.render.filter_size), _FILTER_WIDTH[0]), _FILTER_WIDTH[1])
+    fields = dict(samples=int(settings.samples), shadow_samples=int(settings.shadow_samples), filter_width=width,
+                  pixel_filter="BLACKMAN_HARRIS")
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None:
+        fields["pixel_filter"] = cycles.pixel_filter_type
+        fields.update({key: min(int(getattr(cycles, prop)), _MAX_BOUNCES) for key, prop in _BOUNCES.items()})
+        fields["seed"] = _seed(cycles, scene.frame_current)
+    return shading.RenderSettings(**fields)
+
+
+_RAYS = ("camera", "diffuse", "glossy", "transmission", "shadow")
+
+
+def _holdout(obj, view_layer) -> bool:
+    """The object's holdout (its own, or its collection's in the view layer). holdout_get
+    finds an evaluated object only in the evaluated view layer (depsgraph.view_layer_eval),
+    and an original one only in the original: both are asked, so either layer works."""
+    candidates = [obj] + ([obj.original] if obj.original is not None and obj.original != obj else [])
+    return bool(obj.is_holdout) or any(o.holdout_get(view_layer=view_layer) for o in candidates)
+
+
+def object_visibility(obj_eval, view_layer, parent=None) -> dict:
+    """Ray visibility of an object: {'camera', 'diffuse', 'glossy', 'transmission',
+    'shadow': bool (Object Properties > Visibility > Ray Visibility), 'holdout': bool (the
+    object's Holdout, or its collection's Holdout in `view_layer`)}.
+
+    `parent`: for an instance (depsgraph.object_instances, is_instance), the object that
+    instances it: as in Cycles, a ray sees the instance only if it sees the parent too, and
+    the parent's holdout holds it out."""
+    flags = {ray: bool(getattr(obj_eval, f"visible_{ray}")) for ray in _RAYS}
+    flags["holdout"] = _holdout(obj_eval, view_layer)
+    if parent is not None and parent != obj_eval:
+        outer = object_visibility(parent, view_layer)
+        flags = {key: (flags[key] or outer[key]) if key == "holdout" else (flags[key] and outer[key]) for key in flags}
+    return flags

@@ -1,0 +1,491 @@
+"""Reading Blender materials, lamps, world, render settings and visibility into the plain
+shading contract (real bpy), and the importer's "Splat Cloud" material."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_camera, render_to_exr
+
+
+@pytest.fixture
+def es(blender):
+    from splat_tracer import export_shading
+    return export_shading
+
+
+@pytest.fixture
+def report():
+    from splat_tracer import shading
+    return shading.Report()
+
+
+def approx(values, rel=1e-5, abs=1e-6):  # noqa: A002 - pytest's own names
+    return pytest.approx(values, rel=rel, abs=abs)
+
+
+def new_material(bpy, name, shader_type, **inputs):
+    """A material whose Material Output is fed by one new shader node, with input values."""
+    material = bpy.data.materials.new(name)
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    shader = nodes.new(shader_type)
+    output = nodes.new("ShaderNodeOutputMaterial")
+    links.new(shader.outputs[0], output.inputs["Surface"])
+    for key, value in inputs.items():
+        shader.inputs[key].default_value = value
+    return material, shader
+
+
+# --------------------------------------------------------------------------------------
+# Materials.
+
+def test_principled_bsdf_maps_every_socket(blender, empty_scene, es, report):
+    material, _ = new_material(blender, "Shiny", "ShaderNodeBsdfPrincipled", **{
+        "Base Color": (0.2, 0.4, 0.6, 1.0), "Metallic": 0.3, "Roughness": 0.25, "IOR": 1.33,
+        "Specular IOR Level": 0.7, "Transmission Weight": 0.4, "Alpha": 0.9,
+        "Emission Color": (1.0, 0.5, 0.25, 1.0), "Emission Strength": 2.0})
+    m = es.material_of(material, report)
+    assert m.base_colour == approx((0.2, 0.4, 0.6))
+    assert (m.metallic, m.roughness, m.ior, m.specular_level, m.transmission, m.alpha) == approx(
+        (0.3, 0.25, 1.33, 0.7, 0.4, 0.9))
+    assert m.emission == approx((2.0, 1.0, 0.5))
+    assert not m.use_point_colour and not m.use_point_alpha
+    assert report.lines == []
+
+
+def test_principled_lobes_the_engine_ignores_are_reported(blender, empty_scene, es, report):
+    material, _ = new_material(blender, "Car", "ShaderNodeBsdfPrincipled", **{"Coat Weight": 1.0,
+                                                                              "Sheen Weight": 0.5})
+    es.material_of(material, report)
+    assert report.lines == ["material 'Car': the Principled BSDF's coat, sheen are ignored"]
+
+
+@pytest.mark.parametrize("shader_type, inputs, expected", [
+    ("ShaderNodeBsdfDiffuse", {"Color": (0.5, 0.25, 0.1, 1), "Roughness": 0.9},
+     dict(base_colour=(0.5, 0.25, 0.1), specular_level=0.0, metallic=0.0, roughness=0.5)),
+    ("ShaderNodeBsdfGlossy", {"Color": (0.9, 0.8, 0.7, 1), "Roughness": 0.1},
+     dict(base_colour=(0.9, 0.8, 0.7), metallic=1.0, roughness=0.1)),
+    ("ShaderNodeBsdfMetallic", {"Base Color": (0.9, 0.6, 0.3, 1), "Roughness": 0.2},
+     dict(base_colour=(0.9, 0.6, 0.3), metallic=1.0, roughness=0.2)),
+    ("ShaderNodeBsdfGlass", {"Color": (0.8, 1.0, 0.9, 1), "Roughness": 0.05, "IOR": 1.52},
+     dict(base_colour=(0.8, 1.0, 0.9), transmission=1.0, ior=1.52, roughness=0.05, specular_level=0.5)),
+    ("ShaderNodeBsdfRefraction", {"Color": (1, 1, 1, 1), "Roughness": 0.0, "IOR": 1.33},
+     dict(base_colour=(1, 1, 1), transmission=1.0, ior=1.33, specular_level=0.0)),
+    ("ShaderNodeEmission", {"Color": (1.0, 0.5, 0.0, 1), "Strength": 4.0},
+     dict(base_colour=(0, 0, 0), emission=(4.0, 2.0, 0.0), specular_level=0.0)),
+    ("ShaderNodeBsdfTransparent", {}, dict(alpha=0.0)),
+])
+def test_each_shader_node_maps_to_its_material(blender, empty_scene, es, report, shader_type, inputs, expected):
+    material, _ = new_material(blender, "M", shader_type, **inputs)
+    m = es.material_of(material, report)
+    for key, value in expected.items():
+        assert getattr(m, key) == approx(value), key
+    assert report.lines == []
+
+
+def test_point_colours_through_a_reroute_and_point_alpha(blender, empty_scene, es, report):
+    material, principled = new_material(blender, "Scan", "ShaderNodeBsdfPrincipled")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    attribute = nodes.new("ShaderNodeAttribute")
+    attribute.attribute_name = "Col"  # any name: the engine reads the points' own colours
+    reroute = nodes.new("NodeReroute")
+    links.new(attribute.outputs["Color"], reroute.inputs[0])
+    links.new(reroute.outputs[0], principled.inputs["Base Color"])
+    links.new(attribute.outputs["Alpha"], principled.inputs["Alpha"])
+    m = es.material_of(material, report)
+    assert m.use_point_colour and m.use_point_alpha and m.alpha == 1.0
+    assert report.lines == []
+    diffuse_material, diffuse = new_material(blender, "Painted", "ShaderNodeBsdfDiffuse")
+    colour = diffuse_material.node_tree.nodes.new("ShaderNodeVertexColor")
+    diffuse_material.node_tree.links.new(colour.outputs["Color"], diffuse.inputs["Color"])
+    m = es.material_of(diffuse_material, report)
+    assert m.use_point_colour and not m.use_point_alpha and report.lines == []
+
+
+def test_an_object_attribute_is_not_a_point_colour(blender, empty_scene, es, report):
+    material, principled = new_material(blender, "Tinted", "ShaderNodeBsdfPrincipled")
+    attribute = material.node_tree.nodes.new("ShaderNodeAttribute")
+    attribute.attribute_type, attribute.attribute_name = "OBJECT", "color"
+    material.node_tree.links.new(attribute.outputs["Color"], principled.inputs["Base Color"])
+    assert not es.material_of(material, report).use_point_colour
+    assert len(report.lines) == 1 and "driven by a 'Attribute' node" in report.lines[0]
+
+
+def test_image_texture_falls_back_to_the_default_with_one_report_line(blender, empty_scene, es, report):
+    material, principled = new_material(blender, "Floor", "ShaderNodeBsdfPrincipled")
+    texture = material.node_tree.nodes.new("ShaderNodeTexImage")
+    material.node_tree.links.new(texture.outputs["Color"], principled.inputs["Base Color"])
+    m = es.material_of(material, report)
+    es.material_of(material, report)  # the same material twice: still one line
+    assert m.base_colour == approx((0.8, 0.8, 0.8)) and not m.use_point_colour
+    assert report.lines == [
+        "material 'Floor': Base Color is driven by a 'Image Texture' node; using its default value (0.8, 0.8, 0.8)"]
+
+
+def test_mix_shader_blends_the_parameters_and_reports_once(blender, empty_scene, es, report):
+    material = blender.data.materials.new("Blend")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    diffuse, glossy = nodes.new("ShaderNodeBsdfDiffuse"), nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+    glossy.inputs["Color"].default_value = (0.0, 0.0, 1.0, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.2
+    mix, output = nodes.new("ShaderNodeMixShader"), nodes.new("ShaderNodeOutputMaterial")
+    mix.inputs[0].default_value = 0.25
+    links.new(diffuse.outputs[0], mix.inputs[1])
+    links.new(glossy.outputs[0], mix.inputs[2])
+    links.new(mix.outputs[0], output.inputs["Surface"])
+    m = es.material_of(material, report)
+    assert m.base_colour == approx((0.75, 0.0, 0.25))
+    assert m.metallic == approx(0.25)  # the glossy share
+    assert m.roughness == approx(0.75 * 0.5 + 0.25 * 0.2)
+    assert m.specular_level == approx(0.75 * 0.0 + 0.25 * 0.5)
+    assert report.lines == ["material 'Blend': Mix and Add Shaders are approximated by blending their shaders' "
+                            "parameters"]
+    # Transparent mixed in: alpha is the opaque share, the surface colour stays the BSDF's.
+    transparent = nodes.new("ShaderNodeBsdfTransparent")
+    links.new(transparent.outputs[0], mix.inputs[2])
+    m = es.material_of(material, report)
+    assert m.alpha == approx(0.75) and m.base_colour == approx((1.0, 0.0, 0.0))
+    assert len(report.lines) == 1
+    # Add Shader: emission adds to the surface, which stays whole.
+    emission, add = nodes.new("ShaderNodeEmission"), nodes.new("ShaderNodeAddShader")
+    emission.inputs["Strength"].default_value = 3.0
+    links.new(diffuse.outputs[0], add.inputs[0])
+    links.new(emission.outputs[0], add.inputs[1])
+    links.new(add.outputs[0], output.inputs["Surface"])
+    m = es.material_of(material, report)
+    assert m.base_colour == approx((1.0, 0.0, 0.0)) and m.emission == approx((3.0, 3.0, 3.0)) and m.alpha == 1.0
+
+
+def test_material_without_nodes(blender, empty_scene, es, report):
+    bpy = blender
+    material = bpy.data.materials.new("Legacy")
+    material.diffuse_color, material.metallic, material.roughness = (0.1, 0.6, 0.3, 1.0), 0.2, 0.7
+    if bpy.app.version >= (5, 0, 0):
+        # Blender 5 has no node-less materials: use_nodes is deprecated and stays on, and
+        # the nodes are read (a new material's default Principled BSDF).
+        material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.9, 0.9, 0.2, 1.0)
+        with pytest.deprecated_call():
+            material.use_nodes = False
+        m = es.material_of(material, report)
+        assert m.base_colour == approx((0.9, 0.9, 0.2)) and report.lines == []
+    else:
+        material.use_nodes = False
+        m = es.material_of(material, report)
+        assert m.base_colour == approx((0.1, 0.6, 0.3)) and (m.metallic, m.roughness) == approx((0.2, 0.7))
+        assert report.lines == ["material 'Legacy' does not use nodes; using its viewport display colour, "
+                                "metallic and roughness"]
+
+
+def test_the_cycles_output_is_read_where_outputs_differ_per_engine(blender, empty_scene, es, report):
+    """What Blender 5 makes of a node-less material from an older file: an active EEVEE
+    output with a Principled BSDF and an inactive Cycles one with a Diffuse BSDF."""
+    material, principled = new_material(blender, "Versioned", "ShaderNodeBsdfPrincipled")
+    nodes = material.node_tree.nodes
+    eevee = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    eevee.target = "EEVEE"
+    diffuse, cycles = nodes.new("ShaderNodeBsdfDiffuse"), nodes.new("ShaderNodeOutputMaterial")
+    cycles.target = "CYCLES"
+    diffuse.inputs["Color"].default_value = (0.3, 0.2, 0.1, 1.0)
+    material.node_tree.links.new(diffuse.outputs[0], cycles.inputs["Surface"])
+    eevee.is_active_output = True
+    assert not cycles.is_active_output
+    m = es.material_of(material, report)
+    assert m.base_colour == approx((0.3, 0.2, 0.1)) and m.specular_level == 0.0
+
+
+def test_no_material_no_output_and_ignored_outputs(blender, empty_scene, es, report):
+    from splat_tracer import shading
+    assert es.material_of(None, report) == shading.Material() and report.lines == []
+    empty = blender.data.materials.new("Empty")
+    empty.node_tree.nodes.clear()
+    m = es.material_of(empty, report)
+    assert m.base_colour == (0, 0, 0) and m.specular_level == 0  # black, as Cycles renders it
+    assert report.lines == ["material 'Empty' has no Material Output; rendered black, as Cycles does"]
+    material, _ = new_material(blender, "Foggy", "ShaderNodeBsdfDiffuse")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    links.new(nodes.new("ShaderNodeVolumePrincipled").outputs[0], output.inputs["Volume"])
+    links.new(nodes.new("ShaderNodeDisplacement").outputs[0], output.inputs["Displacement"])
+    es.material_of(material, report)
+    assert report.lines[-1] == "material 'Foggy': Volume, Displacement are ignored"
+
+
+# --------------------------------------------------------------------------------------
+# Lamps.
+
+def add_lamp(bpy, scene, kind, location=(0, 0, 0), rotation=(0, 0, 0), scale=(1, 1, 1), **settings):
+    light = bpy.data.lights.new(kind.title(), kind)
+    for key, value in settings.items():
+        setattr(light, key, value)
+    obj = bpy.data.objects.new(kind.title(), light)
+    scene.collection.objects.link(obj)
+    obj.location, obj.rotation_euler, obj.scale = location, rotation, scale
+    bpy.context.view_layer.update()
+    return obj
+
+
+def lamp_of(bpy, es, obj, report):
+    obj_eval = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    return es.light_of(obj_eval, np.array(obj_eval.matrix_world, np.float64), report)
+
+
+def test_point_spot_and_sun_lamps(blender, empty_scene, es, report):
+    bpy = blender
+    point = add_lamp(bpy, empty_scene, "POINT", location=(1, 2, 3), energy=250.0, shadow_soft_size=0.2,
+                     color=(1.0, 0.5, 0.25), use_shadow=False, use_soft_falloff=False)
+    p = lamp_of(bpy, es, point, report)
+    assert (p.type, p.power, p.radius, p.cast_shadow, p.soft_falloff) == ("POINT", 250.0, approx(0.2), False, False)
+    assert p.position == approx((1, 2, 3)) and p.colour == approx((1.0, 0.5, 0.25))
+    # Rotated 90 degrees about X: local -Z points along world +Y.
+    spot = add_lamp(bpy, empty_scene, "SPOT", rotation=(math.pi / 2, 0, 0), energy=80.0,
+                    spot_size=math.radians(30), spot_blend=0.4)
+    s = lamp_of(bpy, es, spot, report)
+    assert s.direction == approx((0, 1, 0)) and s.u_axis == approx((1, 0, 0))
+    assert (s.spot_size, s.spot_blend, s.power) == approx((math.radians(30), 0.4, 80.0))
+    sun = add_lamp(bpy, empty_scene, "SUN", energy=3.5, angle=math.radians(2))
+    u = lamp_of(bpy, es, sun, report)
+    assert (u.type, u.power, u.angle) == ("SUN", approx(3.5), approx(math.radians(2)))
+    assert u.direction == approx((0, 0, -1))
+    assert report.lines == []
+    camera = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    assert es.light_of(camera, np.eye(4), report) is None
+
+
+def test_rotated_scaled_area_lamp(blender, empty_scene, es, report):
+    bpy = blender
+    area = add_lamp(bpy, empty_scene, "AREA", location=(0, 0, 4), rotation=(0, 0, math.pi / 2), scale=(2, 3, 1),
+                    shape="RECTANGLE", size=1.5, size_y=0.5, energy=400.0)
+    a = lamp_of(bpy, es, area, report)
+    assert (a.shape, a.size, a.size_y, a.power) == ("RECTANGLE", approx(3.0), approx(1.5), 400.0)
+    assert not a.soft_falloff  # a Blender option of point and spot lamps only
+    assert a.u_axis == approx((0, 1, 0)) and a.direction == approx((0, 0, -1)) and a.position == approx((0, 0, 4))
+    # A square stretched unevenly is a rectangle (the contract packs one size for squares).
+    square = add_lamp(bpy, empty_scene, "AREA", scale=(1, 2, 1), shape="DISK", size=1.0)
+    d = lamp_of(bpy, es, square, report)
+    assert (d.shape, d.size, d.size_y) == ("ELLIPSE", approx(1.0), approx(2.0))
+    assert report.lines == []
+    narrow = add_lamp(bpy, empty_scene, "AREA", spread=math.radians(30))
+    lamp_of(bpy, es, narrow, report)
+    assert report.lines == ["light 'Area.002': a spread of 30 degrees is ignored (rendered as 180)"]
+
+
+def test_lamp_node_trees_and_light_linking_are_reported(blender, empty_scene, es, report):
+    bpy = blender
+    plain = add_lamp(bpy, empty_scene, "POINT", use_nodes=True)  # the default Emission: nothing to say
+    lamp_of(bpy, es, plain, report)
+    assert report.lines == []
+    custom = add_lamp(bpy, empty_scene, "POINT", use_nodes=True)
+    custom.data = custom.data.copy()
+    emission = next(n for n in custom.data.node_tree.nodes if n.type == "EMISSION")
+    emission.inputs["Strength"].default_value = 0.5
+    linked = add_lamp(bpy, empty_scene, "SPOT")
+    receivers = bpy.data.collections.new("Receivers")
+    linked.light_linking.receiver_collection = receivers
+    lamp_of(bpy, es, custom, report)
+    lamp_of(bpy, es, linked, report)
+    assert report.lines == [f"light '{custom.name}': light node trees are ignored",
+                            f"light '{linked.name}': light linking is ignored"]
+
+
+# --------------------------------------------------------------------------------------
+# World.
+
+def test_world_background_colour_strength_and_film(blender, empty_scene, es, report):
+    bpy = blender
+    scene = empty_scene
+    scene.world = None
+    scene.render.film_transparent = True
+    w = es.world_of(scene, report)
+    assert w.radiance() == (0, 0, 0) and w.transparent
+    scene.world = bpy.data.worlds.new("Sky")
+    background = scene.world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (0.2, 0.3, 0.4, 1.0)
+    background.inputs["Strength"].default_value = 2.5
+    scene.render.film_transparent = False
+    w = es.world_of(scene, report)
+    assert w.colour == approx((0.2, 0.3, 0.4)) and w.strength == approx(2.5) and not w.transparent
+    assert report.lines == []
+
+
+def test_world_without_nodes(blender, empty_scene, es, report):
+    bpy = blender
+    world = empty_scene.world = bpy.data.worlds.new("Plain")
+    world.color = (0.1, 0.2, 0.3)
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+    if bpy.app.version >= (5, 0, 0):  # use_nodes is deprecated and stays on: nodes are read
+        with pytest.deprecated_call():
+            world.use_nodes = False
+        assert es.world_of(empty_scene, report).colour == approx((0.5, 0.5, 0.5))
+    else:
+        world.use_nodes = False
+        assert es.world_of(empty_scene, report).colour == approx((0.1, 0.2, 0.3))
+    assert report.lines == []
+
+
+def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, report):
+    bpy = blender
+    world = empty_scene.world = bpy.data.worlds.new("Outdoor")
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    background = nodes["Background"]
+    background.inputs["Strength"].default_value = 0.5
+    sky = nodes.new("ShaderNodeTexSky")
+    links.new(sky.outputs["Color"], background.inputs["Color"])
+    w = es.world_of(empty_scene, report)
+    assert w.colour == approx(es.SKY_RADIANCE) and w.strength == approx(0.5)
+    assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform sky of radiance (1.7, 2.9, 4.8)" \
+        in report.lines[0]
+    background.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    links.new(nodes.new("ShaderNodeTexEnvironment").outputs["Color"], background.inputs["Color"])
+    w = es.world_of(empty_scene, report)
+    assert w.colour == approx((0.3, 0.3, 0.3))
+    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Environment Texture' node; "
+                               "using its default value (0.3, 0.3, 0.3)")
+
+
+# --------------------------------------------------------------------------------------
+# Render settings and visibility.
+
+def test_render_settings_from_the_scene_and_cycles(blender, empty_scene, es):
+    scene = empty_scene
+    s = es.render_settings_of(scene)
+    assert (s.samples, s.shadow_samples) == (16, 1)
+    scene.splat_tracer.samples, scene.splat_tracer.shadow_samples = 64, 4
+    scene.render.filter_size = 2.0
+    cycles = scene.cycles
+    cycles.pixel_filter_type = "GAUSSIAN"
+    cycles.max_bounces, cycles.diffuse_bounces, cycles.glossy_bounces = 6, 2, 3
+    cycles.transmission_bounces, cycles.transparent_max_bounces, cycles.seed = 5, 7, 42
+    s = es.render_settings_of(scene)
+    assert (s.samples, s.shadow_samples, s.pixel_filter, s.filter_width) == (64, 4, "GAUSSIAN", 2.0)
+    assert (s.max_bounces, s.diffuse_bounces, s.glossy_bounces, s.transmission_bounces,
+            s.transparent_bounces, s.seed) == (6, 2, 3, 5, 7, 42)
+    cycles.use_animated_seed = True
+    seeds = set()
+    for frame in (1, 2):
+        scene.frame_set(frame)
+        seeds.add(es.render_settings_of(scene).seed)
+    assert len(seeds) == 2  # the noise changes from frame to frame
+
+
+def test_visibility_flags_and_holdout(blender, empty_scene, es):
+    bpy = blender
+    scene = empty_scene
+    collection = bpy.data.collections.new("Held")
+    scene.collection.children.link(collection)
+    obj = bpy.data.objects.new("Thing", bpy.data.meshes.new("Thing"))
+    collection.objects.link(obj)
+    obj.visible_glossy, obj.visible_shadow = False, False
+    view_layer = bpy.context.view_layer
+
+    def flags():
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        evaluated = obj.evaluated_get(depsgraph)
+        from_eval = es.object_visibility(evaluated, depsgraph.view_layer_eval)
+        assert es.object_visibility(evaluated, view_layer) == from_eval  # either view layer works
+        assert es.object_visibility(obj, view_layer) == from_eval
+        return from_eval
+
+    assert flags() == dict(camera=True, diffuse=True, glossy=False, transmission=True, shadow=False, holdout=False)
+    view_layer.layer_collection.children["Held"].holdout = True
+    assert flags()["holdout"]
+    view_layer.layer_collection.children["Held"].holdout = False
+    assert not flags()["holdout"]
+    obj.is_holdout = True
+    assert flags()["holdout"]
+    obj.is_holdout = False
+    parent = bpy.data.objects.new("Parent", None)
+    parent.visible_camera = False
+    parent.is_holdout = True
+    instanced = es.object_visibility(obj, view_layer, parent=parent)
+    assert not instanced["camera"] and instanced["holdout"] and instanced["diffuse"]
+
+
+def test_sampling_settings_are_registered(blender):
+    bpy = blender
+    assert hasattr(bpy.types, "SPLAT_TRACER_PT_sampling") and hasattr(bpy.types, "SPLAT_TRACER_PT_light_paths")
+    samples = bpy.types.Scene.bl_rna.properties["splat_tracer"].fixed_type.properties["samples"]
+    assert (samples.default, samples.hard_min, samples.soft_max) == (16, 1, 1024)
+
+
+# --------------------------------------------------------------------------------------
+# The importer's material.
+
+def grid_cloud(n=21):
+    g = np.stack(np.meshgrid(np.linspace(-1, 1, n), np.linspace(-1, 1, n)), -1).reshape(-1, 2)
+    positions = np.column_stack([g, np.zeros(len(g))])
+    return positions, np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.full(len(g), 0.08)
+
+
+def cloud_materials(bpy, obj):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cloud = next(i.object for i in depsgraph.object_instances
+                 if i.object.type == "POINTCLOUD" and i.object.original == obj)
+    return [m.name for m in cloud.data.materials]
+
+
+def test_imported_clouds_show_their_colours_in_cycles(blender, empty_scene, es, report, tmp_path):
+    bpy = blender
+    from splat_tracer import cloud_object
+    scene = empty_scene
+    positions, normals, radii = grid_cloud()
+    red = np.tile([0.9, 0.1, 0.05, 1.0], (len(positions), 1))
+    coloured = cloud_object.create_cloud_object("Coloured", positions, normals, radii, red, location=(-1.2, 0, 0))
+    plain = cloud_object.create_cloud_object("Plain", positions, normals, radii, None, location=(1.2, 0, 0))
+    assert cloud_materials(bpy, coloured) == ["Splat Cloud"]
+    assert cloud_materials(bpy, plain) == []  # Cycles would shade a missing attribute black
+    material = bpy.data.materials["Splat Cloud"]
+    m = es.material_of(material, report)
+    assert m.use_point_colour and report.lines == []
+    cloud_object.create_cloud_object("Again", positions, normals, radii, red)
+    assert len([m for m in bpy.data.materials if m.get(cloud_object.MATERIAL_TAG)]) == 1  # created once
+
+    add_camera(bpy, scene, (0, 0, 6), (0, 0, 0), type="ORTHO", ortho_scale=5.0)
+    bpy.data.objects.remove(bpy.data.objects["Again"])
+    scene.world = bpy.data.worlds.new("White")
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    scene.render.engine = "CYCLES"
+    scene.cycles.samples, scene.cycles.device = 4, "CPU"
+    out = render_to_exr(bpy, scene, tmp_path / "cycles.exr", 32, 32, passes=False)["rgba"]
+    left, right = out[16, 8, :3], out[16, 24, :3]
+    # Lit by a white sky: the coloured cloud shows its red, the plain one Cycles' grey.
+    assert left[0] > 0.6 and left[1] < 0.25 * left[0] and left[2] < 0.25 * left[0]
+    assert right == approx([0.8, 0.8, 0.8], rel=0.1)
+
+
+def test_a_file_with_the_version_1_node_group_still_renders(blender, empty_scene, tmp_path):
+    bpy = blender
+    from splat_tracer import cloud_object
+    scene = empty_scene
+    positions, normals, radii = grid_cloud()
+    colours = np.tile([0.2, 0.9, 0.1, 1.0], (len(positions), 1))
+    obj = cloud_object.create_cloud_object("Old", positions, normals, radii, colours)
+    # The group as version 1 made it: Mesh to Points only.
+    group = bpy.data.node_groups.new("Splat Points", "GeometryNodeTree")
+    group[cloud_object.NODE_GROUP_TAG] = 1
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    inp, out, to_points = (group.nodes.new(t) for t in ("NodeGroupInput", "NodeGroupOutput",
+                                                        "GeometryNodeMeshToPoints"))
+    radius = group.nodes.new("GeometryNodeInputNamedAttribute")
+    radius.inputs["Name"].default_value = cloud_object.RADIUS
+    group.links.new(inp.outputs[0], to_points.inputs["Mesh"])
+    group.links.new(radius.outputs["Attribute"], to_points.inputs["Radius"])
+    group.links.new(to_points.outputs["Points"], out.inputs[0])
+    obj.modifiers[0].node_group = group
+    for other in [g for g in bpy.data.node_groups if g != group]:
+        bpy.data.node_groups.remove(other)
+    path = tmp_path / "version1.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(path))
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    scene = bpy.context.scene
+    assert [g.get(cloud_object.NODE_GROUP_TAG) for g in bpy.data.node_groups] == [1]
+    add_camera(bpy, scene, (0, 0, 6), (0, 0, 0), type="ORTHO", ortho_scale=3.0)
+    pixel = render_to_exr(bpy, scene, tmp_path / "old.exr", 32, 32)["rgba"][16, 16]
+    assert pixel[3] == 1.0 and pixel[1] > 2 * pixel[0]  # the points' green, headlit
+    new = cloud_object.create_cloud_object("New", positions, normals, radii, colours)
+    assert new.modifiers[0].node_group[cloud_object.NODE_GROUP_TAG] == cloud_object.NODE_GROUP_VERSION
