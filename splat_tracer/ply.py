@@ -13,6 +13,14 @@ from typing import Optional
 import numpy as np
 
 
+# A header is a few lines per element and property, plus comments: scanners write a few
+# kilobytes of metadata there. 4 MiB is a thousand times that and still parses in about a
+# second (plyfile reads a header one character at a time, ~0.3 s per MiB); anything longer
+# is not a header, and is refused before plyfile spends minutes on it.
+MAX_HEADER_BYTES = 4 << 20
+_SCAN_CHUNK = 1 << 16  # the header is searched for its end this many bytes at a time
+
+
 class CloudFileError(ValueError):
     """A point-cloud file that cannot be imported; the message names file and problem."""
 
@@ -42,7 +50,37 @@ def _unit_colour(values: np.ndarray) -> np.ndarray:
     return np.clip(values.astype(np.float32), 0.0, 1.0)
 
 
-def _check_trailing_data(path: str, ply, vertex_count: int) -> None:
+def _header_length(path: str) -> int:
+    """Bytes up to and including the header's last line, the first line that is exactly
+    `end_header` (as plyfile reads it: lines end with the newline that follows `ply`, so
+    a comment that mentions end_header does not end the header)."""
+    with open(path, "rb") as f:
+        buf = bytearray(f.read(5))
+        for start, nl in ((b"ply\r\n", b"\r\n"), (b"ply\n", b"\n"), (b"ply\r", b"\r")):
+            if buf.startswith(start):
+                break
+        else:
+            raise CloudFileError(f"{path}: not a valid PLY file (it does not start with a 'ply' line)")
+        marker = nl + b"end_header" + nl
+        too_long = CloudFileError(f"{path}: the header is longer than {MAX_HEADER_BYTES >> 20} MiB (no "
+                                  f"'end_header' line within its first {MAX_HEADER_BYTES:,} bytes); "
+                                  "this is not a PLY header")
+        searched = 0
+        while (at := buf.find(marker, searched)) < 0:
+            if len(buf) > MAX_HEADER_BYTES:
+                raise too_long
+            searched = max(0, len(buf) - len(marker) + 1)
+            chunk = f.read(_SCAN_CHUNK)
+            if not chunk:
+                raise CloudFileError(f"{path}: not a valid PLY file (no 'end_header' line ends its header)")
+            buf += chunk
+    end = at + len(marker)
+    if end > MAX_HEADER_BYTES:
+        raise too_long
+    return end
+
+
+def _check_trailing_data(path: str, ply, vertex_count: int, header_len: int) -> None:
     """plyfile stops reading after the declared counts; a file with more data than its
     header declares has a count that lies, which we refuse rather than silently drop."""
     if ply.text:
@@ -57,10 +95,6 @@ def _check_trailing_data(path: str, ply, vertex_count: int) -> None:
         return
     if any(p.__class__.__name__ == "PlyListProperty" for e in ply.elements for p in e.properties):
         return  # variable-size rows: the expected size cannot be computed from the header
-    with open(path, "rb") as f:
-        head = f.read(1 << 16)
-    header_len = head.find(b"end_header")
-    header_len = head.index(b"\n", header_len) + 1
     expected = header_len + sum(e.count * e.data.dtype.itemsize for e in ply.elements)
     actual = os.path.getsize(path)
     if actual > expected:
@@ -75,6 +109,7 @@ def read_ply(path: str) -> PointCloud:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise CloudFileError(f"{path}: no such file")
+    header_len = _header_length(path)
     try:
         ply = PlyData.read(path)
     except Exception as e:  # plyfile raises several types; all mean "malformed"
@@ -92,7 +127,7 @@ def read_ply(path: str) -> PointCloud:
     n = len(v)
     if n == 0:
         raise CloudFileError(f"{path}: contains no vertices")
-    _check_trailing_data(path, ply, n)
+    _check_trailing_data(path, ply, n, header_len)
 
     pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
     bad = ~np.isfinite(pos).all(axis=1)

@@ -103,3 +103,36 @@ def test_closed_guess(name, make, closed):
     points, normals = make()
     hood = spacing.analyse(points, normals)
     assert hood.closed_guess is closed, (name, hood.describe())
+
+
+def _insert_header_lines(path, lines: list[str]) -> None:
+    """Inserts lines (e.g. comments) after the 'format' line of a PLY file's header."""
+    data = path.read_bytes()
+    at = data.index(b"\n", data.index(b"format")) + 1
+    path.write_bytes(data[:at] + "".join(line + "\n" for line in lines).encode() + data[at:])
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("extra", [
+    ["comment end_header is the last line of a header"],
+    [f"comment scanner metadata line {i:05d} " + "x" * 60 for i in range(2000)],  # 150 KB
+], ids=["comment_says_end_header", "header_over_64k"])
+def test_header_ends_at_the_first_line_that_is_exactly_end_header(tmp_path, binary, extra):
+    """A long header (scanner metadata) and a comment that mentions end_header are fine."""
+    p, n = fibonacci_sphere(100)
+    path = tmp_path / "header.ply"
+    ply.write_ply(str(path), p, n, binary=binary)
+    _insert_header_lines(path, extra)
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+
+
+def test_header_beyond_the_limit_is_refused_with_a_clear_message(tmp_path):
+    p, n = fibonacci_sphere(100)
+    path = tmp_path / "huge_header.ply"
+    ply.write_ply(str(path), p, n)
+    line = "comment " + "x" * 120
+    _insert_header_lines(path, [line] * (ply.MAX_HEADER_BYTES // len(line) + 10))
+    with pytest.raises(ply.CloudFileError, match=r"header.*longer than") as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)
