@@ -6,6 +6,7 @@ and the problem, so that the importer can refuse it before creating anything.
 """
 from __future__ import annotations
 
+import io
 import os
 from dataclasses import dataclass
 from typing import Optional
@@ -19,6 +20,10 @@ import numpy as np
 # is not a header, and is refused before plyfile spends minutes on it.
 MAX_HEADER_BYTES = 4 << 20
 _SCAN_CHUNK = 1 << 16  # the header is searched for its end this many bytes at a time
+# The least an ascii row can take per property: one character and one separator (a space,
+# or the newline after the last one); a list property's count is such a property. A row
+# of an element without properties is at least its newline.
+_ASCII_MIN_BYTES_PER_PROPERTY = 2
 
 
 class CloudFileError(ValueError):
@@ -50,8 +55,8 @@ def _unit_colour(values: np.ndarray) -> np.ndarray:
     return np.clip(values.astype(np.float32), 0.0, 1.0)
 
 
-def _header_length(path: str) -> int:
-    """Bytes up to and including the header's last line, the first line that is exactly
+def _header_length(path: str) -> tuple[int, bytes]:
+    """(length, bytes) of the header: up to and including the header's last line, the first line that is exactly
     `end_header` (as plyfile reads it: lines end with the newline that follows `ply`, so
     a comment that mentions end_header does not end the header)."""
     with open(path, "rb") as f:
@@ -77,7 +82,52 @@ def _header_length(path: str) -> int:
     end = at + len(marker)
     if end > MAX_HEADER_BYTES:
         raise too_long
-    return end
+    return end, bytes(buf[:end])
+
+
+def _read_header(path: str):
+    """(header length in bytes, the header as plyfile's PlyData with no data read)."""
+    from plyfile import PlyData
+
+    length, head = _header_length(path)
+    try:
+        # plyfile has no public header-only reader; _parse_header is what PlyData.read
+        # itself calls first (plyfile is pinned, 1.0.3, and bundled as such).
+        return length, PlyData._parse_header(io.BytesIO(head))
+    except Exception as e:  # plyfile raises several types; all mean "malformed"
+        raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+
+
+def _min_row_bytes(element, text: bool, byte_order: str) -> int:
+    """The fewest bytes a row of this element can take in the file."""
+    if text:
+        return _ASCII_MIN_BYTES_PER_PROPERTY * len(element.properties) or 1
+    size = 0
+    for prop in element.properties:
+        if hasattr(prop, "list_dtype"):  # a list may be empty: only its count is certain
+            size += np.dtype(prop.list_dtype(byte_order)[0]).itemsize
+        else:
+            size += np.dtype(prop.dtype(byte_order)).itemsize
+    return size
+
+
+def _check_declared_sizes(path: str, header, header_len: int) -> None:
+    """Refuses, before anything is allocated, counts that the file is too small to hold
+    (plyfile allocates every element's declared rows before reading them: a tiny file
+    declaring a billion rows cost a minute and gigabytes before it failed)."""
+    available = os.path.getsize(path) - header_len
+    needed = 0
+    for element in header.elements:
+        if element.count < 0:
+            raise CloudFileError(f"{path}: the header declares a negative count for '{element.name}'")
+        row = _min_row_bytes(element, header.text, header.byte_order)
+        left = available - needed  # after the elements before this one
+        needed += element.count * row
+        if needed > available:
+            raise CloudFileError(
+                f"{path}: early end-of-file: the header declares {element.count:,} '{element.name}' rows, "
+                f"at least {element.count * row:,} bytes ({row} a row), but only {max(left, 0):,} bytes "
+                "of the file are left for them")
 
 
 def _check_trailing_data(path: str, ply, vertex_count: int, header_len: int) -> None:
@@ -109,7 +159,8 @@ def read_ply(path: str) -> PointCloud:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise CloudFileError(f"{path}: no such file")
-    header_len = _header_length(path)
+    header_len, header = _read_header(path)
+    _check_declared_sizes(path, header, header_len)
     try:
         ply = PlyData.read(path)
     except Exception as e:  # plyfile raises several types; all mean "malformed"
