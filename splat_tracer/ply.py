@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 from dataclasses import dataclass
 from typing import Optional
 
@@ -24,6 +25,7 @@ _SCAN_CHUNK = 1 << 16  # the header is searched for its end this many bytes at a
 # or the newline after the last one); a list property's count is such a property. A row
 # of an element without properties is at least its newline.
 _ASCII_MIN_BYTES_PER_PROPERTY = 2
+_ROW_START = re.compile(r"^[ \t]*\S", re.MULTILINE)  # an ascii line that is not blank
 
 
 class CloudFileError(ValueError):
@@ -130,26 +132,28 @@ def _check_declared_sizes(path: str, header, header_len: int) -> None:
                 "of the file are left for them")
 
 
-def _check_trailing_data(path: str, ply, vertex_count: int, header_len: int) -> None:
-    """plyfile stops reading after the declared counts; a file with more data than its
-    header declares has a count that lies, which we refuse rather than silently drop."""
-    if ply.text:
-        with open(path, "rb") as f:
-            for line in f:
-                if line.strip() == b"end_header":
-                    break
-            rows = sum(1 for line in f if line.strip())
-        declared = sum(e.count for e in ply.elements)
-        if rows > declared:
-            raise CloudFileError(f"{path}: the header declares {declared} rows but the file has {rows}")
+def _declared(ply) -> str:
+    return " and ".join(f"{e.count:,} '{e.name}'" for e in ply.elements) + " rows"
+
+
+def _check_nothing_follows(path: str, ply, f) -> None:
+    """plyfile stops reading after the declared counts; data left after the last element
+    means a count in the header lies (e.g. a vertex count smaller than the data, whose
+    first rows alone would otherwise be imported), which we refuse. `f` is the stream
+    plyfile read from, positioned where it stopped."""
+    if ply.text:  # whitespace may follow the last row; any other text is more rows
+        rows = 0
+        while chunk := f.read(_SCAN_CHUNK):
+            chunk += f.readline()  # whole lines, so that no row is counted twice
+            rows += len(_ROW_START.findall(chunk))
+        if rows:
+            raise CloudFileError(f"{path}: the header declares {_declared(ply)} but {rows:,} more rows follow "
+                                 "them (a count in the header is wrong)")
         return
-    if any(p.__class__.__name__ == "PlyListProperty" for e in ply.elements for p in e.properties):
-        return  # variable-size rows: the expected size cannot be computed from the header
-    expected = header_len + sum(e.count * e.data.dtype.itemsize for e in ply.elements)
-    actual = os.path.getsize(path)
-    if actual > expected:
-        raise CloudFileError(f"{path}: {actual - expected} bytes follow the {vertex_count} declared vertices "
-                             "(the vertex count in the header is wrong)")
+    extra = os.fstat(f.fileno()).st_size - f.tell()
+    if extra:
+        raise CloudFileError(f"{path}: the header declares {_declared(ply)} but {extra:,} more bytes follow "
+                             "them (a count in the header is wrong)")
 
 
 def read_ply(path: str) -> PointCloud:
@@ -161,10 +165,13 @@ def read_ply(path: str) -> PointCloud:
         raise CloudFileError(f"{path}: no such file")
     header_len, header = _read_header(path)
     _check_declared_sizes(path, header, header_len)
-    try:
-        ply = PlyData.read(path)
-    except Exception as e:  # plyfile raises several types; all mean "malformed"
-        raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+    # Read from our own stream (ascii: text, as plyfile wants it) to see where it stops.
+    with (open(path, "r", encoding="ascii", newline="") if header.text else open(path, "rb")) as f:
+        try:
+            ply = PlyData.read(f)
+        except Exception as e:  # plyfile raises several types; all mean "malformed"
+            raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+        _check_nothing_follows(path, ply, f)
     if "vertex" not in ply:
         raise CloudFileError(f"{path}: has no 'vertex' element")
     v = ply["vertex"].data
@@ -178,7 +185,6 @@ def read_ply(path: str) -> PointCloud:
     n = len(v)
     if n == 0:
         raise CloudFileError(f"{path}: contains no vertices")
-    _check_trailing_data(path, ply, n, header_len)
 
     pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
     bad = ~np.isfinite(pos).all(axis=1)

@@ -161,3 +161,53 @@ def test_a_count_the_file_cannot_hold_is_refused_before_reading(tmp_path, binary
     assert time.perf_counter() - start < 0.5
     message = str(err.value)
     assert str(path) in message and f"1,000,000,000 '{element}'" in message, message
+
+
+def _cloud_with_faces(path, binary: bool, vertices: int = 50, faces: int = 4, vertex_list: bool = False):
+    """A PLY with a vertex element and a face element (a list property), as meshes have;
+    vertex_list: the vertices have a list property too (e.g. a scanner's per-point echoes)."""
+    from plyfile import PlyData, PlyElement
+
+    p, n = fibonacci_sphere(vertices)
+    fields = [(c, "f4") for c in ("x", "y", "z", "nx", "ny", "nz")] + ([("echoes", "O")] if vertex_list else [])
+    rows = np.empty(vertices, dtype=fields)
+    for k, c in enumerate("xyz"):
+        rows[c], rows["n" + c] = p[:, k], n[:, k]
+    if vertex_list:
+        rows["echoes"] = [np.arange(i % 3 + 1, dtype=np.float32) for i in range(vertices)]
+    elements = [PlyElement.describe(rows, "vertex")]
+    if faces:
+        face = np.empty(faces, dtype=[("vertex_indices", "O")])
+        face["vertex_indices"] = [np.array([i, i + 1, i + 2], np.int32) for i in range(faces)]
+        elements.append(PlyElement.describe(face, "face"))
+    PlyData(elements, text=not binary).write(str(path))
+    return p
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("layout", [dict(faces=4), dict(faces=0, vertex_list=True), dict(faces=4, vertex_list=True)],
+                         ids=["faces", "vertex_list", "vertex_list_and_faces"])
+@pytest.mark.parametrize("change", ["vertex 50->40", "face 4->2", "vertex 50->49", "none"])
+def test_data_must_match_every_declared_count_with_list_properties(tmp_path, binary, layout, change):
+    """With faces (a list property) after the vertices, a vertex count smaller than the
+    data imported the first vertices silently; now every element's data must end where
+    the next begins and the last one at the end of the file."""
+    path = tmp_path / "mesh.ply"
+    p = _cloud_with_faces(path, binary, **layout)
+    if change == "none" or (change.startswith("face") and not layout["faces"]):
+        np.testing.assert_allclose(ply.read_ply(str(path)).positions, p, atol=1e-6)
+        return
+    element, counts = change.split()
+    old, new = counts.split("->")
+    data = path.read_bytes()
+    path.write_bytes(data.replace(f"element {element} {old}\n".encode(), f"element {element} {new}\n".encode(), 1))
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)
+
+
+def test_trailing_blank_lines_after_ascii_data_are_fine(tmp_path):
+    path = tmp_path / "blank.ply"
+    p = _cloud_with_faces(path, binary=False)
+    path.write_bytes(path.read_bytes() + b"\n  \n\n")
+    np.testing.assert_allclose(ply.read_ply(str(path)).positions, p, atol=1e-6)
