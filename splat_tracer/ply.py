@@ -50,11 +50,33 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def _unit_colour(values: np.ndarray) -> np.ndarray:
-    """Integer channels scale by their type's maximum; float channels are taken as 0..1."""
-    if np.issubdtype(values.dtype, np.integer):
-        return values.astype(np.float32) / np.iinfo(values.dtype).max
-    return np.clip(values.astype(np.float32), 0.0, 1.0)
+# Colour conventions for types that do not imply one: a float channel within 0..1 is
+# taken as it is; otherwise (and for integers other than uchar/ushort) values that fit
+# 0..255 are 8-bit and values that fit 0..65535 are 16-bit colours. Anything else has no
+# known meaning as a colour and is refused rather than guessed.
+_COLOUR_RANGES = (255.0, 65535.0)
+_BY_TYPE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}  # the PLY convention
+
+
+def _unit_colours(path: str, v, names: tuple[str, ...]) -> np.ndarray:
+    """(N, len(names)) float32 in 0..1 from colour properties read together (one
+    convention for red, green and blue, decided by their types and then their values)."""
+    columns = [v[c] for c in names]
+    scale = _BY_TYPE.get(columns[0].dtype)
+    if scale is None or any(c.dtype != columns[0].dtype for c in columns):
+        lo = [float(np.min(c)) for c in columns]
+        hi = [float(np.max(c)) for c in columns]
+        if not all(np.isfinite(lo + hi)):
+            raise CloudFileError(f"{path}: some colours are not finite")
+        worst = int(np.argmin(lo)) if min(lo) < 0 else int(np.argmax(hi))
+        floats = any(np.issubdtype(c.dtype, np.floating) for c in columns)
+        if min(lo) < 0 or max(hi) > _COLOUR_RANGES[-1]:
+            raise CloudFileError(
+                f"{path}: the colour property '{names[worst]}' ({columns[worst].dtype}) ranges from "
+                f"{lo[worst]:g} to {hi[worst]:g}, which is none of the colour ranges 0..1 (floats), "
+                "0..255 and 0..65535")
+        scale = 1.0 if floats and max(hi) <= 1.0 else next(r for r in _COLOUR_RANGES if max(hi) <= r)
+    return np.column_stack([c.astype(np.float64) / scale for c in columns]).astype(np.float32)
 
 
 def _header_length(path: str) -> tuple[int, bytes]:
@@ -202,10 +224,8 @@ def read_ply(path: str) -> PointCloud:
 
     colours = None
     if {"red", "green", "blue"} <= names:
-        rgb = np.column_stack([_unit_colour(v[c]) for c in ("red", "green", "blue")])
-        alpha = _unit_colour(v["alpha"]) if "alpha" in names else np.ones(n, np.float32)
-        if not np.isfinite(rgb).all() or not np.isfinite(alpha).all():
-            raise CloudFileError(f"{path}: some colours are not finite")
+        rgb = _unit_colours(path, v, ("red", "green", "blue"))
+        alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
         colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
 
     # A zero or non-finite normal is an error of that point alone (ALGORITHM.md): the

@@ -211,3 +211,57 @@ def test_trailing_blank_lines_after_ascii_data_are_fine(tmp_path):
     p = _cloud_with_faces(path, binary=False)
     path.write_bytes(path.read_bytes() + b"\n  \n\n")
     np.testing.assert_allclose(ply.read_ply(str(path)).positions, p, atol=1e-6)
+
+
+def _coloured_cloud(path, dtype, rgb, alpha=None, binary=True):
+    """Three points with colour properties of the given type (and alpha, if given)."""
+    from plyfile import PlyData, PlyElement
+
+    fields = [(c, "f4") for c in ("x", "y", "z", "nx", "ny", "nz")] + [(c, dtype) for c in ("red", "green", "blue")]
+    if alpha is not None:
+        fields.append(("alpha", dtype))
+    rows = np.zeros(len(rgb), dtype=fields)
+    rows["x"], rows["nz"] = np.arange(len(rgb)), 1.0
+    for k, c in enumerate(("red", "green", "blue")):
+        rows[c] = np.asarray(rgb)[:, k]
+    if alpha is not None:
+        rows["alpha"] = alpha
+    PlyData([PlyElement.describe(rows, "vertex")], text=not binary).write(str(path))
+
+
+BYTE_RGB = [[255, 0, 0], [0, 128, 0], [10, 20, 255]]   # 0..255 values
+BYTE_ALPHA = [255, 128, 0]
+
+
+@pytest.mark.parametrize("dtype, scale", [
+    ("u1", "0..255"), ("i1", "0..127"), ("i2", "0..255"), ("i4", "0..255"), ("u4", "0..255"),
+    ("f4", "0..255"), ("f8", "0..255"), ("f4", "0..1"), ("f8", "0..1"),
+    ("u2", "0..65535"), ("i4", "0..65535"), ("u4", "0..65535"), ("f4", "0..65535"),
+], ids=lambda v: str(v))
+def test_colour_types_are_read_by_type_and_range(tmp_path, dtype, scale):
+    """uchar is /255 and ushort /65535 by type; every other type by its values: floats in
+    0..1 as they are, anything within 0..255 /255, within 0..65535 /65535. Alpha alike."""
+    rgb, alpha = np.array(BYTE_RGB, float) / 255, np.array(BYTE_ALPHA, float) / 255  # what is meant
+    if scale == "0..127":  # int8 holds 0..127 only: values that are read /255
+        rgb, alpha = np.floor(rgb * 127.5) / 255, np.floor(alpha * 127.5) / 255
+    factor = {"0..1": 1, "0..127": 255, "0..255": 255, "0..65535": 65535}[scale]
+    path = tmp_path / "colours.ply"
+    stored = (lambda v: np.round(v * factor)) if factor > 1 else (lambda v: v)
+    _coloured_cloud(path, dtype, stored(rgb), stored(alpha))
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(rgb), atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[:, 3], alpha, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype, rgb, alpha, bad", [
+    ("i4", [[0, 0, 0], [70000, 1, 2], [3, 4, 5]], None, "'red'"),
+    ("i2", [[0, 0, 0], [1, -3, 2], [3, 4, 5]], None, "'green'"),
+    ("f4", [[0, 0, 0], [0.5, 0.2, 1e6], [0.1, 0.1, 0.1]], None, "'blue'"),
+    ("i4", BYTE_RGB, [255, 128, 100000], "'alpha'"),
+])
+def test_colours_outside_every_known_range_are_refused(tmp_path, dtype, rgb, alpha, bad):
+    path = tmp_path / "colours.ply"
+    _coloured_cloud(path, dtype, rgb, alpha)
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value) and bad in str(err.value), str(err.value)
