@@ -14,6 +14,12 @@ def load_cloud(path: str, k: int):
     """Reads and prepares one file; raises ply.CloudFileError with the file named.
     Returns (cloud, origin, local positions, radii, neighbourhood analysis)."""
     cloud = ply.read_ply(path)
+    if len(cloud) < spacing.MIN_POINTS:  # refused before the neighbour search, which needs them
+        usable = len(cloud) + cloud.merged_duplicates
+        raise ply.CloudFileError(
+            f"{path}: only {len(cloud)} distinct position{'s' if len(cloud) != 1 else ''} among its {usable:,} "
+            f"usable points ({cloud.merged_duplicates:,} repeat an earlier one); at least {spacing.MIN_POINTS} "
+            "are needed to size the splats")
     origin, local = core.local_frame(cloud.positions)
     try:
         hood = spacing.analyse(local, cloud.normals, k)
@@ -21,6 +27,19 @@ def load_cloud(path: str, k: int):
         raise ply.CloudFileError(f"{path}: {e}") from None
     radii = cloud.radii if cloud.radii is not None else hood.spacing
     return cloud, origin, local, radii, hood
+
+
+def import_notes(cloud, hood, k: int) -> list[str]:
+    """What the import changed or found, one sentence each (the import's warnings)."""
+    notes = []
+    if cloud.dropped_normals:
+        notes.append(f"{cloud.dropped_normals:,} points with a zero or non-finite normal were dropped")
+    if cloud.merged_duplicates:
+        notes.append(f"{cloud.merged_duplicates:,} points repeat the position of an earlier one and were merged "
+                     f"into it (first: row {cloud.first_duplicate_row})")
+    if hood.degenerate and cloud.radii is None:
+        notes.append(f"{hood.degenerate} points share their position with {k}+ others; they got the median radius")
+    return notes
 
 
 class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
@@ -64,12 +83,11 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
                 obj.splat_tracer.closed = hood.closed_guess
                 obj["splat_tracer_closed_guess"] = hood.describe()
                 created.append(obj)
-                if cloud.dropped_normals:
-                    self.report({"WARNING"}, f"{path}: {cloud.dropped_normals} points with a zero or "
-                                             "non-finite normal were dropped")
-                if hood.degenerate and cloud.radii is None:
-                    self.report({"WARNING"}, f"{path}: {hood.degenerate} points share their position with "
-                                             f"{self.neighbours}+ others; they got the median radius")
+                notes = import_notes(cloud, hood, self.neighbours)
+                for note in notes:
+                    self.report({"WARNING"}, f"{path}: {note}")
+                if notes:  # kept with the object: reports scroll away
+                    obj["splat_tracer_import_notes"] = "\n".join(notes)
         except Exception:
             for obj in created:
                 mesh = obj.data

@@ -14,6 +14,8 @@ from typing import Optional
 
 import numpy as np
 
+from . import spacing
+
 
 # A header is a few lines per element and property, plus comments: scanners write a few
 # kilobytes of metadata there. 4 MiB is a thousand times that and still parses in about a
@@ -39,6 +41,9 @@ class PointCloud:
     colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
     radii: Optional[np.ndarray]      # (N,) float32 from the file, or None
     dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
+    merged_duplicates: int = 0       # rows dropped for repeating an earlier row's position
+    first_duplicate_row: int = -1    # the first of those, as a row of the file
+    rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -236,9 +241,18 @@ def read_ply(path: str) -> PointCloud:
     dropped = int(n - ok.sum())
     if not ok.any():
         raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-    nrm = (nrm[ok] / length[ok, None]).astype(np.float32)
-    keep = (lambda a: a if a is None or dropped == 0 else a[ok])
-    return PointCloud(pos[ok] if dropped else pos, nrm, keep(colours), keep(radii), dropped)
+    nrm = nrm / np.where(ok, length, 1.0)[:, None]
+    # Points at exactly the same position as an earlier one are merged into it (the
+    # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
+    # piles of them make the neighbour search pathological.
+    usable = np.flatnonzero(ok)
+    first = spacing.first_of_duplicates(pos[usable])
+    rows = usable[first]
+    merged = len(usable) - len(rows)
+    first_merged = int(usable[~first][0]) if merged else -1
+    take = (lambda a: a if a is None or len(rows) == n else a[rows])
+    return PointCloud(take(pos), take(nrm).astype(np.float32), take(colours), take(radii), dropped,
+                      merged, first_merged, rows)
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

@@ -285,3 +285,29 @@ def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_p
     scene.camera.data.type = "PANO"
     with pytest.raises(RuntimeError, match="panoramic cameras are not supported"):
         bpy.ops.render.render()
+
+
+def test_identical_points_are_refused_quickly(blender, empty_scene, tmp_path):
+    """200k copies of one point took 92 s in the k-NN before being refused."""
+    import time
+
+    bpy = blender
+    path = tmp_path / "same.ply"
+    ply.write_ply(str(path), np.tile([4e5, 5e6, 30.0], (200_000, 1)), np.tile([0.0, 0.0, 1.0], (200_000, 1)))
+    start = time.perf_counter()
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    assert time.perf_counter() - start < 2.0
+    assert str(path) in str(err.value) and "1 distinct position" in str(err.value), str(err.value)
+    assert len(bpy.data.objects) == 0
+
+
+def test_duplicated_rows_are_merged_on_import(blender, empty_scene, tmp_path):
+    bpy = blender
+    p, n = fibonacci_sphere(2000)
+    path = tmp_path / "dups.ply"
+    ply.write_ply(str(path), np.concatenate([p, p[:50]]), np.concatenate([n, n[:50]]))
+    assert bpy.ops.splat_tracer.import_cloud(filepath=str(path)) == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert len(obj.data.vertices) == 2000
+    assert "50 points repeat the position of an earlier one" in obj["splat_tracer_import_notes"]

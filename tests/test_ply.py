@@ -265,3 +265,36 @@ def test_colours_outside_every_known_range_are_refused(tmp_path, dtype, rgb, alp
     with pytest.raises(ply.CloudFileError) as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value) and bad in str(err.value), str(err.value)
+
+
+def test_exact_duplicates_are_merged_keeping_the_first(tmp_path):
+    p, n = fibonacci_sphere(300)
+    colours = np.random.default_rng(2).uniform(size=(300, 3))
+    dup = np.array([5, 17, 17, 250])  # row 17 three times in all
+    p2 = np.concatenate([p, p[dup]])
+    n2 = np.concatenate([n, -n[dup]])  # the copies differ in all but their position
+    path = tmp_path / "dups.ply"
+    ply.write_ply(str(path), p2, n2, colours=np.concatenate([colours, 1 - colours[dup]]))
+    cloud = ply.read_ply(str(path))
+    assert len(cloud) == 300 and cloud.merged_duplicates == 4 and cloud.first_duplicate_row == 300
+    np.testing.assert_array_equal(cloud.positions, p)
+    np.testing.assert_allclose(cloud.normals, n, atol=1e-6)  # the first row's attributes
+    np.testing.assert_allclose(cloud.colours[:, :3], colours, atol=0.01)
+    np.testing.assert_array_equal(cloud.rows, np.arange(300))
+
+
+def test_negative_zero_is_the_same_position():
+    keep = spacing.first_of_duplicates(np.array([[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [0.0, 1.0, 2.5]]))
+    np.testing.assert_array_equal(keep, [True, False, True])
+
+
+def test_first_of_duplicates_on_many_points_is_fast():
+    import time
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(1_000_006, 3)) * 1000 + 4e6  # a multiple of 7 rows
+    p[::7] = p[1::7]  # every 7th row repeats the next one
+    start = time.perf_counter()
+    keep = spacing.first_of_duplicates(p)
+    assert time.perf_counter() - start < 1.5
+    assert (~keep).sum() == len(p[::7]) and keep[::7].all() and not keep[1::7].any()  # the later copy goes
