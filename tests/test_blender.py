@@ -311,3 +311,24 @@ def test_duplicated_rows_are_merged_on_import(blender, empty_scene, tmp_path):
     obj = bpy.context.active_object
     assert len(obj.data.vertices) == 2000
     assert "50 points repeat the position of an earlier one" in obj["splat_tracer_import_notes"]
+
+
+@pytest.mark.parametrize("outliers", ["KEEP", "DROP"])
+def test_a_stray_point_does_not_move_the_origin_and_is_reported(blender, empty_scene, tmp_path, outliers):
+    """A georeferenced sphere with one invalid return at (0, 0, 0): the object sits where
+    the clean sphere's does, the stray point is kept (small) or dropped, and said."""
+    bpy = blender
+    p, n = fibonacci_sphere(3000, radius=1.0, centre=(5e5, 4e6, 100.0))
+    ply.write_ply(str(tmp_path / "clean.ply"), p, n)
+    ply.write_ply(str(tmp_path / "stray.ply"), np.concatenate([p, [[0.0, 0.0, 0.0]]]),
+                  np.concatenate([n, [[0.0, 0.0, 1.0]]]))
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "clean.ply"))
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "stray.ply"), outliers=outliers)
+    clean, stray = bpy.data.objects["clean"], bpy.data.objects["stray"]
+    assert tuple(stray.location) == tuple(clean.location)
+    assert stray.splat_tracer.closed and clean.splat_tracer.closed
+    assert len(stray.data.vertices) == (3001 if outliers == "KEEP" else 3000)
+    radii = np.empty(len(stray.data.vertices), np.float32)
+    stray.data.attributes["splat_radius"].data.foreach_get("value", radii)
+    assert radii.max() <= 3 * np.percentile(radii[:3000], 95) * (1 + 1e-6)  # no 4e6 m disc: at most the cap
+    assert "1 point lies far from the rest" in stray["splat_tracer_import_notes"]

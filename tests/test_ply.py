@@ -298,3 +298,56 @@ def test_first_of_duplicates_on_many_points_is_fast():
     keep = spacing.first_of_duplicates(p)
     assert time.perf_counter() - start < 1.5
     assert (~keep).sum() == len(p[::7]) and keep[::7].all() and not keep[1::7].any()  # the later copy goes
+
+
+def _utm_sphere(tmp_path, stray: bool, n_points: int = 3000):
+    """A sphere of radius 1 m at UTM-like coordinates; stray: a scanner's invalid return at
+    (0, 0, 0) written after the 1000th point."""
+    p, n = fibonacci_sphere(n_points, radius=1.0, centre=(5e5, 4e6, 100.0))
+    if stray:
+        p = np.concatenate([p[:1000], [[0.0, 0.0, 0.0]], p[1000:]])
+        n = np.concatenate([n[:1000], [[0.0, 0.0, 1.0]], n[1000:]])
+    path = tmp_path / f"utm_{'stray' if stray else 'clean'}.ply"
+    ply.write_ply(str(path), p, n)
+    return path
+
+
+@pytest.mark.parametrize("drop", [False, True])
+def test_one_stray_point_changes_nothing_but_the_warning(tmp_path, drop):
+    """Georeferenced scan with one stray (0,0,0): same origin, same radii for the sphere's
+    points, same closed guess as without it; the stray point is found, reported (count and
+    row), kept with a bounded radius or dropped."""
+    from splat_tracer import prepare
+
+    clean_path, stray_path = _utm_sphere(tmp_path, False), _utm_sphere(tmp_path, True)
+    clean = prepare.prepare(ply.read_ply(str(clean_path)), str(clean_path))
+    dirty = prepare.prepare(ply.read_ply(str(stray_path)), str(stray_path), drop_outliers=drop)
+    assert clean.outliers == 0 and dirty.outliers == 1 and dirty.first_outlier_row == 1000
+    np.testing.assert_allclose(dirty.origin, clean.origin, rtol=0, atol=np.spacing(np.float32(4e6)))
+    sphere = np.arange(len(dirty.local)) != 1000 if not drop else slice(None)
+    np.testing.assert_allclose(dirty.local[sphere] + dirty.origin, clean.local + clean.origin, atol=1e-6)
+    np.testing.assert_allclose(dirty.radii[sphere], clean.radii, rtol=1e-5)
+    assert dirty.hood.closed_guess is clean.hood.closed_guess is True
+    assert dirty.hood.boundary == clean.hood.boundary
+    notes = "\n".join(dirty.notes(6))
+    assert "1 point lies far from the rest" in notes and "row 1000" in notes, notes
+    if drop:
+        assert len(dirty.local) == 3000 and "dropped" in notes
+    else:
+        assert len(dirty.local) == 3001
+        assert dirty.radii[1000] <= 3 * np.percentile(clean.radii, 95) * (1 + 1e-6)  # not a 4e6 m disc
+        assert dirty.clamped_radii >= 1 and "radii were reduced" in notes
+
+
+def test_genuine_sparse_parts_are_not_outliers():
+    """A scan's thinning tail (points farther out, fewer of them) stays in the bulk."""
+    from splat_tracer import prepare
+
+    rng = np.random.default_rng(4)
+    r = np.exp(rng.uniform(0, np.log(100), 50000))  # ranges 1..100 m, log-uniform as a scanner sees them
+    d = rng.normal(size=(50000, 3))
+    d[:, 2] = np.abs(d[:, 2]) * 0.1
+    p = d / np.linalg.norm(d, axis=1, keepdims=True) * r[:, None]
+    assert prepare.bulk_mask(p).all()
+    p[7] = [1e4, 0, 0]
+    assert np.flatnonzero(~prepare.bulk_mask(p)).tolist() == [7]
