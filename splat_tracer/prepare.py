@@ -39,6 +39,12 @@ OUTLIER_REACH = 10.0
 # behind it. Smaller radii are left alone: a small disc among its neighbours' is harmless.
 RADIUS_CAP_PERCENTILE = 95.0
 RADIUS_CAP = 3.0
+# The largest coordinate and extent a cloud may have. Points are stored as float32 offsets
+# from a float32 origin, and the renderer squares distances in float32 (and sums squares,
+# and multiplies areas by counts in the BVH's cost), whose range ends at 3.4e38: offsets
+# up to 1e15 square to 1e30, eight orders of magnitude below that. Georeferenced scans
+# are within 1e7 (metres) or 1e10 (millimetres); beyond 1e15 a file holds garbage.
+MAX_COORDINATE = 1e15
 
 
 @dataclass
@@ -90,6 +96,29 @@ def bulk_mask(positions: np.ndarray) -> np.ndarray:
         return ~((pos < lo - reach) | (pos > hi + reach)).any(axis=1)
 
 
+def _span(positions: np.ndarray) -> tuple[float, float, float]:
+    """(largest side of the bounding box, smallest coordinate, largest coordinate)."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    with np.errstate(over="ignore"):  # sides of boxes near 1e308 are inf: too large anyway
+        return float(np.max(hi - lo)), float(lo.min()), float(hi.max())
+
+
+def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> None:
+    extent, lo, hi = _span(positions)
+    if extent <= MAX_COORDINATE and max(-lo, hi) <= MAX_COORDINATE:
+        return
+    hint = ""
+    if not bulk.all():
+        b_extent, b_lo, b_hi = _span(positions[bulk])
+        if b_extent <= MAX_COORDINATE and max(-b_lo, b_hi) <= MAX_COORDINATE:
+            hint = (f"; without its {int((~bulk).sum()):,} outlier(s) it would fit: import with "
+                    "Outliers: Drop")
+    raise CloudFileError(
+        f"{path}: the cloud spans {extent:.3g} (coordinates from {lo:.3g} to {hi:.3g}); coordinates and "
+        f"extents beyond {MAX_COORDINATE:.0e} cannot be stored safely as float32 offsets from the import "
+        f"origin (the renderer squares them in float32, whose range ends at 3.4e38){hint}")
+
+
 def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
     take = (lambda a: None if a is None else a[keep])
     return PointCloud(cloud.positions[keep], cloud.normals[keep], take(cloud.colours), take(cloud.radii),
@@ -111,6 +140,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     first_outlier = int(rows[np.argmin(bulk)]) if outliers else -1
     if outliers and drop_outliers:
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
+    _check_float32_safe(cloud.positions, bulk, path)
     origin, local = core.local_frame(cloud.positions, bulk)
     inliers = np.flatnonzero(bulk)
     try:

@@ -108,10 +108,11 @@ MALFORMED = {
     "count_too_high": None,
     "count_too_low": None,
     "nan_row": None,
+    "beyond_float32": None,  # two clusters at +-2.5e38, in doubles
 }
 MESSAGES = {"bad_header": "not a valid PLY", "not_ply": "not a valid PLY", "no_normals": "no normals",
             "truncated": "end-of-file", "count_too_high": "end-of-file", "count_too_low": "header declares",
-            "nan_row": "non-finite coordinates"}
+            "nan_row": "non-finite coordinates", "beyond_float32": "spans 5e+38"}
 
 
 def make_malformed(kind: str, tmp_path) -> str:
@@ -120,7 +121,9 @@ def make_malformed(kind: str, tmp_path) -> str:
         path.write_bytes(MALFORMED[kind])
         return str(path)
     p, n = fibonacci_sphere(50)
-    if kind == "truncated":
+    if kind == "beyond_float32":
+        ply.write_ply(str(path), np.concatenate([p[:25] + 2.5e38, p[25:] - 2.5e38]), n)
+    elif kind == "truncated":
         ply.write_ply(str(path), p, n)
         path.write_bytes(path.read_bytes()[:-37])
     else:

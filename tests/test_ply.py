@@ -351,3 +351,29 @@ def test_genuine_sparse_parts_are_not_outliers():
     assert prepare.bulk_mask(p).all()
     p[7] = [1e4, 0, 0]
     assert np.flatnonzero(~prepare.bulk_mask(p)).tolist() == [7]
+
+
+@pytest.mark.parametrize("case", ["two clusters at +-2.5e38", "all near 1e300", "one point at 1e20"])
+def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
+    """Double coordinates near the top of float32's range imported and later crashed the
+    renderer, which squares distances in float32."""
+    from splat_tracer import prepare
+
+    p, n = fibonacci_sphere(400)
+    if case == "two clusters at +-2.5e38":
+        p = np.concatenate([p[:200] + 2.5e38, p[200:] - 2.5e38])
+    elif case == "all near 1e300":
+        p = p * 1e290 + 1e300
+    else:
+        p = np.concatenate([p + [5e5, 4e6, 100.0], [[1e20, 0.0, 0.0]]])
+        n = np.concatenate([n, [[0.0, 0.0, 1.0]]])
+    path = tmp_path / "huge.ply"
+    ply.write_ply(str(path), p, n)
+    with pytest.raises(ply.CloudFileError) as err:
+        prepare.prepare(ply.read_ply(str(path)), str(path))
+    message = str(err.value)
+    assert str(path) in message and "spans" in message and "float32" in message, message
+    if case == "one point at 1e20":  # the bulk alone is fine: dropping the stray point imports it
+        assert "Outliers: Drop" in message
+        dropped = prepare.prepare(ply.read_ply(str(path)), str(path), drop_outliers=True)
+        assert len(dropped.local) == 400 and dropped.outliers == 1
