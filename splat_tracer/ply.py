@@ -170,9 +170,13 @@ def _check_nothing_follows(path: str, ply, f) -> None:
     plyfile read from, positioned where it stopped."""
     if ply.text:  # whitespace may follow the last row; any other text is more rows
         rows = 0
-        while chunk := f.read(_SCAN_CHUNK):
-            chunk += f.readline()  # whole lines, so that no row is counted twice
-            rows += len(_ROW_START.findall(chunk))
+        try:
+            while chunk := f.read(_SCAN_CHUNK):
+                chunk += f.readline()  # whole lines, so that no row is counted twice
+                rows += len(_ROW_START.findall(chunk))
+        except UnicodeDecodeError:
+            raise CloudFileError(f"{path}: the header declares {_declared(ply)} but non-ascii data follow "
+                                 "them") from None
         if rows:
             raise CloudFileError(f"{path}: the header declares {_declared(ply)} but {rows:,} more rows follow "
                                  "them (a count in the header is wrong)")

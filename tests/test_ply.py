@@ -377,3 +377,12 @@ def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
         assert "Outliers: Drop" in message
         dropped = prepare.prepare(ply.read_ply(str(path)), str(path), drop_outliers=True)
         assert len(dropped.local) == 400 and dropped.outliers == 1
+
+
+def test_non_ascii_bytes_after_ascii_data_are_refused_with_a_message(tmp_path):
+    path = tmp_path / "junk.ply"
+    _cloud_with_faces(path, binary=False, vertices=5000)  # the junk lies beyond plyfile's read-ahead
+    path.write_bytes(path.read_bytes() + b"\n" * 100_000 + b"\xff\xfe junk\n")
+    with pytest.raises(ply.CloudFileError, match="follow") as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)
