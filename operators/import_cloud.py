@@ -6,21 +6,13 @@ import os
 import bpy
 from bpy_extras.io_utils import ImportHelper
 
-from ..splat_tracer import core, ply, spacing
+from ..splat_tracer import ply, prepare, spacing
 from ..splat_tracer.cloud_object import create_cloud_object
 
 
-def load_cloud(path: str, k: int):
-    """Reads and prepares one file; raises ply.CloudFileError with the file named.
-    Returns (cloud, origin, local positions, radii, neighbourhood analysis)."""
-    cloud = ply.read_ply(path)
-    origin, local = core.local_frame(cloud.positions)
-    try:
-        hood = spacing.analyse(local, cloud.normals, k)
-    except spacing.SpacingError as e:
-        raise ply.CloudFileError(f"{path}: {e}") from None
-    radii = cloud.radii if cloud.radii is not None else hood.spacing
-    return cloud, origin, local, radii, hood
+def load_cloud(path: str, k: int, drop_outliers: bool = False) -> prepare.PreparedCloud:
+    """Reads and prepares one file; raises ply.CloudFileError with the file named."""
+    return prepare.prepare(ply.read_ply(path), path, k, drop_outliers)
 
 
 class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
@@ -39,6 +31,14 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
         description="When a file has no radius, each splat's radius is the distance to its k-th nearest point",
         default=spacing.DEFAULT_K, min=1, max=64,
     )
+    outliers: bpy.props.EnumProperty(
+        name="Outliers",
+        description="Points far from the rest of the cloud (e.g. a scanner's invalid returns at 0, 0, 0): "
+                    "they never move the origin or the analysis; keep them as small splats, or leave them out",
+        items=[("KEEP", "Keep", "Import them, with their radius limited; the import warns about them"),
+               ("DROP", "Drop", "Leave them out; the import says how many")],
+        default="KEEP",
+    )
 
     def paths(self) -> list[str]:
         if self.files and self.directory:
@@ -50,26 +50,25 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
         loaded = []
         for path in self.paths():
             try:
-                loaded.append((path, *load_cloud(path, self.neighbours)))
+                loaded.append((path, load_cloud(path, self.neighbours, self.outliers == "DROP")))
             except (ply.CloudFileError, MemoryError) as e:
                 self.report({"ERROR"}, str(e))
                 return {"CANCELLED"}
         created = []
         try:
-            for path, cloud, origin, local, radii, hood in loaded:
+            for path, prep in loaded:
                 name = os.path.splitext(os.path.basename(path))[0] or "Splats"
-                obj = create_cloud_object(name, local, cloud.normals, radii, cloud.colours,
-                                          location=tuple(origin), collection=context.collection)
+                obj = create_cloud_object(name, prep.local, prep.cloud.normals, prep.radii, prep.cloud.colours,
+                                          location=tuple(prep.origin), collection=context.collection)
                 obj["splat_tracer_source"] = path
-                obj.splat_tracer.closed = hood.closed_guess
-                obj["splat_tracer_closed_guess"] = hood.describe()
+                obj.splat_tracer.closed = prep.hood.closed_guess
+                obj["splat_tracer_closed_guess"] = prep.hood.describe()
                 created.append(obj)
-                if cloud.dropped_normals:
-                    self.report({"WARNING"}, f"{path}: {cloud.dropped_normals} points with a zero or "
-                                             "non-finite normal were dropped")
-                if hood.degenerate and cloud.radii is None:
-                    self.report({"WARNING"}, f"{path}: {hood.degenerate} points share their position with "
-                                             f"{self.neighbours}+ others; they got the median radius")
+                notes = prep.notes(self.neighbours)
+                for note in notes:
+                    self.report({"WARNING"}, f"{path}: {note}")
+                if notes:  # kept with the object: reports scroll away
+                    obj["splat_tracer_import_notes"] = "\n".join(notes)
         except Exception:
             for obj in created:
                 mesh = obj.data
@@ -82,7 +81,7 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
             obj.select_set(True)
         if created:
             context.view_layer.objects.active = created[-1]
-        total = sum(len(c[1]) for c in loaded)
+        total = sum(len(prep.local) for _, prep in loaded)
         self.report({"INFO"}, f"Imported {total:,} splats from {len(created)} file(s)")
         return {"FINISHED"}
 

@@ -89,17 +89,20 @@ def _f32(a, name: str, shape: tuple) -> np.ndarray:
     return arr
 
 
-def local_frame(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
     """Splits float64 points into (origin, float32 offsets from it).
 
-    The origin is the centre of the bounding box, rounded to a float32 value so that it
-    can be stored exactly (e.g. as a Blender object location). Subtracting it in float64
-    before the cast keeps full precision for georeferenced scans (1e5 to 1e7 metres).
+    The origin is the centre of the bounding box (of the points selected by the boolean
+    mask `bulk`, when given: the importer leaves stray points out, so that one point far
+    away cannot move it), rounded to a float32 value so that it can be stored exactly
+    (e.g. as a Blender object location). Subtracting it in float64 before the cast keeps
+    full precision for georeferenced scans (1e5 to 1e7 metres).
     """
     pts = np.asarray(points, dtype=np.float64)
     if pts.size == 0:
         return np.zeros(3), np.zeros((0, 3), np.float32)
-    origin = ((pts.min(axis=0) + pts.max(axis=0)) * 0.5).astype(np.float32).astype(np.float64)
+    box = pts if bulk is None or not np.any(bulk) else pts[np.asarray(bulk, bool)]
+    origin = ((box.min(axis=0) + box.max(axis=0)) * 0.5).astype(np.float32).astype(np.float64)
     return origin, (pts - origin).astype(np.float32)
 
 

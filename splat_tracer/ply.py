@@ -6,11 +6,28 @@ and the problem, so that the importer can refuse it before creating anything.
 """
 from __future__ import annotations
 
+import io
 import os
+import re
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
+
+from . import spacing
+
+
+# A header is a few lines per element and property, plus comments: scanners write a few
+# kilobytes of metadata there. 4 MiB is a thousand times that and still parses in about a
+# second (plyfile reads a header one character at a time, ~0.3 s per MiB); anything longer
+# is not a header, and is refused before plyfile spends minutes on it.
+MAX_HEADER_BYTES = 4 << 20
+_SCAN_CHUNK = 1 << 16  # the header is searched for its end this many bytes at a time
+# The least an ascii row can take per property: one character and one separator (a space,
+# or the newline after the last one); a list property's count is such a property. A row
+# of an element without properties is at least its newline.
+_ASCII_MIN_BYTES_PER_PROPERTY = 2
+_ROW_START = re.compile(r"^[ \t]*\S", re.MULTILINE)  # an ascii line that is not blank
 
 
 class CloudFileError(ValueError):
@@ -24,6 +41,9 @@ class PointCloud:
     colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
     radii: Optional[np.ndarray]      # (N,) float32 from the file, or None
     dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
+    merged_duplicates: int = 0       # rows dropped for repeating an earlier row's position
+    first_duplicate_row: int = -1    # the first of those, as a row of the file
+    rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file
 
     def __len__(self) -> int:
         return len(self.positions)
@@ -35,37 +55,136 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def _unit_colour(values: np.ndarray) -> np.ndarray:
-    """Integer channels scale by their type's maximum; float channels are taken as 0..1."""
-    if np.issubdtype(values.dtype, np.integer):
-        return values.astype(np.float32) / np.iinfo(values.dtype).max
-    return np.clip(values.astype(np.float32), 0.0, 1.0)
+# Colour conventions for types that do not imply one: a float channel within 0..1 is
+# taken as it is; otherwise (and for integers other than uchar/ushort) values that fit
+# 0..255 are 8-bit and values that fit 0..65535 are 16-bit colours. Anything else has no
+# known meaning as a colour and is refused rather than guessed.
+_COLOUR_RANGES = (255.0, 65535.0)
+_BY_TYPE = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}  # the PLY convention
 
 
-def _check_trailing_data(path: str, ply, vertex_count: int) -> None:
-    """plyfile stops reading after the declared counts; a file with more data than its
-    header declares has a count that lies, which we refuse rather than silently drop."""
-    if ply.text:
-        with open(path, "rb") as f:
-            for line in f:
-                if line.strip() == b"end_header":
-                    break
-            rows = sum(1 for line in f if line.strip())
-        declared = sum(e.count for e in ply.elements)
-        if rows > declared:
-            raise CloudFileError(f"{path}: the header declares {declared} rows but the file has {rows}")
-        return
-    if any(p.__class__.__name__ == "PlyListProperty" for e in ply.elements for p in e.properties):
-        return  # variable-size rows: the expected size cannot be computed from the header
+def _unit_colours(path: str, v, names: tuple[str, ...]) -> np.ndarray:
+    """(N, len(names)) float32 in 0..1 from colour properties read together (one
+    convention for red, green and blue, decided by their types and then their values)."""
+    columns = [v[c] for c in names]
+    scale = _BY_TYPE.get(columns[0].dtype)
+    if scale is None or any(c.dtype != columns[0].dtype for c in columns):
+        lo = [float(np.min(c)) for c in columns]
+        hi = [float(np.max(c)) for c in columns]
+        if not all(np.isfinite(lo + hi)):
+            raise CloudFileError(f"{path}: some colours are not finite")
+        worst = int(np.argmin(lo)) if min(lo) < 0 else int(np.argmax(hi))
+        floats = any(np.issubdtype(c.dtype, np.floating) for c in columns)
+        if min(lo) < 0 or max(hi) > _COLOUR_RANGES[-1]:
+            raise CloudFileError(
+                f"{path}: the colour property '{names[worst]}' ({columns[worst].dtype}) ranges from "
+                f"{lo[worst]:g} to {hi[worst]:g}, which is none of the colour ranges 0..1 (floats), "
+                "0..255 and 0..65535")
+        scale = 1.0 if floats and max(hi) <= 1.0 else next(r for r in _COLOUR_RANGES if max(hi) <= r)
+    return np.column_stack([c.astype(np.float64) / scale for c in columns]).astype(np.float32)
+
+
+def _header_length(path: str) -> tuple[int, bytes]:
+    """(length, bytes) of the header: up to and including the header's last line, the first line that is exactly
+    `end_header` (as plyfile reads it: lines end with the newline that follows `ply`, so
+    a comment that mentions end_header does not end the header)."""
     with open(path, "rb") as f:
-        head = f.read(1 << 16)
-    header_len = head.find(b"end_header")
-    header_len = head.index(b"\n", header_len) + 1
-    expected = header_len + sum(e.count * e.data.dtype.itemsize for e in ply.elements)
-    actual = os.path.getsize(path)
-    if actual > expected:
-        raise CloudFileError(f"{path}: {actual - expected} bytes follow the {vertex_count} declared vertices "
-                             "(the vertex count in the header is wrong)")
+        buf = bytearray(f.read(5))
+        for start, nl in ((b"ply\r\n", b"\r\n"), (b"ply\n", b"\n"), (b"ply\r", b"\r")):
+            if buf.startswith(start):
+                break
+        else:
+            raise CloudFileError(f"{path}: not a valid PLY file (it does not start with a 'ply' line)")
+        marker = nl + b"end_header" + nl
+        too_long = CloudFileError(f"{path}: the header is longer than {MAX_HEADER_BYTES >> 20} MiB (no "
+                                  f"'end_header' line within its first {MAX_HEADER_BYTES:,} bytes); "
+                                  "this is not a PLY header")
+        searched = 0
+        while (at := buf.find(marker, searched)) < 0:
+            if len(buf) > MAX_HEADER_BYTES:
+                raise too_long
+            searched = max(0, len(buf) - len(marker) + 1)
+            chunk = f.read(_SCAN_CHUNK)
+            if not chunk:
+                raise CloudFileError(f"{path}: not a valid PLY file (no 'end_header' line ends its header)")
+            buf += chunk
+    end = at + len(marker)
+    if end > MAX_HEADER_BYTES:
+        raise too_long
+    return end, bytes(buf[:end])
+
+
+def _read_header(path: str):
+    """(header length in bytes, the header as plyfile's PlyData with no data read)."""
+    from plyfile import PlyData
+
+    length, head = _header_length(path)
+    try:
+        # plyfile has no public header-only reader; _parse_header is what PlyData.read
+        # itself calls first (plyfile is pinned, 1.0.3, and bundled as such).
+        return length, PlyData._parse_header(io.BytesIO(head))
+    except Exception as e:  # plyfile raises several types; all mean "malformed"
+        raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+
+
+def _min_row_bytes(element, text: bool, byte_order: str) -> int:
+    """The fewest bytes a row of this element can take in the file."""
+    if text:
+        return _ASCII_MIN_BYTES_PER_PROPERTY * len(element.properties) or 1
+    size = 0
+    for prop in element.properties:
+        if hasattr(prop, "list_dtype"):  # a list may be empty: only its count is certain
+            size += np.dtype(prop.list_dtype(byte_order)[0]).itemsize
+        else:
+            size += np.dtype(prop.dtype(byte_order)).itemsize
+    return size
+
+
+def _check_declared_sizes(path: str, header, header_len: int) -> None:
+    """Refuses, before anything is allocated, counts that the file is too small to hold
+    (plyfile allocates every element's declared rows before reading them: a tiny file
+    declaring a billion rows cost a minute and gigabytes before it failed)."""
+    available = os.path.getsize(path) - header_len
+    needed = 0
+    for element in header.elements:
+        if element.count < 0:
+            raise CloudFileError(f"{path}: the header declares a negative count for '{element.name}'")
+        row = _min_row_bytes(element, header.text, header.byte_order)
+        left = available - needed  # after the elements before this one
+        needed += element.count * row
+        if needed > available:
+            raise CloudFileError(
+                f"{path}: early end-of-file: the header declares {element.count:,} '{element.name}' rows, "
+                f"at least {element.count * row:,} bytes ({row} a row), but only {max(left, 0):,} bytes "
+                "of the file are left for them")
+
+
+def _declared(ply) -> str:
+    return " and ".join(f"{e.count:,} '{e.name}'" for e in ply.elements) + " rows"
+
+
+def _check_nothing_follows(path: str, ply, f) -> None:
+    """plyfile stops reading after the declared counts; data left after the last element
+    means a count in the header lies (e.g. a vertex count smaller than the data, whose
+    first rows alone would otherwise be imported), which we refuse. `f` is the stream
+    plyfile read from, positioned where it stopped."""
+    if ply.text:  # whitespace may follow the last row; any other text is more rows
+        rows = 0
+        try:
+            while chunk := f.read(_SCAN_CHUNK):
+                chunk += f.readline()  # whole lines, so that no row is counted twice
+                rows += len(_ROW_START.findall(chunk))
+        except UnicodeDecodeError:
+            raise CloudFileError(f"{path}: the header declares {_declared(ply)} but non-ascii data follow "
+                                 "them") from None
+        if rows:
+            raise CloudFileError(f"{path}: the header declares {_declared(ply)} but {rows:,} more rows follow "
+                                 "them (a count in the header is wrong)")
+        return
+    extra = os.fstat(f.fileno()).st_size - f.tell()
+    if extra:
+        raise CloudFileError(f"{path}: the header declares {_declared(ply)} but {extra:,} more bytes follow "
+                             "them (a count in the header is wrong)")
 
 
 def read_ply(path: str) -> PointCloud:
@@ -75,10 +194,15 @@ def read_ply(path: str) -> PointCloud:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise CloudFileError(f"{path}: no such file")
-    try:
-        ply = PlyData.read(path)
-    except Exception as e:  # plyfile raises several types; all mean "malformed"
-        raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+    header_len, header = _read_header(path)
+    _check_declared_sizes(path, header, header_len)
+    # Read from our own stream (ascii: text, as plyfile wants it) to see where it stops.
+    with (open(path, "r", encoding="ascii", newline="") if header.text else open(path, "rb")) as f:
+        try:
+            ply = PlyData.read(f)
+        except Exception as e:  # plyfile raises several types; all mean "malformed"
+            raise CloudFileError(f"{path}: not a valid PLY file ({e})") from None
+        _check_nothing_follows(path, ply, f)
     if "vertex" not in ply:
         raise CloudFileError(f"{path}: has no 'vertex' element")
     v = ply["vertex"].data
@@ -92,7 +216,6 @@ def read_ply(path: str) -> PointCloud:
     n = len(v)
     if n == 0:
         raise CloudFileError(f"{path}: contains no vertices")
-    _check_trailing_data(path, ply, n)
 
     pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
     bad = ~np.isfinite(pos).all(axis=1)
@@ -110,10 +233,8 @@ def read_ply(path: str) -> PointCloud:
 
     colours = None
     if {"red", "green", "blue"} <= names:
-        rgb = np.column_stack([_unit_colour(v[c]) for c in ("red", "green", "blue")])
-        alpha = _unit_colour(v["alpha"]) if "alpha" in names else np.ones(n, np.float32)
-        if not np.isfinite(rgb).all() or not np.isfinite(alpha).all():
-            raise CloudFileError(f"{path}: some colours are not finite")
+        rgb = _unit_colours(path, v, ("red", "green", "blue"))
+        alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
         colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
 
     # A zero or non-finite normal is an error of that point alone (ALGORITHM.md): the
@@ -124,9 +245,18 @@ def read_ply(path: str) -> PointCloud:
     dropped = int(n - ok.sum())
     if not ok.any():
         raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-    nrm = (nrm[ok] / length[ok, None]).astype(np.float32)
-    keep = (lambda a: a if a is None or dropped == 0 else a[ok])
-    return PointCloud(pos[ok] if dropped else pos, nrm, keep(colours), keep(radii), dropped)
+    nrm = nrm / np.where(ok, length, 1.0)[:, None]
+    # Points at exactly the same position as an earlier one are merged into it (the
+    # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
+    # piles of them make the neighbour search pathological.
+    usable = np.flatnonzero(ok)
+    first = spacing.first_of_duplicates(pos[usable])
+    rows = usable[first]
+    merged = len(usable) - len(rows)
+    first_merged = int(usable[~first][0]) if merged else -1
+    take = (lambda a: a if a is None or len(rows) == n else a[rows])
+    return PointCloud(take(pos), take(nrm).astype(np.float32), take(colours), take(radii), dropped,
+                      merged, first_merged, rows)
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

@@ -23,6 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 
 DEFAULT_K = 6
+# A splat's size comes from its distance to other points: a cloud needs at least one
+# point besides each one (the importer refuses fewer distinct positions).
+MIN_POINTS = 2
 # The boundary test looks at this many neighbours, for a gap wider than BOUNDARY_GAP. With
 # randomly sampled surfaces (50k points on a sphere) k = 12 and 150 degrees flagged 3 % of
 # interior points; k = 24 and 160 degrees flags almost none, while an open patch's rim,
@@ -34,6 +37,12 @@ CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sq
 # order, so that each chunk walks the same few branches: this is what keeps 10M-point
 # scans within seconds and bounds the memory of the (chunk, k+1) arrays.
 _CHUNK = 1 << 16
+
+
+# Odd 64-bit multipliers (from splitmix64) that mix a row's three coordinates' bits into
+# one hash; equal rows have equal hashes, and unequal rows rarely do (a collision costs
+# only time: rows with equal hashes are compared exactly).
+_HASH_MULTIPLIERS = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], np.uint64)
 
 
 class SpacingError(ValueError):
@@ -50,6 +59,34 @@ class Neighbourhood:
     def describe(self) -> str:
         return (f"{self.boundary} of {len(self.spacing)} points look like a boundary "
                 f"(limit {CLOSED_MAX_BOUNDARY * np.sqrt(len(self.spacing)):.0f} for a closed surface)")
+
+
+def first_of_duplicates(points: np.ndarray) -> np.ndarray:
+    """(N,) bool: True for each row whose position no earlier row has (exact equality of
+    the coordinates' values; -0.0 equals 0.0). Coincident points make the k-NN query
+    pathological (every neighbour at distance 0: 200k copies of one point took 90 s), so
+    they are found first, in O(N log N): rows are sorted by a hash of their bits, and only
+    rows sharing a hash are sorted and compared by value."""
+    pts = np.ascontiguousarray(points, dtype=np.float64) + 0.0  # + 0.0 turns -0.0 into 0.0
+    n = len(pts)
+    keep = np.ones(n, bool)
+    if n < 2:
+        return keep
+    h = np.bitwise_xor.reduce(pts.view(np.uint64) * _HASH_MULTIPLIERS, axis=1)  # wraps modulo 2^64
+    order = np.argsort(h, kind="stable")
+    same = h[order[1:]] == h[order[:-1]]
+    if not same.any():
+        return keep
+    shared = np.zeros(n, bool)
+    shared[1:] |= same
+    shared[:-1] |= same
+    rows = np.sort(order[shared])  # rows with a hash some other row has, in file order
+    sub = pts[rows]
+    by_value = np.lexsort((sub[:, 2], sub[:, 1], sub[:, 0]))  # stable: earlier rows first
+    ordered = sub[by_value]
+    repeat = (ordered[1:] == ordered[:-1]).all(axis=1)
+    keep[rows[by_value[1:][repeat]]] = False
+    return keep
 
 
 def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
@@ -74,8 +111,8 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    if n < 2:
-        raise SpacingError("need at least 2 points to estimate the spacing (or a 'radius' property)")
+    if n < MIN_POINTS:
+        raise SpacingError(f"need at least {MIN_POINTS} points to estimate the spacing (or a 'radius' property)")
     k = int(min(k, n - 1))
     kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
     nrm = None if normals is None else np.asarray(normals, dtype=np.float64)

@@ -108,10 +108,11 @@ MALFORMED = {
     "count_too_high": None,
     "count_too_low": None,
     "nan_row": None,
+    "beyond_float32": None,  # two clusters at +-2.5e38, in doubles
 }
 MESSAGES = {"bad_header": "not a valid PLY", "not_ply": "not a valid PLY", "no_normals": "no normals",
             "truncated": "end-of-file", "count_too_high": "end-of-file", "count_too_low": "header declares",
-            "nan_row": "non-finite coordinates"}
+            "nan_row": "non-finite coordinates", "beyond_float32": "spans 5e+38"}
 
 
 def make_malformed(kind: str, tmp_path) -> str:
@@ -120,7 +121,9 @@ def make_malformed(kind: str, tmp_path) -> str:
         path.write_bytes(MALFORMED[kind])
         return str(path)
     p, n = fibonacci_sphere(50)
-    if kind == "truncated":
+    if kind == "beyond_float32":
+        ply.write_ply(str(path), np.concatenate([p[:25] + 2.5e38, p[25:] - 2.5e38]), n)
+    elif kind == "truncated":
         ply.write_ply(str(path), p, n)
         path.write_bytes(path.read_bytes()[:-37])
     else:
@@ -285,3 +288,50 @@ def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_p
     scene.camera.data.type = "PANO"
     with pytest.raises(RuntimeError, match="panoramic cameras are not supported"):
         bpy.ops.render.render()
+
+
+def test_identical_points_are_refused_quickly(blender, empty_scene, tmp_path):
+    """200k copies of one point took 92 s in the k-NN before being refused."""
+    import time
+
+    bpy = blender
+    path = tmp_path / "same.ply"
+    ply.write_ply(str(path), np.tile([4e5, 5e6, 30.0], (200_000, 1)), np.tile([0.0, 0.0, 1.0], (200_000, 1)))
+    start = time.perf_counter()
+    with pytest.raises(RuntimeError) as err:
+        bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    assert time.perf_counter() - start < 2.0
+    assert str(path) in str(err.value) and "1 distinct position" in str(err.value), str(err.value)
+    assert len(bpy.data.objects) == 0
+
+
+def test_duplicated_rows_are_merged_on_import(blender, empty_scene, tmp_path):
+    bpy = blender
+    p, n = fibonacci_sphere(2000)
+    path = tmp_path / "dups.ply"
+    ply.write_ply(str(path), np.concatenate([p, p[:50]]), np.concatenate([n, n[:50]]))
+    assert bpy.ops.splat_tracer.import_cloud(filepath=str(path)) == {"FINISHED"}
+    obj = bpy.context.active_object
+    assert len(obj.data.vertices) == 2000
+    assert "50 points repeat the position of an earlier one" in obj["splat_tracer_import_notes"]
+
+
+@pytest.mark.parametrize("outliers", ["KEEP", "DROP"])
+def test_a_stray_point_does_not_move_the_origin_and_is_reported(blender, empty_scene, tmp_path, outliers):
+    """A georeferenced sphere with one invalid return at (0, 0, 0): the object sits where
+    the clean sphere's does, the stray point is kept (small) or dropped, and said."""
+    bpy = blender
+    p, n = fibonacci_sphere(3000, radius=1.0, centre=(5e5, 4e6, 100.0))
+    ply.write_ply(str(tmp_path / "clean.ply"), p, n)
+    ply.write_ply(str(tmp_path / "stray.ply"), np.concatenate([p, [[0.0, 0.0, 0.0]]]),
+                  np.concatenate([n, [[0.0, 0.0, 1.0]]]))
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "clean.ply"))
+    bpy.ops.splat_tracer.import_cloud(filepath=str(tmp_path / "stray.ply"), outliers=outliers)
+    clean, stray = bpy.data.objects["clean"], bpy.data.objects["stray"]
+    assert tuple(stray.location) == tuple(clean.location)
+    assert stray.splat_tracer.closed and clean.splat_tracer.closed
+    assert len(stray.data.vertices) == (3001 if outliers == "KEEP" else 3000)
+    radii = np.empty(len(stray.data.vertices), np.float32)
+    stray.data.attributes["splat_radius"].data.foreach_get("value", radii)
+    assert radii.max() <= 3 * np.percentile(radii[:3000], 95) * (1 + 1e-6)  # no 4e6 m disc: at most the cap
+    assert "1 point lies far from the rest" in stray["splat_tracer_import_notes"]

@@ -103,3 +103,286 @@ def test_closed_guess(name, make, closed):
     points, normals = make()
     hood = spacing.analyse(points, normals)
     assert hood.closed_guess is closed, (name, hood.describe())
+
+
+def _insert_header_lines(path, lines: list[str]) -> None:
+    """Inserts lines (e.g. comments) after the 'format' line of a PLY file's header."""
+    data = path.read_bytes()
+    at = data.index(b"\n", data.index(b"format")) + 1
+    path.write_bytes(data[:at] + "".join(line + "\n" for line in lines).encode() + data[at:])
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("extra", [
+    ["comment end_header is the last line of a header"],
+    [f"comment scanner metadata line {i:05d} " + "x" * 60 for i in range(2000)],  # 150 KB
+], ids=["comment_says_end_header", "header_over_64k"])
+def test_header_ends_at_the_first_line_that_is_exactly_end_header(tmp_path, binary, extra):
+    """A long header (scanner metadata) and a comment that mentions end_header are fine."""
+    p, n = fibonacci_sphere(100)
+    path = tmp_path / "header.ply"
+    ply.write_ply(str(path), p, n, binary=binary)
+    _insert_header_lines(path, extra)
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+
+
+def test_header_beyond_the_limit_is_refused_with_a_clear_message(tmp_path):
+    p, n = fibonacci_sphere(100)
+    path = tmp_path / "huge_header.ply"
+    ply.write_ply(str(path), p, n)
+    line = "comment " + "x" * 120
+    _insert_header_lines(path, [line] * (ply.MAX_HEADER_BYTES // len(line) + 10))
+    with pytest.raises(ply.CloudFileError, match=r"header.*longer than") as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("element", ["face", "vertex"])
+def test_a_count_the_file_cannot_hold_is_refused_before_reading(tmp_path, binary, element):
+    """A tiny file declaring 1e9 rows took 72 s and 8 GB before plyfile gave up: the
+    declared counts are compared with the file's size first."""
+    import time
+
+    p, n = fibonacci_sphere(100)
+    path = tmp_path / "lying.ply"
+    ply.write_ply(str(path), p, n, binary=binary)
+    data = path.read_bytes()
+    if element == "vertex":
+        data = data.replace(b"element vertex 100\n", b"element vertex 1000000000\n")
+    else:
+        data = data.replace(b"end_header\n", b"element face 1000000000\n"
+                            b"property list uchar int vertex_indices\nend_header\n")
+    path.write_bytes(data)
+    start = time.perf_counter()
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert time.perf_counter() - start < 0.5
+    message = str(err.value)
+    assert str(path) in message and f"1,000,000,000 '{element}'" in message, message
+
+
+def _cloud_with_faces(path, binary: bool, vertices: int = 50, faces: int = 4, vertex_list: bool = False):
+    """A PLY with a vertex element and a face element (a list property), as meshes have;
+    vertex_list: the vertices have a list property too (e.g. a scanner's per-point echoes)."""
+    from plyfile import PlyData, PlyElement
+
+    p, n = fibonacci_sphere(vertices)
+    fields = [(c, "f4") for c in ("x", "y", "z", "nx", "ny", "nz")] + ([("echoes", "O")] if vertex_list else [])
+    rows = np.empty(vertices, dtype=fields)
+    for k, c in enumerate("xyz"):
+        rows[c], rows["n" + c] = p[:, k], n[:, k]
+    if vertex_list:
+        rows["echoes"] = [np.arange(i % 3 + 1, dtype=np.float32) for i in range(vertices)]
+    elements = [PlyElement.describe(rows, "vertex")]
+    if faces:
+        face = np.empty(faces, dtype=[("vertex_indices", "O")])
+        face["vertex_indices"] = [np.array([i, i + 1, i + 2], np.int32) for i in range(faces)]
+        elements.append(PlyElement.describe(face, "face"))
+    PlyData(elements, text=not binary).write(str(path))
+    return p
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("layout", [dict(faces=4), dict(faces=0, vertex_list=True), dict(faces=4, vertex_list=True)],
+                         ids=["faces", "vertex_list", "vertex_list_and_faces"])
+@pytest.mark.parametrize("change", ["vertex 50->40", "face 4->2", "vertex 50->49", "none"])
+def test_data_must_match_every_declared_count_with_list_properties(tmp_path, binary, layout, change):
+    """With faces (a list property) after the vertices, a vertex count smaller than the
+    data imported the first vertices silently; now every element's data must end where
+    the next begins and the last one at the end of the file."""
+    path = tmp_path / "mesh.ply"
+    p = _cloud_with_faces(path, binary, **layout)
+    if change == "none" or (change.startswith("face") and not layout["faces"]):
+        np.testing.assert_allclose(ply.read_ply(str(path)).positions, p, atol=1e-6)
+        return
+    element, counts = change.split()
+    old, new = counts.split("->")
+    data = path.read_bytes()
+    path.write_bytes(data.replace(f"element {element} {old}\n".encode(), f"element {element} {new}\n".encode(), 1))
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)
+
+
+def test_trailing_blank_lines_after_ascii_data_are_fine(tmp_path):
+    path = tmp_path / "blank.ply"
+    p = _cloud_with_faces(path, binary=False)
+    path.write_bytes(path.read_bytes() + b"\n  \n\n")
+    np.testing.assert_allclose(ply.read_ply(str(path)).positions, p, atol=1e-6)
+
+
+def _coloured_cloud(path, dtype, rgb, alpha=None, binary=True):
+    """Three points with colour properties of the given type (and alpha, if given)."""
+    from plyfile import PlyData, PlyElement
+
+    fields = [(c, "f4") for c in ("x", "y", "z", "nx", "ny", "nz")] + [(c, dtype) for c in ("red", "green", "blue")]
+    if alpha is not None:
+        fields.append(("alpha", dtype))
+    rows = np.zeros(len(rgb), dtype=fields)
+    rows["x"], rows["nz"] = np.arange(len(rgb)), 1.0
+    for k, c in enumerate(("red", "green", "blue")):
+        rows[c] = np.asarray(rgb)[:, k]
+    if alpha is not None:
+        rows["alpha"] = alpha
+    PlyData([PlyElement.describe(rows, "vertex")], text=not binary).write(str(path))
+
+
+BYTE_RGB = [[255, 0, 0], [0, 128, 0], [10, 20, 255]]   # 0..255 values
+BYTE_ALPHA = [255, 128, 0]
+
+
+@pytest.mark.parametrize("dtype, scale", [
+    ("u1", "0..255"), ("i1", "0..127"), ("i2", "0..255"), ("i4", "0..255"), ("u4", "0..255"),
+    ("f4", "0..255"), ("f8", "0..255"), ("f4", "0..1"), ("f8", "0..1"),
+    ("u2", "0..65535"), ("i4", "0..65535"), ("u4", "0..65535"), ("f4", "0..65535"),
+], ids=lambda v: str(v))
+def test_colour_types_are_read_by_type_and_range(tmp_path, dtype, scale):
+    """uchar is /255 and ushort /65535 by type; every other type by its values: floats in
+    0..1 as they are, anything within 0..255 /255, within 0..65535 /65535. Alpha alike."""
+    rgb, alpha = np.array(BYTE_RGB, float) / 255, np.array(BYTE_ALPHA, float) / 255  # what is meant
+    if scale == "0..127":  # int8 holds 0..127 only: values that are read /255
+        rgb, alpha = np.floor(rgb * 127.5) / 255, np.floor(alpha * 127.5) / 255
+    factor = {"0..1": 1, "0..127": 255, "0..255": 255, "0..65535": 65535}[scale]
+    path = tmp_path / "colours.ply"
+    stored = (lambda v: np.round(v * factor)) if factor > 1 else (lambda v: v)
+    _coloured_cloud(path, dtype, stored(rgb), stored(alpha))
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(rgb), atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[:, 3], alpha, atol=1e-6)
+
+
+@pytest.mark.parametrize("dtype, rgb, alpha, bad", [
+    ("i4", [[0, 0, 0], [70000, 1, 2], [3, 4, 5]], None, "'red'"),
+    ("i2", [[0, 0, 0], [1, -3, 2], [3, 4, 5]], None, "'green'"),
+    ("f4", [[0, 0, 0], [0.5, 0.2, 1e6], [0.1, 0.1, 0.1]], None, "'blue'"),
+    ("i4", BYTE_RGB, [255, 128, 100000], "'alpha'"),
+])
+def test_colours_outside_every_known_range_are_refused(tmp_path, dtype, rgb, alpha, bad):
+    path = tmp_path / "colours.ply"
+    _coloured_cloud(path, dtype, rgb, alpha)
+    with pytest.raises(ply.CloudFileError) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value) and bad in str(err.value), str(err.value)
+
+
+def test_exact_duplicates_are_merged_keeping_the_first(tmp_path):
+    p, n = fibonacci_sphere(300)
+    colours = np.random.default_rng(2).uniform(size=(300, 3))
+    dup = np.array([5, 17, 17, 250])  # row 17 three times in all
+    p2 = np.concatenate([p, p[dup]])
+    n2 = np.concatenate([n, -n[dup]])  # the copies differ in all but their position
+    path = tmp_path / "dups.ply"
+    ply.write_ply(str(path), p2, n2, colours=np.concatenate([colours, 1 - colours[dup]]))
+    cloud = ply.read_ply(str(path))
+    assert len(cloud) == 300 and cloud.merged_duplicates == 4 and cloud.first_duplicate_row == 300
+    np.testing.assert_array_equal(cloud.positions, p)
+    np.testing.assert_allclose(cloud.normals, n, atol=1e-6)  # the first row's attributes
+    np.testing.assert_allclose(cloud.colours[:, :3], colours, atol=0.01)
+    np.testing.assert_array_equal(cloud.rows, np.arange(300))
+
+
+def test_negative_zero_is_the_same_position():
+    keep = spacing.first_of_duplicates(np.array([[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [0.0, 1.0, 2.5]]))
+    np.testing.assert_array_equal(keep, [True, False, True])
+
+
+def test_first_of_duplicates_on_many_points_is_fast():
+    import time
+
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(1_000_006, 3)) * 1000 + 4e6  # a multiple of 7 rows
+    p[::7] = p[1::7]  # every 7th row repeats the next one
+    start = time.perf_counter()
+    keep = spacing.first_of_duplicates(p)
+    assert time.perf_counter() - start < 1.5
+    assert (~keep).sum() == len(p[::7]) and keep[::7].all() and not keep[1::7].any()  # the later copy goes
+
+
+def _utm_sphere(tmp_path, stray: bool, n_points: int = 3000):
+    """A sphere of radius 1 m at UTM-like coordinates; stray: a scanner's invalid return at
+    (0, 0, 0) written after the 1000th point."""
+    p, n = fibonacci_sphere(n_points, radius=1.0, centre=(5e5, 4e6, 100.0))
+    if stray:
+        p = np.concatenate([p[:1000], [[0.0, 0.0, 0.0]], p[1000:]])
+        n = np.concatenate([n[:1000], [[0.0, 0.0, 1.0]], n[1000:]])
+    path = tmp_path / f"utm_{'stray' if stray else 'clean'}.ply"
+    ply.write_ply(str(path), p, n)
+    return path
+
+
+@pytest.mark.parametrize("drop", [False, True])
+def test_one_stray_point_changes_nothing_but_the_warning(tmp_path, drop):
+    """Georeferenced scan with one stray (0,0,0): same origin, same radii for the sphere's
+    points, same closed guess as without it; the stray point is found, reported (count and
+    row), kept with a bounded radius or dropped."""
+    from splat_tracer import prepare
+
+    clean_path, stray_path = _utm_sphere(tmp_path, False), _utm_sphere(tmp_path, True)
+    clean = prepare.prepare(ply.read_ply(str(clean_path)), str(clean_path))
+    dirty = prepare.prepare(ply.read_ply(str(stray_path)), str(stray_path), drop_outliers=drop)
+    assert clean.outliers == 0 and dirty.outliers == 1 and dirty.first_outlier_row == 1000
+    np.testing.assert_allclose(dirty.origin, clean.origin, rtol=0, atol=np.spacing(np.float32(4e6)))
+    sphere = np.arange(len(dirty.local)) != 1000 if not drop else slice(None)
+    np.testing.assert_allclose(dirty.local[sphere] + dirty.origin, clean.local + clean.origin, atol=1e-6)
+    np.testing.assert_allclose(dirty.radii[sphere], clean.radii, rtol=1e-5)
+    assert dirty.hood.closed_guess is clean.hood.closed_guess is True
+    assert dirty.hood.boundary == clean.hood.boundary
+    notes = "\n".join(dirty.notes(6))
+    assert "1 point lies far from the rest" in notes and "row 1000" in notes, notes
+    if drop:
+        assert len(dirty.local) == 3000 and "dropped" in notes
+    else:
+        assert len(dirty.local) == 3001
+        assert dirty.radii[1000] <= 3 * np.percentile(clean.radii, 95) * (1 + 1e-6)  # not a 4e6 m disc
+        assert dirty.clamped_radii >= 1 and "radii were reduced" in notes
+
+
+def test_genuine_sparse_parts_are_not_outliers():
+    """A scan's thinning tail (points farther out, fewer of them) stays in the bulk."""
+    from splat_tracer import prepare
+
+    rng = np.random.default_rng(4)
+    r = np.exp(rng.uniform(0, np.log(100), 50000))  # ranges 1..100 m, log-uniform as a scanner sees them
+    d = rng.normal(size=(50000, 3))
+    d[:, 2] = np.abs(d[:, 2]) * 0.1
+    p = d / np.linalg.norm(d, axis=1, keepdims=True) * r[:, None]
+    assert prepare.bulk_mask(p).all()
+    p[7] = [1e4, 0, 0]
+    assert np.flatnonzero(~prepare.bulk_mask(p)).tolist() == [7]
+
+
+@pytest.mark.parametrize("case", ["two clusters at +-2.5e38", "all near 1e300", "one point at 1e20"])
+def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
+    """Double coordinates near the top of float32's range imported and later crashed the
+    renderer, which squares distances in float32."""
+    from splat_tracer import prepare
+
+    p, n = fibonacci_sphere(400)
+    if case == "two clusters at +-2.5e38":
+        p = np.concatenate([p[:200] + 2.5e38, p[200:] - 2.5e38])
+    elif case == "all near 1e300":
+        p = p * 1e290 + 1e300
+    else:
+        p = np.concatenate([p + [5e5, 4e6, 100.0], [[1e20, 0.0, 0.0]]])
+        n = np.concatenate([n, [[0.0, 0.0, 1.0]]])
+    path = tmp_path / "huge.ply"
+    ply.write_ply(str(path), p, n)
+    with pytest.raises(ply.CloudFileError) as err:
+        prepare.prepare(ply.read_ply(str(path)), str(path))
+    message = str(err.value)
+    assert str(path) in message and "spans" in message and "float32" in message, message
+    if case == "one point at 1e20":  # the bulk alone is fine: dropping the stray point imports it
+        assert "Outliers: Drop" in message
+        dropped = prepare.prepare(ply.read_ply(str(path)), str(path), drop_outliers=True)
+        assert len(dropped.local) == 400 and dropped.outliers == 1
+
+
+def test_non_ascii_bytes_after_ascii_data_are_refused_with_a_message(tmp_path):
+    path = tmp_path / "junk.ply"
+    _cloud_with_faces(path, binary=False, vertices=5000)  # the junk lies beyond plyfile's read-ahead
+    path.write_bytes(path.read_bytes() + b"\n" * 100_000 + b"\xff\xfe junk\n")
+    with pytest.raises(ply.CloudFileError, match="follow") as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)

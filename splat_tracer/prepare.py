@@ -1,0 +1,166 @@
+"""From a cloud read from a file to what the importer stores (no Blender needed).
+
+The bulk of a scan decides the frame and the analysis, never a few stray points: scanners
+write invalid returns as (0, 0, 0) into georeferenced scans, and one such point used to
+move the origin halfway to it, degrade every other point's float32 offset, flip the
+closed guess and get a disc millions of metres wide.
+
+- Outliers: the bulk's size is the largest side of the box between the 1st and 99th
+  percentiles of the coordinates (a robust spread: up to 1 % of the points on each side
+  cannot widen it). A point more than OUTLIER_REACH such sizes outside that box is an
+  outlier. They are kept by default (a point is never lost silently) or dropped on request,
+  and reported either way (count and first file row).
+- The origin is the centre of the bulk's bounding box (core.local_frame with the inliers).
+- The neighbourhood analysis (k-NN spacing, closed guess) runs on the inliers; a kept
+  outlier's spacing is its k-NN distance among all points.
+- k-NN radii are clamped to RADIUS_CAP times the 95th percentile of the inliers' spacing,
+  so that an isolated point never becomes a giant disc; the clamped radii are counted.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import core, spacing
+from .ply import CloudFileError, PointCloud
+
+# The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
+BULK_PERCENTILES = (1.0, 99.0)
+# How many bulk sizes outside the bulk's box a point must lie to be an outlier. Genuine
+# sparse parts of a scan (a terrestrial scanner's far returns, a driveway leaving a
+# building) reach a few bulk sizes; a stray (0, 0, 0) in a georeferenced scan lies 1e3 to
+# 1e6 bulk sizes away. 10 keeps the former and finds the latter.
+OUTLIER_REACH = 10.0
+# k-NN radii are at most RADIUS_CAP x the 95th percentile of the bulk's spacing. On an
+# evenly sampled surface the spacing varies by tens of percent, and a scan's sparse parts
+# are within the top 5 %: a radius 3 times beyond that (a disc 9+ times the area of the
+# sparsest 5 %'s) has no neighbours to overlap; it only makes a blob that hides the surface
+# behind it. Smaller radii are left alone: a small disc among its neighbours' is harmless.
+RADIUS_CAP_PERCENTILE = 95.0
+RADIUS_CAP = 3.0
+# The largest coordinate and extent a cloud may have. Points are stored as float32 offsets
+# from a float32 origin, and the renderer squares distances in float32 (and sums squares,
+# and multiplies areas by counts in the BVH's cost), whose range ends at 3.4e38: offsets
+# up to 1e15 square to 1e30, eight orders of magnitude below that. Georeferenced scans
+# are within 1e7 (metres) or 1e10 (millimetres); beyond 1e15 a file holds garbage.
+MAX_COORDINATE = 1e15
+
+
+@dataclass
+class PreparedCloud:
+    cloud: PointCloud                  # the points imported (outliers removed when dropped)
+    origin: np.ndarray                 # (3,) float64 holding a float32 value: the object's location
+    local: np.ndarray                  # (N,3) float32 offsets from the origin
+    radii: np.ndarray                  # (N,) float32: the file's, else clamped k-NN spacing
+    hood: spacing.Neighbourhood        # the analysis of the bulk (inliers)
+    outliers: int = 0                  # points far from the bulk (found; imported unless dropped)
+    first_outlier_row: int = -1        # the first of them, as a row of the file
+    outliers_dropped: bool = False
+    clamped_radii: int = 0             # k-NN radii reduced to radius_cap
+    radius_cap: float = 0.0
+
+    def notes(self, k: int) -> list[str]:
+        """What the import changed or found, one sentence each (the import's warnings)."""
+        c, notes = self.cloud, []
+        if c.dropped_normals:
+            notes.append(f"{c.dropped_normals:,} points with a zero or non-finite normal were dropped")
+        if c.merged_duplicates:
+            notes.append(f"{c.merged_duplicates:,} points repeat the position of an earlier one and were merged "
+                         f"into it (first: row {c.first_duplicate_row})")
+        if self.outliers:
+            notes.append(f"{self.outliers:,} point{'s lie' if self.outliers != 1 else ' lies'} far from the rest "
+                         f"(more than {OUTLIER_REACH:g} times the bulk's size outside it; first: row "
+                         f"{self.first_outlier_row}); "
+                         + ("dropped" if self.outliers_dropped else "kept (import with Outliers: Drop to leave "
+                                                                     "them out)"))
+        if self.clamped_radii:
+            notes.append(f"{self.clamped_radii:,} splat radii were reduced to {self.radius_cap:.4g} "
+                         f"({RADIUS_CAP:g} x the {RADIUS_CAP_PERCENTILE:g}th percentile of the spacing): "
+                         "their points have no close neighbours")
+        if self.hood.degenerate and c.radii is None:
+            notes.append(f"{self.hood.degenerate} points share their position with {k}+ others; "
+                         "they got the median radius")
+        return notes
+
+
+def bulk_mask(positions: np.ndarray) -> np.ndarray:
+    """(N,) bool: True for the points that are not outliers (see the module's text)."""
+    pos = np.asarray(positions, dtype=np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):  # coordinates near 1e308: no bulk, no outliers
+        lo, hi = np.percentile(pos, BULK_PERCENTILES, axis=0)
+        size = float(np.max(hi - lo))
+        if not (np.isfinite(size) and size > 0):
+            return np.ones(len(pos), bool)
+        reach = OUTLIER_REACH * size
+        return ~((pos < lo - reach) | (pos > hi + reach)).any(axis=1)
+
+
+def _span(positions: np.ndarray) -> tuple[float, float, float]:
+    """(largest side of the bounding box, smallest coordinate, largest coordinate)."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    with np.errstate(over="ignore"):  # sides of boxes near 1e308 are inf: too large anyway
+        return float(np.max(hi - lo)), float(lo.min()), float(hi.max())
+
+
+def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> None:
+    extent, lo, hi = _span(positions)
+    if extent <= MAX_COORDINATE and max(-lo, hi) <= MAX_COORDINATE:
+        return
+    hint = ""
+    if not bulk.all():
+        b_extent, b_lo, b_hi = _span(positions[bulk])
+        if b_extent <= MAX_COORDINATE and max(-b_lo, b_hi) <= MAX_COORDINATE:
+            hint = (f"; without its {int((~bulk).sum()):,} outlier(s) it would fit: import with "
+                    "Outliers: Drop")
+    raise CloudFileError(
+        f"{path}: the cloud spans {extent:.3g} (coordinates from {lo:.3g} to {hi:.3g}); coordinates and "
+        f"extents beyond {MAX_COORDINATE:.0e} cannot be stored safely as float32 offsets from the import "
+        f"origin (the renderer squares them in float32, whose range ends at 3.4e38){hint}")
+
+
+def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
+    take = (lambda a: None if a is None else a[keep])
+    return PointCloud(cloud.positions[keep], cloud.normals[keep], take(cloud.colours), take(cloud.radii),
+                      cloud.dropped_normals, cloud.merged_duplicates, cloud.first_duplicate_row, take(cloud.rows))
+
+
+def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outliers: bool = False,
+            workers: int = -1) -> PreparedCloud:
+    """Frame, outliers, analysis and radii of a cloud; raises CloudFileError naming `path`."""
+    if len(cloud) < spacing.MIN_POINTS:  # refused before the neighbour search, which needs them
+        usable = len(cloud) + cloud.merged_duplicates
+        raise CloudFileError(
+            f"{path}: only {len(cloud)} distinct position{'s' if len(cloud) != 1 else ''} among its {usable:,} "
+            f"usable points ({cloud.merged_duplicates:,} repeat an earlier one); at least {spacing.MIN_POINTS} "
+            "are needed to size the splats")
+    rows = cloud.rows if cloud.rows is not None else np.arange(len(cloud))
+    bulk = bulk_mask(cloud.positions)
+    outliers = int(len(bulk) - bulk.sum())
+    first_outlier = int(rows[np.argmin(bulk)]) if outliers else -1
+    if outliers and drop_outliers:
+        cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
+    _check_float32_safe(cloud.positions, bulk, path)
+    origin, local = core.local_frame(cloud.positions, bulk)
+    inliers = np.flatnonzero(bulk)
+    try:
+        hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers)
+    except spacing.SpacingError as e:
+        raise CloudFileError(f"{path}: {e}") from None
+    prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
+                             outliers > 0 and drop_outliers)
+    if cloud.radii is None:
+        radii = np.empty(len(local), np.float32)
+        radii[inliers] = hood.spacing
+        strays = np.flatnonzero(~bulk)
+        if len(strays):  # their distance to their k-th nearest point, among all
+            from scipy.spatial import cKDTree
+
+            kk = min(k, len(local) - 1)
+            dist, _ = cKDTree(local).query(local[strays], k=kk + 1, workers=workers)
+            radii[strays] = dist[:, kk]
+        cap = np.float32(RADIUS_CAP * np.percentile(hood.spacing, RADIUS_CAP_PERCENTILE))
+        clamped = radii > cap
+        prepared.radii = np.minimum(radii, cap)
+        prepared.clamped_radii, prepared.radius_cap = int(clamped.sum()), float(cap)
+    return prepared
