@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 
 from ..splat_tracer import core
-from ..splat_tracer.engine import render_frame
+from ..splat_tracer.session import render_frame
 
 _CHOICES = tuple((p, p.replace("_", " ").title(), f"The {p.replace('_', ' ').lower()} preset")
                  for p in core.PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)
@@ -66,6 +66,14 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
     toggle: bpy.props.EnumProperty(name="Toggle", items=_TOGGLES, default="NONE",
                                    description="Instead of A and B: the scene's settings with this switch off (A) "
                                                "and on (B)")
+    shading: bpy.props.EnumProperty(
+        name="Shading",
+        items=(("HEADLIGHT", "Headlight", "Base colours lit from the eye: only what the visibility settings change "
+                                          "differs, with no sampling noise"),
+               ("SCENE", "Scene", "The scene's lamps, materials and world, as F12 renders them (the same samples "
+                                  "and seed for A and B, so only what the settings change differs)")),
+        default="HEADLIGHT", description="How A and B are lit",
+    )
     threshold: bpy.props.FloatProperty(name="Threshold", default=1e-3, min=0.0,
                                        description="A pixel differs when a channel changes by more than this")
     directory: bpy.props.StringProperty(name="Save To", subtype="DIR_PATH", default="",
@@ -87,12 +95,14 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
             methods = [scene.splat_tracer.core_method(**{self.toggle: value}) for value in (False, True)]
             names = (f"{self.toggle} off", "on")
         try:
-            frames = [render_frame(depsgraph, m, depth=False, normal=False, report=self.report, use_border=False)
-                      for m in methods]
+            headlight = True if self.shading == "HEADLIGHT" else None
+            frames = [render_frame(depsgraph, m, use_border=False, headlight=headlight) for m in methods]
         except Exception as e:  # noqa: BLE001 - every failure is reported to the user
             self.report({"ERROR"}, f"Splat Tracer compare: {e}")
             return {"CANCELLED"}
-        a, b = (f.image.rgba for f in frames)
+        for line in frames[0].report.lines:
+            self.report({"WARNING"}, f"Splat Tracer: {line}")
+        a, b = (f.passes["Combined"] for f in frames)
         diff, mask = difference_image(a, b, self.threshold)
         images = [_store_image(name, pixels) for name, pixels in zip(IMAGE_NAMES, (a, b, diff))]
         if self.directory:

@@ -413,7 +413,7 @@ class RenderScene:
             materials.extend(mats)
         n = len(rows)
         col = lambda k, dtype: np.array([r[k] for r in rows], dtype).reshape((n,) + np.shape(rows[0][k]) if n else (0,))
-        self._world = world
+        self.world = world
         self.lights = tuple(lights)
         self._scene = _core.RenderScene(
             geometries,
@@ -449,7 +449,7 @@ class RenderScene:
         done, counters = self._scene.render(
             np.ascontiguousarray(camera.local_from_ndc, np.float64), np.ascontiguousarray(camera.position, np.float64),
             np.ascontiguousarray(camera.forward, np.float64), int(width), int(height),
-            (int(x0), int(y0), int(w), int(h)), settings.pack(), method.as_tuple(), self._world.radiance(),
-            bool(self._world.transparent), buffers["Combined"], threads=threads, progress=progress,
+            (int(x0), int(y0), int(w), int(h)), settings.pack(), method.as_tuple(), self.world.radiance(),
+            bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
             tile_size=tile_size, **optional)
         return FrameResult(buffers, bool(done), counters)

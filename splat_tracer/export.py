@@ -1,27 +1,45 @@
-"""Blender scene -> core scene and camera.
+"""Blender scene -> core RenderScene and camera.
 
-Reads every visible evaluated point cloud that carries splat normals, through
-`depsgraph.object_instances` (so modifiers, instancing and world matrices are honoured),
-and the scene camera through Blender's own projection matrix (sensor fit, lens shift,
-clipping, pixel aspect, orthographic scale).
+Walks `depsgraph.object_instances` (modifiers, collection and Geometry Nodes instancing,
+world matrices, the view layer's collections all honoured) and turns:
+- point clouds carrying splat normals into splat geometry (core.Scene),
+- meshes (and curves, text, surfaces, metaballs through their evaluated mesh) into core.Mesh,
+- lamps into shading.Light, materials into shading.Material (export_shading.py),
+into instances: each unique geometry is read and built once and shared by all its
+instances, and kept across frames by the session's cache (session.py), keyed by content.
+
+Everything is placed in one local frame whose float64 origin is the camera's position, so
+that single-precision coordinates are finest where the viewer is (georeferenced scenes).
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
 
-from . import core
+from . import core, export_shading, shading
 from .cloud_object import COLOUR, NORMAL, RADIUS
+
+# Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
+_MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
+# Types that render nothing in any engine: skipped without a word.
+_NOTHING_TO_RENDER = {"CAMERA", "EMPTY", "ARMATURE", "LATTICE", "SPEAKER", "LIGHT_PROBE", "LIGHTPROBE"}
 
 
 @dataclass
 class ExportedScene:
-    scene: core.Scene
-    origin: np.ndarray            # float64 world position of the local frame's origin
-    objects: int                  # number of clouds (instances) exported
-    skipped: list = field(default_factory=list)  # names of point clouds without splat normals
+    render_scene: core.RenderScene
+    origin: np.ndarray                 # float64 world position of the local frame's origin
+    instances: int = 0
+    clouds: int = 0                    # cloud instances
+    meshes: int = 0                    # mesh instances
+    splats: int = 0                    # in the unique cloud geometry
+    triangles: int = 0                 # in the unique mesh geometry
+    lights: int = 0
+    emission: bool = False             # some material emits light
+    report: shading.Report = field(default_factory=shading.Report)
 
 
 def _read(attribute, key: str, width: int, n: int) -> np.ndarray:
@@ -30,17 +48,18 @@ def _read(attribute, key: str, width: int, n: int) -> np.ndarray:
     return buf.reshape(n, width) if width > 1 else buf
 
 
-def _check_cloud(name: str, pos, nrm, rad) -> None:
-    """Names the object and point for the errors the core would report by global index."""
-    problems = (
-        (~np.isfinite(pos).all(axis=1), "a position that is not finite"),
-        (~(np.isfinite(nrm).all(axis=1) & (np.abs(nrm).max(axis=1) > 0)), "a zero or non-finite normal"),
-        (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
-    )
-    for bad, what in problems:
-        if bad.any():
-            raise ValueError(f"point cloud '{name}': point {int(np.flatnonzero(bad)[0])} has {what} "
-                             f"({int(bad.sum())} such points)")
+def _digest(*parts) -> bytes:
+    """Content key of a geometry: what it is made of, not where Blender keeps it (evaluated
+    datablocks are new objects on every evaluation). SHA-1 for speed (about 1 GB/s), not
+    for security: a collision would only mean a stale cache entry."""
+    h = hashlib.sha1()
+    for p in parts:
+        if isinstance(p, np.ndarray):
+            h.update(str((p.dtype.str, p.shape)).encode())
+            h.update(np.ascontiguousarray(p).data)
+        else:
+            h.update(repr(p).encode())
+    return h.digest()
 
 
 def _source(obj: bpy.types.Object) -> bpy.types.Object:
@@ -48,55 +67,225 @@ def _source(obj: bpy.types.Object) -> bpy.types.Object:
     return obj.original if obj.original is not None else obj
 
 
-def base_colour(obj: bpy.types.Object) -> np.ndarray:
-    """Scene-linear RGB of a cloud without point colours: the active material's viewport
-    colour when it has one, else the object's own viewport colour."""
-    source = _source(obj)
-    material = source.active_material
-    rgba = material.diffuse_color if material is not None else source.color
-    return np.array(rgba[:3], dtype=np.float32)
+def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarray:
+    """Mask of the points that can be splats. The others (a vertex added in Edit Mode has a
+    zero normal and radius) are left out and counted in the report, never failing the
+    whole render."""
+    problems = (
+        (~np.isfinite(pos).all(axis=1), "a position that is not finite"),
+        (~(np.isfinite(nrm).all(axis=1) & (np.abs(nrm).max(axis=1) > 0)), "a zero or non-finite normal"),
+        (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
+    )
+    ok = np.ones(len(pos), bool)
+    for bad, what in problems:
+        if bad.any():
+            report.once(f"point cloud '{name}': {int(bad.sum())} points have {what} "
+                        f"(first: point {int(np.flatnonzero(bad)[0])}); they are not rendered")
+            ok &= ~bad
+    return ok
 
 
-def export_scene(depsgraph: bpy.types.Depsgraph, radius_factor: float = 1.0, threads: int = 0) -> ExportedScene:
-    clouds, skipped = [], []
+def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
+    """(positions, normals, radii, colours or None) of a point cloud or of a vertex-only
+    mesh carrying the splat attributes, invalid points left out."""
+    pos = _read(attrs["position"], "vector", 3, n)
+    nrm = _read(attrs[NORMAL], "vector", 3, n)
+    rad_attr = attrs[RADIUS] if RADIUS in attrs else attrs.get("radius")
+    if rad_attr is None:
+        raise ValueError(f"point cloud '{obj.name}' has splat normals but no radius attribute")
+    for name, attr, kinds in ((NORMAL, attrs[NORMAL], ("FLOAT_VECTOR",)), ("radius", rad_attr, ("FLOAT",))):
+        if attr.data_type not in kinds or attr.domain != "POINT":
+            raise ValueError(f"point cloud '{obj.name}': attribute '{attr.name}' must be {kinds[0]} on points, "
+                             f"not {attr.data_type} on {attr.domain}")
+    rad = _read(rad_attr, "value", 1, n)
+    col = None
+    if COLOUR in attrs:
+        c = attrs[COLOUR]
+        if c.data_type in ("FLOAT_COLOR", "BYTE_COLOR") and c.domain == "POINT":
+            col = _read(c, "color", 4, n)[:, :3]
+        else:
+            report.once(f"point cloud '{obj.name}': attribute '{COLOUR}' is {c.data_type} on {c.domain}, "
+                        "not a point colour; ignored")
+    ok = _valid_points(obj.name, pos, nrm, rad, report)
+    if not ok.all():
+        pos, nrm, rad, col = pos[ok], nrm[ok], rad[ok], None if col is None else col[ok]
+    return pos, nrm, rad, col
+
+
+def _mesh_arrays(mesh: bpy.types.Mesh):
+    """(vertices, triangles, corner normals (T,3,3), material indices) of an evaluated mesh."""
+    mesh.calc_loop_triangles()
+    nv, nt = len(mesh.vertices), len(mesh.loop_triangles)
+    verts = np.empty(nv * 3, np.float32)
+    mesh.vertices.foreach_get("co", verts)
+    tris = np.empty(nt * 3, np.int32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    loops = np.empty(nt * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    corner = np.empty(len(mesh.loops) * 3, np.float32)
+    mesh.corner_normals.foreach_get("vector", corner)  # smooth, flat and sharp edges resolved
+    normals = corner.reshape(-1, 3)[loops].reshape(nt, 3, 3)
+    mats = np.empty(nt, np.int32)
+    mesh.loop_triangles.foreach_get("material_index", mats)
+    return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats
+
+
+def _materials(obj, cache: dict, report: shading.Report) -> tuple:
+    """The object's material slots as shading.Material (one default for none)."""
+    out = []
+    for m in _slot_materials(obj) or [None]:
+        key = m.name_full if m is not None else None
+        if key not in cache:
+            cache[key] = export_shading.material_of(m, report)
+        out.append(cache[key])
+    return tuple(out)
+
+
+def _slot_materials(obj) -> list:
+    """The Blender materials of the object's slots (None for an empty slot)."""
+    if obj.material_slots:
+        blender_mats = [slot.material for slot in obj.material_slots]
+    else:
+        blender_mats = list(getattr(obj.data, "materials", ()) or ())
+    # Geometry Nodes' Mesh to Points drops the mesh's materials: a splat cloud's evaluated
+    # slots are empty, and the user's material is on the original object's slot.
+    original = _source(obj).material_slots
+    blender_mats = [m if m is not None or i >= len(original) else original[i].material
+                    for i, m in enumerate(blender_mats)]
+    return blender_mats
+
+
+class _Frame:
+    """The state of one export: the geometry memo and the report."""
+
+    def __init__(self, geometry_cache, radius_factor: float, threads: int, report: shading.Report):
+        self.cache = geometry_cache
+        self.radius_factor = radius_factor
+        self.threads = threads
+        self.report = report
+        self.by_pointer = {}   # evaluated data pointer -> (geometry, kind) within this frame
+        self.materials = {}
+        self.splats = self.triangles = 0
+
+    def cloud(self, obj, attrs, n: int):
+        """The splat geometry of a cloud object (built once per content)."""
+        closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
+        pos, nrm, rad, col = _cloud_arrays(obj, attrs, n, self.report)
+        if len(pos) == 0:
+            return None
+        key = ("cloud", _digest(pos, nrm, rad, col, closed, self.radius_factor))
+
+        def build():
+            return core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed, threads=self.threads)
+
+        geometry, built = self.cache.get(key, build)
+        if built or key not in self.cache.counted:
+            self.splats += len(geometry)
+            self.cache.counted.add(key)
+        return geometry
+
+    def mesh(self, obj):
+        mesh = obj.data if obj.type == "MESH" else None
+        temporary = False
+        if mesh is None:
+            try:
+                mesh = obj.to_mesh()
+                temporary = True
+            except RuntimeError:
+                mesh = None
+        if mesh is None:
+            return None
+        try:
+            verts, tris, normals, mats = _mesh_arrays(mesh)
+        finally:
+            if temporary:
+                obj.to_mesh_clear()
+        if len(tris) == 0:
+            return None
+        key = ("mesh", _digest(verts, tris, normals, mats))
+        geometry, built = self.cache.get(key, lambda: core.Mesh(verts, tris, normals, mats, threads=self.threads))
+        if built or key not in self.cache.counted:
+            self.triangles += len(geometry)
+            self.cache.counted.add(key)
+        return geometry
+
+    def geometry(self, obj):
+        """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""
+        data = obj.data
+        pointer = data.as_pointer() if data is not None else None
+        if pointer is not None and pointer in self.by_pointer:
+            return self.by_pointer[pointer]
+        result = (None, None)
+        if obj.type == "POINTCLOUD":
+            n = len(data.points)
+            if n and NORMAL in data.attributes:
+                result = (self.cloud(obj, data.attributes, n), "cloud")
+            elif n:
+                self.report.once(f"point cloud '{obj.name}' has no splat normals ('{NORMAL}'); not rendered")
+        elif obj.type == "MESH" and NORMAL in data.attributes and len(data.polygons) == 0 and len(data.vertices):
+            # A splat cloud whose Mesh-to-Points modifier (or its node group) was removed:
+            # still a cloud, rendered from its vertices, and the user is told.
+            self.report.once(f"object '{obj.name}' carries splats but no longer evaluates to a point cloud (its "
+                             "'Splat Points' modifier is missing or changed); rendering its vertices as splats")
+            result = (self.cloud(obj, data.attributes, len(data.vertices)), "cloud")
+        elif obj.type in _MESH_LIKE:
+            result = (self.mesh(obj), "mesh")
+        if pointer is not None:
+            self.by_pointer[pointer] = result
+        return result
+
+
+def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_factor: float = 1.0,
+                 threads: int = 0, report: shading.Report | None = None) -> ExportedScene:
+    """The depsgraph's view layer as a core.RenderScene in the local frame at `origin`."""
+    report = report if report is not None else shading.Report()
+    origin = np.asarray(origin, np.float64)
+    frame = _Frame(geometry_cache, radius_factor, threads, report)
+    view_layer = depsgraph.view_layer
+    instances, lights = [], []
+    counts = {"cloud": 0, "mesh": 0}
     for inst in depsgraph.object_instances:
         obj = inst.object
-        if obj.type != "POINTCLOUD":
+        matrix = np.array(inst.matrix_world, dtype=np.float64)
+        matrix[:3, 3] -= origin
+        if obj.type == "LIGHT":
+            light = export_shading.light_of(obj, matrix, report)
+            if light is not None:
+                lights.append(light)
             continue
-        attrs = obj.data.attributes
-        n = len(obj.data.points)
-        if n == 0:
+        if obj.type in _NOTHING_TO_RENDER:
             continue
-        if NORMAL not in attrs:
-            skipped.append(obj.name)
+        if obj.type not in _MESH_LIKE and obj.type != "POINTCLOUD":
+            report.once(f"object '{obj.name}' ({obj.type.lower()}) is not rendered: Splat Tracer renders point "
+                        "clouds, meshes and lamps")
             continue
-        pos = _read(attrs["position"], "vector", 3, n).astype(np.float64)
-        nrm = _read(attrs[NORMAL], "vector", 3, n)
-        rad = _read(attrs[RADIUS] if RADIUS in attrs else attrs["radius"], "value", 1, n)
-        col = _read(attrs[COLOUR], "color", 4, n)[:, :3] if COLOUR in attrs else np.tile(base_colour(obj), (n, 1))
-        _check_cloud(obj.name, pos, nrm, rad)
-        closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
-        clouds.append((np.array(inst.matrix_world, dtype=np.float64), pos, nrm, rad, col, closed))
+        geometry, kind = frame.geometry(obj)
+        if geometry is None:
+            continue
+        parent = inst.parent if inst.is_instance else None
+        vis = export_shading.object_visibility(obj, view_layer, parent)
+        materials = _materials(obj, frame.materials, report)
+        if kind == "cloud" and all(m is None for m in _slot_materials(obj)) and geometry_has_colours(obj):
+            # A cloud without any material (imported before clouds got one): its own colours.
+            materials = (shading.Material(use_point_colour=True),)
+        for m in materials:
+            if m.use_point_alpha:
+                report.once(f"object '{obj.name}': the points' own alpha is not rendered yet; opaque")
+        instances.append(core.Instance(
+            geometry, matrix, materials,
+            visibility=frozenset(k for k in core.RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
+            pass_index=_source(obj).pass_index))
+        counts[kind] += 1
+    render_scene = core.RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
+                                    threads=threads)
+    emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
+    return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["mesh"], frame.splats,
+                         frame.triangles, len(lights), emission, report)
 
-    world_pos, normals, radii, colours, closed_flags = [], [], [], [], []
-    for m, pos, nrm, rad, col, closed in clouds:
-        lin = m[:3, :3]
-        world_pos.append(pos @ lin.T + m[:3, 3])
-        # Normals transform by the inverse transpose; discs scale by the cube root of the
-        # volume scale (exact for uniform scale, a mean for a non-uniform one).
-        nrm_w = nrm.astype(np.float64) @ np.linalg.inv(lin)
-        normals.append(nrm_w / np.linalg.norm(nrm_w, axis=1, keepdims=True))
-        radii.append(rad * abs(np.linalg.det(lin)) ** (1.0 / 3.0) * radius_factor)
-        colours.append(col)
-        closed_flags.append(np.full(len(pos), closed))
-    if world_pos:
-        origin, local = core.local_frame(np.concatenate(world_pos))
-        arrays = (local, np.concatenate(normals), np.concatenate(radii), np.concatenate(colours),
-                  np.concatenate(closed_flags))
-    else:
-        origin = np.zeros(3)
-        arrays = (np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), False)
-    return ExportedScene(core.Scene(*arrays, threads=threads), origin, len(clouds), skipped)
+
+def geometry_has_colours(obj) -> bool:
+    data = obj.data
+    return data is not None and hasattr(data, "attributes") and COLOUR in data.attributes
 
 
 def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> core.Camera:
@@ -108,7 +297,20 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
         raise RuntimeError(f"the active camera '{cam.name}' is not a camera object")
     if cam.data.type == "PANO":
         raise RuntimeError("panoramic cameras are not supported; use perspective or orthographic")
+    if not cam.data.clip_start < cam.data.clip_end:
+        raise RuntimeError(f"camera '{cam.name}': Clip Start ({cam.data.clip_start:g}) must be less than Clip End "
+                           f"({cam.data.clip_end:g})")
     r = scene.render
     projection = cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=r.pixel_aspect_x,
                                         scale_y=r.pixel_aspect_y)
     return core.Camera.from_view_projection(projection, cam.matrix_world.normalized(), origin)
+
+
+def camera_origin(depsgraph: bpy.types.Depsgraph) -> np.ndarray:
+    """The local frame's origin: the camera position rounded to float32 (so that it can be
+    stored and subtracted exactly), or the world origin without a camera."""
+    cam = depsgraph.scene.camera
+    if cam is None:
+        return np.zeros(3)
+    p = np.array(cam.evaluated_get(depsgraph).matrix_world.translation, dtype=np.float64)
+    return p.astype(np.float32).astype(np.float64)

@@ -111,6 +111,15 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
     )
 
+    lighting: bpy.props.EnumProperty(
+        name="Lighting",
+        items=(("SCENE", "Scene", "The scene's lamps, materials and world, with shadows, reflections and "
+                                  "refractions (a scene with no light at all falls back to the headlight)"),
+               ("HEADLIGHT", "Headlight", "Preview: each surface's base colour lit from the eye, no lamps and no "
+                                          "secondary rays; shows the geometry the visibility rules produce")),
+        default="SCENE",
+        description="What lights the render",
+    )
     samples: bpy.props.IntProperty(
         name="Samples",
         description="Camera rays per pixel: anti-aliasing, and every soft shadow, glossy reflection and diffuse "
@@ -133,6 +142,16 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel)
 
 
+class SplatTracerViewLayerSettings(bpy.types.PropertyGroup):
+    __slots__ = ()
+
+    use_pass_splat_count: bpy.props.BoolProperty(
+        name="Splat Count", default=False,
+        description="Debug pass: how many splats formed the surface point seen at each pixel's centre "
+                    "(0 on the background and on meshes)",
+    )
+
+
 class SplatTracerObjectSettings(bpy.types.PropertyGroup):
     __slots__ = ()
 
@@ -143,18 +162,20 @@ class SplatTracerObjectSettings(bpy.types.PropertyGroup):
     )
 
 
-classes = (SplatTracerSceneSettings, SplatTracerObjectSettings)
+classes = (SplatTracerSceneSettings, SplatTracerViewLayerSettings, SplatTracerObjectSettings)
 
 
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     bpy.types.Scene.splat_tracer = bpy.props.PointerProperty(type=SplatTracerSceneSettings)
+    bpy.types.ViewLayer.splat_tracer = bpy.props.PointerProperty(type=SplatTracerViewLayerSettings)
     bpy.types.Object.splat_tracer = bpy.props.PointerProperty(type=SplatTracerObjectSettings)
 
 
 def unregister():
     del bpy.types.Object.splat_tracer
+    del bpy.types.ViewLayer.splat_tracer
     del bpy.types.Scene.splat_tracer
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

@@ -180,6 +180,8 @@ class RenderSettings:
     max_bounces, diffuse_bounces, glossy_bounces, transmission_bounces,
     transparent_bounces: path depth limits, as in Cycles' Light Paths.
     seed: varies the noise pattern (Blender's seed).
+    headlight: preview shading instead of the scene's light: base colour x |cos| of the
+        view ray and the normal, no lamps, no secondary rays.
     """
 
     samples: int = 16
@@ -192,6 +194,7 @@ class RenderSettings:
     transmission_bounces: int = 12
     transparent_bounces: int = 8
     seed: int = 0
+    headlight: bool = False
 
     def __post_init__(self):
         if self.pixel_filter not in PIXEL_FILTERS:
@@ -210,7 +213,7 @@ class RenderSettings:
     def pack(self) -> tuple:
         return (self.samples, PIXEL_FILTERS.index(self.pixel_filter), float(self.filter_width), self.shadow_samples,
                 self.max_bounces, self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces,
-                self.transparent_bounces, self.seed & 0x7FFFFFFF)
+                self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight))
 
 
 # Passes the core can write, by the name Blender shows, with their channel count.

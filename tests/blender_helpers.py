@@ -45,3 +45,14 @@ def render_to_exr(bpy, scene, path: Path, width=320, height=240, percentage=100,
         out["depth"] = channels[f"{prefix}Depth.Z"].pixels
         out["normal"] = stack("Normal", "XYZ")
     return out
+
+
+def extension_module(name: str):
+    """A module of the enabled extension (e.g. 'session'), as Blender loaded it: the
+    extension's package is bl_ext.<repo>.<id>, not the source tree's `splat_tracer`."""
+    import sys
+
+    for mod_name, module in sys.modules.items():
+        if mod_name.startswith("bl_ext.") and mod_name.endswith(f".splat_tracer.{name}"):
+            return module
+    raise LookupError(f"the extension's module '{name}' is not loaded")

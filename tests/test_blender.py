@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from blender_helpers import add_camera, render_to_exr
+from blender_helpers import add_camera, extension_module, render_to_exr
 from geometry import angle_deg, blender_camera_rays, fibonacci_sphere, sphere_truth
 from splat_tracer import ply
 
@@ -247,14 +247,20 @@ def test_resolution_percentage_and_border(blender, empty_scene, sphere_ply, tmp_
 
 
 def test_background_film_and_base_colour(blender, empty_scene, sphere_ply, tmp_path):
+    """The world's Background node is the background (Blender 5 worlds always use nodes; the
+    old World.color no longer counts), and the material's Base Color is the surface colour
+    (shown here with the headlight: base colour x |cos|)."""
     bpy = blender
     scene = empty_scene
     obj = import_sphere(bpy, sphere_ply)
-    obj.color = (1.0, 0.5, 0.25, 1.0)
+    material = bpy.data.materials.new("Orange")
+    material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (1.0, 0.5, 0.25, 1.0)
+    obj.data.materials.append(material)
     add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
     scene.world = bpy.data.worlds.new("World")
-    scene.world.color = (0.1, 0.2, 0.3)
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.1, 0.2, 0.3, 1.0)
     scene.render.film_transparent = False
+    scene.splat_tracer.lighting = "HEADLIGHT"
     out = render_to_exr(bpy, scene, tmp_path / "opaque.exr", passes=False)
     bg = out["rgba"][0, 0]
     np.testing.assert_allclose(bg, [0.1, 0.2, 0.3, 1.0], rtol=1e-6)
@@ -276,17 +282,42 @@ def test_hidden_clouds_are_not_rendered_and_skipped_clouds_warn(blender, empty_s
     assert np.all(out["depth"] == pytest.approx(1e10))
 
 
-def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_ply, tmp_path):
+def test_bad_points_are_left_out_and_reported_not_fatal(blender, empty_scene, sphere_ply, tmp_path):
+    """A point with a negative radius or a zero normal (a vertex added in Edit Mode) is left
+    out and counted in the render report; the rest of the cloud renders."""
+    session = extension_module("session")
     bpy = blender
     scene = empty_scene
     obj = import_sphere(bpy, sphere_ply)
     add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
     obj.data.attributes["splat_radius"].data[7].value = -1.0
-    with pytest.raises(RuntimeError, match=r"Splat Tracer: point cloud 'sphere': point 7 has a radius"):
-        bpy.ops.render.render()
-    obj.data.attributes["splat_radius"].data[7].value = 0.03
-    scene.camera.data.type = "PANO"
+    obj.data.attributes["splat_normal"].data[9].vector = (0.0, 0.0, 0.0)
+    out = render_to_exr(bpy, scene, tmp_path / "bad_points.exr", 160, 120)
+    assert (out["depth"] < 1e9).sum() > 2000
+    lines = session.HISTORY[-1]["report"]
+    assert any("point cloud 'sphere': 1 points have a radius that is not a positive number (first: point 7)" in line
+               for line in lines), lines
+    assert any("1 points have a zero or non-finite normal (first: point 9)" in line for line in lines), lines
+
+
+def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_ply, tmp_path):
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+    cam = add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    cam.data.type = "PANO"
     with pytest.raises(RuntimeError, match="panoramic cameras are not supported"):
+        bpy.ops.render.render()
+    cam.data.type = "PERSP"
+    cam.data.clip_start, cam.data.clip_end = 50.0, 10.0
+    with pytest.raises(RuntimeError, match="Clip Start .50. must be less than Clip End .10."):
+        bpy.ops.render.render()
+    cam.data.clip_start, cam.data.clip_end = 0.1, 100.0
+    attrs = obj.data.attributes
+    attrs.remove(attrs["splat_radius"])
+    attrs.new("splat_radius", "INT", "POINT")
+    with pytest.raises(RuntimeError, match="point cloud 'sphere': attribute 'splat_radius' must be FLOAT on points"):
         bpy.ops.render.render()
 
 

@@ -202,6 +202,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
     }
     Vec3 L = mat.emission;  // emission is two-sided, like Cycles' Emission shader
+    if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
     // Where rays leave this point from: the splats that formed it are excluded (the paper's
     // wrong-reflection rule), and a triangle's point is moved off the surface on the side

@@ -23,6 +23,9 @@ struct IntegratorSettings {
     Method method;
     Vec3 world;  // background radiance
     bool film_transparent = false;
+    // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
+    // eye), no lamps, no secondary rays. What a scene without any light source renders with.
+    bool headlight = false;
     int tile_size = 32;
     float background_depth = 1e10f;  // what Cycles writes in Z where nothing is hit
 };

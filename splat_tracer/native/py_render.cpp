@@ -223,11 +223,13 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     IntegratorSettings cfg;
     unsigned int seed = 0;
-    if (!PyArg_ParseTuple(osettings, "iifiiiiiiI;settings must be RenderSettings.pack()", &cfg.samples,
+    int headlight = 0;
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIp;settings must be RenderSettings.pack()", &cfg.samples,
                           &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
                           &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
-                          &cfg.transparent_bounces, &seed))
+                          &cfg.transparent_bounces, &seed, &headlight))
         return nullptr;
+    cfg.headlight = headlight != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
         cfg.filter_type < 0 || cfg.filter_type > 2 || !(cfg.filter_width >= 0.01f && cfg.filter_width <= 10.f))
         return PyErr_Format(PyExc_ValueError, "settings out of range (see shading.RenderSettings)");

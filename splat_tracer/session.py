@@ -1,0 +1,147 @@
+"""The render session: what survives from one frame to the next, and the frame render that F12,
+`blender -b -a` and the A/B compare operator share.
+
+Geometry (each cloud's and mesh's BVH) is kept in a cache keyed by its content, so a frame
+in which only the camera, lamps, materials or transforms changed builds no acceleration
+structure: only the small top-level tree over the instances. Like Cycles' Persistent Data,
+the cache is kept after a render only when the scene asks for it (Render > Performance >
+Persistent Data) or during an animation render; otherwise it is freed at once.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from . import core, export, export_shading, shading
+
+
+class GeometryCache:
+    """Built geometry by content key. `get` returns (geometry, built_now)."""
+
+    def __init__(self):
+        self.entries: dict = {}
+        self.used: set = set()
+        self.counted: set = set()  # keys whose size was counted in this frame's totals
+        self.built = self.reused = 0
+        self.build_seconds = 0.0
+
+    def begin_frame(self) -> None:
+        self.used, self.counted = set(), set()
+        self.built = self.reused = 0
+        self.build_seconds = 0.0
+
+    def get(self, key, build: Callable):
+        if key in self.entries:
+            if key not in self.used:
+                self.reused += 1
+            self.used.add(key)
+            return self.entries[key], False
+        t0 = time.perf_counter()
+        geometry = build()
+        self.build_seconds += time.perf_counter() - t0
+        self.entries[key] = geometry
+        self.used.add(key)
+        self.built += 1
+        return geometry, True
+
+    def end_frame(self, keep: bool) -> None:
+        """Drops what this frame did not use (an object deleted or changed), or everything
+        when the session is not to be kept."""
+        if not keep:
+            self.entries.clear()
+        else:
+            self.entries = {k: v for k, v in self.entries.items() if k in self.used}
+
+
+CACHE = GeometryCache()
+HISTORY: list = []  # stats of the frames rendered in this Blender session, newest last (tests read it)
+_HISTORY_LIMIT = 100
+
+
+@dataclass
+class Frame:
+    passes: dict            # pass name -> (h, w[, c]) float32, top row first
+    completed: bool
+    window: tuple           # (x0, y0 from the top, w, h) within the width x height frame
+    width: int
+    height: int
+    stats: dict
+    report: shading.Report = field(default_factory=shading.Report)
+
+
+def image_size(render) -> tuple[int, int]:
+    """Output size in pixels after the resolution percentage, as Blender computes it."""
+    scale = render.resolution_percentage / 100.0
+    return max(1, int(render.resolution_x * scale)), max(1, int(render.resolution_y * scale))
+
+
+def border_window(render, width: int, height: int) -> tuple[int, int, int, int]:
+    """(x0, y0 from the top, w, h) of the rendered region: the border when one is set."""
+    if not render.use_border:
+        return 0, 0, width, height
+    # Blender rounds the border edges to the nearest pixel (round_fl_to_int).
+    x0, x1 = (int(np.floor(v * width + 0.5)) for v in (render.border_min_x, render.border_max_x))
+    yb0, yb1 = (int(np.floor(v * height + 0.5)) for v in (render.border_min_y, render.border_max_y))
+    x1, yb1 = max(x1, x0 + 1), max(yb1, yb0 + 1)
+    return x0, height - yb1, x1 - x0, yb1 - yb0
+
+
+def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=None, stats=None,
+                 use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
+                 settings: Optional[shading.RenderSettings] = None) -> Frame:
+    """Exports the depsgraph's view layer and renders the frame (or its border) with
+    `method`. headlight: None follows the scene's Lighting setting (and falls back to the
+    headlight, said in the report, when nothing in the scene gives light); True/False
+    force it. keep: keep the geometry for the next frame."""
+    scene = depsgraph.scene
+    props = scene.splat_tracer
+    width, height = image_size(scene.render)
+    x0, y0, w, h = border_window(scene.render, width, height) if use_border else (0, 0, width, height)
+    threads = scene.render.threads
+    say = stats or (lambda s: None)
+    report = shading.Report()
+
+    t0 = time.perf_counter()
+    say("Splat Tracer | exporting")
+    CACHE.begin_frame()
+    try:
+        origin = export.camera_origin(depsgraph)
+        camera = export.export_camera(depsgraph, width, height, origin)
+        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report)
+    except BaseException:
+        CACHE.end_frame(keep=False)
+        raise
+    t_export = time.perf_counter() - t0
+    settings = settings or export_shading.render_settings_of(scene)
+    world = exported.render_scene.world
+    lit = exported.lights > 0 or exported.emission or max(world.radiance()) > 0
+    if headlight is None:
+        headlight = props.lighting == "HEADLIGHT"
+        if not headlight and not lit:
+            headlight = True
+            report.once("the scene has no lamp, no emission and a black world: rendered with a headlight "
+                        "(Splat Tracer > Lighting)")
+    if headlight:
+        settings = shading.RenderSettings(**{**settings.__dict__, "headlight": True})
+    summary = (f"Splat Tracer | {exported.instances} instances of {len(CACHE.used)} geometries "
+               f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
+    say(summary + " | rendering")
+    t1 = time.perf_counter()
+    result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
+                                          threads=threads, progress=progress)
+    t_render = time.perf_counter() - t1
+    frame_stats = dict(instances=exported.instances, geometries=len(CACHE.used), built=CACHE.built,
+                       reused=CACHE.reused, build_seconds=CACHE.build_seconds, export_seconds=t_export,
+                       render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
+                       lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
+                       view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
+                       **result.counters)
+    CACHE.end_frame(keep)
+    HISTORY.append(frame_stats)
+    del HISTORY[:-_HISTORY_LIMIT]
+    say(f"{summary} | built {CACHE.built}, reused {CACHE.reused} ({CACHE.build_seconds:.2f} s) | "
+        f"export {t_export:.2f} s, render {t_render:.2f} s")
+    return Frame(result.passes, result.completed, (x0, y0, w, h), width, height, frame_stats, report)
