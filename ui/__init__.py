@@ -22,12 +22,11 @@ class SPLAT_TRACER_PT_render(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         settings = context.scene.splat_tracer
+        layout.prop(settings, "lighting")
         layout.prop(settings, "method")
         layout.prop(settings, "epsilon")
         layout.prop(settings, "radius_factor")
         layout.prop(context.scene.render, "film_transparent")
-        if context.scene.world is not None:
-            layout.prop(context.scene.world, "color", text="Background")
         layout.operator("splat_tracer.compare", icon="IMAGE_REFERENCE")
 
 
@@ -144,13 +143,113 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         view_layer = context.view_layer
-        layout.prop(view_layer, "use_pass_z", text="Depth")
-        layout.prop(view_layer, "use_pass_normal", text="Normal")
+        col = layout.column(heading="Data")
+        col.prop(view_layer, "use_pass_z", text="Depth")
+        col.prop(view_layer, "use_pass_normal", text="Normal")
+        col.prop(view_layer, "use_pass_object_index", text="Object Index")
+        col = layout.column(heading="Light")
+        col.prop(view_layer, "use_pass_diffuse_color", text="Diffuse Color")
+        col.prop(view_layer, "use_pass_emit", text="Emission")
+        col.prop(view_layer, "use_pass_shadow", text="Shadow")
+        col = layout.column(heading="Debug")
+        col.prop(view_layer.splat_tracer, "use_pass_splat_count")
+
+
+class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
+    """Ray visibility and holdout, as Cycles reads them (its own panel hides for other engines)."""
+    bl_label = "Ray Visibility"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return super().poll(context) and obj is not None and obj.type not in {"CAMERA", "LIGHT", "EMPTY"}
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        obj = context.object
+        col = layout.column(heading="Ray Visibility")
+        for prop, text in (("visible_camera", "Camera"), ("visible_diffuse", "Diffuse"), ("visible_glossy", "Glossy"),
+                           ("visible_transmission", "Transmission"), ("visible_shadow", "Shadow")):
+            col.prop(obj, prop, text=text)
+        layout.prop(obj, "is_holdout")
+        layout.prop(obj, "pass_index")
+
+
+class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
+    """The lamp settings the engine reads (Cycles' light panel hides for other engines)."""
+    bl_label = "Light"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.light is not None
+
+    def draw(self, context):
+        layout = self.layout
+        light = context.light
+        layout.row().prop(light, "type", expand=True)
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(light, "color")
+        col.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
+        if light.type in {"POINT", "SPOT"}:
+            col.prop(light, "shadow_soft_size", text="Radius")
+            col.prop(light, "use_soft_falloff")
+        elif light.type == "SUN":
+            col.prop(light, "angle")
+        elif light.type == "AREA":
+            col.prop(light, "shape")
+            if light.shape in {"SQUARE", "DISK"}:
+                col.prop(light, "size")
+            else:
+                col.prop(light, "size", text="Size X")
+                col.prop(light, "size_y", text="Y")
+        if light.type == "SPOT":
+            col.prop(light, "spot_size", text="Spot Size")
+            col.prop(light, "spot_blend", text="Blend")
+        col.prop(light, "use_shadow", text="Cast Shadow")
+
+
+def _draw_surface(layout, idblock, output_type: str, input_name: str) -> None:
+    """The node set-up the engine reads, drawn as Cycles' Surface panels draw it."""
+    tree = idblock.node_tree
+    output = next((n for n in tree.nodes if n.type == output_type and n.is_active_output), None) if tree else None
+    if output is None:
+        layout.label(text="No output node")
+        return
+    layout.template_node_view(tree, output, output.inputs[input_name])
+
+
+class SPLAT_TRACER_PT_material(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Surface"
+    bl_context = "material"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.material is not None
+
+    def draw(self, context):
+        _draw_surface(self.layout, context.material, "OUTPUT_MATERIAL", "Surface")
+
+
+class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Surface"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None
+
+    def draw(self, context):
+        _draw_surface(self.layout, context.world, "OUTPUT_WORLD", "Surface")
 
 
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
-           SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_passes)
+           SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
 # show for; the ones that show for the built-in BLENDER_RENDER also make sense here.
