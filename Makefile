@@ -34,6 +34,7 @@ test: build
 
 docs: build
 	$(VPY) tools/switch_images.py --output-dir docs/switches
+	$(VPY) tools/demo.py --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 
 dist: build
 	$(VPY) tools/build_dist.py --output-dir dist
@@ -41,10 +42,12 @@ dist: build
 bench-quick: build
 	$(VPY) benchmarks/trace_throughput.py --quick
 	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
+	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
 
 bench: build
 	$(VPY) benchmarks/trace_throughput.py
 	$(VPY) benchmarks/accuracy.py --output benchmarks/results
+	$(VPY) benchmarks/frame_time.py --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

@@ -68,6 +68,7 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
         scene.cycles.filter_width = 0.01  # sample the pixel centre, like the truth and our engine
     else:
         scene.splat_tracer.method = method
+        scene.splat_tracer.samples = 1  # the pixel centre, like the truth and the Cycles row
     t0 = time.perf_counter()
     out = render_to_exr(bpy, scene, workdir / f"{engine.lower()}.exr", width, height)
     seconds = time.perf_counter() - t0
