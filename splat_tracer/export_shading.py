@@ -407,6 +407,9 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
         fields["angle"] = float(light.angle)
     elif light.type == "AREA":
         fields.update(_area_fields(light, m, say))
+    fields.update(visible_camera=bool(getattr(obj_eval, "visible_camera", True)),
+                  visible_glossy=bool(getattr(obj_eval, "visible_glossy", True)),
+                  visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)))
     return shading.Light(**fields)
 
 

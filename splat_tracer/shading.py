@@ -85,7 +85,8 @@ LIGHT_FIELDS = (
     "shape",                         # area: AREA_SHAPES index
     "spot_half_angle", "spot_blend", # spot: half the cone angle (radians), blend 0..1
     "cast_shadow",                   # 0 or 1
-    "soft_falloff",                  # point/spot/area with a size: Blender 4's Soft Falloff
+    "soft_falloff",                  # point/spot with a radius: Blender 4's Soft Falloff
+    "visibility",                    # bits: 1 seen by camera rays, 4 by mirror rays, 8 through glass
 )
 
 
@@ -118,6 +119,11 @@ class Light:
     spot_blend: float = 0.15
     cast_shadow: bool = True
     soft_falloff: bool = True
+    # Whether the lamp itself is seen (a sun disc, a sphere, an area's shape) by camera rays,
+    # in mirrors and through clear glass (Object > Visibility > Ray Visibility).
+    visible_camera: bool = True
+    visible_glossy: bool = True
+    visible_transmission: bool = True
 
     def __post_init__(self):
         if self.type not in LIGHT_TYPES:
@@ -147,7 +153,9 @@ class Light:
         return np.array([LIGHT_TYPES.index(self.type), *rgb, *self.position, *d, *u, radius, self.size,
                          self.size if square else self.size_y, AREA_SHAPES.index(self.shape),
                          min(self.spot_size, math.pi) / 2, min(self.spot_blend, 1.0), float(self.cast_shadow),
-                         float(self.soft_falloff)], np.float32)
+                         float(self.soft_falloff),
+                         float(1 * self.visible_camera + 4 * self.visible_glossy + 8 * self.visible_transmission)],
+                        np.float32)
 
 
 # --------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ struct Integrator::PathState {
     bool camera = true;
     Origin from;
     float throughput = 1.f;
+    bool specular = true;  // camera, mirror or clear-glass ray: it may see the lamps themselves
 };
 
 struct Integrator::Primary {
@@ -159,14 +160,18 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     Vec3 base;
     float opacity = 1.f;
     // Surfaces with alpha < 1 are passed through stochastically (transparent bounces).
+    Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
     for (;;) {
         sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
+        if (st.specular && !cfg.headlight)
+            for (const Light &light : scene_.lights())
+                if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
         if (!sp.valid()) {
             if (st.camera && cfg.film_transparent) {
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
-            return cfg.world;
+            return cfg.world + lamps;
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -201,7 +206,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
     }
-    Vec3 L = mat.emission;  // emission is two-sided, like Cycles' Emission shader
+    Vec3 L = mat.emission + lamps;  // emission is two-sided, like Cycles' Emission shader
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
     // Where rays leave this point from: the splats that formed it are excluded (the paper's
@@ -234,7 +239,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
 
     // Continues the path with `weight`, by Russian roulette when its throughput is small.
     auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
-                      uint64_t Tally::*count) {
+                      uint64_t Tally::*count, bool specular) {
         PathState next = st;
         next.camera = false;
         next.kind = kind;
@@ -243,6 +248,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         next.from = here;
         next.from.inside = inside;
         next.throughput = st.throughput * luminance(weight);
+        // Lamps are seen only along a chain of mirror/glass rays from the camera: after a
+        // diffuse or rough bounce, a lamp seen through a mirror is a caustic, which light
+        // sampling cannot find and which would only add fireflies (not traced, like the
+        // glass's shadow).
+        next.specular = st.specular && specular;
         if (next.throughput < kRouletteThroughput) {
             const float survive = next.throughput / kRouletteThroughput;
             if (!(rng.next() < survive)) return;
@@ -262,11 +272,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         const Vec3 spec = lobes.specular(cos_o);
         if (luminance(spec) > 0.f && st.glossy < cfg.glossy_bounces)
             follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside,
-                   &Tally::reflection);
+                   &Tally::reflection, true);
         Vec3 wt;
         const Vec3 trans = lobes.transmission(cos_o);
         if (luminance(trans) > 0.f && st.transmission < cfg.transmission_bounces && refract(wo, n, lobes.eta, &wt))
-            follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction);
+            follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true);
     }
 
     // One sampled continuation among the lobes that are not traced exactly.
@@ -282,7 +292,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             const Vec3 wi = sample_cosine(n, u1, u2);
             if (dot(wi, ng) > 0.f)
                 follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse,
-                       st.from.inside, &Tally::diffuse);
+                       st.from.inside, &Tally::diffuse, false);
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             const Vec3 wi = reflect(wo, m);
@@ -290,7 +300,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                 // VNDF sampling: the estimator is F(wo.m) G1(wi).
                 const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
                 follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
-                       &Tally::reflection);
+                       &Tally::reflection, false);
             }
         } else {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
@@ -298,7 +308,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             if (refract(wo, m, lobes.eta, &wt) && dot(wt, n) < 0.f) {
                 const Vec3 w = lobes.transmission(std::fmax(dot(wo, m), 0.f)) * ggx_g1(-dot(wt, n), lobes.alpha);
                 follow(wt, w * (w_sum / w_trans), kVisTransmission, &PathState::transmission, inside_after,
-                       &Tally::refraction);
+                       &Tally::refraction, false);
             }
         }
     }

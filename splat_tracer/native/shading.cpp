@@ -18,6 +18,7 @@ Light Light::from_row(const float *r) {
     l.cos_half_spot = std::cos(half);
     l.spot_smooth = (1.f - l.cos_half_spot) * blend;
     l.cast_shadow = r[19] != 0.f, l.soft_falloff = r[20] != 0.f;
+    l.visibility = uint32_t(r[21]);
     return l;
 }
 
@@ -96,6 +97,47 @@ LightSample sample_light(const Light &l, Vec3 p, float u1, float u2) {
         }
     }
     return s;
+}
+
+Vec3 lamp_radiance(const Light &l, const Ray &ray, float tmax) {
+    switch (l.type) {
+        case LightType::Sun: {
+            if (!std::isinf(tmax) || !(l.radius > 0.f)) return Vec3();
+            if (dot(ray.d, l.axis * -1.f) < std::cos(l.radius)) return Vec3();
+            const float s = std::sin(l.radius);
+            return l.rgb * (1.f / (kPi * s * s));
+        }
+        case LightType::Point:
+        case LightType::Spot: {
+            if (!(l.radius > 0.f)) return Vec3();
+            const Vec3 oc = l.position - ray.o;
+            const float b = dot(oc, ray.d), c = dot(oc, oc) - l.radius * l.radius;
+            const float disc = b * b - c;
+            if (disc < 0.f) return Vec3();
+            const float t = c > 0.f ? b - std::sqrt(disc) : b + std::sqrt(disc);
+            if (!(t > ray.tmin && t < tmax)) return Vec3();
+            float mask = 1.f;
+            if (l.type == LightType::Spot) {
+                const float cs = dot(normalize(ray.o - l.position), l.axis);
+                if (cs <= l.cos_half_spot) return Vec3();
+                if (l.spot_smooth > 0.f) mask = smoothstep01((cs - l.cos_half_spot) / l.spot_smooth);
+            }
+            return l.rgb * (mask / (4.f * kPi * kPi * l.radius * l.radius));
+        }
+        case LightType::Area: {
+            const float dn = dot(ray.d, l.axis);
+            if (!(dn < 0.f)) return Vec3();  // one-sided: seen from the side it shines to
+            const float t = dot(l.position - ray.o, l.axis) / dn;
+            if (!(t > ray.tmin && t < tmax)) return Vec3();
+            const Vec3 q = ray.o + ray.d * t - l.position;
+            const float x = dot(q, l.u) / l.size_u, y = dot(q, l.v) / l.size_v;  // in -0.5..0.5 inside
+            const bool round = l.shape == AreaShape::Disk || l.shape == AreaShape::Ellipse;
+            const bool inside = round ? x * x + y * y <= 0.25f : std::fabs(x) <= 0.5f && std::fabs(y) <= 0.5f;
+            const float area = l.area();
+            return inside && area > 0.f ? l.rgb * (1.f / (kPi * area)) : Vec3();
+        }
+    }
+    return Vec3();
 }
 
 float fresnel_dielectric(float cos_i, float eta) {

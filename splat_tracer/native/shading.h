@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "sampling.h"
 #include "ray.h"
@@ -12,7 +13,7 @@
 namespace splat {
 
 constexpr int kMaterialFields = 14;
-constexpr int kLightFields = 21;
+constexpr int kLightFields = 22;
 
 // Below this roughness a lobe is a perfect mirror or clear glass: traced by recursive
 // reflection/refraction rays rather than sampled (GGX with alpha = roughness^2 < 1e-4 is
@@ -50,6 +51,7 @@ struct Light {
     AreaShape shape = AreaShape::Square;
     float cos_half_spot = -1, spot_smooth = 0;
     bool cast_shadow = true, soft_falloff = true;
+    uint32_t visibility = 13;  // ray kinds that see the lamp itself (render_scene.h's kVis* bits)
 
     static Light from_row(const float *r);
     float area() const {  // of an area lamp (Cycles' definition per shape)
@@ -72,6 +74,12 @@ struct LightSample {
 // 1 / d^2; spot: times smoothstep((cos - cos_half) / ((1 - cos_half) blend)); sun: S W/m^2
 // whatever its angle; area: one-sided radiance P / (pi A).
 LightSample sample_light(const Light &light, Vec3 p, float u1, float u2);
+
+// The radiance of the lamp itself where the ray meets it before `tmax` (a sun: only rays that
+// leave the scene), 0 elsewhere. As Cycles shows lamps (measured): an area lamp's front
+// P / (pi A), a point or spot sphere P / (4 pi^2 r^2) (a spot's masked by its cone towards
+// the viewer), a sun's disc S / (pi sin^2(angle / 2)). Lamps without a size are not seen.
+Vec3 lamp_radiance(const Light &light, const Ray &ray, float tmax);
 
 // --------------------------------------------------------------------------------------
 // BSDF: Lambert diffuse under a GGX specular layer (Fresnel-Schlick from the IOR scaled by
