@@ -480,7 +480,8 @@ def render_settings_of(scene) -> shading.RenderSettings:
     settings = scene.splat_tracer
     width = min(max(float(scene.render.filter_size), _FILTER_WIDTH[0]), _FILTER_WIDTH[1])
     fields = dict(samples=int(settings.samples), shadow_samples=int(settings.shadow_samples), filter_width=width,
-                  pixel_filter="BLACKMAN_HARRIS")
+                  pixel_filter="BLACKMAN_HARRIS", sky_ao=settings.sky_light == "AO",
+                  ao_samples=int(settings.ao_samples))
     cycles = getattr(scene, "cycles", None)
     if cycles is not None:
         fields["pixel_filter"] = cycles.pixel_filter_type

@@ -120,6 +120,19 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         default="SCENE",
         description="What lights the render",
     )
+    sky_light: bpy.props.EnumProperty(
+        name="Sky Light",
+        items=(("BOUNCE", "Diffuse Bounces", "The world and every lit surface light the scene through diffuse "
+                                             "bounce rays (Light Paths > Diffuse), as in Cycles"),
+               ("AO", "Ambient Occlusion", "The world lights each diffuse point through occlusion rays only: "
+                                          "cheaper, but light bounced off other surfaces is left out")),
+        default="BOUNCE",
+        description="How the world's light reaches diffuse surfaces",
+    )
+    ao_samples: bpy.props.IntProperty(
+        name="AO Samples", default=1, min=1, soft_max=16, max=1024,
+        description="Occlusion rays per diffuse point and camera sample, with Ambient Occlusion sky light",
+    )
     samples: bpy.props.IntProperty(
         name="Samples",
         description="Camera rays per pixel: anti-aliasing, and every soft shadow, glossy reflection and diffuse "

@@ -190,6 +190,9 @@ class RenderSettings:
     seed: varies the noise pattern (Blender's seed).
     headlight: preview shading instead of the scene's light: base colour x |cos| of the
         view ray and the normal, no lamps, no secondary rays.
+    sky_ao: light from the world by ambient occlusion instead of diffuse bounces: at each
+        diffuse point `ao_samples` occlusion rays, the world's radiance where they escape
+        (cheaper; ignores light bounced off other surfaces).
     """
 
     samples: int = 16
@@ -203,12 +206,16 @@ class RenderSettings:
     transparent_bounces: int = 8
     seed: int = 0
     headlight: bool = False
+    sky_ao: bool = False
+    ao_samples: int = 1
 
     def __post_init__(self):
         if self.pixel_filter not in PIXEL_FILTERS:
             raise ValueError(f"pixel_filter must be one of {PIXEL_FILTERS}, got {self.pixel_filter!r}")
         if not 1 <= self.samples <= 1 << 16:
             raise ValueError(f"samples must be in 1..65536, got {self.samples!r}")
+        if not 1 <= self.ao_samples <= 1024:
+            raise ValueError(f"ao_samples must be in 1..1024, got {self.ao_samples!r}")
         if not 1 <= self.shadow_samples <= 1024:
             raise ValueError(f"shadow_samples must be in 1..1024, got {self.shadow_samples!r}")
         if not (math.isfinite(self.filter_width) and 0.01 <= self.filter_width <= 10):
@@ -221,7 +228,8 @@ class RenderSettings:
     def pack(self) -> tuple:
         return (self.samples, PIXEL_FILTERS.index(self.pixel_filter), float(self.filter_width), self.shadow_samples,
                 self.max_bounces, self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces,
-                self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight))
+                self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight), bool(self.sky_ao),
+                self.ao_samples)
 
 
 # Passes the core can write, by the name Blender shows, with their channel count.

@@ -65,6 +65,10 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
         col = layout.column()
         col.prop(scene.splat_tracer, "samples")
         col.prop(scene.splat_tracer, "shadow_samples")
+        col.prop(scene.splat_tracer, "sky_light")
+        sub = col.column()
+        sub.active = scene.splat_tracer.sky_light == "AO"
+        sub.prop(scene.splat_tracer, "ao_samples")
         # The filter, seed and bounces are Cycles' own settings, read when the add-on is on;
         # shown here because Cycles' panels hide for other engines.
         cycles = getattr(scene, "cycles", None)

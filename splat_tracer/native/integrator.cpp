@@ -279,8 +279,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true);
     }
 
+    // Sky light by ambient occlusion replaces the diffuse bounce.
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(cfg.world) > 0.f)
+        L = L + diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally);
+
     // One sampled continuation among the lobes that are not traced exactly.
-    const float w_diffuse = st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
+    const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
     const float w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
     const float w_trans =
         !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
@@ -362,6 +366,25 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
         }
     }
     return L;
+}
+
+// The fraction of the sky the point sees, by cosine-distributed occlusion rays: with the
+// cosine in the pdf, the diffuse integral of a uniform sky is albedo x world x that fraction.
+Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng,
+                               Tally &tally) const {
+    Vec3 open;
+    const int k = settings_.ao_samples;
+    for (int i = 0; i < k; ++i) {
+        const float u1 = rng.next(), u2 = rng.next();
+        const Vec3 wi = sample_cosine(n, u1, u2);
+        if (dot(wi, ng) <= 0.f) continue;
+        Ray r;
+        r.o = sp.p + ng * sp.offset;
+        r.d = wi;
+        ++tally.diffuse;
+        open = open + shadow_transmittance(r, from, tally);
+    }
+    return open * (1.f / float(k));
 }
 
 Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const {

@@ -26,6 +26,10 @@ struct IntegratorSettings {
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
     bool headlight = false;
+    // World light by ambient occlusion: at each diffuse point `ao_samples` cosine-distributed
+    // occlusion rays bring the world's radiance where they escape; no diffuse bounce rays.
+    bool sky_ao = false;
+    int ao_samples = 1;
     int tile_size = 32;
     float background_depth = 1e10f;  // what Cycles writes in Z where nothing is hit
 };
@@ -62,6 +66,7 @@ class Integrator {
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 wo, const Material &m, Vec3 base,
                       bool delta, Sampler &rng, Primary *primary, Tally &tally) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
+    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void shade_pixel(int col, int row, Tally &tally) const;
 
     const RenderScene &scene_;

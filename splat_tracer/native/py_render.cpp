@@ -223,13 +223,14 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     IntegratorSettings cfg;
     unsigned int seed = 0;
-    int headlight = 0;
-    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIp;settings must be RenderSettings.pack()", &cfg.samples,
+    int headlight = 0, sky_ao = 0;
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppi;settings must be RenderSettings.pack()", &cfg.samples,
                           &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
                           &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
-                          &cfg.transparent_bounces, &seed, &headlight))
+                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples))
         return nullptr;
-    cfg.headlight = headlight != 0;
+    if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
+    cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
         cfg.filter_type < 0 || cfg.filter_type > 2 || !(cfg.filter_width >= 0.01f && cfg.filter_width <= 10.f))
         return PyErr_Format(PyExc_ValueError, "settings out of range (see shading.RenderSettings)");
