@@ -389,10 +389,19 @@ class RenderScene:
 
     def __init__(self, instances: Sequence[Instance], lights: Sequence[Light] = (), world: World = World(),
                  threads: int = 0):
+        # Wrong types are refused here with a TypeError naming them, not left to fail later
+        # as an AttributeError deep in pack() (or, for the world, only at render time).
+        if not isinstance(world, World):
+            raise TypeError(f"world must be a shading.World, got {type(world).__name__}")
+        for light in lights:
+            if not isinstance(light, Light):
+                raise TypeError(f"lights must be shading.Light objects, got {type(light).__name__}")
         geometries, index_of = [], {}
         rows = []
         materials = []
         for inst in instances:
+            if not isinstance(inst, Instance):
+                raise TypeError(f"instances must be core.Instance objects, got {type(inst).__name__}")
             geo = inst.geometry
             native = geo._scene if isinstance(geo, Scene) else geo._mesh if isinstance(geo, Mesh) else None
             if native is None:
@@ -408,6 +417,9 @@ class RenderScene:
             if unknown:
                 raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")
             mats = tuple(inst.materials) or (Material(),)
+            for mat in mats:
+                if not isinstance(mat, Material):
+                    raise TypeError(f"instance materials must be shading.Material objects, got {type(mat).__name__}")
             rows.append((index_of[id(native)], m[:3].ravel(), inv[:3].ravel(), (len(materials), len(mats)),
                          sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index))
             materials.extend(mats)
@@ -435,6 +447,12 @@ class RenderScene:
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for Scene.render."""
+        for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
+                                  (method, Method, "method")):
+            if not isinstance(value, kind):
+                raise TypeError(f"{name} must be a {kind.__name__}, got {type(value).__name__}")
+        if isinstance(passes, str):
+            raise TypeError("passes must be a sequence of pass names, not one string")
         unknown = set(passes) - set(PASSES)
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")

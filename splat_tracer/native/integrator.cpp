@@ -59,6 +59,7 @@ Vec3 schlick(Vec3 f0, float c) { return f0 + (Vec3(1, 1, 1) - f0) * schlick_weig
 struct Lobes {
     float metal, glass, plastic;  // metallic, transmissive, opaque dielectric shares (sum 1)
     float f0;                     // opaque dielectric's normal-incidence reflectance
+    float spec_eta;               // the IOR whose exact Fresnel has that f0 (1: none)
     float eta;                    // n_transmitted / n_incident for the glass lobe
     float alpha;                  // GGX roughness
     bool delta;                   // mirror-smooth: specular lobes are traced, not sampled
@@ -69,17 +70,24 @@ struct Lobes {
         glass = (1.f - m.metallic) * m.transmission;
         plastic = (1.f - m.metallic) * (1.f - m.transmission);
         const float r = (m.ior - 1.f) / (m.ior + 1.f);
-        f0 = std::clamp(r * r * 2.f * m.specular_level, 0.f, 1.f);  // level 0.5: the IOR's own
+        f0 = std::clamp(r * r * 2.f * m.specular_level, 0.f, 0.9999f);  // level 0.5: the IOR's own
+        // As Cycles does, the specular level changes the layer's IOR, and its Fresnel is the
+        // exact dielectric one: level 0 gives eta 1, no reflection at any angle, so the
+        // diffuse lobe is pure Lambert. (Schlick's f0 + (1 - f0)(1 - c)^5 kept a grazing
+        // reflection and dimmed the diffuse by it even at f0 = 0.)
+        const float sf0 = std::sqrt(f0);
+        spec_eta = (1.f + sf0) / (1.f - sf0);
         eta = entering ? m.ior : 1.f / m.ior;
         alpha = ggx_alpha(m.roughness);
         delta = m.roughness < kDeltaRoughness;
     }
     // Reflectance towards the mirror direction, for a half-vector cosine c.
+    float plastic_fresnel(float c) const { return f0 > 0.f ? fresnel_dielectric(c, spec_eta) : 0.f; }
     Vec3 specular(float c) const {
-        return schlick(base, c) * metal + Vec3(1, 1, 1) * (plastic * (f0 + (1.f - f0) * schlick_weight(c)) +
+        return schlick(base, c) * metal + Vec3(1, 1, 1) * (plastic * plastic_fresnel(c) +
                                                              glass * fresnel_dielectric(c, eta));
     }
-    Vec3 diffuse(float cos_o) const { return base * (plastic * (1.f - (f0 + (1.f - f0) * schlick_weight(cos_o)))); }
+    Vec3 diffuse(float cos_o) const { return base * (plastic * (1.f - plastic_fresnel(cos_o))); }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
 };
 

@@ -382,7 +382,7 @@ PyMethodDef module_methods[] = {
     {nullptr, nullptr, 0, nullptr},
 };
 
-PyObject *scene_type = nullptr;  // the Scene type object, for as_splat_scene()
+PyObject *scene_type = nullptr;  // the last-made Scene type (as_splat_scene identifies Scenes by their deallocator)
 
 int module_exec(PyObject *module) {
     PyObject *type = PyType_FromSpec(&Scene_spec);
@@ -405,7 +405,11 @@ PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_
 }  // namespace
 
 const SplatScene *splat::py::as_splat_scene(PyObject *obj) {
-    if (!scene_type || !PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(scene_type))) return nullptr;
+    // A Scene of any instance of this module: the same binary imported under two names (the
+    // add-on as bl_ext.*.splat_tracer beside splat_tracer) runs module_exec twice, and
+    // scene_type is then the second one's type; a Scene made by the first was refused. The
+    // deallocator identifies the type and its layout whichever module made it.
+    if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Scene_dealloc)) return nullptr;
     return reinterpret_cast<SceneObject *>(obj)->scene;
 }
 

@@ -63,7 +63,10 @@ void Mesh_dealloc(PyObject *self) {
 }
 
 const TriangleMesh *as_mesh(PyObject *obj) {
-    if (!mesh_type || !PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(mesh_type))) return nullptr;
+    // Identified by its deallocator, not by mesh_type: a second import of this binary under
+    // another module name (the add-on as bl_ext.*.splat_tracer) makes a new Mesh type and
+    // overwrites mesh_type, and Meshes of the first import were refused (see as_splat_scene).
+    if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Mesh_dealloc)) return nullptr;
     return reinterpret_cast<MeshObject *>(obj)->mesh;
 }
 

@@ -86,11 +86,29 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                     const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
                     const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
                     best.ng = ng, best.ns = ns;
-                    best.p = ray.o + ray.d * best.t;
+                    // The point is the triangle's own (barycentric interpolation, then the
+                    // instance transform), not ray.o + t d: that one carries the rounding of
+                    // t and of the ray's origin -- about an ulp of the camera's distance, not
+                    // of p -- and a shadow ray from a point that fell below the surface met
+                    // the neighbouring triangle (black pixels on a UV sphere near its pole).
+                    const Vec3 po = inst.mesh->point(h);
+                    best.p = inst.to_world.point(po);
                     // Start secondary rays off the surface by the interpolation's error bound
-                    // (object space, scaled to the scene) plus the scene-frame rounding of p.
-                    const float obj_err = max_component(inst.mesh->point_error(h)) / s;
-                    best.offset = 2.f * (obj_err + max_component(vabs(best.p)) * 1.2e-7f);
+                    // carried into the scene frame, plus the transform's own rounding
+                    // (gamma(3) (|M| |po| + |translation|), per axis).
+                    const Vec3 obj_err = inst.mesh->point_error(h);
+                    const Affine &M = inst.to_world;
+                    const Vec3 abs_po = vabs(po);
+                    auto abs_row = [&](int r, Vec3 v) {
+                        return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y +
+                               std::fabs(M.m[4 * r + 2]) * v.z;
+                    };
+                    constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
+                    float err = 0.f;
+                    for (int r = 0; r < 3; ++r)
+                        err = std::fmax(err, abs_row(r, obj_err) +
+                                                 kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
+                    best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
                     const int slot = inst.mesh->material(h.tri);
                     best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
                     limit = best.t;

@@ -40,10 +40,9 @@ LightSample sample_light(const Light &l, Vec3 p, float u1, float u2) {
             const float d2 = dot(to_centre, to_centre);
             if (!(d2 > 0.f)) return s;
             Vec3 target = l.position;
+            const Vec3 w = to_centre * (1.f / std::sqrt(d2));
             if (l.radius > 0.f) {
-                // A point of the sphere's disk facing p: soft shadows; the intensity stays
-                // that of the whole lamp (Cycles' sphere light seen from outside).
-                const Vec3 w = to_centre * (1.f / std::sqrt(d2));
+                // A point of the sphere's disk facing p: soft shadows.
                 const Vec3 t = orthogonal(w), b = cross(w, t);
                 float x, y;
                 sample_disk(u1, u2, &x, &y);
@@ -54,7 +53,19 @@ LightSample sample_light(const Light &l, Vec3 p, float u1, float u2) {
             if (!(dist > 0.f)) return s;
             s.wi = to * (1.f / dist);
             s.distance = dist;
-            float falloff = 1.f / (l.soft_falloff && l.radius > 0.f ? d2 + l.radius * l.radius : d2);
+            float falloff = 1.f / d2;
+            if (l.radius > 0.f) {
+                // The disk of radius r facing p with radiance P / (4 pi^2 r^2), integrated over
+                // its area: the estimator is (P / 4 pi) cos_l / dist^2 (times the receiver's
+                // cosine, applied by the caller), whose mean on a receiver facing the lamp is
+                // exactly (P / 4 pi) / (d^2 + r^2), Soft Falloff's law. Without Soft Falloff
+                // the law is 1 / d^2: the same estimator scaled by (d^2 + r^2) / d^2.
+                // (Weighting by 1 / (d^2 + r^2) alone left the receiver's cosine towards the
+                // sampled point, not the centre, in the mean: up to r^2 / 4 d^2 too dark.)
+                const float cos_l = std::fmax(dot(s.wi, w), 0.f);
+                falloff = cos_l / (dist * dist);
+                if (!l.soft_falloff) falloff *= (d2 + l.radius * l.radius) / d2;
+            }
             if (l.type == LightType::Spot) {
                 const float c = dot(s.wi * -1.f, l.axis);
                 if (c <= l.cos_half_spot) return s;
@@ -66,9 +77,12 @@ LightSample sample_light(const Light &l, Vec3 p, float u1, float u2) {
         }
         case LightType::Sun: {
             // Any angle gives the same irradiance (measured); the angle only softens shadows.
-            s.wi = l.radius > 0.f ? sample_cone(l.axis * -1.f, std::cos(l.radius), u1, u2) : l.axis * -1.f;
+            const float cos_max = std::cos(l.radius);
+            s.wi = l.radius > 0.f ? sample_cone(l.axis * -1.f, cos_max, u1, u2) : l.axis * -1.f;
             s.distance = kInfinity;
-            s.irradiance = l.rgb;
+            // Directions uniform in the cone bring a mean receiver cosine of cos(theta) times
+            // (1 + cos_max) / 2; dividing that factor out keeps S cos(theta) for any angle.
+            s.irradiance = l.rgb * (l.radius > 0.f ? 2.f / (1.f + cos_max) : 1.f);
             s.valid = true;
             return s;
         }

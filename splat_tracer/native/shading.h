@@ -82,9 +82,9 @@ LightSample sample_light(const Light &light, Vec3 p, float u1, float u2);
 Vec3 lamp_radiance(const Light &light, const Ray &ray, float tmax);
 
 // --------------------------------------------------------------------------------------
-// BSDF: Lambert diffuse under a GGX specular layer (Fresnel-Schlick from the IOR scaled by
-// the specular level), GGX metal (Schlick with the base colour), and a dielectric
-// (exact Fresnel) for transmission.
+// BSDF: Lambert diffuse under a GGX specular layer (the exact dielectric Fresnel of an IOR
+// whose f0 is the material IOR's scaled by the specular level, as Cycles does), GGX metal
+// (Schlick with the base colour), and a dielectric (exact Fresnel) for transmission.
 
 struct ShadingFrame {
     Vec3 n;  // shading normal, on the side of wo
