@@ -100,7 +100,12 @@ def render(instances, lights=(), world=BLACK, cam=None, w=8, h=8, passes=("Combi
 
 
 def lit_plane(lights, cam, w, h, **settings) -> np.ndarray:
-    """Red channel of the Combined pass of a big Lambert plane at z = 0 under `lights`."""
+    """Red channel of the Combined pass of a big Lambert plane at z = 0 under `lights`, the
+    lamps themselves hidden from the camera (as in the Cycles measurements): a lamp's sphere
+    or shape between the camera and the plane would otherwise be what the pixel shows."""
+    import dataclasses
+
+    lights = [dataclasses.replace(light, visible_camera=False) for light in lights]
     plane = grid_mesh(100.0, 1)
     return render([core.Instance(plane, materials=(LAMBERT,))], lights, cam=cam, w=w, h=h,
                   **settings).passes["Combined"][..., 0].astype(np.float64)
@@ -235,7 +240,8 @@ def test_area_lamp_matches_integrated_radiance(shape, height):
 
 
 def test_area_lamp_facing_away_gives_no_light():
-    lamp = Light(type="AREA", power=100.0, position=(0, 0, 1.0), direction=(0, 0, 1), size=1.0)
+    # Hidden from the camera: the camera above would see its emitting front.
+    lamp = Light(type="AREA", power=100.0, position=(0, 0, 1.0), direction=(0, 0, 1), size=1.0, visible_camera=False)
     fr = render([core.Instance(grid_mesh(100.0, 1), materials=(LAMBERT,))], [lamp], cam=ortho_down(), w=4, h=4,
                 shadow_samples=16)
     assert np.all(fr.passes["Combined"][..., :3] == 0)
@@ -853,3 +859,47 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "2"
+
+
+# --------------------------------------------------------------------------------------
+# Lamps seen directly
+
+@pytest.mark.parametrize("lamp, expected", [
+    # Radiances Cycles shows for each lamp seen directly (measured): an area's front P/(pi A),
+    # a sphere P/(4 pi^2 r^2), a sun's disc S/(pi sin^2(angle/2)).
+    (Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, -1), size=2.0, size_y=1.0,
+           shape="RECTANGLE"), 100.0 / (np.pi * 2.0)),
+    (Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, -1), size=2.0, shape="DISK"),
+     100.0 / (np.pi * np.pi)),
+    (Light(type="POINT", power=100.0, position=(0, 0, 3), radius=0.5), 100.0 / (4 * np.pi ** 2 * 0.25)),
+    (Light(type="SUN", power=3.0, direction=(0, 0, -1), angle=np.radians(20.0)),
+     3.0 / (np.pi * np.sin(np.radians(10.0)) ** 2)),
+])
+def test_lamps_seen_by_the_camera_have_cycles_radiance(lamp, expected):
+    """A camera below the lamp looking up at it (nothing else in the scene) sees its radiance;
+    hidden from the camera (its ray visibility), it shows the black world."""
+    cam = core.Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
+    scene = core.RenderScene([], [lamp], BLACK)
+    img = scene.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"]
+    np.testing.assert_allclose(img[..., 0], expected, rtol=1e-5)
+    import dataclasses
+
+    hidden = core.RenderScene([], [dataclasses.replace(lamp, visible_camera=False)], BLACK)
+    assert hidden.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., :3].max() == 0.0
+
+
+def test_area_lamp_is_one_sided_and_seen_in_a_mirror_not_after_a_diffuse_bounce():
+    """The lamp is seen along a mirror ray (the mirror shows its radiance times the metal's
+    reflectance at normal incidence, its base colour) but not from behind, and a diffuse
+    plane under it shows no speck of it (that would be a caustic path)."""
+    lamp = Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, 1), size=2.0)  # faces up
+    mirror = Material(base_colour=(0.5, 0.5, 0.5), metallic=1.0, roughness=0.0)
+    plane = grid_mesh(20.0, 1)
+    cam = core.Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
+    behind = core.RenderScene([core.Instance(plane, materials=(mirror,))], [lamp], BLACK)
+    assert behind.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., 0].max() == 0.0
+    facing = core.RenderScene([core.Instance(plane, materials=(mirror,))],
+                              [Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, -1), size=2.0)],
+                              BLACK)
+    img = facing.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., 0]
+    np.testing.assert_allclose(img, 0.5 * 100.0 / (np.pi * 4.0), rtol=1e-3)
