@@ -93,6 +93,18 @@ def frame(bpy, scene, engine: str, samples: int, path: Path, session) -> dict:
     return {"engine": engine, "samples": samples, "seconds": seconds, "stats": stats}
 
 
+def read_rgb(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    exr = OpenEXR.File(str(path), separate_channels=True)
+    channels = {}
+    for part in exr.parts:
+        channels.update(part.channels)
+    names = sorted(k for k in channels if k.endswith("Combined.R") or k.endswith("Combined.G") or
+                   k.endswith("Combined.B"))
+    return np.stack([channels[n].pixels for n in names], axis=-1).astype(np.float64)
+
+
 def scene_size(scene):
     return scene.render.resolution_x, scene.render.resolution_y
 
@@ -165,10 +177,34 @@ def main(argv=None) -> int:
     layer.splat_tracer.use_pass_splat_count = True
     skip_row("every pass enabled")
 
+    # Sky light: diffuse bounces or ambient occlusion, against a converged Cycles render of the
+    # same sky-lit scene (sun hidden): error of the floor and cloud per time.
+    sun.hide_render = True
+    for prop in ("use_pass_z", "use_pass_normal", "use_pass_diffuse_color", "use_pass_emit", "use_pass_shadow",
+                 "use_pass_object_index"):
+        setattr(layer, prop, False)
+    layer.splat_tracer.use_pass_splat_count = False
+    reference_samples = 64 if args.quick else 256
+    ref = frame(bpy, scene, "CYCLES", reference_samples, work / "sky_reference.exr", session)
+    reference = read_rgb(work / "sky_reference.exr")
+    sky = []
+    for mode, ao in (("diffuse bounce", False), ("ambient occlusion, 1 ray", True), ("ambient occlusion, 4 rays", True)):
+        scene.splat_tracer.sky_light = "AO" if ao else "BOUNCE"
+        scene.splat_tracer.ao_samples = 4 if "4" in mode else 1
+        r = frame(bpy, scene, "SPLAT_TRACER", 16, work / "sky.exr", session)
+        img = read_rgb(work / "sky.exr")
+        err = float(np.mean(np.abs(img - reference)) / np.mean(reference))
+        bias = float(np.mean(img) / np.mean(reference) - 1)
+        sky.append({"mode": mode, "samples": 16, "seconds": r["seconds"], "render_seconds": r["stats"]["render_seconds"],
+                    "mean_abs_error": err, "brightness_bias": bias})
+        print(f"sky light: {mode:28s} {r['seconds']:.2f} s, error {100 * err:.1f} %, bias {100 * bias:+.1f} %")
+    scene.splat_tracer.sky_light = "BOUNCE"
+
     report = {"cloud": name, "splats": len(centres), "size": [width, height], "threads": scene.render.threads,
               "frames": [{k: v for k, v in r.items() if k != "stats"} | {
                   "render_seconds": r["stats"].get("render_seconds"), "build_seconds": r["stats"].get("build_seconds")}
-                  for r in rows], "skips": skips}
+                  for r in rows], "skips": skips, "sky_light": sky,
+              "sky_reference": {"samples": reference_samples, "seconds": ref["seconds"]}}
     (out_dir / "frame_time.json").write_text(json.dumps(report, indent=1))
     lines = [f"# Frame time: {name} ({len(centres):,} splats) on a mesh floor, one sun with shadows, sky light",
              "", f"{width}x{height}, 2 threads, wall time of `bpy.ops.render.render` (export, build, render, EXR).",
@@ -183,6 +219,13 @@ def main(argv=None) -> int:
     for s in skips:
         lines.append(f"| {s['case']} | {s['seconds']:.2f} | {s['render_seconds']:.3f} | {s['shadow_rays']:,} | "
                      f"{s['layer_queries']:,} | {s['far_rejections']:,} | {s['interpolations']:,} |")
+    lines += ["", f"## Sky light: diffuse bounce or ambient occlusion (16 samples; sun hidden)", "",
+              f"Error: mean absolute difference from Cycles at {reference_samples} samples "
+              f"({ref['seconds']:.1f} s), relative to its mean; bias: mean brightness against it.", "",
+              "| sky light | frame (s) | rendering (s) | error | bias |", "|---|---:|---:|---:|---:|"]
+    for s in sky:
+        lines.append(f"| {s['mode']} | {s['seconds']:.2f} | {s['render_seconds']:.2f} | "
+                     f"{100 * s['mean_abs_error']:.1f} % | {100 * s['brightness_bias']:+.1f} % |")
     (out_dir / "frame_time.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0
