@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import core, export_shading, shading
+from . import core, export_shading, resources, shading
 from .cloud_object import COLOUR, NORMAL, RADIUS
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -176,6 +176,7 @@ class _Frame:
         key = ("cloud", _digest(pos, nrm, rad, col, closed, self.radius_factor))
 
         def build():
+            resources.check(f"point cloud '{obj.name}' ({len(pos):,} splats)", len(pos) * resources.BYTES_PER_SPLAT)
             return core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed, threads=self.threads)
 
         geometry, built = self.cache.get(key, build)
@@ -203,7 +204,11 @@ class _Frame:
         if len(tris) == 0:
             return None
         key = ("mesh", _digest(verts, tris, normals, mats))
-        geometry, built = self.cache.get(key, lambda: core.Mesh(verts, tris, normals, mats, threads=self.threads))
+        def build():
+            resources.check(f"mesh '{obj.name}' ({len(tris):,} triangles)", len(tris) * resources.BYTES_PER_TRIANGLE)
+            return core.Mesh(verts, tris, normals, mats, threads=self.threads)
+
+        geometry, built = self.cache.get(key, build)
         if built or key not in self.cache.counted:
             self.triangles += len(geometry)
             self.cache.counted.add(key)

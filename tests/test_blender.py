@@ -366,3 +366,21 @@ def test_a_stray_point_does_not_move_the_origin_and_is_reported(blender, empty_s
     stray.data.attributes["splat_radius"].data.foreach_get("value", radii)
     assert radii.max() <= 3 * np.percentile(radii[:3000], 95) * (1 + 1e-6)  # no 4e6 m disc: at most the cap
     assert "1 point lies far from the rest" in stray["splat_tracer_import_notes"]
+
+
+def test_a_scene_that_cannot_fit_in_memory_is_refused_before_building(blender, empty_scene, sphere_ply, tmp_path):
+    """The memory a cloud's build needs is estimated first: when it cannot fit, the render
+    fails with a message naming the object, and nothing is allocated."""
+    bpy = blender
+    scene = empty_scene
+    import_sphere(bpy, sphere_ply)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+    resources = extension_module("resources")
+    resources.override(1_000_000)  # 1 MB free: 20,000 splats need about 5 MB
+    try:
+        with pytest.raises(RuntimeError, match=r"point cloud 'sphere' \(20,000 splats\) needs about 0.00 GB to build"):
+            bpy.ops.render.render()
+    finally:
+        resources.override(None)
+    bpy.ops.render.render()  # with the real free memory it renders
