@@ -103,11 +103,25 @@ class SplatTracerEngine(bpy.types.RenderEngine):
 classes = (SplatTracerEngine,)
 
 
+@bpy.app.handlers.persistent  # kept when another file is loaded
+def _job_ended(scene, *_):
+    session.release_after_job(scene)
+
+
+_JOB_END_HANDLERS = (bpy.app.handlers.render_complete, bpy.app.handlers.render_cancel)
+
+
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
+    for handlers in _JOB_END_HANDLERS:
+        if _job_ended not in handlers:
+            handlers.append(_job_ended)
 
 
 def unregister():
+    for handlers in _JOB_END_HANDLERS:
+        if _job_ended in handlers:
+            handlers.remove(_job_ended)
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)
