@@ -13,19 +13,27 @@ import numpy as np
 
 from . import session
 
-# Blender's passes this engine writes: (view-layer switch, pass name, channels, channel ids, type).
+# Blender 5.0 renamed three passes (Cycles and EEVEE write "Diffuse Color", "Emission" and
+# "Object Index" there, "DiffCol", "Emit" and "IndexOB" before). A pass must carry the name
+# Blender's own engines give it, or the compositor's Render Layers node shows it as a
+# different socket and links made for Cycles (an ID Mask on Object Index) are lost.
+_NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
+# Blender's passes this engine writes: (view-layer switch, the core's pass name, Blender's
+# pass name, channels, channel ids, type).
 _PASSES = (
-    ("use_pass_z", "Depth", 1, "Z", "VALUE"),
-    ("use_pass_normal", "Normal", 3, "XYZ", "VECTOR"),
-    ("use_pass_diffuse_color", "DiffCol", 3, "RGB", "COLOR"),
-    ("use_pass_emit", "Emit", 3, "RGB", "COLOR"),
-    ("use_pass_shadow", "Shadow", 3, "RGB", "COLOR"),
-    ("use_pass_object_index", "IndexOB", 1, "X", "VALUE"),
+    ("use_pass_z", "Depth", "Depth", 1, "Z", "VALUE"),
+    ("use_pass_normal", "Normal", "Normal", 3, "XYZ", "VECTOR"),
+    ("use_pass_diffuse_color", "DiffCol", "Diffuse Color" if _NEW_PASS_NAMES else "DiffCol", 3, "RGB", "COLOR"),
+    ("use_pass_emit", "Emit", "Emission" if _NEW_PASS_NAMES else "Emit", 3, "RGB", "COLOR"),
+    ("use_pass_shadow", "Shadow", "Shadow", 3, "RGB", "COLOR"),
+    ("use_pass_object_index", "IndexOB", "Object Index" if _NEW_PASS_NAMES else "IndexOB", 1, "X", "VALUE"),
 )
 SPLAT_COUNT = "Splat Count"  # debug pass: the splats that formed each surface point
+_BLENDER_NAME = {core_name: blender_name for _, core_name, blender_name, *_ in _PASSES}
 
 
 def wanted_passes(view_layer) -> tuple:
+    """The core's names of the passes the view layer asks for."""
     names = [name for prop, name, *_ in _PASSES if getattr(view_layer, prop)]
     if view_layer.splat_tracer.use_pass_splat_count:
         names.append(SPLAT_COUNT)
@@ -33,8 +41,10 @@ def wanted_passes(view_layer) -> tuple:
 
 
 def _set_pass(layer, name: str, pixels: np.ndarray) -> None:
-    """Writes (h, w[, c]) top-row-first pixels into a pass (whose rows run bottom to top)."""
-    layer.passes[name].rect.foreach_set(np.ascontiguousarray(pixels[::-1], dtype=np.float32).ravel())
+    """Writes (h, w[, c]) top-row-first pixels into the pass the core calls `name` (whose
+    rows run bottom to top)."""
+    layer.passes[_BLENDER_NAME.get(name, name)].rect.foreach_set(
+        np.ascontiguousarray(pixels[::-1], dtype=np.float32).ravel())
 
 
 class SplatTracerEngine(bpy.types.RenderEngine):
@@ -45,7 +55,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
 
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
-        for prop, name, channels, ids, kind in _PASSES:
+        for prop, _, name, channels, ids, kind in _PASSES:
             if getattr(renderlayer, prop):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
         if renderlayer.splat_tracer.use_pass_splat_count:
@@ -93,11 +103,25 @@ class SplatTracerEngine(bpy.types.RenderEngine):
 classes = (SplatTracerEngine,)
 
 
+@bpy.app.handlers.persistent  # kept when another file is loaded
+def _job_ended(scene, *_):
+    session.release_after_job(scene)
+
+
+_JOB_END_HANDLERS = (bpy.app.handlers.render_complete, bpy.app.handlers.render_cancel)
+
+
 def register():
     for cls in classes:
         bpy.utils.register_class(cls)
+    for handlers in _JOB_END_HANDLERS:
+        if _job_ended not in handlers:
+            handlers.append(_job_ended)
 
 
 def unregister():
+    for handlers in _JOB_END_HANDLERS:
+        if _job_ended in handlers:
+            handlers.remove(_job_ended)
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)

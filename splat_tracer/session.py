@@ -57,6 +57,16 @@ class GeometryCache:
 
 
 CACHE = GeometryCache()
+
+
+def release_after_job(scene) -> None:
+    """At the end of a render job (F12, or the last frame of an animation; also when one
+    is cancelled): frees the geometry unless the scene keeps it (Persistent Data). Each
+    frame of an animation keeps its geometry for the next one, and only the job's end
+    knows that no next frame comes: without this, an animation's BVHs stayed in memory
+    until the next render."""
+    if scene is None or not scene.render.use_persistent_data:
+        CACHE.entries.clear()
 HISTORY: list = []  # stats of the frames rendered in this Blender session, newest last (tests read it)
 _HISTORY_LIMIT = 100
 
