@@ -333,11 +333,9 @@ def test_cloud_shadow_covers_the_mesh_spheres_pixels(blender, lamp_renders, kind
         assert cloud_ours.sum() == pytest.approx(other.sum(), rel=0.05)
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: the diffuse lobe keeps a (1 - cos)^5 Fresnel loss at Specular "
-                                       "IOR Level 0, where Cycles has no Fresnel at all (grazing views too dark)")
 def test_diffuse_floor_at_grazing_view_matches_cycles(blender, lamp_renders):
     """The floor seen from 18-22 degrees above it, under the sun: within 3 % of Cycles.
-    Measured: 13.7 % darker (1 - (1 - cos)^5 is 0.84-0.91 there)."""
+    (It was 13.7 % darker while a Schlick Fresnel dimmed the diffuse at Specular IOR Level 0.)"""
     r = lamp_renders("SUN")
     floor = erode((r["ours"][INDEX] == FLOOR) & (r["cycles"][INDEX] == FLOOR))
     floor[int(0.4 * H):] = False
@@ -710,8 +708,6 @@ def test_a_lit_diffuse_scene_traces_shadow_and_diffuse_rays_only(blender, empty_
     assert stats()["refraction_rays"] > 0
 
 
-@pytest.mark.xfail(strict=True, reason="core bug: a specular lobe with Fresnel (1 - cos)^5 stays on at Specular "
-                                       "IOR Level 0 (and for the Diffuse BSDF), so glossy rays are traced")
 def test_a_lit_diffuse_scene_traces_no_reflection_rays(blender, empty_scene, tmp_path):
     """Diffuse BSDFs reflect nothing specularly: Cycles traces no glossy ray for them."""
     bpy = blender
