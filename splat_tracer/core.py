@@ -32,7 +32,7 @@ PRESETS = ("GENERAL", "NEAREST_CENTRE", "FULL")
 
 @dataclass(frozen=True)
 class Method:
-    """Which surface a ray sees and how it is shaded (ALGORITHM.md); each rule a switch.
+    """Which surface a ray sees and how it is shaded (docs/ALGORITHM.md); each rule a switch.
 
     eliminate_wrong_hits: hits of the wrong facing before the first layer are ignored.
     interpolate_normals: normal and colour blended over the layer's splats, weighted by

@@ -237,7 +237,7 @@ def read_ply(path: str) -> PointCloud:
         alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
         colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
 
-    # A zero or non-finite normal is an error of that point alone (ALGORITHM.md): the
+    # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
     # point is dropped and counted, never rendered with a garbage orientation.
     nrm = np.column_stack([v[c].astype(np.float64) for c in ("nx", "ny", "nz")])
     length = np.linalg.norm(nrm, axis=1)

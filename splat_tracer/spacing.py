@@ -1,6 +1,6 @@
 """Neighbourhood analysis on import: splat radii and the "closed surface" guess.
 
-Radii (ALGORITHM.md, "Radius"): the spacing s_i of point i is the distance to its k-th
+Radii (docs/ALGORITHM.md, "Radius"): the spacing s_i of point i is the distance to its k-th
 nearest neighbour (k = 6 by default: on an evenly sampled surface a point has about six
 neighbours at distance D, so s_i ~ D and radius factor 1 gives the paper's "size update",
 full overlap).

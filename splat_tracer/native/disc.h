@@ -1,4 +1,4 @@
-// Ray / splat (oriented disc) intersection, as written in ALGORITHM.md:
+// Ray / splat (oriented disc) intersection, as written in docs/ALGORITHM.md:
 //   t = ((c - o) . n) / (d . n),  hit when |o + t d - c|^2 <= r^2.
 #pragma once
 

@@ -1,5 +1,5 @@
 // The ε-window query: in one BVH traversal, the first layer of splats a ray meets and
-// the first hit after it (ALGORITHM.md, "Visibility computation").
+// the first hit after it (docs/ALGORITHM.md, "Visibility computation").
 //
 // Definitions, for a ray and a facing `f` that may begin a layer:
 //   first  - the nearest hit of facing f (wrong-intersection elimination: hits of the other

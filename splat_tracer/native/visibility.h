@@ -1,5 +1,5 @@
 // Which surface a ray sees, and its normal and colour: the paper's visibility method
-// (ALGORITHM.md) on top of the ε-window query, with each rule a switch.
+// (docs/ALGORITHM.md) on top of the ε-window query, with each rule a switch.
 #pragma once
 
 #include "layer.h"
