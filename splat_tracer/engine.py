@@ -91,9 +91,19 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         layer = result.layers[0]
         for name, pixels in frame.passes.items():
             _set_pass(layer, name, pixels)
-        # A stopped render still hands back complete buffers (Blender's writers expect every
-        # pass filled); Blender knows it was cancelled and does not save it as finished.
-        self.end_result(result)
+        if frame.completed:
+            self.end_result(result)
+        else:
+            # Stopped (Esc): the frame is incomplete and must not be saved as if finished. The
+            # error is set *before* the result is discarded: Blender then writes no file.
+            # (Discarding without the error made Blender's EXR writers crash on the empty
+            # result -- found by the hostile test; tests/test_blender.py reproduces it.)
+            message = (f"Splat Tracer: render stopped before the end; the image of view layer '{view_layer.name}' "
+                       "is incomplete and was not saved")
+            self.report({"ERROR"}, message)
+            self.error_set(message)
+            self.end_result(result, cancel=True)
+            return
         s = frame.stats
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "
                               f"{s['reused']} geometries ({s['build_seconds']:.2f} s), rendered in "

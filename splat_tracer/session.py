@@ -148,6 +148,7 @@ def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=
                        render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
                        view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
+                       completed=result.completed,
                        **result.counters)
     CACHE.end_frame(keep)
     HISTORY.append(frame_stats)

@@ -384,3 +384,68 @@ def test_a_scene_that_cannot_fit_in_memory_is_refused_before_building(blender, e
     finally:
         resources.override(None)
     bpy.ops.render.render()  # with the real free memory it renders
+
+
+STOPPED_RENDER = """
+import sys
+sys.path[:0] = [{tests!r}, {root!r}, {tools!r}]
+import dev_extension
+home = dev_extension.isolate_user_dirs()
+import bpy, math, numpy as np
+dev_extension.enable_from_source(home)
+bpy.ops.wm.read_homefile(use_empty=True)
+from blender_helpers import add_camera, extension_module
+from geometry import fibonacci_sphere
+from splat_tracer import ply
+p, n = fibonacci_sphere(5000)
+ply.write_ply({ply_path!r}, p, n)
+bpy.ops.splat_tracer.import_cloud(filepath={ply_path!r})
+scene = bpy.context.scene
+add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+scene.render.engine = "SPLAT_TRACER"
+scene.render.resolution_x, scene.render.resolution_y = 320, 240
+scene.splat_tracer.samples = 64
+session = extension_module("session")
+real = session.render_frame
+def stopping(depsgraph, method, passes=("Combined",), progress=None, **kw):
+    # What Esc does: the progress callback answers "stop" (after the first report).
+    calls = []
+    def stop(done, total):
+        calls.append(done)
+        progress(done, total)
+        return len(calls) > 1
+    return real(depsgraph, method, passes, progress=stop, **kw)
+session.render_frame = stopping
+scene.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
+scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
+import os
+for fmt, path in (("OPEN_EXR_MULTILAYER", {exr!r}), ("OPEN_EXR", {exr!r} + ".single.exr"), ("PNG", {exr!r} + ".png")):
+    if fmt != "OPEN_EXR_MULTILAYER":
+        scene.render.image_settings.media_type = "IMAGE"
+    scene.render.image_settings.file_format = fmt
+    scene.render.filepath = path
+    try:
+        bpy.ops.render.render(write_still=True)
+    except RuntimeError as e:
+        print("error:", e)
+    print(fmt, "completed:", session.HISTORY[-1]["completed"], "written:", os.path.exists(path))
+"""
+
+
+def test_a_stopped_render_never_crashes_the_exr_writer_and_says_it_is_incomplete(tmp_path):
+    """Esc during a render, then writing the image: Blender's EXR writers used to crash on the
+    result the engine ended with cancel=True, and a PNG got the partial frame as if it were
+    finished. Now nothing is written and the render reports the frame incomplete. Run in a
+    fresh Blender process (a crash must fail this test, not kill the test session)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    here = Path(__file__).resolve().parent
+    code = STOPPED_RENDER.format(tests=str(here), root=str(here.parent), tools=str(here.parent / "tools"),
+                                 ply_path=str(tmp_path / "s.ply"), exr=str(tmp_path / "stopped.exr"))
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    for fmt in ("OPEN_EXR_MULTILAYER", "OPEN_EXR", "PNG"):
+        assert f"{fmt} completed: False written: False" in run.stdout, run.stdout  # never saved as finished
+    assert "render stopped before the end; the image of view layer 'ViewLayer' is incomplete" in run.stdout
