@@ -903,3 +903,43 @@ def test_area_lamp_is_one_sided_and_seen_in_a_mirror_not_after_a_diffuse_bounce(
                               BLACK)
     img = facing.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., 0]
     np.testing.assert_allclose(img, 0.5 * 100.0 / (np.pi * 4.0), rtol=1e-3)
+
+
+# --------------------------------------------------------------------------------------
+# Regressions from the hostile test (issue #9)
+
+@pytest.mark.parametrize("preset", ["FULL", "NEAREST_CENTRE", "GENERAL"])
+def test_camera_inside_a_closed_cloud_sees_its_inner_wall(preset):
+    """A camera inside a closed cloud (a room scan, an inside view of an object) used to
+    render nothing with the full method: every hit is back-facing, and a ray from outside
+    ignores those. The scene finds the clouds around the camera and starts its rays inside."""
+    c, n, r = sphere_cloud(20_000, radius=2.0, seed=3)
+    cloud = core.Scene(c, n, r, closed=True)
+    cam = core.Camera.look_at((0.2, -0.3, 0.1), (1.0, 2.0, 0.5), fov_y=70.0)
+    fr = render([core.Instance(cloud)], [], World(colour=(0.2, 0.2, 0.2)), cam=cam, w=48, h=36,
+                passes=("Depth",), method=core.Method.preset(preset), headlight=True)
+    depth = fr.passes["Depth"]
+    assert (depth < 1e9).all()  # the wall everywhere
+    assert depth.max() < 2.5  # and the near wall: the sphere's radius is 2, the camera near its centre
+
+
+def test_a_stopped_render_finishes_only_the_tiles_in_flight():
+    """Esc: once progress() says stop, each worker finishes the tile it is on and takes no
+    other -- counted in camera rays, not timed."""
+    c, n, r = sphere_cloud(20_000, seed=5)
+    cloud = core.Scene(c, n, r, closed=True)
+    cam = core.Camera.look_at((0, -3, 0.5), (0, 0, 0))
+    scene = core.RenderScene([core.Instance(cloud)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)))
+    seen = []
+
+    def stop(done, total):
+        seen.append(done)
+        return True
+
+    tile, samples, threads = 8, 4, 2
+    fr = scene.render(cam, 256, 192, RenderSettings(samples=samples), passes=(), threads=threads, tile_size=tile,
+                      progress=stop)
+    assert not fr.completed and len(seen) == 1
+    tiles_done = fr.counters["camera_rays"] / (tile * tile * samples)
+    assert tiles_done <= seen[0] + threads, (tiles_done, seen[0])
+    assert tiles_done < (256 // tile) * (192 // tile)  # it did stop early
