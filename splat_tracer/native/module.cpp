@@ -14,6 +14,7 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <vector>
 
 #include "parallel.h"
 #include "py_util.h"
@@ -382,12 +383,20 @@ PyMethodDef module_methods[] = {
     {nullptr, nullptr, 0, nullptr},
 };
 
-PyObject *scene_type = nullptr;  // the Scene type object, for as_splat_scene()
+// Every Scene type object this library has made, for as_splat_scene(). The module can be
+// initialised more than once in one process -- the same file imported under two package
+// names (the tests' `splat_tracer._core` beside Blender's `bl_ext...` copy) or again after
+// an add-on reload -- and objects of an earlier initialisation's type stay valid. With one
+// pointer, overwritten by the last initialisation, such Scenes were refused as "neither a
+// Scene nor a Mesh" (found by tests/test_properties.py, issue #9). Each type is kept alive
+// by a reference held here.
+std::vector<PyObject *> scene_types;
 
 int module_exec(PyObject *module) {
     PyObject *type = PyType_FromSpec(&Scene_spec);
     if (!type) return -1;
-    scene_type = type;
+    scene_types.push_back(type);
+    Py_INCREF(type);  // one reference for the module, one kept in scene_types
     if (PyModule_AddObject(module, "Scene", type) < 0) {
         Py_DECREF(type);
         return -1;
@@ -405,8 +414,10 @@ PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_
 }  // namespace
 
 const SplatScene *splat::py::as_splat_scene(PyObject *obj) {
-    if (!scene_type || !PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(scene_type))) return nullptr;
-    return reinterpret_cast<SceneObject *>(obj)->scene;
+    for (PyObject *type : scene_types)
+        if (PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(type)))
+            return reinterpret_cast<SceneObject *>(obj)->scene;
+    return nullptr;
 }
 
 PyMODINIT_FUNC PyInit__core(void) { return PyModuleDef_Init(&module_def); }

@@ -20,7 +20,10 @@ struct MeshObject {
     TriangleMesh *mesh;
 };
 
-PyObject *mesh_type = nullptr;
+// Every Mesh type object this library has made (see scene_types in module.cpp: the module
+// may be initialised more than once per process). With one pointer, overwritten by the
+// last initialisation, len() of a Mesh of an earlier one dereferenced null (a segfault).
+std::vector<PyObject *> mesh_types;
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
@@ -63,8 +66,10 @@ void Mesh_dealloc(PyObject *self) {
 }
 
 const TriangleMesh *as_mesh(PyObject *obj) {
-    if (!mesh_type || !PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(mesh_type))) return nullptr;
-    return reinterpret_cast<MeshObject *>(obj)->mesh;
+    for (PyObject *type : mesh_types)
+        if (PyObject_TypeCheck(obj, reinterpret_cast<PyTypeObject *>(type)))
+            return reinterpret_cast<MeshObject *>(obj)->mesh;
+    return nullptr;
 }
 
 PyObject *Mesh_size(PyObject *self, void *) { return PyLong_FromSize_t(as_mesh(self)->size()); }
@@ -332,8 +337,8 @@ PyType_Spec RenderScene_spec = {"splat_tracer._core.RenderScene", sizeof(RenderS
 int add_render_types(PyObject *module) {
     PyObject *mesh = PyType_FromSpec(&Mesh_spec);
     if (!mesh) return -1;
-    mesh_type = mesh;
-    Py_INCREF(mesh);  // one reference for the module, one kept in mesh_type
+    mesh_types.push_back(mesh);
+    Py_INCREF(mesh);  // one reference for the module, one kept in mesh_types
     if (PyModule_AddObject(module, "Mesh", mesh) < 0) {
         Py_DECREF(mesh);
         return -1;
