@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
 
-.PHONY: all venv build demo test dist docs bench bench-quick clean
+.PHONY: all venv build demo test test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
 
 all: build
 
@@ -31,6 +31,48 @@ demo: build
 
 test: build
 	$(VPY) -m pytest tests
+
+# --- Sanitizers -------------------------------------------------------------------------
+# The native core built with AddressSanitizer + UndefinedBehaviorSanitizer (setup.py,
+# SPLAT_SANITIZE=1) into build/sanitize/, next to a copy of the Python package and the
+# tests: the in-place binary of `make build` is never replaced. Only the core's test files
+# run there: bpy does not load into a process with the ASan runtime. The runtime has to be
+# preloaded into Python (which is not built with it), with libstdc++ (else ASan cannot find
+# the real __cxa_throw and every C++ exception aborts). Leak detection is off: CPython keeps
+# interned objects and module state until exit by design, so every run would "leak".
+# Reports go to build/sanitize/logs/ (pytest's output capture would hide them); any report,
+# even from a subprocess whose test tolerated its failure, fails the target.
+SAN      := build/sanitize
+SAN_LIBS  = $(shell gcc -print-file-name=libasan.so) $(shell gcc -print-file-name=libstdc++.so)
+SAN_ENV   = LD_PRELOAD="$(SAN_LIBS)" \
+            ASAN_OPTIONS=detect_leaks=0:log_path=$(abspath $(SAN))/logs/asan \
+            UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(abspath $(SAN))/logs/ubsan
+SAN_TESTS = test_core.py test_robustness.py test_method.py test_properties.py \
+            $(notdir $(wildcard tests/test_render_scene.py))
+
+sanitize-tree: $(STAMP)
+	SPLAT_SANITIZE=1 $(VPY) setup.py --quiet build_ext --build-lib $(SAN)/lib --build-temp $(SAN)/tmp
+	rm -rf $(SAN)/tree $(SAN)/logs
+	mkdir -p $(SAN)/tree/splat_tracer $(SAN)/logs
+	cp splat_tracer/*.py $(SAN)/tree/splat_tracer/
+	cp $(SAN)/lib/splat_tracer/_core.abi3.so $(SAN)/tree/splat_tracer/
+	cp -r tests tools fuzz $(SAN)/tree/
+	ldd $(SAN)/tree/splat_tracer/_core.abi3.so | grep -q libasan  # really the sanitized build
+
+test-sanitize: sanitize-tree
+	cd $(SAN)/tree/tests && $(SAN_ENV) $(abspath $(VPY)) -m pytest -q -p no:cacheprovider $(SAN_TESTS) \
+		|| { cat $(abspath $(SAN))/logs/* 2>/dev/null; exit 1; }
+	@if ls $(SAN)/logs/* >/dev/null 2>&1; then cat $(SAN)/logs/*; echo "sanitizer reports above"; exit 1; fi
+	@echo "test-sanitize: no AddressSanitizer or UndefinedBehaviorSanitizer report"
+
+# --- Fuzzing ----------------------------------------------------------------------------
+# atheris harnesses in fuzz/ (PLY reader, import preparation, native entry points), each
+# for FUZZ_SECONDS / 3 from its seed corpus fuzz/corpus/<harness>/; the native harness's
+# corpus is then replayed against the sanitizer build (see fuzz/run.py).
+FUZZ_SECONDS ?= 60
+
+fuzz: build sanitize-tree
+	$(VPY) fuzz/run.py --seconds $(FUZZ_SECONDS) --sanitized $(SAN)/tree
 
 docs: build
 	$(VPY) tools/switch_images.py --output-dir docs/switches

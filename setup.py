@@ -5,7 +5,15 @@
 One binary for every Blender from 4.2 to 5.1: it is compiled against the CPython limited
 API of Python 3.11 (abi3), which Python 3.11 to 3.13 all load. This file is only a build
 script; the project is installed as a Blender extension, not as a Python package.
+
+    SPLAT_SANITIZE=1 python setup.py build_ext --build-lib DIR   (what `make test-sanitize` runs)
+
+builds a debugging variant instead: AddressSanitizer + UndefinedBehaviorSanitizer, -O1 with
+debug info, and the C++ runtime linked dynamically (the sanitizer runtimes replace its
+allocator). It is never shipped; the Makefile builds it into build/sanitize/, away from the
+normal in-place binary.
 """
+import os
 from pathlib import Path
 
 from setuptools import Extension, setup
@@ -25,6 +33,18 @@ core = Extension(
     extra_compile_args=["-std=c++17", "-O3", "-g0", "-fvisibility=hidden", "-Wall", "-Wextra", "-pthread"],
     extra_link_args=["-pthread", "-static-libstdc++", "-static-libgcc", "-s"],
 )
+if os.environ.get("SPLAT_SANITIZE") == "1":
+    # Any undefined behaviour aborts (no recovery), so that a test cannot pass over it.
+    # float-cast-overflow (a float out of an integer's range converted to it) is UB that
+    # GCC's -fsanitize=undefined leaves out; it is asked for by name.
+    SANITIZE = ["-fsanitize=address,undefined,float-cast-overflow",
+                "-fno-sanitize-recover=undefined,float-cast-overflow", "-fno-omit-frame-pointer"]
+    # Python's own CFLAGS come first: -fwrapv would define signed overflow away (UBSan would
+    # not check it) and -DNDEBUG would turn asserts off; both are undone here.
+    core.extra_compile_args = ["-std=c++17", "-O1", "-g", "-fvisibility=hidden", "-Wall", "-Wextra", "-pthread",
+                               "-fno-wrapv", "-UNDEBUG", *SANITIZE]
+    core.extra_link_args = ["-pthread", *SANITIZE]
+
 
 setup(
     name="splat_tracer_core",

@@ -106,6 +106,17 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     return origin, (pts - origin).astype(np.float32)
 
 
+def _window(window, width: int, height: int) -> tuple[int, int, int, int]:
+    """(x0, y0, w, h) of a render window, checked before its buffers are allocated (a bad
+    window such as (-1, -1, 1, 2**31 - 1) used to ask numpy for 34 GB before the core
+    refused it)."""
+    x0, y0, w, h = (int(v) for v in (window if window is not None else (0, 0, width, height)))
+    if not (width > 0 and height > 0 and 0 <= x0 and 0 <= y0 and w > 0 and h > 0 and x0 + w <= width
+            and y0 + h <= height):
+        raise ValueError(f"window ({x0}, {y0}, {w}, {h}) is not inside the {width}x{height} image")
+    return x0, y0, w, h
+
+
 class TraceResult(NamedTuple):
     t: np.ndarray       # (N,) float32 distance along the normalised direction; inf on a miss
     id: np.ndarray      # (N,) int32 splat index, -1 on a miss
@@ -311,7 +322,7 @@ class Scene:
         and row of its top-left pixel), default the whole image. progress(done, total) is
         called from this thread every ~50 ms; returning True stops the render.
         """
-        x0, y0, w, h = window if window is not None else (0, 0, width, height)
+        x0, y0, w, h = _window(window, width, height)
         rgba = np.empty((h, w, 4), np.float32)
         dep = np.empty((h, w), np.float32) if depth else None
         nrm = np.empty((h, w, 3), np.float32) if normal else None
@@ -456,7 +467,7 @@ class RenderScene:
         unknown = set(passes) - set(PASSES)
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
-        x0, y0, w, h = window if window is not None else (0, 0, width, height)
+        x0, y0, w, h = _window(window, width, height)
         buffers = {}
         for name in ("Combined", *passes):
             c = PASSES[name]

@@ -90,7 +90,10 @@ def bulk_mask(positions: np.ndarray) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):  # coordinates near 1e308: no bulk, no outliers
         lo, hi = np.percentile(pos, BULK_PERCENTILES, axis=0)
         size = float(np.max(hi - lo))
-        if not (np.isfinite(size) and size > 0):
+        # Percentiles of coordinates near +-1.8e308 can overflow to +-inf or NaN on some axis
+        # while another axis gives a finite size: then every point "lay outside" the bulk and
+        # prepare() failed with a raw numpy error (found by fuzz/fuzz_prepare.py). No bulk then.
+        if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.isfinite(size) and size > 0):
             return np.ones(len(pos), bool)
         reach = OUTLIER_REACH * size
         return ~((pos < lo - reach) | (pos > hi + reach)).any(axis=1)
@@ -108,7 +111,7 @@ def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> N
     if extent <= MAX_COORDINATE and max(-lo, hi) <= MAX_COORDINATE:
         return
     hint = ""
-    if not bulk.all():
+    if not bulk.all() and bulk.any():
         b_extent, b_lo, b_hi = _span(positions[bulk])
         if b_extent <= MAX_COORDINATE and max(-b_lo, b_hi) <= MAX_COORDINATE:
             hint = (f"; without its {int((~bulk).sum()):,} outlier(s) it would fit: import with "

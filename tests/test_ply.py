@@ -379,6 +379,24 @@ def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
         assert len(dropped.local) == 400 and dropped.outliers == 1
 
 
+@pytest.mark.parametrize("rows", [
+    [[-1.7558342626051445e308, -1.7539056980694914e308, 3.6241848276995449e293], [-1.7976931348623157e308] * 3],
+    [[1.7976931348623157e308, 0.0, 0.0], [-1.7976931348623157e308, 0.0, 0.0], [0.0, 1.0, 0.0]],
+])
+def test_coordinates_near_the_float64_limit_are_refused_not_a_numpy_error(tmp_path, rows):
+    """Found by fuzz/fuzz_prepare.py: the bulk's percentiles overflowed on one axis, every
+    point counted as an outlier and prepare() raised numpy's 'zero-size array' ValueError
+    instead of refusing the file."""
+    from splat_tracer import prepare
+
+    p = np.array(rows)
+    assert prepare.bulk_mask(p).all()
+    path = tmp_path / "extreme.ply"
+    ply.write_ply(str(path), p, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
+    with pytest.raises(ply.CloudFileError, match="float32"):
+        prepare.prepare(ply.read_ply(str(path)), str(path))
+
+
 def test_non_ascii_bytes_after_ascii_data_are_refused_with_a_message(tmp_path):
     path = tmp_path / "junk.ply"
     _cloud_with_faces(path, binary=False, vertices=5000)  # the junk lies beyond plyfile's read-ahead

@@ -171,3 +171,43 @@ def test_look_at_rejects_unusable_cameras(kwargs, message):
 def test_look_at_rejects_eye_on_target():
     with pytest.raises(ValueError, match="same point"):
         core.Camera.look_at((1, 2, 3), (1, 2, 3))
+
+
+@pytest.mark.parametrize("window", [(-1, -1, 1, 2**31 - 1), (0, 0, 2**20, 2**20), (3, 0, 8, 6)])
+def test_render_window_is_checked_before_its_buffers_are_allocated(window):
+    """Found by the property tests' degenerate inputs: Scene.render and RenderScene.render
+    allocated the window's buffers before the core checked the window, so a bad one asked
+    numpy for up to 34 GB (MemoryError) instead of being refused."""
+    scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
+    cam = core.Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
+    with pytest.raises(ValueError, match="window"):
+        scene.render(cam, 8, 6, window=window)
+    with pytest.raises(ValueError, match="window"):
+        core.RenderScene([core.Instance(scene)]).render(cam, 8, 6, window=window)
+
+
+def test_objects_of_an_earlier_module_initialisation_stay_usable():
+    """Found by the property tests (a RenderScene test refused a Scene when it ran after
+    the Blender tests): the native module is initialised again when the same file is
+    imported under a second package name (Blender's bl_ext copy beside splat_tracer, or an
+    add-on reload). The core remembered only the last Scene and Mesh types, so earlier
+    Scenes were refused and len() of an earlier Mesh dereferenced null (segfault)."""
+    result = run_isolated(f"""
+        import importlib, os, sys, tempfile
+        from splat_tracer import _core
+        mesh = core.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+        scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
+        d = tempfile.mkdtemp()
+        os.makedirs(os.path.join(d, "other"))
+        open(os.path.join(d, "other", "__init__.py"), "w").close()
+        os.symlink(os.path.abspath(_core.__file__), os.path.join(d, "other", "_core.abi3.so"))
+        sys.path.insert(0, d)
+        other = importlib.import_module("other._core")
+        assert other is not _core
+        print("mesh size", len(mesh))
+        print("instances", core.RenderScene([core.Instance(scene), core.Instance(mesh)])._scene.instances)
+        new_scene = other.Scene(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
+        print("new scene", len(new_scene.bvh_stats()))
+    """)
+    assert result.returncode == 0, result.stderr
+    assert "mesh size 1" in result.stdout and "instances 2" in result.stdout, result.stdout

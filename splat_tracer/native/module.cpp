@@ -14,6 +14,7 @@
 #include <memory>
 #include <new>
 #include <string>
+#include <vector>
 
 #include "parallel.h"
 #include "py_util.h"
@@ -382,12 +383,9 @@ PyMethodDef module_methods[] = {
     {nullptr, nullptr, 0, nullptr},
 };
 
-PyObject *scene_type = nullptr;  // the last-made Scene type (as_splat_scene identifies Scenes by their deallocator)
-
 int module_exec(PyObject *module) {
     PyObject *type = PyType_FromSpec(&Scene_spec);
     if (!type) return -1;
-    scene_type = type;
     if (PyModule_AddObject(module, "Scene", type) < 0) {
         Py_DECREF(type);
         return -1;
@@ -407,7 +405,7 @@ PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_
 const SplatScene *splat::py::as_splat_scene(PyObject *obj) {
     // A Scene of any instance of this module: the same binary imported under two names (the
     // add-on as bl_ext.*.splat_tracer beside splat_tracer) runs module_exec twice, and
-    // scene_type is then the second one's type; a Scene made by the first was refused. The
+    // a type check against the newest Scene type refused a Scene made by the first. The
     // deallocator identifies the type and its layout whichever module made it.
     if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Scene_dealloc)) return nullptr;
     return reinterpret_cast<SceneObject *>(obj)->scene;

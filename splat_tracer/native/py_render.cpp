@@ -20,8 +20,6 @@ struct MeshObject {
     TriangleMesh *mesh;
 };
 
-PyObject *mesh_type = nullptr;
-
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
     PyObject *ov, *ot, *on = Py_None, *om = Py_None;
@@ -63,9 +61,10 @@ void Mesh_dealloc(PyObject *self) {
 }
 
 const TriangleMesh *as_mesh(PyObject *obj) {
-    // Identified by its deallocator, not by mesh_type: a second import of this binary under
-    // another module name (the add-on as bl_ext.*.splat_tracer) makes a new Mesh type and
-    // overwrites mesh_type, and Meshes of the first import were refused (see as_splat_scene).
+    // Identified by its deallocator, not by a stored type: a second import of this binary
+    // under another module name (the add-on as bl_ext.*.splat_tracer) makes a new Mesh type,
+    // and Meshes of the first import were refused -- or, through a null type pointer, len()
+    // segfaulted (see as_splat_scene).
     if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Mesh_dealloc)) return nullptr;
     return reinterpret_cast<MeshObject *>(obj)->mesh;
 }
@@ -336,8 +335,6 @@ PyType_Spec RenderScene_spec = {"splat_tracer._core.RenderScene", sizeof(RenderS
 int add_render_types(PyObject *module) {
     PyObject *mesh = PyType_FromSpec(&Mesh_spec);
     if (!mesh) return -1;
-    mesh_type = mesh;
-    Py_INCREF(mesh);  // one reference for the module, one kept in mesh_type
     if (PyModule_AddObject(module, "Mesh", mesh) < 0) {
         Py_DECREF(mesh);
         return -1;

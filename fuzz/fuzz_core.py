@@ -1,0 +1,187 @@
+"""Fuzz harness: the native core's entry points, called directly (splat_tracer._core).
+
+    python fuzz/fuzz_core.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
+
+The input bytes are decoded (atheris.FuzzedDataProvider) into float32 splat arrays mixing
+ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extremes
+(sometimes with a wrong dtype or shape), and then into calls of every native entry
+point on them: _core.Scene(...), trace, trace_surface (method tuples, exclude ids, inside
+flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds;
+then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
+and lamp rows and settings, rendered. The contract of a native entry point: it returns,
+or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
+crash, and under the sanitizer build of `make fuzz` any AddressSanitizer or UBSan
+report) is a finding.
+
+`make fuzz` runs this harness against the ASan + UBSan build (build/sanitize/tree): the
+native code is not coverage-instrumented (GCC cannot emit libFuzzer's coverage), so
+atheris's guidance comes from the Python side and the decoding; the sanitizers turn
+silent memory errors and undefined behaviour into findings.
+Seed corpus: fuzz/corpus/core/.
+"""
+import sys
+from pathlib import Path
+
+import atheris
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from splat_tracer import _core  # noqa: E402
+
+ALLOWED = (ValueError, TypeError, MemoryError)
+SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-45, 1.1754942e-38, 1e18, -1e18, 1.0000001e18, 1e19, -1e19,
+           3.4028235e38, -3.4028235e38, 1.0, -1.0, 0.5, 2.0, 1e-7, 1e7]
+MAX_LAYER_HITS = _core.MAX_LAYER_HITS
+
+
+@atheris.instrument_func  # Python-side coverage: which branches and refusals an input reached
+def value(fdp) -> float:
+    k = fdp.ConsumeIntInRange(0, 3)
+    if k == 0:
+        return SPECIAL[fdp.ConsumeIntInRange(0, len(SPECIAL) - 1)]
+    if k == 1:
+        return fdp.ConsumeFloat()  # any double, NaN and inf included
+    return fdp.ConsumeFloatInRange(-3.0, 3.0)  # mostly ordinary geometry
+
+
+@atheris.instrument_func
+def array(fdp, shape, dtype=np.float32):
+    n = int(np.prod(shape))
+    a = np.array([value(fdp) for _ in range(n)], np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        out = a.astype(dtype).reshape(shape)
+    if fdp.ConsumeIntInRange(0, 30) == 0:  # now and then a wrong dtype or layout
+        out = [out.astype(np.float64), out.T, out.ravel(), "not an array", None][fdp.ConsumeIntInRange(0, 4)]
+    return out
+
+
+@atheris.instrument_func
+def method(fdp):
+    if fdp.ConsumeIntInRange(0, 20) == 0:
+        return [None, "FULL", (1, 2), (True, True, True, 9, 0, 1.0), (True,) * 5 + (float("nan"),)][
+            fdp.ConsumeIntInRange(0, 4)]
+    return (fdp.ConsumeBool(), fdp.ConsumeBool(), fdp.ConsumeBool(), fdp.ConsumeIntInRange(-1, 3),
+            fdp.ConsumeIntInRange(-1, 2), value(fdp))
+
+
+def small_int(fdp):
+    return [0, 1, 2, 3, 7, 8, 16, 33, -1, 2**31 - 1, -2**31][fdp.ConsumeIntInRange(0, 10)]
+
+
+@atheris.instrument_func
+def call(fn, *args, **kwargs):
+    try:
+        return fn(*args, **kwargs)
+    except ALLOWED:
+        return None
+
+
+@atheris.instrument_func
+def camera(fdp):
+    if fdp.ConsumeBool():  # a plausible camera looking at the origin, from a fuzzed place
+        m = np.eye(4)
+        m[:3, :3] *= fdp.ConsumeFloatInRange(0.1, 3)
+        m[:3, 3] = [value(fdp) for _ in range(3)]
+        m[3, 2] = fdp.ConsumeFloatInRange(-1, 1)
+        m[3, 3] = fdp.ConsumeFloatInRange(0, 2)
+    else:
+        m = np.array([value(fdp) for _ in range(16)], np.float64).reshape(4, 4)
+    pos = np.array([value(fdp) for _ in range(3)], np.float64)
+    fwd = np.array([value(fdp) for _ in range(3)], np.float64)
+    return np.ascontiguousarray(m), pos, fwd
+
+
+@atheris.instrument_func
+def fuzz_scene(fdp):
+    n = fdp.ConsumeIntInRange(0, 40)
+    c, nrm = array(fdp, (n, 3)), array(fdp, (n, 3))
+    r = array(fdp, (n,))
+    col = array(fdp, (n, 3)) if fdp.ConsumeBool() else None
+    closed = np.frombuffer(fdp.ConsumeBytes(n).ljust(n, b"\1"), np.uint8).copy() if fdp.ConsumeBool() else None
+    scene = call(_core.Scene, c, nrm, r, col, closed, fdp.ConsumeIntInRange(0, 3))
+    if scene is None:
+        return None
+    assert scene.size == n
+    scene.bvh_stats()
+    b = scene.bounds
+    assert (b is None) == (n == 0)
+
+    k = fdp.ConsumeIntInRange(0, 24)
+    o, d = array(fdp, (k, 3)), array(fdp, (k, 3))
+    tmin, tmax = value(fdp), value(fdp)
+    out = (np.empty(k, np.float32), np.empty(k, np.int32), np.empty(k, np.uint8))
+    if call(scene.trace, o, d, tmin, tmax, *out, np.empty((k, 3), np.float32), fdp.ConsumeIntInRange(0, 3),
+            fdp.ConsumeBool(), np.zeros(2, np.int64)) is not None:
+        t, ids, _ = out
+        assert ((ids >= -1) & (ids < n)).all()
+        assert (np.isinf(t) == (ids < 0)).all()
+    m_ex = fdp.ConsumeIntInRange(0, 4)
+    ex = np.array([fdp.ConsumeIntInRange(-2, n) for _ in range(k * m_ex)], np.int32).reshape(k, m_ex)
+    inside = np.frombuffer(fdp.ConsumeBytes(k).ljust(k, b"\0"), np.uint8).copy()
+    sout = (np.empty(k, np.float32), np.empty(k, np.int32), np.empty(k, np.uint8), np.empty((k, 3), np.float32),
+            np.empty((k, 3), np.float32), np.empty((k, MAX_LAYER_HITS), np.int32))
+    if call(scene.trace_surface, o, d, tmin, tmax, method(fdp), *sout, inside if fdp.ConsumeBool() else None,
+            ex if fdp.ConsumeBool() else None, fdp.ConsumeIntInRange(0, 3), fdp.ConsumeBool()) is not None:
+        assert ((sout[1] >= -1) & (sout[1] < n)).all() and ((sout[5] >= -1) & (sout[5] < n)).all()
+
+    width, height = fdp.ConsumeIntInRange(1, 24), fdp.ConsumeIntInRange(1, 24)
+    win = (0, 0, width, height) if fdp.ConsumeBool() else tuple(small_int(fdp) for _ in range(4))
+    h, w = max(win[3], 0), max(win[2], 0)
+    if h * w <= 4096:
+        m, pos, fwd = camera(fdp)
+        call(scene.render, m, pos, fwd, width, height, win, (value(fdp), 0.0, 0.0, 1.0),
+             np.empty((h, w, 4), np.float32), np.empty((h, w), np.float32), np.empty((h, w, 3), np.float32),
+             fdp.ConsumeIntInRange(0, 3), None, small_int(fdp), method(fdp))
+    return scene
+
+
+@atheris.instrument_func
+def fuzz_render_scene(fdp, splats):
+    v = fdp.ConsumeIntInRange(0, 12)
+    verts = array(fdp, (v, 3))
+    tris = np.array([fdp.ConsumeIntInRange(-1, v) for _ in range(3 * fdp.ConsumeIntInRange(0, 6))],
+                    np.int32).reshape(-1, 3)
+    t = len(tris)
+    normals = array(fdp, (t, 3, 3)) if fdp.ConsumeBool() else None
+    mat_index = np.array([fdp.ConsumeIntInRange(-1, 3) for _ in range(t)], np.int32) if fdp.ConsumeBool() else None
+    mesh = call(_core.Mesh, verts, tris, normals, mat_index, 1)
+    geos = [g for g in (splats, mesh) if g is not None]
+    if not geos:
+        return
+    n = fdp.ConsumeIntInRange(0, 4)
+    n_mat, n_light = fdp.ConsumeIntInRange(0, 3), fdp.ConsumeIntInRange(0, 3)
+    rows = lambda count, fields: array(fdp, (count, fields))
+    to_world = np.tile(np.eye(4)[:3].ravel(), (n, 1)).astype(np.float32)
+    if fdp.ConsumeBool():
+        to_world = rows(n, 12)
+    scene = call(_core.RenderScene, geos, np.array([fdp.ConsumeIntInRange(-1, len(geos)) for _ in range(n)], np.int32),
+                 to_world, rows(n, 12) if fdp.ConsumeBool() else to_world,
+                 np.array([[fdp.ConsumeIntInRange(-1, n_mat), fdp.ConsumeIntInRange(0, 2)] for _ in range(n)],
+                          np.int32).reshape(n, 2),
+                 np.full(n, fdp.ConsumeIntInRange(-1, 64), np.int32), np.zeros(n, np.uint8), np.zeros(n, np.float32),
+                 rows(n_mat, 14), rows(n_light, 21), fdp.ConsumeIntInRange(0, 2))
+    if scene is None:
+        return
+    w, h = fdp.ConsumeIntInRange(1, 12), fdp.ConsumeIntInRange(1, 12)
+    settings = (fdp.ConsumeIntInRange(0, 3), fdp.ConsumeIntInRange(-1, 3), value(fdp), fdp.ConsumeIntInRange(0, 2),
+                *[fdp.ConsumeIntInRange(-1, 4) for _ in range(5)], fdp.ConsumeIntInRange(0, 2**31 - 1),
+                fdp.ConsumeBool())
+    m, pos, fwd = camera(fdp)
+    buffers = {name: np.zeros((h, w, c) if c > 1 else (h, w), np.float32)
+               for name, c in (("depth", 1), ("normal", 3), ("diffcol", 3), ("emit", 3), ("shadow", 3), ("index", 1),
+                               ("splat_count", 1))}
+    call(scene.render, m, pos, fwd, w, h, (0, 0, w, h), settings, method(fdp),
+         tuple(abs(value(fdp)) for _ in range(3)), fdp.ConsumeBool(), np.zeros((h, w, 4), np.float32),
+         threads=fdp.ConsumeIntInRange(0, 2), tile_size=fdp.ConsumeIntInRange(1, 8), **buffers)
+
+
+@atheris.instrument_func
+def TestOneInput(data: bytes) -> None:
+    fdp = atheris.FuzzedDataProvider(data)
+    splats = fuzz_scene(fdp)
+    fuzz_render_scene(fdp, splats)
+
+
+if __name__ == "__main__":
+    atheris.Setup(sys.argv, TestOneInput)
+    atheris.Fuzz()

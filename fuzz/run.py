@@ -1,0 +1,77 @@
+"""Runs every fuzz harness for a share of a time budget (what `make fuzz` calls).
+
+    python fuzz/run.py --seconds 60 [--sanitized build/sanitize/tree]
+
+Harnesses (one per entry point, each documented in its file): fuzz_ply.py (the PLY reader
+and the import preparation behind it), fuzz_prepare.py (the import preparation on fuzzed
+arrays), fuzz_core.py (the native Scene, Mesh and RenderScene entry points). Each runs
+for seconds / 3 with its seed corpus fuzz/corpus/<name>/ (read only: what the fuzzer
+learns goes to build/fuzz/corpus/<name>/, kept between runs). With --sanitized, the core
+harness's whole corpus (seeds and learnt) is then replayed, once each, against the ASan +
+UBSan build in that tree: under the preloaded ASan runtime atheris gets no coverage
+signal, so the coverage-guided search runs on the normal build and the sanitizers judge
+what it found. A finding stops its harness; its input is written to build/fuzz/<name>-crash-*
+(replay: python fuzz/fuzz_<name>.py FILE) and this script exits 1. It prints the executions
+of each harness.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+HARNESSES = ("ply", "prepare", "core")
+
+
+def sanitizer_env() -> dict:
+    libs = [subprocess.check_output(["gcc", f"-print-file-name={lib}"], text=True).strip()
+            for lib in ("libasan.so", "libstdc++.so")]
+    return {**os.environ, "LD_PRELOAD": " ".join(libs), "ASAN_OPTIONS": "detect_leaks=0",
+            "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
+
+
+def run(name: str, harness_root: Path, args: list[str], env=None, label: str = "") -> tuple[bool, int]:
+    out = ROOT / "build" / "fuzz"
+    log = out / f"{name}{label}.log"
+    cmd = [sys.executable, str(harness_root / "fuzz" / f"fuzz_{name}.py"), *args,
+           f"-artifact_prefix={out}/{name}-", "-rss_limit_mb=8192", "-timeout=60", "-print_final_stats=1"]
+    with open(log, "w") as f:
+        code = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env, cwd=ROOT).returncode
+    text = log.read_text(errors="replace")
+    runs = re.findall(r"stat::number_of_executed_units:\s*(\d+)", text)
+    executions = int(runs[-1]) if runs else 0
+    if code != 0:
+        print(f"fuzz_{name}{label}: FINDING (exit {code}); log {log}\n" + "\n".join(text.splitlines()[-60:]))
+    return code == 0, executions
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seconds", type=int, default=60, help="total budget, split evenly (default 60)")
+    ap.add_argument("--sanitized", type=Path, help="a tree with the ASan + UBSan core (make sanitize-tree)")
+    opts = ap.parse_args()
+    each = max(1, opts.seconds // len(HARNESSES))
+    ok = True
+    for name in HARNESSES:
+        learnt = ROOT / "build" / "fuzz" / "corpus" / name
+        learnt.mkdir(parents=True, exist_ok=True)
+        seeds = HERE / "corpus" / name
+        good, n = run(name, ROOT, [str(learnt), str(seeds), f"-max_total_time={each}"])
+        print(f"fuzz_{name}: {n:,} executions in {each} s, {'no finding' if good else 'FINDING'}")
+        ok &= good
+        if good and name == "core" and opts.sanitized:
+            good, n = run(name, opts.sanitized.resolve(), [str(learnt), str(seeds), "-runs=0"], sanitizer_env(),
+                          label="-sanitized")
+            print(f"fuzz_{name} corpus under ASan + UBSan: {n:,} inputs replayed, "
+                  f"{'no finding' if good else 'FINDING'}")
+            ok &= good
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
