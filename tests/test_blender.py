@@ -449,3 +449,20 @@ def test_a_stopped_render_never_crashes_the_exr_writer_and_says_it_is_incomplete
     for fmt in ("OPEN_EXR_MULTILAYER", "OPEN_EXR", "PNG"):
         assert f"{fmt} completed: False written: False" in run.stdout, run.stdout  # never saved as finished
     assert "render stopped before the end; the image of view layer 'ViewLayer' is incomplete" in run.stdout
+
+
+def test_a_cloud_without_its_points_modifier_still_renders_and_says_why(blender, empty_scene, sphere_ply, tmp_path):
+    """Removing the Mesh to Points modifier (or its node group) used to make the cloud vanish
+    from renders without a word: the object is a vertex-only mesh carrying splats, and is
+    still rendered as splats, with a report line."""
+    session = extension_module("session")
+    bpy = blender
+    scene = empty_scene
+    obj = import_sphere(bpy, sphere_ply)
+    add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
+    with_modifier = render_to_exr(bpy, scene, tmp_path / "with.exr", 160, 120)
+    obj.modifiers.remove(obj.modifiers[0])
+    without = render_to_exr(bpy, scene, tmp_path / "without.exr", 160, 120)
+    np.testing.assert_array_equal(without["depth"] < 1e9, with_modifier["depth"] < 1e9)
+    assert any("carries splats but no longer evaluates to a point cloud" in line
+               for line in session.HISTORY[-1]["report"])
