@@ -50,7 +50,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from geometry import angle_deg, fibonacci_sphere
+from geometry import angle_deg, cube_cloud, fibonacci_sphere
 from splat_tracer import core
 
 HERE = Path(__file__).resolve().parent
@@ -257,18 +257,9 @@ DIRECTIONS = [v / np.linalg.norm(v) for v in
 
 
 def cube_surface(per_edge: int = 40):
-    g = (np.arange(per_edge) + 0.5) / per_edge * 2 - 1
-    u, v = (a.ravel() for a in np.meshgrid(g, g))
-    pts, nrm = [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            p = np.zeros((len(u), 3))
-            others = [k for k in range(3) if k != axis]
-            p[:, others[0]], p[:, others[1]], p[:, axis] = u, v, sign
-            n = np.zeros_like(p)
-            n[:, axis] = sign
-            pts.append(p), nrm.append(n)
-    return np.concatenate(pts), np.concatenate(nrm), np.full(6 * len(u), 1.5 * 2 / per_edge)
+    """The tests' cube cloud (geometry.cube_cloud) with radii of 1.5 grid steps."""
+    pts, nrm = cube_cloud(per_edge)
+    return pts, nrm, np.full(len(pts), 1.5 * 2 / per_edge)
 
 
 CUBE = cube_surface()

@@ -265,34 +265,14 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                      &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
                                      &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh))
         return nullptr;
-    if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive");
-    // In 64 bits: x0 + w may overflow int for a window near 2^31.
-    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || int64_t(x0) + w > width || int64_t(y0) + h > height)
-        return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w,
-                            h, width, height);
-    if (tile_size <= 0 || tile_size > 4096) return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096");
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
-    if (progress != Py_None && !PyCallable_Check(progress))
-        return PyErr_Format(PyExc_TypeError, "progress must be callable or None");
-
-    View m, pos, fwd, rgba, depth, normal;
-    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3}, sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
-    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m)) return nullptr;
-    if (!get_array(opos, "position", 'd', 1, s3, false, pos)) return nullptr;
-    if (!get_array(ofwd, "forward", 'd', 1, s3, false, fwd)) return nullptr;
+    if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
+    Camera cam;
+    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+    View rgba, depth, normal;
+    Py_ssize_t sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
     if (!get_array(orgba, "out_rgba", 'f', 3, sr, true, rgba)) return nullptr;
     if (odepth != Py_None && !get_array(odepth, "out_depth", 'f', 2, sd, true, depth)) return nullptr;
     if (onormal != Py_None && !get_array(onormal, "out_normal", 'f', 3, sn, true, normal)) return nullptr;
-
-    Camera cam;
-    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
-    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
-    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
-    for (double v : cam.local_from_ndc)
-        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite");
-    for (int k = 0; k < 3; ++k)
-        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
-            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite");
     for (float v : bg)
         if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "background must be finite");
 

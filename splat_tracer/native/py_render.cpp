@@ -212,14 +212,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                      &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size))
         return nullptr;
-    if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive");
-    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || int64_t(x0) + w > width || int64_t(y0) + h > height)
-        return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w, h,
-                            width, height);
-    if (tile_size <= 0 || tile_size > 4096) return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096");
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
-    if (progress != Py_None && !PyCallable_Check(progress))
-        return PyErr_Format(PyExc_TypeError, "progress must be callable or None");
+    if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
         if (!(std::isfinite(v) && v >= 0.f)) return PyErr_Format(PyExc_ValueError, "world radiance must be finite, >= 0");
 
@@ -245,20 +238,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     cfg.film_transparent = transparent != 0;
     cfg.tile_size = tile_size;
 
-    View m, pos, fwd;
-    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3};
-    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m) || !get_array(opos, "position", 'd', 1, s3, false, pos) ||
-        !get_array(ofwd, "forward", 'd', 1, s3, false, fwd))
-        return nullptr;
     Camera cam;
-    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
-    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
-    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
-    for (double v : cam.local_from_ndc)
-        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite");
-    for (int k = 0; k < 3; ++k)
-        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
-            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite");
+    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;

@@ -5,10 +5,13 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <new>
 #include <string>
 
+#include "camera.h"
 #include "parallel.h"
 #include "splat_scene.h"
 #include "visibility.h"
@@ -178,6 +181,43 @@ int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
         Py_DECREF(res);
     }
     return completed ? 1 : 0;
+}
+
+// The scalar arguments of a render call: image size, window, tile size, threads, progress.
+// Sets an exception and returns false when unusable.
+inline bool check_render_args(int width, int height, int x0, int y0, int w, int h, int tile_size, int threads,
+                              PyObject *progress) {
+    if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive"), false;
+    // In 64 bits: x0 + w may overflow int for a window near 2^31.
+    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || int64_t(x0) + w > width || int64_t(y0) + h > height)
+        return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w, h,
+                            width, height),
+               false;
+    if (tile_size <= 0 || tile_size > 4096)
+        return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096"), false;
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    if (progress != Py_None && !PyCallable_Check(progress))
+        return PyErr_Format(PyExc_TypeError, "progress must be callable or None"), false;
+    return true;
+}
+
+// A camera from its three arrays (core.Camera): local_from_ndc 4x4, position and forward 3,
+// all float64 and finite. Sets an exception and returns false otherwise.
+inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &cam) {
+    View m, pos, fwd;
+    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3};
+    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m) || !get_array(opos, "position", 'd', 1, s3, false, pos) ||
+        !get_array(ofwd, "forward", 'd', 1, s3, false, fwd))
+        return false;
+    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
+    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
+    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
+    for (double v : cam.local_from_ndc)
+        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite"), false;
+    for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
+            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite"), false;
+    return true;
 }
 
 // The splat scene inside a `_core.Scene` object, or null (no exception set) for anything else.

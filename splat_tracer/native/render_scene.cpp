@@ -62,11 +62,13 @@ void RenderScene::locate_camera(Vec3 eye) {
     }
 }
 
-SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
-                                    bool camera_ray, TraversalStats *stats) const {
-    SurfacePoint best;
-    if (instances_.empty()) return best;
-    float limit = ray.tmax;
+// Visits, front to back, each instance visible to `ray_kind` whose box the ray enters before
+// `limit`: visit(index, instance, ray in object space, distance scale, starts on it?)
+// returns true to stop (an occluder found).
+template <class Visit>
+void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
+                                    TraversalStats *stats, Visit &&visit) const {
+    if (instances_.empty()) return;
     traverse_bvh(
         top_, ray, limit,
         [&](uint32_t first, uint32_t count) {
@@ -76,99 +78,94 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                 if (!(inst.visibility & ray_kind)) continue;
                 float s;
                 Ray local = to_object(inst, ray, &s);
-                const bool self = from.instance == index;
-                if (inst.mesh) {
-                    local.tmax = std::fmin(local.tmax, limit * s);
-                    const MeshHit h = inst.mesh->intersect(local, self ? from.triangle : -1, stats);
-                    if (!h.valid() || !(h.t / s < best.t)) continue;
-                    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
-                    best.n_members = 0, best.has_point_colour = false;
-                    const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
-                    const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
-                    best.ng = ng, best.ns = ns;
-                    // The point is the triangle's own (barycentric interpolation, then the
-                    // instance transform), not ray.o + t d: that one carries the rounding of
-                    // t and of the ray's origin -- about an ulp of the camera's distance, not
-                    // of p -- and a shadow ray from a point that fell below the surface met
-                    // the neighbouring triangle (black pixels on a UV sphere near its pole).
-                    const Vec3 po = inst.mesh->point(h);
-                    best.p = inst.to_world.point(po);
-                    // Start secondary rays off the surface by the interpolation's error bound
-                    // carried into the scene frame, plus the transform's own rounding
-                    // (gamma(3) (|M| |po| + |translation|), per axis).
-                    const Vec3 obj_err = inst.mesh->point_error(h);
-                    const Affine &M = inst.to_world;
-                    const Vec3 abs_po = vabs(po);
-                    auto abs_row = [&](int r, Vec3 v) {
-                        return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y +
-                               std::fabs(M.m[4 * r + 2]) * v.z;
-                    };
-                    constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
-                    float err = 0.f;
-                    for (int r = 0; r < 3; ++r)
-                        err = std::fmax(err, abs_row(r, obj_err) +
-                                                 kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
-                    best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
-                    const int slot = inst.mesh->material(h.tri);
-                    best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
-                    limit = best.t;
-                } else {
-                    // The far phase of a closed cloud needs the hit after the layer, which may
-                    // lie beyond the nearest surface so far: only then is the full ray kept.
-                    const bool needs_exit = method.far_phase && inst.splats->any_closed();
-                    if (!needs_exit) local.tmax = std::fmin(local.tmax, limit * s);
-                    const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
-                    const SurfaceHit h =
-                        find_surface(*inst.splats, local, method, inside, self ? from.members : nullptr,
-                                     self ? from.n_members : 0, false, stats);
-                    if (!h.valid() || !(h.t / s < best.t)) continue;
-                    best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
-                    best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
-                    best.ns = normalize(inst.to_object.transposed_vector(h.normal));
-                    best.p = ray.o + ray.d * best.t;
-                    best.offset = 0;  // splat rays leave by excluding the members instead
-                    best.radius = inst.splats->radius(h.id) / s;
-                    best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
-                    best.material = inst.material_offset;
-                    best.n_members = h.n_members;
-                    for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
-                    limit = best.t;
-                }
+                if (visit(index, inst, local, s, from.instance == index)) return true;
             }
             return false;
         },
         stats ? &stats->nodes : nullptr);
+}
+
+SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
+                                    bool camera_ray, TraversalStats *stats) const {
+    SurfacePoint best;
+    float limit = ray.tmax;
+    for_each_instance(ray, limit, ray_kind, from, stats,
+                      [&](int index, const Instance &inst, Ray &local, float s, bool self) {
+            if (inst.mesh) {
+                local.tmax = std::fmin(local.tmax, limit * s);
+                const MeshHit h = inst.mesh->intersect(local, self ? from.triangle : -1, stats);
+                if (!h.valid() || !(h.t / s < best.t)) return false;
+                best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+                best.n_members = 0, best.has_point_colour = false;
+                const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
+                const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+                best.ng = ng, best.ns = ns;
+                // The point is the triangle's own (barycentric interpolation, then the
+                // instance transform), not ray.o + t d: that one carries the rounding of
+                // t and of the ray's origin -- about an ulp of the camera's distance, not
+                // of p -- and a shadow ray from a point that fell below the surface met
+                // the neighbouring triangle (black pixels on a UV sphere near its pole).
+                const Vec3 po = inst.mesh->point(h);
+                best.p = inst.to_world.point(po);
+                // Start secondary rays off the surface by the interpolation's error bound
+                // carried into the scene frame, plus the transform's own rounding
+                // (gamma(3) (|M| |po| + |translation|), per axis).
+                const Vec3 obj_err = inst.mesh->point_error(h);
+                const Affine &M = inst.to_world;
+                const Vec3 abs_po = vabs(po);
+                auto abs_row = [&](int r, Vec3 v) {
+                    return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y +
+                           std::fabs(M.m[4 * r + 2]) * v.z;
+                };
+                constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
+                float err = 0.f;
+                for (int r = 0; r < 3; ++r)
+                    err = std::fmax(err, abs_row(r, obj_err) +
+                                             kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
+                best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
+                const int slot = inst.mesh->material(h.tri);
+                best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
+                limit = best.t;
+            } else {
+                // The far phase of a closed cloud needs the hit after the layer, which may
+                // lie beyond the nearest surface so far: only then is the full ray kept.
+                const bool needs_exit = method.far_phase && inst.splats->any_closed();
+                if (!needs_exit) local.tmax = std::fmin(local.tmax, limit * s);
+                const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
+                const SurfaceHit h =
+                    find_surface(*inst.splats, local, method, inside, self ? from.members : nullptr,
+                                 self ? from.n_members : 0, false, stats);
+                if (!h.valid() || !(h.t / s < best.t)) return false;
+                best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
+                best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
+                best.ns = normalize(inst.to_object.transposed_vector(h.normal));
+                best.p = ray.o + ray.d * best.t;
+                best.offset = 0;  // splat rays leave by excluding the members instead
+                best.radius = inst.splats->radius(h.id) / s;
+                best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
+                best.material = inst.material_offset;
+                best.n_members = h.n_members;
+                for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
+                limit = best.t;
+            }
+            return false;
+            });
     return best;
 }
 
 bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {
-    if (instances_.empty()) return false;
     bool blocked = false;
     const float limit = ray.tmax;
-    traverse_bvh(
-        top_, ray, limit,
-        [&](uint32_t first, uint32_t count) {
-            for (uint32_t k = first; k < first + count; ++k) {
-                const int index = int(top_.prim_order[k]);
-                const Instance &inst = instances_[index];
-                if (!(inst.visibility & kVisShadow)) continue;
-                float s;
-                const Ray local = to_object(inst, ray, &s);
-                const bool self = from.instance == index;
-                if (inst.mesh) {
-                    if (inst.mesh->occluded(local, self ? from.triangle : -1, stats)) return blocked = true;
-                } else {
-                    // Splats block only where the visibility rules put a surface: a fringe
-                    // disc (far phase) or the splats the ray starts from never cast a shadow.
-                    const SurfaceHit h = find_surface(*inst.splats, local, method, from.inside == index,
-                                                      self ? from.members : nullptr, self ? from.n_members : 0,
-                                                      false, stats);
-                    if (h.valid() && h.t < local.tmax) return blocked = true;
-                }
-            }
-            return false;
-        },
-        stats ? &stats->nodes : nullptr);
+    for_each_instance(ray, limit, kVisShadow, from, stats,
+                      [&](int index, const Instance &inst, Ray &local, float, bool self) {
+                          if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
+                          // Splats block only where the visibility rules put a surface: a fringe
+                          // disc (far phase) or the splats the ray starts from never cast a shadow.
+                          const SurfaceHit h = find_surface(*inst.splats, local, method, from.inside == index,
+                                                            self ? from.members : nullptr,
+                                                            self ? from.n_members : 0, false, stats);
+                          return blocked = h.valid() && h.t < local.tmax;
+                      });
     return blocked;
 }
 

@@ -105,6 +105,9 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
+    template <class Visit>
+    void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
+                           TraversalStats *stats, Visit &&visit) const;
     // The ray in an instance's object space: unit direction, distances scaled by `scale`.
     static Ray to_object(const Instance &inst, const Ray &ray, float *scale);
 
