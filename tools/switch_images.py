@@ -28,12 +28,22 @@ SWITCHES = {  # property -> (scene, what to look at)
 }
 
 
+def colour(bpy, obj, rgba) -> None:
+    """A material of that base colour (what the compare's headlight shades), linked to the
+    object: Mesh to Points drops the mesh's own materials."""
+    material = bpy.data.materials.new("Colour")
+    material.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = rgba
+    obj.data.materials.append(None)
+    obj.material_slots[0].link = "OBJECT"
+    obj.material_slots[0].material = material
+
+
 def cube_scene(bpy, ply, geometry):
     p, n = geometry.cube_cloud(24)
     path = BUILD / "cube.ply"
     ply.write_ply(str(path), p, n)
     bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    bpy.context.active_object.color = (0.85, 0.6, 0.35, 1.0)
+    colour(bpy, bpy.context.active_object, (0.85, 0.6, 0.35, 1.0))
     return (3.0, -4.6, 3.4), (math.radians(55), 0.0, math.radians(33)), 50
 
 
@@ -42,7 +52,7 @@ def suzanne_scene(bpy, ply, demo):
     path = BUILD / "suzanne.ply"
     ply.write_ply(str(path), positions, normals)
     bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    bpy.context.active_object.color = (0.8, 0.45, 0.2, 1.0)
+    colour(bpy, bpy.context.active_object, (0.8, 0.45, 0.2, 1.0))
     return (2.2, -5.2, 1.4), (math.radians(77), 0.0, math.radians(23)), 55
 
 
@@ -69,7 +79,7 @@ def main(argv=None) -> int:
         scene.render.resolution_x, scene.render.resolution_y = 320, 240
         scene.view_settings.view_transform = "Standard"
         scene.world = bpy.data.worlds.new("World")
-        scene.world.color = (0.03, 0.035, 0.045)
+        scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.03, 0.035, 0.045, 1.0)
         location, rotation, lens = (cube_scene(bpy, ply, geometry) if scene_name == "cube"
                                     else suzanne_scene(bpy, ply, demo))
         cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
