@@ -21,14 +21,14 @@ NODE_GROUP_TAG = "splat_tracer_points"  # custom property marking our node group
 # Objects in older files keep the group they were made with, which still renders.
 NODE_GROUP_VERSION = 2
 MATERIAL_TAG = "splat_tracer_material"  # custom property marking our material
-MATERIAL_VERSION = 1
+MATERIAL_VERSION = 2  # 1: Base Color from splat_color; 2: its alpha into Alpha too
 MATERIAL_NAME = "Splat Cloud"
 
 
 def cloud_material() -> bpy.types.Material:
     """The shared "Splat Cloud" material, created on first use: a Principled BSDF whose Base
-    Color is the points' `splat_color` (an Attribute node), so Cycles and EEVEE show the
-    point colours."""
+    Color and Alpha are the points' `splat_color` and its alpha (an Attribute node), so
+    Cycles and EEVEE show the point colours, and see-through points are see-through."""
     for material in bpy.data.materials:
         if material.get(MATERIAL_TAG) == MATERIAL_VERSION:
             return material
@@ -44,6 +44,7 @@ def cloud_material() -> bpy.types.Material:
     shader = nodes.new("ShaderNodeBsdfPrincipled")
     output = nodes.new("ShaderNodeOutputMaterial")
     links.new(colour.outputs["Color"], shader.inputs["Base Color"])
+    links.new(colour.outputs["Alpha"], shader.inputs["Alpha"])  # the points' own alpha (1: opaque)
     links.new(shader.outputs["BSDF"], output.inputs["Surface"])
     colour.location, shader.location, output.location = (-300, 0), (0, 0), (300, 0)
     return material

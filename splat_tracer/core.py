@@ -225,18 +225,21 @@ class Scene:
     centres (N,3), normals (N,3, any non-zero length), radii (N,) > 0 and optional colours
     (N,3, scene-linear RGB) in one local frame. closed: whether each splat belongs to a
     closed, hole-free object (bool for all, or (N,) flags; the far phase applies to those
-    only). Raises ValueError naming the first bad splat (non-finite value, zero normal,
-    radius <= 0), TypeError for unusable arrays.
+    only). alphas: optional (N,) opacities in 0..1, the points' own alpha (a material whose
+    Alpha reads them makes the cloud see-through there). Raises ValueError naming the first
+    bad splat (non-finite value, zero normal, radius <= 0, alpha outside 0..1), TypeError for
+    unusable arrays.
     threads: default thread count for tracing and rendering (0: all cores).
     """
 
-    def __init__(self, centres, normals, radii, colours=None, closed=False, threads: int = 0):
+    def __init__(self, centres, normals, radii, colours=None, closed=False, threads: int = 0, alphas=None):
         c = _f32(centres, "centres", (-1, 3))
         n = _f32(normals, "normals", (len(c), 3))
         r = _f32(radii, "radii", (len(c),))
         col = None if colours is None else _f32(colours, "colours", (len(c), 3))
+        a = None if alphas is None else _f32(alphas, "alphas", (len(c),))
         flags = np.broadcast_to(np.asarray(closed, dtype=np.uint8), (len(c),))
-        self._scene = _core.Scene(c, n, r, col, np.ascontiguousarray(flags), threads)
+        self._scene = _core.Scene(c, n, r, col, np.ascontiguousarray(flags), threads, a)
 
     def __len__(self) -> int:
         return self._scene.size

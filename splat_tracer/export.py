@@ -86,8 +86,9 @@ def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarra
 
 
 def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
-    """(positions, normals, radii, colours or None) of a point cloud or of a vertex-only
-    mesh carrying the splat attributes, invalid points left out."""
+    """(positions, normals, radii, colours or None, alphas or None) of a point cloud or of a
+    vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
+    some point is not opaque."""
     pos = _read(attrs["position"], "vector", 3, n)
     nrm = _read(attrs[NORMAL], "vector", 3, n)
     rad_attr = attrs[RADIUS] if RADIUS in attrs else attrs.get("radius")
@@ -98,18 +99,22 @@ def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
             raise ValueError(f"point cloud '{obj.name}': attribute '{attr.name}' must be {kinds[0]} on points, "
                              f"not {attr.data_type} on {attr.domain}")
     rad = _read(rad_attr, "value", 1, n)
-    col = None
+    col = alpha = None
     if COLOUR in attrs:
         c = attrs[COLOUR]
         if c.data_type in ("FLOAT_COLOR", "BYTE_COLOR") and c.domain == "POINT":
-            col = _read(c, "color", 4, n)[:, :3]
+            rgba = _read(c, "color", 4, n)
+            col = np.ascontiguousarray(rgba[:, :3])
+            if (rgba[:, 3] < 1.0).any():
+                alpha = np.ascontiguousarray(np.clip(rgba[:, 3], 0.0, 1.0))
         else:
             report.once(f"point cloud '{obj.name}': attribute '{COLOUR}' is {c.data_type} on {c.domain}, "
                         "not a point colour; ignored")
     ok = _valid_points(obj.name, pos, nrm, rad, report)
     if not ok.all():
-        pos, nrm, rad, col = pos[ok], nrm[ok], rad[ok], None if col is None else col[ok]
-    return pos, nrm, rad, col
+        keep = (lambda a: None if a is None else a[ok])
+        pos, nrm, rad, col, alpha = pos[ok], nrm[ok], rad[ok], keep(col), keep(alpha)
+    return pos, nrm, rad, col, alpha
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
@@ -170,14 +175,15 @@ class _Frame:
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
         closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
-        pos, nrm, rad, col = _cloud_arrays(obj, attrs, n, self.report)
+        pos, nrm, rad, col, alpha = _cloud_arrays(obj, attrs, n, self.report)
         if len(pos) == 0:
             return None
-        key = ("cloud", _digest(pos, nrm, rad, col, closed, self.radius_factor))
+        key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
 
         def build():
             resources.check(f"point cloud '{obj.name}' ({len(pos):,} splats)", len(pos) * resources.BYTES_PER_SPLAT)
-            return core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed, threads=self.threads)
+            return core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed, threads=self.threads,
+                              alphas=alpha)
 
         geometry, built = self.cache.get(key, build)
         if built or key not in self.cache.counted:
@@ -273,9 +279,6 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in _slot_materials(obj)) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
-        for m in materials:
-            if m.use_point_alpha:
-                report.once(f"object '{obj.name}': the points' own alpha is not rendered yet; opaque")
         instances.append(core.Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in core.RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],

@@ -466,3 +466,30 @@ def test_a_cloud_without_its_points_modifier_still_renders_and_says_why(blender,
     np.testing.assert_array_equal(without["depth"] < 1e9, with_modifier["depth"] < 1e9)
     assert any("carries splats but no longer evaluates to a point cloud" in line
                for line in session.HISTORY[-1]["report"])
+
+
+def test_points_own_alpha_renders_through_the_importer_material(blender, empty_scene, tmp_path):
+    """A coloured cloud whose points have alpha 0.25 gets the importer's material (Attribute
+    node: colour into Base Color, alpha into Alpha): with a transparent film, the cloud covers
+    its pixels a quarter (the alpha channel), and its colour is the points' colour."""
+    from splat_tracer.shading import Report
+
+    bpy = blender
+    scene = empty_scene
+    export_shading = extension_module("export_shading")
+    cloud_object = extension_module("cloud_object")
+    p, n = fibonacci_sphere(8000)
+    radii = np.full(len(p), 2.2 * np.sqrt(4 * np.pi / len(p)), np.float32)
+    colours = np.tile(np.float32([0.9, 0.2, 0.1, 0.25]), (len(p), 1))
+    obj = cloud_object.create_cloud_object("veil", p, n, radii, colours)
+    obj.splat_tracer.closed = True
+    add_camera(bpy, scene, (0.0, -6.0, 0.0), (math.radians(90), 0.0, 0.0))
+    scene.render.film_transparent = True
+    scene.splat_tracer.lighting = "HEADLIGHT"
+    scene.splat_tracer.samples = 64
+    out = render_to_exr(bpy, scene, tmp_path / "veil.exr", 64, 48, passes=False)
+    centre = out["rgba"][18:30, 26:38]
+    # Front and back of the sphere: each a quarter opaque, so 1 - 0.75^2 of the camera samples stop.
+    np.testing.assert_allclose(centre[..., 3].mean(), 1 - 0.75 ** 2, atol=0.05)
+    assert np.all(out["rgba"][0, 0] == 0)
+    assert export_shading.material_of(cloud_object.cloud_material(), Report()).use_point_alpha

@@ -943,3 +943,59 @@ def test_a_stopped_render_finishes_only_the_tiles_in_flight():
     tiles_done = fr.counters["camera_rays"] / (tile * tile * samples)
     assert tiles_done <= seen[0] + threads, (tiles_done, seen[0])
     assert tiles_done < (256 // tile) * (192 // tile)  # it did stop early
+
+
+def plane_cloud(half: float, n: int, z: float, alpha=None) -> core.Scene:
+    """A square of n x n overlapping discs at height z facing +Z, with optional alphas."""
+    g = (np.arange(n) + 0.5) / n * 2 * half - half
+    xs, ys = np.meshgrid(g, g)
+    c = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, z)])
+    nrm = np.tile([0.0, 0.0, 1.0], (len(c), 1))
+    alphas = None if alpha is None else np.full(len(c), alpha)
+    return core.Scene(c, nrm, np.full(len(c), 1.5 * 2 * half / n), alphas=alphas)
+
+
+def test_point_alpha_makes_a_cloud_see_through_to_camera_and_shadow_rays():
+    """A cloud whose points have alpha 0.25, with a material reading it (use_point_alpha): the
+    camera sees 25 % of it over what is behind, and a lamp's light passes 75 % of it -- exactly
+    for shadow rays (they multiply the transmittance), within noise for camera samples."""
+    veil = Material(base_colour=(0.0, 0.0, 0.0), emission=(1.0, 1.0, 1.0), specular_level=0.0,
+                    use_point_alpha=True)
+    floor = grid_mesh(50.0, 1)
+    cloud = plane_cloud(3.0, 60, 1.0, alpha=0.25)
+    cam = ortho_down(width=2.0, height=2.0)
+    sun = [Light(type="SUN", power=np.pi, direction=(0, 0, -1))]
+    glow = Material(base_colour=(0.0, 0.0, 0.0), emission=(0.0, 0.0, 1.0), specular_level=0.0)
+    seen = render([core.Instance(floor, materials=(glow,)), core.Instance(cloud, materials=(veil,))], (), cam=cam,
+                  w=8, h=8, samples=256).passes["Combined"]
+    np.testing.assert_allclose(seen[..., 0].mean(), 0.25, atol=0.02)  # the veil's own white
+    np.testing.assert_allclose(seen[..., 2].mean(), 0.25 + 0.75, atol=0.02)  # plus the blue floor behind it
+    lit = lambda instances: render(instances, sun, cam=cam, w=4, h=4).passes["Combined"][..., 0]  # noqa: E731
+    shadowed = core.Instance(cloud, materials=(Material(use_point_alpha=True, specular_level=0.0),),
+                             visibility=frozenset({"shadow"}))
+    open_floor = lit([core.Instance(floor, materials=(LAMBERT,))])
+    under_veil = lit([core.Instance(floor, materials=(LAMBERT,)), shadowed])
+    np.testing.assert_allclose(under_veil / open_floor, 0.75, rtol=1e-5)
+    opaque = core.Instance(plane_cloud(3.0, 60, 1.0, alpha=0.25), materials=(Material(specular_level=0.0),),
+                           visibility=frozenset({"shadow"}))  # material ignores the points' alpha
+    assert lit([core.Instance(floor, materials=(LAMBERT,)), opaque]).max() == 0.0
+
+
+def test_point_alphas_are_checked():
+    with pytest.raises(ValueError, match="splat 1: alpha must be in 0..1"):
+        core.Scene([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, [1.0, 1.0], alphas=[0.5, 1.5])
+
+
+def test_an_open_cloud_is_seen_from_behind_and_shadows_what_is_beneath():
+    """A one-sided open scan (normals up) used to vanish when seen from below, and to cast no
+    shadow on what lies under it (the shadow ray meets it from behind): an open object seen
+    from behind is a real surface, and the ray takes its back-facing layer."""
+    roof = plane_cloud(3.0, 60, 1.0)
+    looking_up = core.Camera.look_at((0, 0, -5), (0, 0, 0), up=(0, 1, 0), ortho_height=2.0, aspect=1.0)
+    depth = render([core.Instance(roof)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)),
+                   cam=looking_up, w=8, h=8, passes=("Depth",), headlight=True).passes["Depth"]
+    np.testing.assert_allclose(depth, 6.0, rtol=1e-5)  # the roof, from below
+    sun = [Light(type="SUN", power=np.pi, direction=(0, 0, -1))]
+    floor = core.Instance(grid_mesh(50.0, 1), materials=(LAMBERT,))
+    under = render([floor, core.Instance(roof, visibility=frozenset({"shadow"}))], sun, cam=ortho_down(), w=4, h=4)
+    assert under.passes["Combined"][..., 0].max() == 0.0

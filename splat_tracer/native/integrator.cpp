@@ -110,6 +110,15 @@ struct Lobes {
 
 }  // namespace
 
+// The cloud a ray travels inside once it has crossed the surface at `sp` (refracted, or
+// passed through a see-through point): entering a splat cloud it is inside it, and its next
+// layer there is the exit (the swapped-facing rule); leaving, it is outside again. Meshes
+// need no flag: their triangles' winding tells in and out.
+int Integrator::inside_after_crossing(const SurfacePoint &sp, int inside_before) const {
+    if (!scene_.instance(sp.instance).splats) return inside_before;
+    return sp.front ? sp.instance : -1;
+}
+
 Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Film &film,
                        const IntegratorSettings &settings, RenderCounters &counters)
     : scene_(scene), camera_(camera), film_(film), settings_(settings), counters_(counters),
@@ -204,11 +213,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         }
         mat = scene_.material(sp.material);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
-        opacity = mat.alpha;
+        opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
         if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces || rng.next() < opacity) break;
         ++st.transparent, ++tally.transparent;
         passed = sp;
-        st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members, st.from.inside};
+        st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
+                         inside_after_crossing(passed, st.from.inside)};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
@@ -287,10 +297,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         ++(tally.*count);
         L = L + weight * radiance(spawn(dir), next, rng, nullptr, tally);
     };
-    // A refracted ray entering a splat cloud travels inside it (swapped facing); leaving, it
-    // is outside again. Meshes need no flag: their triangles' winding tells in and out.
-    const bool is_cloud = scene_.instance(sp.instance).splats != nullptr;
-    const int inside_after = is_cloud ? (entering ? sp.instance : -1) : st.from.inside;
+    const int inside_after = inside_after_crossing(sp, st.from.inside);
 
     // Mirror and clear glass: both rays, each weighted by its Fresnel term.
     if (lobes.delta) {
@@ -421,11 +428,13 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
         sp = scene_.intersect(ray, method, kVisShadow, from, false, &tally.stats);
         if (!sp.valid()) return t;
-        const float a = scene_.material(sp.material).alpha;
+        const Material &m = scene_.material(sp.material);
+        const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);
         if (a >= 1.f) return Vec3();
         t = t * (1.f - a);
         previous = sp;
-        from = Origin{previous.instance, previous.prim, previous.members, previous.n_members, from.inside};
+        from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
+                      inside_after_crossing(previous, from.inside)};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;

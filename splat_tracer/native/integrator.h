@@ -68,6 +68,7 @@ class Integrator {
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void shade_pixel(int col, int row, Tally &tally) const;
+    int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
 
     const RenderScene &scene_;
     const Camera &camera_;

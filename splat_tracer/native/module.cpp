@@ -73,14 +73,14 @@ struct SceneObject {
 };
 
 PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", nullptr};
-    PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None;
+    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", "alphas", nullptr};
+    PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None, *oalpha = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOi", const_cast<char **>(kwlist), &oc, &on, &orad,
-                                     &ocol, &oclosed, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOiO", const_cast<char **>(kwlist), &oc, &on, &orad,
+                                     &ocol, &oclosed, &threads, &oalpha))
         return nullptr;
     if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
-    View c, n, r, col, closed;
+    View c, n, r, col, closed, alpha;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(oc, "centres", 'f', 2, s3, false, c)) return nullptr;
     const Py_ssize_t count = c.dim(0);
@@ -89,12 +89,14 @@ PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (!get_array(orad, "radii", 'f', 1, s1, false, r)) return nullptr;
     if (ocol != Py_None && !get_array(ocol, "colours", 'f', 2, sn, false, col)) return nullptr;
     if (oclosed != Py_None && !get_array(oclosed, "closed", 'B', 1, s1, false, closed)) return nullptr;
+    if (oalpha != Py_None && !get_array(oalpha, "alphas", 'f', 1, s1, false, alpha)) return nullptr;
 
     SplatScene *scene = nullptr;
     if (!without_gil([&] {
             scene = new SplatScene(c.data<float>(), n.data<float>(), r.data<float>(),
                                    col.held ? col.data<float>() : nullptr,
-                                   closed.held ? closed.data<uint8_t>() : nullptr, size_t(count), threads);
+                                   closed.held ? closed.data<uint8_t>() : nullptr, size_t(count), threads,
+                                   alpha.held ? alpha.data<float>() : nullptr);
         }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));

@@ -8,7 +8,8 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
                          int threads)
     : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (const Material &m : materials_) any_transparent_ |= m.alpha < 1.f, any_emission_ |= m.emits();
+    for (const Material &m : materials_)
+        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha, any_emission_ |= m.emits();
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
         Instance &inst = instances_[i];
@@ -96,7 +97,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                 const MeshHit h = inst.mesh->intersect(local, self ? from.triangle : -1, stats);
                 if (!h.valid() || !(h.t / s < best.t)) return false;
                 best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
-                best.n_members = 0, best.has_point_colour = false;
+                best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
                 const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
                 const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
                 best.ng = ng, best.ns = ns;
@@ -143,6 +144,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                 best.offset = 0;  // splat rays leave by excluding the members instead
                 best.radius = inst.splats->radius(h.id) / s;
                 best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
+                best.point_alpha = h.alpha;
                 best.material = inst.material_offset;
                 best.n_members = h.n_members;
                 for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];

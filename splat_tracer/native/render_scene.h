@@ -75,6 +75,7 @@ struct SurfacePoint {
                          // splats only without wrong-hit elimination, see the integrator)
     float radius = 0;    // splats: the chosen splat's radius in the scene frame
     Vec3 point_colour;
+    float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
     int material = 0;    // index in the material table
     int n_members = 0;   // splats that formed the point

@@ -15,13 +15,18 @@ bool in_range3(const float *v) { return within_range(v[0]) && within_range(v[1])
 }  // namespace
 
 SplatScene::SplatScene(const float *centres, const float *normals, const float *radii,
-                       const float *colours, const uint8_t *closed, size_t n, int threads) {
+                       const float *colours, const uint8_t *closed, size_t n, int threads, const float *alphas) {
     if (n >= size_t(INT32_MAX)) throw InputError("too many splats (ids are 32-bit)");
     normals_.resize(n);
     closed_.assign(n, 0);
     if (closed)
         for (size_t i = 0; i < n; ++i) closed_[i] = closed[i] ? 1 : 0, any_closed_ |= closed[i] != 0;
     has_colours_ = colours != nullptr;
+    if (alphas) {
+        alphas_.assign(alphas, alphas + n);
+        for (size_t i = 0; i < n; ++i)
+            if (!(alphas_[i] >= 0.f && alphas_[i] <= 1.f)) bad_splat(i, "alpha must be in 0..1");
+    }
     colours_.assign(n, Vec3(1.f, 1.f, 1.f));
     radii_.assign(radii, radii + n);
     std::vector<AABB> boxes(n);

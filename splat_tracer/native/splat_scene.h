@@ -34,8 +34,9 @@ class SplatScene {
     // the splat belongs to a closed, hole-free object) may be null (all open). Throws
     // InputError naming the first offending splat when a value is not finite, a normal is
     // zero or a radius is not positive.
+    // `alphas` (n opacities in 0..1, the points' own alpha) may be null (all opaque).
     SplatScene(const float *centres, const float *normals, const float *radii,
-               const float *colours, const uint8_t *closed, size_t n, int threads);
+               const float *colours, const uint8_t *closed, size_t n, int threads, const float *alphas = nullptr);
 
     size_t size() const { return splats_.size(); }
     const AABB &bounds() const { return bounds_; }
@@ -48,6 +49,8 @@ class SplatScene {
     bool any_closed() const { return any_closed_; }    // the far phase has work here
     bool has_colours() const { return has_colours_; }  // per-point colours were given
     Vec3 colour(int32_t id) const { return colours_[id]; }
+    float alpha(int32_t id) const { return alphas_.empty() ? 1.f : alphas_[id]; }
+    bool has_alphas() const { return !alphas_.empty(); }
     float radius(int32_t id) const { return radii_[id]; }
 
     // Nearest hit in (ray.tmin, ray.tmax), either facing.
@@ -66,7 +69,7 @@ class SplatScene {
     std::vector<PackedSplat> splats_;  // BVH order
     std::vector<Vec3> centres_, normals_, colours_;
     std::vector<uint8_t> closed_;
-    std::vector<float> radii_;
+    std::vector<float> radii_, alphas_;
     bool any_closed_ = false, has_colours_ = false;
     AABB bounds_;
     BVH bvh_;

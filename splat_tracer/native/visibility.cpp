@@ -25,7 +25,7 @@ SurfaceHit single_splat(const SplatScene &scene, const Hit &h) {
     SurfaceHit s;
     if (!h.valid()) return s;
     s.t = h.t, s.id = h.id, s.front = h.front;
-    s.normal = scene.normal(h.id), s.colour = scene.colour(h.id);
+    s.normal = scene.normal(h.id), s.colour = scene.colour(h.id), s.alpha = scene.alpha(h.id);
     s.n_members = 1, s.members[0] = h.id;
     return s;
 }
@@ -54,23 +54,25 @@ SurfaceHit resolve_layer(const SplatScene &scene, const LayerQuery &q, const Met
     SurfaceHit s;
     const LayerHit &h = q.hits[chosen];
     s.t = h.t, s.id = h.id, s.front = h.front, s.overflow = q.overflow;
-    s.normal = scene.normal(h.id), s.colour = scene.colour(h.id);
+    s.normal = scene.normal(h.id), s.colour = scene.colour(h.id), s.alpha = scene.alpha(h.id);
     s.n_members = n;
     for (int k = 0; k < n; ++k) s.members[k] = q.hits[idx[k]].id;
     if (m.interpolate && n > 1) {
         Vec3 nsum, csum;
-        float wsum = 0.f;
+        float wsum = 0.f, asum = 0.f;
         for (int k = 0; k < n; ++k) {
             const LayerHit &mh = q.hits[idx[k]];
             const float w = kernel_weight(m.kernel, mh.dist, mh.radius);
             nsum = nsum + scene.normal(mh.id) * w;
             csum = csum + scene.colour(mh.id) * w;
+            asum += scene.alpha(mh.id) * w;
             wsum += w;
         }
         // All members hit exactly on their rims (weight 0): keep the chosen splat's own.
         if (wsum > 0.f && length(nsum) > 0.f) {
             s.normal = normalize(nsum);
             s.colour = csum * (1.f / wsum);
+            s.alpha = asum / wsum;
         }
     }
     return s;
@@ -96,7 +98,19 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
         q.closed = scene.closed_flags();
         scene.gather_layer(ray, q, brute_force, stats);
         if (stats) ++stats->layer_queries;
-        if (q.first < 0) return SurfaceHit();
+        if (q.first < 0) {
+            // Only discs of the other facing on the whole ray. On a closed object those are
+            // wrong hits (fringe discs poking out at an edge) and the ray misses. An open
+            // object (a one-sided scan: a roof, a wall, terrain) seen from behind is a real
+            // surface: the ray takes its back-facing layer -- so an open scan is seen from
+            // both sides and shadows what is beneath it, as any renderer's two-sided surface.
+            if (!inside && q.count > 0 && !scene.closed(q.hits[0].id)) {
+                inside = true;  // its layer begins with a back-facing hit
+                --attempt;      // the same search, not a rejection
+                continue;
+            }
+            return SurfaceHit();
+        }
         const bool closed = scene.closed(q.hits[q.first].id);
         if (m.far_phase && closed) {
             // A ray that truly enters a closed surface leaves it: the next hit after the

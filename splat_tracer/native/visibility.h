@@ -43,6 +43,7 @@ struct SurfaceHit {
     int32_t id = -1;  // the splat whose hit is the surface point
     bool front = false;
     Vec3 normal, colour;
+    float alpha = 1.f;  // the points' own opacity, blended like the colour
     int n_members = 0;  // the splats that contributed (secondary rays exclude them)
     int32_t members[kMaxLayerHits];
     bool overflow = false;
