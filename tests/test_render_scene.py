@@ -999,3 +999,23 @@ def test_an_open_cloud_is_seen_from_behind_and_shadows_what_is_beneath():
     floor = core.Instance(grid_mesh(50.0, 1), materials=(LAMBERT,))
     under = render([floor, core.Instance(roof, visibility=frozenset({"shadow"}))], sun, cam=ortho_down(), w=4, h=4)
     assert under.passes["Combined"][..., 0].max() == 0.0
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_no_wrong_shadows_on_the_lit_side_of_open_or_closed_clouds(closed):
+    """The paper's wrong shadows: a shadow ray leaving a cloud at a grazing angle meets its
+    neighbouring discs from behind. Excluding the splats it starts from and ignoring
+    back-facing hits removes them -- also on an open cloud, where back-facing layers are
+    otherwise surfaces (rays from elsewhere see an open cloud from both sides)."""
+    c, n, r = sphere_cloud(20_000, seed=7)
+    cloud = core.Scene(c, n, r, closed=closed)
+    direction = np.array([0.3, 0.5, -0.8])
+    sun = [Light(type="SUN", power=3.0, direction=tuple(direction))]
+    cam = core.Camera.look_at((0, -4, 1), (0, 0, 0), fov_y=35.0)
+    fr = render([core.Instance(cloud, materials=(LAMBERT,))], sun, cam=cam, w=96, h=72,
+                passes=("Normal", "Shadow"))
+    to_sun = -direction / np.linalg.norm(direction)
+    lit_side = (fr.passes["Normal"] @ to_sun) > 0.1
+    assert lit_side.sum() > 1000
+    wrong = (fr.passes["Shadow"][..., 0] < 0.999) & lit_side
+    assert wrong.sum() == 0, wrong.sum()

@@ -104,7 +104,10 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
             // object (a one-sided scan: a roof, a wall, terrain) seen from behind is a real
             // surface: the ray takes its back-facing layer -- so an open scan is seen from
             // both sides and shadows what is beneath it, as any renderer's two-sided surface.
-            if (!inside && q.count > 0 && !scene.closed(q.hits[0].id)) {
+            // Not for a ray leaving this very cloud (it excludes the splats it starts from):
+            // the neighbours it meets from behind are the paper's wrong reflections and
+            // shadows (grazing shadow rays speckled an open Suzanne with acne).
+            if (!inside && n_exclude == 0 && q.count > 0 && !scene.closed(q.hits[0].id)) {
                 inside = true;  // its layer begins with a back-facing hit
                 --attempt;      // the same search, not a rejection
                 continue;
