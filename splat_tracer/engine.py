@@ -124,7 +124,6 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         vs = self._viewport_session()
         try:
             viewport.update_from_depsgraph(vs, depsgraph, first=vs.exported is None)
-            vs.error = None
         except Exception as e:  # noqa: BLE001 - shown in the viewport, never raised into the draw loop
             traceback.print_exc()
             vs.error = str(e)

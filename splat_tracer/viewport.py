@@ -371,6 +371,7 @@ class ViewportSession:
     def _restart(self) -> None:
         if self.exported is None or self._view is None or self._state is None:
             return
+        self.error = None
         if self._camera is None:
             self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin)
         method, settings, threads = self._state
@@ -434,8 +435,9 @@ class ViewportSession:
                 self._run(*work)
             except Exception as e:  # noqa: BLE001 - shown by view_draw; never kills Blender
                 with self._cond:
-                    self.error = str(e)
-                    self._next = len(work[0].schedule)  # give up on this job until the next change
+                    if work[0].generation == self._generation:  # give up on this job until the next change
+                        self.error = str(e)
+                        self._next = len(work[0].schedule)
                 time.sleep(0.01)
 
     def close(self) -> None:
