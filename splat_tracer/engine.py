@@ -11,7 +11,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import session
+from . import session, viewport
 
 # Blender 5.0 renamed three passes (Cycles and EEVEE write "Diffuse Color", "Emission" and
 # "Object Index" there, "DiffCol", "Emit" and "IndexOB" before). A pass must carry the name
@@ -108,6 +108,62 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "
                               f"{s['reused']} geometries ({s['build_seconds']:.2f} s), rendered in "
                               f"{s['render_seconds']:.2f} s")
+
+    # -- the viewport's Rendered mode ---------------------------------------------------
+    # view_update / view_draw run on Blender's main thread; the session renders on its own
+    # thread (viewport.py) and never calls bpy. Only _draw_pixels needs a GPU context.
+
+    def _viewport_session(self) -> viewport.ViewportSession:
+        vs = getattr(self, "_splat_viewport", None)
+        if vs is None:
+            vs = self._splat_viewport = viewport.ViewportSession()
+            vs.start()
+        return vs
+
+    def view_update(self, context, depsgraph):
+        vs = self._viewport_session()
+        try:
+            viewport.update_from_depsgraph(vs, depsgraph, first=vs.exported is None)
+        except Exception as e:  # noqa: BLE001 - shown in the viewport, never raised into the draw loop
+            traceback.print_exc()
+            vs.error = str(e)
+            self.update_stats("", f"Splat Tracer: {e}")
+
+    def view_draw(self, context, depsgraph):
+        vs = self._viewport_session()
+        scene = depsgraph.scene
+        vs.set_view(viewport.view_of(scene, depsgraph, context.region, context.region_data, context.space_data))
+        image = vs.latest()
+        if image is not None:
+            _draw_pixels(self, scene, image.pixels, context.region.width, context.region.height)
+            self.update_stats("", f"Splat Tracer | {image.samples} sample{'s' if image.samples > 1 else ''}"
+                                  f"{' at 1/%d resolution' % image.scale if image.scale > 1 else ''}"
+                                  f"{'' if image.final else ' | refining'}")
+        if vs.error:
+            self.update_stats("", f"Splat Tracer: {vs.error}")
+        elif not vs.done or image is None or not (image.final and image.generation == vs.generation):
+            self.tag_redraw()  # samples keep arriving (or the last pass is not drawn yet): draw again
+
+    def __del__(self):
+        vs = getattr(self, "_splat_viewport", None)
+        if vs is not None:
+            vs.close()
+
+
+def _draw_pixels(engine, scene, pixels: np.ndarray, width: int, height: int) -> None:
+    """Draws a (h, w, 4) premultiplied scene-linear buffer (top row first) over the region,
+    through the scene's display transform. The only code that needs a GPU: not run headless."""
+    import gpu
+    from gpu_extras.presets import draw_texture_2d
+
+    h, w = pixels.shape[:2]
+    data = gpu.types.Buffer("FLOAT", w * h * 4, np.ascontiguousarray(pixels[::-1], np.float32).ravel())
+    texture = gpu.types.GPUTexture((w, h), format="RGBA16F", data=data)
+    gpu.state.blend_set("ALPHA_PREMULT")
+    engine.bind_display_space_shader(scene)
+    draw_texture_2d(texture, (0, 0), width, height)
+    engine.unbind_display_space_shader()
+    gpu.state.blend_set("NONE")
 
 
 classes = (SplatTracerEngine,)

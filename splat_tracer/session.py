@@ -99,6 +99,24 @@ def border_window(render, width: int, height: int) -> tuple[int, int, int, int]:
     return x0, height - yb1, x1 - x0, yb1 - yb0
 
 
+def lit_settings(scene, exported, settings: shading.RenderSettings, headlight: Optional[bool],
+                 report: shading.Report) -> tuple[shading.RenderSettings, bool]:
+    """(settings, headlight) as the frame is lit. headlight: None follows the scene's Lighting
+    setting, falling back to the headlight (said in the report) when nothing in the exported
+    scene gives light; True/False force it. F12 and the viewport share this."""
+    world = exported.render_scene.world
+    lit = exported.lights > 0 or exported.emission or max(world.radiance()) > 0
+    if headlight is None:
+        headlight = scene.splat_tracer.lighting == "HEADLIGHT"
+        if not headlight and not lit:
+            headlight = True
+            report.once("the scene has no lamp, no emission and a black world: rendered with a headlight "
+                        "(Splat Tracer > Lighting)")
+    if headlight:
+        settings = shading.RenderSettings(**{**settings.__dict__, "headlight": True})
+    return settings, bool(headlight)
+
+
 def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=None, stats=None,
                  use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
                  settings: Optional[shading.RenderSettings] = None) -> Frame:
@@ -125,17 +143,8 @@ def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=
         CACHE.end_frame(keep=False)
         raise
     t_export = time.perf_counter() - t0
-    settings = settings or export_shading.render_settings_of(scene)
-    world = exported.render_scene.world
-    lit = exported.lights > 0 or exported.emission or max(world.radiance()) > 0
-    if headlight is None:
-        headlight = props.lighting == "HEADLIGHT"
-        if not headlight and not lit:
-            headlight = True
-            report.once("the scene has no lamp, no emission and a black world: rendered with a headlight "
-                        "(Splat Tracer > Lighting)")
-    if headlight:
-        settings = shading.RenderSettings(**{**settings.__dict__, "headlight": True})
+    settings, headlight = lit_settings(scene, exported, settings or export_shading.render_settings_of(scene),
+                                       headlight, report)
     summary = (f"Splat Tracer | {exported.instances} instances of {len(CACHE.used)} geometries "
                f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
     say(summary + " | rendering")

@@ -1,0 +1,456 @@
+"""The viewport's Rendered mode: Blender's view -> core camera, what a depsgraph update
+changes, and a progressive session that renders into a buffer.
+
+Everything here except `view_of` (which reads the 3D view) and `update_from_depsgraph` is
+plain Python over numpy and the core, and is tested headless; the engine's view_draw only
+draws the session's latest buffer with the `gpu` module (engine.py).
+
+Rendering runs on a Python thread (`ViewportSession.start`): the core releases the GIL while
+it traces, so Blender's UI thread stays free; the thread never touches bpy. Everything that
+reads Blender (the export, the view's matrices) happens on the main thread, in view_update
+and view_draw, and hands the thread immutable snapshots (a RenderScene, a Camera, settings).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Iterable, Optional
+
+import numpy as np
+
+from . import core, shading
+
+# --------------------------------------------------------------------------------------
+# The view
+
+
+def _matrix(m) -> np.ndarray:
+    a = np.array([[float(v) for v in row] for row in m], dtype=np.float64) if not isinstance(m, np.ndarray) \
+        else np.asarray(m, dtype=np.float64)
+    if a.shape != (4, 4) or not np.isfinite(a).all():
+        raise ValueError(f"a view matrix must be a finite 4x4 matrix, got shape {a.shape}")
+    return a
+
+
+def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> core.Camera:
+    """The core camera of a 3D view: `window_matrix` is its projection (view space to clip
+    space, RegionView3D.window_matrix) and `view_matrix` maps world to view space
+    (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
+    way: Blender folds the camera's lens, sensor fit, shift, the view's zoom and its offset
+    into window_matrix. `origin`: the scene's local-frame origin (float64 world position)."""
+    return core.Camera.from_view_projection(_matrix(window_matrix), np.linalg.inv(_matrix(view_matrix)), origin)
+
+
+def view_position(view_matrix) -> np.ndarray:
+    """The world position of the view (its eye; for an orthographic view, its centre)."""
+    return np.linalg.inv(_matrix(view_matrix))[:3, 3]
+
+
+def region_rect(perspective_matrix, world_points, width: int, height: int) -> tuple[float, float, float, float]:
+    """(xmin, ymin, xmax, ymax) in region pixels (origin bottom left, as Blender's region
+    coordinates) of world points projected by `perspective_matrix` (window @ view): used for
+    the camera frame in the camera view."""
+    p = _matrix(perspective_matrix)
+    pts = np.column_stack([np.asarray(world_points, np.float64).reshape(-1, 3), np.ones(len(world_points))])
+    clip = pts @ p.T
+    ndc = clip[:, :2] / clip[:, 3:4]
+    x = (ndc[:, 0] + 1.0) * 0.5 * width
+    y = (ndc[:, 1] + 1.0) * 0.5 * height
+    return float(x.min()), float(y.min()), float(x.max()), float(y.max())
+
+
+def border_window(width: int, height: int, rect=None, fractions=None) -> Optional[tuple[int, int, int, int]]:
+    """The rendered window (x0, y0 from the top, w, h) of a width x height region.
+
+    rect: (xmin, ymin, xmax, ymax) region pixels (bottom-left origin) the border fractions
+    are relative to (the camera frame in the camera view; default the region); fractions:
+    (min_x, min_y, max_x, max_y) of the border, or None for no border (the whole region).
+    None when the border lies outside the region (nothing to render)."""
+    if fractions is None:
+        return 0, 0, width, height
+    rx0, ry0, rx1, ry1 = rect if rect is not None else (0.0, 0.0, float(width), float(height))
+    fx0, fy0, fx1, fy1 = fractions
+    # Blender rounds border edges to the nearest pixel.
+    x0 = int(np.floor(rx0 + fx0 * (rx1 - rx0) + 0.5))
+    x1 = int(np.floor(rx0 + fx1 * (rx1 - rx0) + 0.5))
+    yb0 = int(np.floor(ry0 + fy0 * (ry1 - ry0) + 0.5))
+    yb1 = int(np.floor(ry0 + fy1 * (ry1 - ry0) + 0.5))
+    x0, x1 = max(x0, 0), min(x1, width)
+    yb0, yb1 = max(yb0, 0), min(yb1, height)
+    if x1 <= x0 or yb1 <= yb0:
+        return None
+    return x0, height - yb1, x1 - x0, yb1 - yb0
+
+
+@dataclass(frozen=True)
+class View:
+    """What the viewport shows: its matrices (nested tuples or arrays), region size and the
+    rendered window (None: an empty border, nothing rendered)."""
+
+    window_matrix: tuple
+    view_matrix: tuple
+    width: int
+    height: int
+    window: Optional[tuple] = None
+
+    @classmethod
+    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL") -> "View":
+        as_tuple = lambda m: tuple(tuple(float(v) for v in row) for row in _matrix(m))
+        if window == "ALL":
+            window = (0, 0, int(width), int(height))
+        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window)
+
+
+def view_of(scene, depsgraph, region, rv3d, space) -> View:
+    """The View of a 3D viewport (main thread: reads bpy). The border is the View3D's render
+    border, or in the camera view the scene's render border within the camera frame."""
+    width, height = int(region.width), int(region.height)
+    window_matrix, view_matrix = rv3d.window_matrix, rv3d.view_matrix
+    if rv3d.view_perspective == "CAMERA" and scene.camera is not None:
+        fractions = None
+        if scene.render.use_border:
+            r = scene.render
+            fractions = (r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y)
+            cam = scene.camera.evaluated_get(depsgraph)
+            frame = [cam.matrix_world @ v for v in cam.data.view_frame(scene=scene)]
+            rect = region_rect(rv3d.perspective_matrix, [tuple(v) for v in frame], width, height)
+        else:
+            rect = None
+    else:
+        rect = None
+        fractions = ((space.render_border_min_x, space.render_border_min_y, space.render_border_max_x,
+                      space.render_border_max_y) if space.use_render_border else None)
+    return View.of(window_matrix, view_matrix, width, height, border_window(width, height, rect, fractions))
+
+
+# --------------------------------------------------------------------------------------
+# What changed
+
+# Datablock types (the RNA type names of depsgraph.updates' ids) and what their change asks for.
+_GEOMETRY = {"Mesh", "PointCloud", "Curve", "Curves", "TextCurve", "SurfaceCurve", "MetaBall", "GeometryNodeTree",
+             "Lattice"}
+_SHADING = {"Material", "ShaderNodeTree", "World", "Image", "Texture", "Light", "PointLight", "SunLight",
+            "SpotLight", "AreaLight"}
+_NOTHING = {"Camera", "Screen", "WindowManager", "Workspace", "WorkSpace", "Brush", "Palette", "Text"}
+
+
+@dataclass
+class Changes:
+    """What a depsgraph update asks of the viewport session. export: the scene is exported
+    again (its geometry comes from the cache: only a changed object's is rebuilt; lamps,
+    materials and transforms are cheap); settings: the scene's settings are read again (a
+    method switch, epsilon, samples: re-rendered without export, unless the radius factor or
+    the frame changed). The view is not an update: view_draw compares the matrices."""
+
+    export: bool = False
+    settings: bool = False
+    reasons: list = field(default_factory=list)
+
+    @classmethod
+    def everything(cls) -> "Changes":
+        return cls(True, True, ["first update"])
+
+    def __bool__(self) -> bool:
+        return self.export or self.settings
+
+
+def classify(updates: Iterable) -> Changes:
+    """Changes from `depsgraph.updates` (records with .id, .is_updated_geometry,
+    .is_updated_transform, .is_updated_shading)."""
+    changes = Changes()
+    for u in updates:
+        block = u.id
+        kind = type(block).__name__
+        if kind == "Object":
+            if block.type == "CAMERA":
+                continue  # the view's matrices say what the camera view sees
+            flags = [f for f in ("geometry", "transform", "shading") if getattr(u, f"is_updated_{f}")]
+            if block.type == "LIGHT" and flags:
+                changes.export = True
+                changes.reasons.append(f"lamp '{block.name}'")
+            elif flags:
+                changes.export = True
+                changes.reasons.append(f"object '{block.name}' ({', '.join(flags)})")
+        elif kind == "Scene":
+            changes.settings = True
+            changes.reasons.append("scene settings")
+        elif kind in _NOTHING:
+            continue
+        elif kind in _SHADING:
+            changes.export = True
+            changes.reasons.append(f"{kind.lower()} '{block.name}'")
+        elif kind in _GEOMETRY or kind == "Collection":
+            changes.export = True
+            changes.reasons.append(f"{kind.lower()} '{block.name}'")
+        else:  # unknown: export again (the cache keeps it cheap)
+            changes.export = True
+            changes.reasons.append(f"{kind} '{getattr(block, 'name', '?')}'")
+    return changes
+
+
+# --------------------------------------------------------------------------------------
+# Progressive rendering
+
+COARSE_SCALE = 4   # the first pass: 1 sample at 1/COARSE_SCALE of the resolution, upscaled
+GROWTH = 4         # each later pass renders GROWTH times the samples of the one before
+
+
+def pass_schedule(samples: int, coarse_scale: int = COARSE_SCALE) -> list[tuple[int, int]]:
+    """(resolution divisor, samples) of each pass: a coarse pass, then full resolution with
+    1, 4, 16, ... samples up to `samples`. Each pass is a complete render from scratch, so
+    the last one is the F12 image (same samples, same seed): the core numbers a pixel's
+    samples from 0 and has no sample offset, so passes cannot be accumulated exactly (see
+    the README); the repeated work is at most 1/(GROWTH-1) of the last pass."""
+    out = [(coarse_scale, 1)] if coarse_scale > 1 else []
+    s = 1
+    while True:
+        out.append((1, s))
+        if s >= samples:
+            return out
+        s = min(samples, s * GROWTH)
+
+
+@dataclass(frozen=True)
+class _Job:
+    generation: int
+    render_scene: core.RenderScene
+    camera: core.Camera
+    view: View
+    settings: shading.RenderSettings
+    method: core.Method
+    threads: int
+    schedule: tuple
+
+
+def _scaled_window(window, width, height, lw, lh):
+    x0, y0, w, h = window
+    a0, a1 = (x0 * lw) // width, -((-(x0 + w) * lw) // width)
+    b0, b1 = (y0 * lh) // height, -((-(y0 + h) * lh) // height)
+    a1, b1 = max(min(a1, lw), a0 + 1), max(min(b1, lh), b0 + 1)
+    return a0, b0, a1 - a0, b1 - b0
+
+
+def render_pass(job: _Job, index: int, progress=None) -> Optional[np.ndarray]:
+    """Pass `index` of the job as a (height, width, 4) region buffer, top row first,
+    transparent outside the window; None when progress() stopped it."""
+    scale, samples = job.schedule[index]
+    v = job.view
+    out = np.zeros((v.height, v.width, 4), np.float32)
+    if v.window is None:
+        return out
+    settings = shading.RenderSettings(**{**job.settings.__dict__, "samples": samples})
+    if scale == 1:
+        x0, y0, w, h = v.window
+        result = job.render_scene.render(job.camera, v.width, v.height, settings, job.method, ("Combined",),
+                                         window=v.window, threads=job.threads, progress=progress)
+        if not result.completed:
+            return None
+        out[y0:y0 + h, x0:x0 + w] = result.passes["Combined"]
+        return out
+    lw, lh = max(1, -(-v.width // scale)), max(1, -(-v.height // scale))
+    lx, ly, lww, lhh = _scaled_window(v.window, v.width, v.height, lw, lh)
+    result = job.render_scene.render(job.camera, lw, lh, settings, job.method, ("Combined",),
+                                     window=(lx, ly, lww, lhh), threads=job.threads, progress=progress)
+    if not result.completed:
+        return None
+    low = np.zeros((lh, lw, 4), np.float32)
+    low[ly:ly + lhh, lx:lx + lww] = result.passes["Combined"]
+    rows = np.minimum(((np.arange(v.height) + 0.5) * lh / v.height).astype(int), lh - 1)
+    cols = np.minimum(((np.arange(v.width) + 0.5) * lw / v.width).astype(int), lw - 1)
+    x0, y0, w, h = v.window
+    out[y0:y0 + h, x0:x0 + w] = low[rows[y0:y0 + h]][:, cols[x0:x0 + w]]
+    return out
+
+
+@dataclass(frozen=True)
+class Image:
+    """A finished pass: the buffer and what it is."""
+
+    pixels: np.ndarray      # (height, width, 4) float32, premultiplied scene-linear, top row first
+    view: View
+    generation: int
+    index: int              # pass index in the schedule
+    samples: int
+    scale: int
+    final: bool             # the last pass: the F12 image of this view
+
+
+class ViewportSession:
+    """The viewport's persistent state: the exported scene (kept between redraws), its
+    geometry cache, the settings, the view, and the progressive passes.
+
+    Main thread: update(depsgraph, changes) after a depsgraph update, set_view(view) on each
+    redraw, latest() to draw. Rendering: step() renders the next pass synchronously (tests),
+    or start() runs the passes on a thread. counters: exports, geometry_builds (BVHs built),
+    renders (core render calls = passes), restarts (refinement started over)."""
+
+    def __init__(self, coarse_scale: int = COARSE_SCALE):
+        from .session import GeometryCache
+        self.cache = GeometryCache()
+        self.coarse_scale = coarse_scale
+        self.counters = dict(exports=0, geometry_builds=0, renders=0, restarts=0)
+        self.report = shading.Report()
+        self.origin: Optional[np.ndarray] = None
+        self.exported = None
+        self._export_state = None   # (radius factor, frame, world, visible objects) of the export
+        self._state = None          # (method, settings, threads) of the scene
+        self._view: Optional[View] = None
+        self._camera: Optional[core.Camera] = None
+        self._cond = threading.Condition()
+        self._job: Optional[_Job] = None
+        self._next = 0              # next pass of the job
+        self._generation = 0
+        self._image: Optional[Image] = None
+        self._thread: Optional[threading.Thread] = None
+        self._closed = False
+        self.error: Optional[str] = None
+
+    # -- main thread ------------------------------------------------------------------
+    def update(self, depsgraph, changes: Optional[Changes] = None) -> None:
+        """Reads what `changes` says changed (everything when None or on the first call)."""
+        from . import export, export_shading
+        from .session import lit_settings
+        if changes is None or self.exported is None:
+            changes = Changes.everything()
+        if not changes:
+            return
+        scene = depsgraph.scene
+        props = scene.splat_tracer
+        # A Scene-only update also comes for hiding an object or assigning another world:
+        # what the export depends on besides the datablocks is compared (cheap: no arrays).
+        export_state = (float(props.radius_factor), int(scene.frame_current),
+                        scene.world.name_full if scene.world is not None else None,
+                        tuple(sorted(o.name_full for o in depsgraph.objects)))
+        if changes.export or export_state != self._export_state:
+            if self.origin is None:
+                # Fixed for the session: the instances are placed relative to it, so that a
+                # new view never needs a new export. The scene camera's, as F12 uses.
+                self.origin = export.camera_origin(depsgraph)
+            report = shading.Report()
+            self.cache.begin_frame()
+            try:
+                exported = export.export_scene(depsgraph, self.cache, self.origin, props.radius_factor,
+                                               scene.render.threads, report)
+            except BaseException:
+                self.cache.end_frame(keep=False)
+                raise
+            self.cache.end_frame(keep=True)
+            self.counters["exports"] += 1
+            self.counters["geometry_builds"] += self.cache.built
+            self.exported, self.report, self._export_state = exported, report, export_state
+        settings, _ = lit_settings(scene, self.exported, export_shading.render_settings_of(scene), None, self.report)
+        state = (props.core_method(), settings, int(scene.render.threads))
+        if changes.export or state != self._state:
+            self._state = state
+            self._restart()
+
+    def set_view(self, view: View) -> None:
+        if view != self._view:
+            self._view = view
+            self._camera = None
+            self._restart()
+
+    def latest(self) -> Optional[Image]:
+        with self._cond:
+            return self._image
+
+    @property
+    def generation(self) -> int:
+        """Counts the restarts: an Image of an older generation shows an older state."""
+        with self._cond:
+            return self._generation
+
+    @property
+    def done(self) -> bool:
+        """Whether the current job's last pass is finished (or nothing is to be rendered)."""
+        with self._cond:
+            return self._job is None or self._next >= len(self._job.schedule)
+
+    # -- the passes ---------------------------------------------------------------------
+    def _restart(self) -> None:
+        if self.exported is None or self._view is None or self._state is None:
+            return
+        self.error = None
+        if self._camera is None:
+            self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin)
+        method, settings, threads = self._state
+        with self._cond:
+            self._generation += 1
+            self._job = _Job(self._generation, self.exported.render_scene, self._camera, self._view, settings, method,
+                             threads, tuple(pass_schedule(settings.samples, self.coarse_scale)))
+            self._next = 0
+            self.counters["restarts"] += 1
+            self._cond.notify_all()
+
+    def _work(self) -> Optional[tuple[_Job, int]]:
+        with self._cond:
+            if self._job is None or self._next >= len(self._job.schedule):
+                return None
+            return self._job, self._next
+
+    def _run(self, job: _Job, index: int) -> None:
+        def stop(done, total):
+            return self._closed or self._generation != job.generation
+        pixels = render_pass(job, index, stop)
+        with self._cond:
+            self.counters["renders"] += 1
+            if pixels is None or job.generation != self._generation:
+                return
+            scale, samples = job.schedule[index]
+            self._image = Image(pixels, job.view, job.generation, index, samples, scale,
+                                index == len(job.schedule) - 1)
+            self._next = index + 1
+
+    def step(self) -> bool:
+        """Renders the next pass here; True while more passes remain."""
+        work = self._work()
+        if work is not None:
+            self._run(*work)
+        return not self.done
+
+    def refine(self) -> Optional[Image]:
+        """Renders every remaining pass here; the last image."""
+        while self.step():
+            pass
+        return self.latest()
+
+    def start(self) -> None:
+        """Renders the passes on a thread from now on (it never calls bpy)."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._loop, name="splat_tracer viewport", daemon=True)
+            self._thread.start()
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while not self._closed and (self._job is None or self._next >= len(self._job.schedule)):
+                    self._cond.wait()
+                if self._closed:
+                    return
+            work = self._work()
+            if work is None:
+                continue
+            try:
+                self._run(*work)
+            except Exception as e:  # noqa: BLE001 - shown by view_draw; never kills Blender
+                with self._cond:
+                    if work[0].generation == self._generation:  # give up on this job until the next change
+                        self.error = str(e)
+                        self._next = len(work[0].schedule)
+                time.sleep(0.01)
+
+    def close(self) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify_all()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+        self._thread = None
+
+
+def update_from_depsgraph(session: ViewportSession, depsgraph, first: bool = False) -> Changes:
+    """view_update's work (main thread): what changed, told to the session."""
+    changes = Changes.everything() if first else classify(depsgraph.updates)
+    session.update(depsgraph, changes)
+    return changes

@@ -1,0 +1,345 @@
+"""The viewport's Rendered mode without a GPU (real bpy, headless): the view -> camera
+conversion checked against Blender's own view math (bpy_extras.view3d_utils), the update
+logic (what is exported and built after which change, by the session's counters), and the
+progressive passes converging to the F12 image. Only engine._draw_pixels (gpu) is untested.
+
+Headless Blender has no drawn 3D view, so its RegionView3D matrices are not computed; the
+tests build them as Blender does (a camera's projection for the region, the view matrix the
+inverse of the view's world matrix, the camera view's zoom and offset applied to the view
+plane) and give them to view3d_utils through stand-ins carrying window_matrix, view_matrix,
+perspective_matrix, is_perspective and view_perspective, as RegionView3D does."""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_camera, extension_module
+from test_blender_scene import cloud_sphere, cube, lamp, principled
+
+RW, RH = 64, 48  # region size
+
+
+def _stand_ins(window_matrix, view_matrix, perspective: bool, kind: str, width=RW, height=RH):
+    region = SimpleNamespace(width=width, height=height)
+    rv3d = SimpleNamespace(window_matrix=window_matrix, view_matrix=view_matrix,
+                           perspective_matrix=window_matrix @ view_matrix, is_perspective=perspective,
+                           view_perspective=kind)
+    return region, rv3d
+
+
+def _blender_rays(region, rv3d):
+    """view3d_utils' ray (origin, direction) through each pixel centre, top row first."""
+    from bpy_extras import view3d_utils
+    o, d = [], []
+    for i in range(region.height):
+        for j in range(region.width):
+            coord = (j + 0.5, region.height - (i + 0.5))
+            o.append(tuple(view3d_utils.region_2d_to_origin_3d(region, rv3d, coord)))
+            d.append(tuple(view3d_utils.region_2d_to_vector_3d(region, rv3d, coord)))
+    return np.array(o), np.array(d)
+
+
+def _assert_same_rays(camera, region, rv3d):
+    ours_o, ours_d = camera.rays(region.width, region.height)
+    theirs_o, theirs_d = _blender_rays(region, rv3d)
+    np.testing.assert_allclose(ours_d, theirs_d, atol=2e-5)
+    # Same line: our origin (on the near plane) lies on Blender's ray.
+    offset = ours_o.astype(np.float64) - theirs_o
+    along = np.einsum("ij,ij->i", offset, theirs_d)[:, None] * theirs_d
+    assert np.abs(offset - along).max() < 1e-4 * max(1.0, np.abs(offset).max())
+
+
+def _view_camera(bpy, scene, kind="PERSP", shift=(0.0, 0.0), **settings):
+    """A camera object standing in for the 3D view: its world matrix is the view's inverse
+    view matrix, its projection at the region size the view's window matrix (Blender builds
+    both from the same view plane)."""
+    cam = add_camera(bpy, scene, (3.0, -4.0, 2.5), (math.radians(65), 0, math.radians(35)), type=kind,
+                     shift_x=shift[0], shift_y=shift[1], **settings)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    window = cam.calc_matrix_camera(depsgraph, x=RW, y=RH)
+    return cam, window, cam.matrix_world.inverted()
+
+
+@pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
+def test_view_rays_are_blenders_for_perspective_and_orthographic_views(blender, empty_scene, kind):
+    from splat_tracer import viewport
+    cam, window, view = _view_camera(blender, empty_scene, kind, shift=(0.1, -0.05), lens=35, ortho_scale=5)
+    region, rv3d = _stand_ins(window, view, kind == "PERSP", kind)
+    _assert_same_rays(viewport.camera_from_view(window, view), region, rv3d)
+
+
+def _camera_view_window(window, zoom: float, offset: tuple):
+    """The camera view's window matrix at a zoom factor and offset: Blender scales the view
+    plane by 1/zoom and moves it by the offset (BKE_camera_params_compute_viewplane), which
+    in normalised device coordinates is x' = zoom * x - offset (applied to clip space)."""
+    from mathutils import Matrix
+    a = Matrix(((zoom, 0, 0, -offset[0]), (0, zoom, 0, -offset[1]), (0, 0, 1, 0), (0, 0, 0, 1)))
+    return a @ window
+
+
+def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blender, empty_scene):
+    from splat_tracer import core, export, viewport
+    scene = empty_scene
+    scene.render.resolution_x, scene.render.resolution_y = 160, 120  # the region's aspect
+    cam, window, view = _view_camera(blender, scene, "PERSP", shift=(0.05, 0.0), lens=40)
+    zoom, offset = 0.6, (0.1, -0.15)
+    cv_window = _camera_view_window(window, zoom, offset)
+    region, rv3d = _stand_ins(cv_window, view, True, "CAMERA")
+    camera = viewport.camera_from_view(cv_window, view)
+    _assert_same_rays(camera, region, rv3d)
+
+    # The camera frame in the region: where Blender draws it, computed from the camera's frame.
+    depsgraph = blender.context.evaluated_depsgraph_get()
+    frame = [tuple(cam.matrix_world @ v) for v in cam.data.view_frame(scene=scene)]
+    rect = viewport.region_rect(rv3d.perspective_matrix, frame, RW, RH)
+    expect = [((-zoom - offset[0]) + 1) / 2 * RW, ((-zoom - offset[1]) + 1) / 2 * RH,
+              ((zoom - offset[0]) + 1) / 2 * RW, ((zoom - offset[1]) + 1) / 2 * RH]
+    np.testing.assert_allclose(rect, expect, atol=1e-3)
+
+    # Within the frame, the view's rays are the F12 camera's at the same place of its image.
+    f12 = export.export_camera(depsgraph, 160, 120, (0, 0, 0))
+    x0, y0, x1, y1 = rect
+    fx, fy = np.meshgrid(np.linspace(0.1, 0.9, 5), np.linspace(0.1, 0.9, 5))
+    u, v = x0 + fx * (x1 - x0), y0 + fy * (y1 - y0)  # region pixels, bottom-left origin
+
+    def directions(cam_: core.Camera, ndc_x, ndc_y):
+        pts = lambda z: np.column_stack([ndc_x.ravel(), ndc_y.ravel(), np.full(ndc_x.size, z),
+                                         np.ones(ndc_x.size)]) @ cam_.local_from_ndc.T
+        a, b = pts(-1.0), pts(1.0)
+        d = b[:, :3] / b[:, 3:] - a[:, :3] / a[:, 3:]
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    np.testing.assert_allclose(directions(camera, 2 * u / RW - 1, 2 * v / RH - 1),
+                               directions(f12, 2 * fx - 1, 2 * fy - 1), atol=1e-6)
+
+    # The scene's render border, in the camera view, is a part of the frame.
+    window_px = viewport.border_window(RW, RH, rect, (0.25, 0.5, 0.75, 1.0))
+    wx0, wy0, ww, wh = window_px
+    assert abs(wx0 - (x0 + 0.25 * (x1 - x0))) <= 0.5 and abs(wx0 + ww - (x0 + 0.75 * (x1 - x0))) <= 0.5
+    assert abs((RH - wy0) - y1) <= 0.5 and abs((RH - wy0 - wh) - (y0 + 0.5 * (y1 - y0))) <= 0.5
+
+
+def test_border_window():
+    from splat_tracer import viewport
+    assert viewport.border_window(100, 50) == (0, 0, 100, 50)
+    # A view's render border: fractions of the region, rows counted from the top.
+    assert viewport.border_window(100, 50, None, (0.1, 0.2, 0.5, 1.0)) == (10, 0, 40, 40)
+    assert viewport.border_window(100, 50, (200, 0, 300, 50), (0.0, 0.0, 1.0, 1.0)) is None  # off the region
+
+
+def test_pass_schedule_ends_with_the_scenes_samples():
+    from splat_tracer import viewport
+    assert viewport.pass_schedule(16) == [(4, 1), (1, 1), (1, 4), (1, 16)]
+    assert viewport.pass_schedule(1) == [(4, 1), (1, 1)]
+    assert viewport.pass_schedule(20)[-1] == (1, 20)
+
+
+# --------------------------------------------------------------------------------------
+# The session: what is rebuilt after which change, and the passes.
+
+def _scene(bpy, scene):
+    grey = principled(bpy, "Grey")
+    ball = cloud_sphere(bpy, "Ball", 3000, 0.6, (-0.8, 0, 0), grey)
+    box = cube(bpy, "Box", 1.0, (0.8, 0, 0), grey)
+    sun = lamp(bpy, "SUN", rotation=(math.radians(30), 0, 0), energy=3.0)
+    add_camera(bpy, scene, (0, -6, 0), (math.radians(90), 0, 0))
+    scene.render.resolution_x, scene.render.resolution_y = 80, 60
+    scene.splat_tracer.samples = 4
+    return grey, ball, box, sun
+
+
+class _Recorder:
+    """depsgraph.updates exist only inside the update handler: it classifies them there."""
+
+    def __init__(self, bpy):
+        self.bpy = bpy
+        self.changes = None
+
+    def __enter__(self):
+        self.bpy.app.handlers.depsgraph_update_post.append(self)
+        return self
+
+    def __exit__(self, *exc):
+        self.bpy.app.handlers.depsgraph_update_post.remove(self)
+
+    def __call__(self, scene, depsgraph):
+        viewport = extension_module("viewport")
+        found = viewport.classify(depsgraph.updates)
+        if self.changes is None:
+            self.changes = found
+        else:
+            self.changes.export |= found.export
+            self.changes.settings |= found.settings
+            self.changes.reasons += found.reasons
+
+    def apply(self, session, change, scene_setting=False):
+        """Makes `change`, lets Blender evaluate it, and tells the session what changed."""
+        self.changes = None
+        change()
+        self.bpy.context.view_layer.update()
+        changes = self.changes
+        if changes is None and scene_setting:
+            # Editing an add-on property in the UI tags the scene (a Scene-only update, as
+            # test_a_scene_setting_is_a_settings_change shows with a built-in property); a
+            # script's setattr of an add-on property tags nothing in Blender 5.0, and
+            # scene.update_tag() would tag every object too. So: what the UI's update gives.
+            changes = extension_module("viewport").Changes(settings=True, reasons=["scene settings"])
+        before = dict(session.counters)
+        session.update(self.bpy.context.evaluated_depsgraph_get(), changes)
+        session.refine()
+        return changes, {k: session.counters[k] - before[k] for k in before}
+
+
+def _f12_view(bpy, scene, width, height):
+    viewport = extension_module("viewport")
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    window = cam.calc_matrix_camera(depsgraph, x=width, y=height)
+    view = np.linalg.inv(np.array(cam.matrix_world.normalized(), np.float64))
+    return viewport.View.of(window, view, width, height)
+
+
+def test_each_change_rebuilds_only_what_it_must(blender, empty_scene):
+    viewport = extension_module("viewport")
+    bpy, scene = blender, empty_scene
+    grey, ball, box, sun = _scene(bpy, scene)
+    session = viewport.ViewportSession()
+    with _Recorder(bpy) as rec:
+        bpy.context.view_layer.update()
+        session.set_view(_f12_view(bpy, scene, 80, 60))
+        session.update(bpy.context.evaluated_depsgraph_get())  # the first view_update
+        session.refine()
+        assert session.counters["exports"] == 1 and session.counters["geometry_builds"] == 2
+        passes = len(viewport.pass_schedule(4))
+        assert session.counters["renders"] == passes
+
+        # The view only: re-rendered, nothing exported.
+        before = dict(session.counters)
+        other = _f12_view(bpy, scene, 80, 60)
+        moved = np.array(other.view_matrix)
+        moved[0, 3] += 0.2  # the view slides sideways
+        session.set_view(viewport.View.of(other.window_matrix, moved, 80, 60))
+        session.refine()
+        assert session.counters["exports"] == before["exports"]
+        assert session.counters["renders"] - before["renders"] == passes
+
+        def delta_of(change, scene_setting=False):
+            return rec.apply(session, change, scene_setting)
+
+        # Settings: re-rendered without export.
+        for change in (lambda: setattr(scene.splat_tracer, "epsilon", 0.5),
+                       lambda: setattr(scene.splat_tracer, "use_far_phase", False),
+                       lambda: setattr(scene.splat_tracer, "shadow_samples", 2),
+                       lambda: setattr(scene.render, "filter_size", 2.0)):
+            changes, delta = delta_of(change, scene_setting=True)
+            assert changes.settings and not changes.export, changes.reasons
+            assert delta["exports"] == 0 and delta["geometry_builds"] == 0 and delta["renders"] == passes
+        changes, delta = delta_of(lambda: setattr(scene.splat_tracer, "samples", 16), scene_setting=True)
+        assert delta["exports"] == 0 and delta["renders"] == len(viewport.pass_schedule(16))
+
+        # A material, a lamp, a transform: exported again, no geometry built.
+        shader = grey.node_tree.nodes["Principled BSDF"]
+        for change in (lambda: setattr(shader.inputs["Base Color"], "default_value", (0.8, 0.2, 0.2, 1)),
+                       lambda: setattr(sun.data, "energy", 5.0),
+                       lambda: setattr(sun, "rotation_euler", (math.radians(40), 0, 0)),
+                       lambda: setattr(box, "location", (0.9, 0, 0))):
+            changes, delta = delta_of(change)
+            assert changes.export, changes.reasons
+            assert delta["exports"] == 1 and delta["geometry_builds"] == 0, changes.reasons
+
+        # Editing one object: only its geometry is built.
+        def edit_box():
+            box.data.vertices[0].co.z += 0.2
+            box.data.update()
+        changes, delta = delta_of(edit_box)
+        assert delta["exports"] == 1 and delta["geometry_builds"] == 1, changes.reasons
+
+        # Hiding an object (a Scene-only update): exported again, nothing built.
+        changes, delta = delta_of(lambda: box.hide_set(True))
+        assert changes.settings and not changes.export, changes.reasons  # Blender says only "Scene"
+        assert delta["exports"] == 1 and delta["geometry_builds"] == 0
+        assert session.exported.meshes == 0 and session.exported.clouds == 1
+
+        # The radius factor is baked into the clouds' splats: the cloud is rebuilt (only it).
+        changes, delta = delta_of(lambda: setattr(scene.splat_tracer, "radius_factor", 1.2), scene_setting=True)
+        assert delta["exports"] == 1 and delta["geometry_builds"] == 1
+
+        # Nothing that matters (the selection): nothing at all.
+        changes, delta = delta_of(lambda: ball.select_set(True))
+        assert not changes.export, changes.reasons  # Blender reports the Scene: settings read, unchanged
+        assert delta == {"exports": 0, "geometry_builds": 0, "renders": 0, "restarts": 0}
+    session.close()
+
+
+def test_progressive_passes_converge_to_the_f12_image(blender, empty_scene):
+    viewport, session_module = extension_module("viewport"), extension_module("session")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    scene.splat_tracer.samples = 8
+    bpy.context.view_layer.update()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    f12 = session_module.render_frame(depsgraph, scene.splat_tracer.core_method()).passes["Combined"]
+
+    vs = viewport.ViewportSession()
+    vs.set_view(_f12_view(bpy, scene, 80, 60))
+    vs.update(depsgraph)
+    images = []
+    while vs.step():
+        images.append(vs.latest())
+    images.append(vs.latest())
+    assert [(im.scale, im.samples) for im in images] == [(4, 1), (1, 1), (1, 4), (1, 8)]
+    coarse = images[0].pixels
+    assert coarse.shape == (60, 80, 4)
+    # The coarse pass is 20x15 pixels upscaled: blocks of 4x4 equal pixels.
+    assert np.array_equal(coarse[::4, ::4].repeat(4, 0).repeat(4, 1), coarse)
+    assert images[-1].final and not images[-2].final
+    errors = [np.abs(im.pixels - f12).mean() for im in images]
+    assert errors[-1] < 1e-6 and errors[-1] <= min(errors[:-1])
+    assert np.array_equal(images[-1].pixels, f12)  # the same rays, samples and seed: bit for bit
+    vs.close()
+
+
+def test_a_border_renders_only_its_window(blender, empty_scene):
+    viewport = extension_module("viewport")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    bpy.context.view_layer.update()
+    full = _f12_view(bpy, scene, 80, 60)
+    window = viewport.border_window(80, 60, None, (0.25, 0.5, 0.75, 1.0))
+    vs = viewport.ViewportSession()
+    vs.set_view(viewport.View.of(full.window_matrix, full.view_matrix, 80, 60, window))
+    vs.update(bpy.context.evaluated_depsgraph_get())
+    image = vs.refine()
+    x0, y0, w, h = window
+    assert (x0, y0, w, h) == (20, 0, 40, 30)
+    inside = np.zeros((60, 80), bool)
+    inside[y0:y0 + h, x0:x0 + w] = True
+    assert (image.pixels[~inside] == 0).all() and image.pixels[inside][:, 3].max() > 0
+    vs.close()
+
+
+def test_the_thread_renders_the_passes_and_a_new_view_restarts_them(blender, empty_scene):
+    import time
+    viewport = extension_module("viewport")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    bpy.context.view_layer.update()
+    vs = viewport.ViewportSession()
+    vs.start()
+    try:
+        vs.set_view(_f12_view(bpy, scene, 80, 60))
+        vs.update(bpy.context.evaluated_depsgraph_get())
+        deadline = time.time() + 60
+        while not vs.done and time.time() < deadline:
+            time.sleep(0.02)
+        image = vs.latest()
+        assert image.final and image.generation == vs.generation
+        vs.set_view(_f12_view(bpy, scene, 40, 30))
+        while not vs.done and time.time() < deadline:
+            time.sleep(0.02)
+        assert vs.latest().pixels.shape == (30, 40, 4) and vs.latest().final
+    finally:
+        vs.close()
