@@ -158,7 +158,9 @@ def test_a_count_the_file_cannot_hold_is_refused_before_reading(tmp_path, binary
     start = time.perf_counter()
     with pytest.raises(ply.CloudFileError) as err:
         ply.read_ply(str(path))
-    assert time.perf_counter() - start < 0.5
+    # Before the fix: 54-72 s and 8 GB. A generous bound (the machine may be busy): only
+    # the pathology is tested, not the speed, which the benchmarks measure.
+    assert time.perf_counter() - start < 10.0
     message = str(err.value)
     assert str(path) in message and f"1,000,000,000 '{element}'" in message, message
 
@@ -296,7 +298,9 @@ def test_first_of_duplicates_on_many_points_is_fast():
     p[::7] = p[1::7]  # every 7th row repeats the next one
     start = time.perf_counter()
     keep = spacing.first_of_duplicates(p)
-    assert time.perf_counter() - start < 1.5
+    # About 0.3 s; a quadratic pass over a million rows would take hours. The bound only
+    # catches that, with room for a busy machine.
+    assert time.perf_counter() - start < 15.0
     assert (~keep).sum() == len(p[::7]) and keep[::7].all() and not keep[1::7].any()  # the later copy goes
 
 
