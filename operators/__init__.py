@@ -2,9 +2,11 @@
 import bpy
 
 from .compare import SPLAT_TRACER_OT_compare
-from .import_cloud import SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_import_cloud, menu_import
+from .import_cloud import (SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_estimate_normals, SPLAT_TRACER_OT_import_cloud,
+                           menu_import)
 
-classes = (SPLAT_TRACER_OT_import_cloud, SPLAT_TRACER_FH_ply, SPLAT_TRACER_OT_compare)
+classes = (SPLAT_TRACER_OT_import_cloud, SPLAT_TRACER_OT_estimate_normals, SPLAT_TRACER_FH_ply,
+           SPLAT_TRACER_OT_compare)
 
 
 def register():

@@ -95,9 +95,23 @@ def points_node_group() -> bpy.types.NodeTree:
     return group
 
 
+def _add_attribute(mesh, name: str, values: np.ndarray) -> None:
+    """A point attribute from an (N,) int or float array or an (N,3) float array."""
+    values = np.asarray(values)
+    if values.ndim == 2:
+        mesh.attributes.new(name, "FLOAT_VECTOR", "POINT").data.foreach_set(
+            "vector", np.ascontiguousarray(values, np.float32).ravel())
+    elif np.issubdtype(values.dtype, np.integer):
+        mesh.attributes.new(name, "INT", "POINT").data.foreach_set("value", np.ascontiguousarray(values, np.int32))
+    else:
+        mesh.attributes.new(name, "FLOAT", "POINT").data.foreach_set("value", np.ascontiguousarray(values, np.float32))
+
+
 def create_cloud_object(name: str, local_positions: np.ndarray, normals: np.ndarray, radii: np.ndarray,
-                        colours=None, location=(0.0, 0.0, 0.0), collection=None) -> bpy.types.Object:
-    """Creates and links the object; on any failure removes what it created and re-raises."""
+                        colours=None, location=(0.0, 0.0, 0.0), collection=None,
+                        attributes=None) -> bpy.types.Object:
+    """Creates and links the object; on any failure removes what it created and re-raises.
+    attributes: further point attributes, name -> (N,) int/float or (N,3) float array."""
     mesh = obj = None
     try:
         mesh = bpy.data.meshes.new(name)
@@ -111,6 +125,8 @@ def create_cloud_object(name: str, local_positions: np.ndarray, normals: np.ndar
         if colours is not None:
             mesh.attributes.new(COLOUR, "FLOAT_COLOR", "POINT").data.foreach_set(
                 "color", np.ascontiguousarray(colours, np.float32).ravel())
+        for attr_name, values in (attributes or {}).items():
+            _add_attribute(mesh, attr_name, values)
         mesh.update()
         obj = bpy.data.objects.new(name, mesh)
         obj.location = location

@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -37,16 +37,35 @@ class CloudFileError(ValueError):
 @dataclass
 class PointCloud:
     positions: np.ndarray            # (N,3) float64, file coordinates
-    normals: np.ndarray              # (N,3) float32, unit length
+    normals: Optional[np.ndarray]    # (N,3) float32, unit length; None: the file has none (estimated on import)
     colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
     radii: Optional[np.ndarray]      # (N,) float32 from the file, or None
     dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
     merged_duplicates: int = 0       # rows dropped for repeating an earlier row's position
     first_duplicate_row: int = -1    # the first of those, as a row of the file
     rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file
+    # Per-point attributes kept on the object besides the splat's own (LAS intensity,
+    # classification, return number; text intensity): name -> (N,) int32 or float32.
+    attributes: dict = field(default_factory=dict)
+    scanners: Optional[np.ndarray] = None  # (N,3) float64: the scanner's position per point (E57 poses)
+    orientation: str = "PROPAGATE"   # how to orient estimated normals: PROPAGATE, UP (aerial), SCANNER
+    oriented: bool = True            # False: the normals' axes are right but their signs arbitrary
+    dropped_rows: int = 0            # rows dropped for non-finite coordinates (text, LAS, E57)
+    format: str = "PLY"              # what the file was read as (for the notes)
+    notes: list = field(default_factory=list)  # what the reader changed or ignored, one sentence each
 
     def __len__(self) -> int:
         return len(self.positions)
+
+    def subset(self, keep: np.ndarray) -> "PointCloud":
+        """The same cloud with only the rows `keep` (a mask or indices) of every per-point array."""
+        from dataclasses import replace
+
+        take = (lambda a: None if a is None else a[keep])
+        return replace(self, positions=self.positions[keep], normals=take(self.normals),
+                       colours=take(self.colours), radii=take(self.radii), rows=take(self.rows),
+                       scanners=take(self.scanners),
+                       attributes={k: v[keep] for k, v in self.attributes.items()})
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -210,12 +229,13 @@ def read_ply(path: str) -> PointCloud:
     missing = [c for c in "xyz" if c not in names]
     if missing:
         raise CloudFileError(f"{path}: vertices lack the coordinate(s) {', '.join(missing)}")
-    if not {"nx", "ny", "nz"} <= names:
-        raise CloudFileError(f"{path}: vertices have no normals (nx, ny, nz); "
-                             "clouds without normals are not supported yet")
     n = len(v)
     if n == 0:
         raise CloudFileError(f"{path}: contains no vertices")
+    from . import gaussians  # a 3D or 2D Gaussian-splatting capture is a PLY of its own kind
+
+    if gaussians.is_gaussian(names):
+        return gaussians.read_gaussians(path, v, names)
 
     pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
     bad = ~np.isfinite(pos).all(axis=1)
@@ -237,26 +257,52 @@ def read_ply(path: str) -> PointCloud:
         alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
         colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
 
-    # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
-    # point is dropped and counted, never rendered with a garbage orientation.
-    nrm = np.column_stack([v[c].astype(np.float64) for c in ("nx", "ny", "nz")])
-    length = np.linalg.norm(nrm, axis=1)
-    ok = np.isfinite(length) & (length > 0)
-    dropped = int(n - ok.sum())
-    if not ok.any():
-        raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-    nrm = nrm / np.where(ok, length, 1.0)[:, None]
+    normals = None
+    if {"nx", "ny", "nz"} <= names:
+        normals = np.column_stack([v[c].astype(np.float64) for c in ("nx", "ny", "nz")])
+    return make_cloud(path, pos, normals, colours, radii)
+
+
+def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, radii=None, attributes=None,
+               scanners=None, *, drop_non_finite: bool = False, **fields) -> PointCloud:
+    """The checks and clean-up every reader shares: rows with non-finite coordinates dropped
+    and counted (drop_non_finite; else the caller has refused them), normals made unit and
+    rows with a zero or non-finite normal dropped and counted, exact duplicate positions
+    merged into their first row. `fields` are PointCloud's other fields (format, orientation,
+    oriented, notes). Raises CloudFileError naming `path` when nothing usable is left."""
+    pos = np.asarray(positions, dtype=np.float64)
+    n = len(pos)
+    keep = np.ones(n, bool)
+    dropped_rows = 0
+    if drop_non_finite:
+        keep = np.isfinite(pos).all(axis=1)
+        dropped_rows = int(n - keep.sum())
+        if not keep.any():
+            raise CloudFileError(f"{path}: no point has finite coordinates (all {n:,} rows are NaN or infinite)")
+    nrm, dropped = None, 0
+    if normals is not None:
+        # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
+        # point is dropped and counted, never rendered with a garbage orientation.
+        nrm = np.asarray(normals, dtype=np.float64)
+        length = np.linalg.norm(nrm, axis=1)
+        ok = np.isfinite(length) & (length > 0)
+        dropped = int((keep & ~ok).sum())
+        if not (ok & keep).any():
+            raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
+        nrm = nrm / np.where(ok, length, 1.0)[:, None]
+        keep &= ok
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
     # piles of them make the neighbour search pathological.
-    usable = np.flatnonzero(ok)
+    usable = np.flatnonzero(keep)
     first = spacing.first_of_duplicates(pos[usable])
     rows = usable[first]
     merged = len(usable) - len(rows)
     first_merged = int(usable[~first][0]) if merged else -1
-    take = (lambda a: a if a is None or len(rows) == n else a[rows])
-    return PointCloud(take(pos), take(nrm).astype(np.float32), take(colours), take(radii), dropped,
-                      merged, first_merged, rows)
+    cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32), colours, radii, dropped, merged,
+                       first_merged, np.arange(n), dict(attributes or {}), scanners, dropped_rows=dropped_rows,
+                       **fields)
+    return cloud if len(rows) == n else cloud.subset(rows)
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

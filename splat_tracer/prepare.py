@@ -18,11 +18,11 @@ closed guess and get a disc millions of metres wide.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import core, spacing
+from . import core, normals as normals_mod, spacing
 from .ply import CloudFileError, PointCloud
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
@@ -59,10 +59,26 @@ class PreparedCloud:
     outliers_dropped: bool = False
     clamped_radii: int = 0             # k-NN radii reduced to radius_cap
     radius_cap: float = 0.0
+    normals_estimated: bool = False    # the file had none: PCA over normal_k neighbours
+    normals_oriented: str = ""         # the orientation mode used when the import chose the signs
+    ambiguous: int = 0                 # points whose orientation was ambiguous
+    normal_k: int = 0
 
     def notes(self, k: int) -> list[str]:
         """What the import changed or found, one sentence each (the import's warnings)."""
-        c, notes = self.cloud, []
+        c = self.cloud
+        notes = list(c.notes)
+        if c.dropped_rows:
+            notes.append(f"{c.dropped_rows:,} rows with non-finite coordinates were dropped")
+        if self.normals_estimated:
+            notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, "
+                         f"oriented {_ORIENTED[self.normals_oriented]}")
+        elif self.normals_oriented:
+            notes.append(f"the file's normal axes have no sign ({c.format}): oriented "
+                         f"{_ORIENTED[self.normals_oriented]}")
+        if self.ambiguous:
+            notes.append(f"{self.ambiguous:,} points' normal orientation was ambiguous (a neighbour more than 60 "
+                         "degrees off, or a grazing view); check them, or re-estimate with another orientation")
         if c.dropped_normals:
             notes.append(f"{c.dropped_normals:,} points with a zero or non-finite normal were dropped")
         if c.merged_duplicates:
@@ -82,6 +98,20 @@ class PreparedCloud:
             notes.append(f"{self.hood.degenerate} points share their position with {k}+ others; "
                          "they got the median radius")
         return notes
+
+
+_ORIENTED = {"PROPAGATE": "consistently along the neighbour graph (outward where the surface encloses a volume)",
+             "UP": "upward (+Z, aerial data)", "SCANNER": "towards the scanner positions", "": ""}
+
+
+def resolve_orientation(cloud: PointCloud, orientation: str = "AUTO") -> str:
+    """The orientation mode: AUTO is the file's own hint (SCANNER for E57, UP for LAS),
+    else propagation."""
+    if orientation == "AUTO":
+        orientation = cloud.orientation
+    if orientation == "SCANNER" and cloud.scanners is None:
+        orientation = "PROPAGATE"
+    return orientation
 
 
 def bulk_mask(positions: np.ndarray) -> np.ndarray:
@@ -123,14 +153,14 @@ def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> N
 
 
 def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
-    take = (lambda a: None if a is None else a[keep])
-    return PointCloud(cloud.positions[keep], cloud.normals[keep], take(cloud.colours), take(cloud.radii),
-                      cloud.dropped_normals, cloud.merged_duplicates, cloud.first_duplicate_row, take(cloud.rows))
+    return cloud.subset(keep)
 
 
 def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outliers: bool = False,
-            workers: int = -1) -> PreparedCloud:
-    """Frame, outliers, analysis and radii of a cloud; raises CloudFileError naming `path`."""
+            workers: int = -1, normal_k: int = normals_mod.DEFAULT_K, orientation: str = "AUTO") -> PreparedCloud:
+    """Frame, outliers, normals (estimated and oriented when the file has none; oriented
+    when their signs are arbitrary), analysis and radii of a cloud; raises CloudFileError
+    naming `path`. orientation: AUTO, PROPAGATE, UP or SCANNER (normals.py)."""
     if len(cloud) < spacing.MIN_POINTS:  # refused before the neighbour search, which needs them
         usable = len(cloud) + cloud.merged_duplicates
         raise CloudFileError(
@@ -145,13 +175,29 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
     _check_float32_safe(cloud.positions, bulk, path)
     origin, local = core.local_frame(cloud.positions, bulk)
+    estimated, oriented_by, ambiguous = cloud.normals is None, "", 0
+    if cloud.normals is None or not cloud.oriented:
+        if cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
+            raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
+                                 f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
+        from scipy.spatial import cKDTree
+
+        rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
+        tree = cKDTree(rel)
+        axes = cloud.normals if cloud.normals is not None else normals_mod.estimate(rel, normal_k, workers, tree)
+        oriented_by = resolve_orientation(cloud, orientation)
+        scanners = None if cloud.scanners is None else cloud.scanners - origin
+        result = normals_mod.orient(rel, axes, oriented_by, scanners, workers=workers, tree=tree)
+        cloud = replace(cloud, normals=result.normals, oriented=True)
+        ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
     try:
         hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers)
     except spacing.SpacingError as e:
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
-                             outliers > 0 and drop_outliers)
+                             outliers > 0 and drop_outliers, normals_estimated=estimated, normals_oriented=oriented_by,
+                             ambiguous=ambiguous, normal_k=normal_k if estimated else 0)
     if cloud.radii is None:
         radii = np.empty(len(local), np.float32)
         radii[inliers] = hood.spacing

@@ -110,7 +110,7 @@ MALFORMED = {
     "nan_row": None,
     "beyond_float32": None,  # two clusters at +-2.5e38, in doubles
 }
-MESSAGES = {"bad_header": "not a valid PLY", "not_ply": "not a valid PLY", "no_normals": "no normals",
+MESSAGES = {"bad_header": "not a valid PLY", "not_ply": "not a valid PLY", "no_normals": "no normals (nx, ny, nz) and only 2 distinct points",
             "truncated": "end-of-file", "count_too_high": "end-of-file", "count_too_low": "header declares",
             "nan_row": "non-finite coordinates", "beyond_float32": "spans 5e+38"}
 

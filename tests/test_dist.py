@@ -32,6 +32,10 @@ def test_zip_holds_the_addon_the_core_and_the_wheels_only(dist_zip):
     wheels = {n for n in names if n.startswith("wheels/")}
     assert any("scipy" in w and "cp311" in w for w in wheels) and any("scipy" in w and "cp313" in w for w in wheels)
     assert any("plyfile" in w for w in wheels) and not any("numpy" in w for w in wheels)
+    for name in ("laspy", "pyquaternion"):
+        assert any(name in w for w in wheels), name
+    for name in ("lazrs", "pye57"):
+        assert all(any(name in w and tag in w for w in wheels) for tag in ("cp311", "cp313")), name
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "splat_tracer/native/")) for n in names)
     manifest = zipfile.ZipFile(dist_zip).read("blender_manifest.toml").decode()
     assert all(f'"./{w}"' in manifest for w in wheels)

@@ -4,8 +4,9 @@
 
 1. Stages the add-on's files (no tests, benchmarks, native sources or build files) and
    the compiled core, splat_tracer/_core.abi3.so, which must have been built.
-2. Adds the dependencies Blender does not ship, as unmodified PyPI wheels (scipy for
-   each Python that Blender 4.2 to 5.1 use, plyfile), listed in the staged manifest.
+2. Adds the dependencies Blender does not ship, as unmodified PyPI wheels (scipy, lazrs
+   and pye57 for each Python that Blender 4.2 to 5.1 use; plyfile, laspy and pyquaternion,
+   pure Python), listed in the staged manifest.
    numpy is never bundled: Blender has its own.
 3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy wheel).
 """
@@ -26,7 +27,8 @@ WHEEL_CACHE = ROOT / "build" / "wheels"
 # needs glibc 2.28, so manylinux_2_28 wheels load wherever Blender runs.
 PLATFORMS = ("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64")
 # (requirement, Python versions to fetch it for). Versions as pinned in requirements.txt.
-WHEELS = [("scipy==1.17.1", ("3.11", "3.13")), ("plyfile==1.0.3", ("3.11",))]
+WHEELS = [("scipy==1.17.1", ("3.11", "3.13")), ("plyfile==1.0.3", ("3.11",)), ("laspy==2.7.0", ("3.11",)),
+          ("lazrs==0.8.2", ("3.11", "3.13")), ("pye57==0.4.19", ("3.11", "3.13")), ("pyquaternion==0.9.9", ("3.11",))]
 PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "native")

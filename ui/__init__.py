@@ -137,6 +137,7 @@ class SPLAT_TRACER_PT_object(SplatTracerPanel, bpy.types.Panel):
         guess = obj.get("splat_tracer_closed_guess")
         if guess:
             layout.label(text=f"Import guess: {guess}", icon="INFO")
+        layout.operator("splat_tracer.estimate_normals", icon="NORMALS_VERTEX")
 
 
 class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
