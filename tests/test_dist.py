@@ -60,6 +60,8 @@ def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
                            str(ply_path), str(output)], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    bundled = next(w for w in zipfile.ZipFile(dist_zip).namelist() if w.startswith("wheels/scipy-") and "cp311" in w)
+    assert f"bundled: scipy {bundled.split('-')[1]} " in proc.stdout, proc.stdout  # not the venv's scipy
     # Blender installed the bundled wheels for this Python into the extensions' site-packages.
     site = list(tmp_path.glob("blender_user_*/**/.local/lib/python3.*/site-packages"))
     assert site and (site[0] / "plyfile.py").is_file() and (site[0] / "scipy").is_dir(), site

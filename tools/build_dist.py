@@ -37,7 +37,7 @@ WHEEL_CACHE = ROOT / "build" / "wheels"
 # Wheel platform tags pip may pick for each Blender platform, and the pattern of the wheel
 # file names that fit it. Linux: Blender 4.2+ itself needs glibc 2.28, so manylinux_2_28
 # wheels load wherever Blender runs. macOS: pip takes a macosx_X_Y tag as "X.Y or older";
-# scipy 1.17.1's oldest arm64 wheel is for macOS 12 (Blender 4.2 runs on 11.2: see README).
+# scipy's oldest arm64 wheel is for macOS 12 (Blender 4.2 runs on 11.2: see README).
 PLATFORMS = {
     "linux-x64": (("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_17_x86_64",
                    "manylinux2014_x86_64"), r".*manylinux.*_x86_64"),
@@ -45,8 +45,11 @@ PLATFORMS = {
     "macos-arm64": (("macosx_12_0_arm64",), r"macosx_\d+_\d+_(arm64|universal2)"),
     "macos-x64": (("macosx_11_0_x86_64",), r"macosx_\d+_\d+_(x86_64|universal2)"),
 }
-# (requirement, Python versions to fetch it for). Versions as pinned in requirements.txt.
-WHEELS = [("scipy==1.17.1", ("3.11", "3.13")), ("plyfile==1.0.3", ("3.11",))]
+# (requirement, Python versions to fetch it for). scipy: the newest that still loads with
+# the numpy of Blender 4.2 (1.24.x): 1.15.x needs numpy >= 1.23.5 (and < 2.5); 1.16 needs
+# 1.25.2 and 1.17 (the development pin in requirements.txt) 1.26.4 (1.17.1 fails to import
+# with numpy 1.24.4: no numpy.exceptions). One cp311 wheel serves Blender 4.2 to 5.0.
+WHEELS = [("scipy==1.15.3", ("3.11", "3.13")), ("plyfile==1.0.3", ("3.11",))]
 PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 # The development core (make build) is never shipped: each stage gets its platform's.
