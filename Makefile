@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
 
-.PHONY: all venv build demo test test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
+.PHONY: all venv build native demo test test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
 
 all: build
 
@@ -25,6 +25,12 @@ $(CORE): $(STAMP) setup.py $(NATIVE)
 	$(VPY) setup.py --quiet build_ext --inplace --force
 
 build: $(CORE)
+
+# The shipped cores, for linux-x64 (glibc 2.28), windows-x64, macos-arm64 and macos-x64,
+# cross-compiled with Zig (the ziglang package) into build/native/<platform>/. `make build`
+# (gcc, in place) stays the development build: the sanitizer build and the tests use it.
+native: $(STAMP)
+	$(VPY) tools/build_native.py
 
 demo: build
 	$(VPY) tools/demo.py --output demo.png
@@ -78,7 +84,8 @@ docs: build
 	$(VPY) tools/switch_images.py --output-dir docs/switches
 	$(VPY) tools/demo.py --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 
-dist: build
+# One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
+dist: $(STAMP)
 	$(VPY) tools/build_dist.py --output-dir dist
 
 bench-quick: build

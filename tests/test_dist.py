@@ -19,16 +19,24 @@ ROOT = Path(__file__).resolve().parent.parent
 
 @pytest.fixture(scope="module")
 def dist_zip(tmp_path_factory):
+    """The Linux zip only (the platform this machine can install and render); `make dist`
+    builds the other three the same way, their binaries are checked by test_portable.py."""
     out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, str(ROOT / "tools" / "build_dist.py"), "--output-dir", str(out)], check=True)
+    subprocess.run([sys.executable, str(ROOT / "tools" / "build_dist.py"), "--platform", "linux-x64",
+                    "--output-dir", str(out)], check=True)
     (zip_path,) = out.glob("splat_tracer-*.zip")
+    assert zip_path.name.endswith("-linux_x64.zip")  # blender_ext.py --split-platforms naming
     return zip_path
 
 
-def test_zip_holds_the_addon_the_core_and_the_wheels_only(dist_zip):
+def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
     names = set(zipfile.ZipFile(dist_zip).namelist())
     assert {"blender_manifest.toml", "__init__.py", "LICENSE", "splat_tracer/_core.abi3.so",
             "splat_tracer/engine.py", "operators/import_cloud.py", "ui/__init__.py"} <= names
+    assert not any(n.endswith(".pyd") for n in names)
+    # The Zig build of tools/build_native.py (glibc 2.28), not the development build.
+    shipped = zipfile.ZipFile(dist_zip).read("splat_tracer/_core.abi3.so")
+    assert shipped == (ROOT / "build" / "native" / "linux-x64" / "_core.abi3.so").read_bytes()
     wheels = {n for n in names if n.startswith("wheels/")}
     assert any("scipy" in w and "cp311" in w for w in wheels) and any("scipy" in w and "cp313" in w for w in wheels)
     assert any("plyfile" in w for w in wheels) and not any("numpy" in w for w in wheels)
@@ -36,9 +44,11 @@ def test_zip_holds_the_addon_the_core_and_the_wheels_only(dist_zip):
         assert any(name in w for w in wheels), name
     for name in ("lazrs", "pye57"):
         assert all(any(name in w and tag in w for w in wheels) for tag in ("cp311", "cp313")), name
+    assert all("manylinux" in w or "none-any" in w for w in wheels), wheels
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "splat_tracer/native/")) for n in names)
     manifest = zipfile.ZipFile(dist_zip).read("blender_manifest.toml").decode()
     assert all(f'"./{w}"' in manifest for w in wheels)
+    assert 'platforms = ["linux-x64"]' in manifest
 
 
 def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
@@ -54,6 +64,8 @@ def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
                            str(ply_path), str(output)], cwd=tmp_path, env=env, capture_output=True, text=True,
                           timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+    bundled = next(w for w in zipfile.ZipFile(dist_zip).namelist() if w.startswith("wheels/scipy-") and "cp311" in w)
+    assert f"bundled: scipy {bundled.split('-')[1]} " in proc.stdout, proc.stdout  # not the venv's scipy
     # Blender installed the bundled wheels for this Python into the extensions' site-packages.
     site = list(tmp_path.glob("blender_user_*/**/.local/lib/python3.*/site-packages"))
     assert site and (site[0] / "plyfile.py").is_file() and (site[0] / "scipy").is_dir(), site

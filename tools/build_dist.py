@@ -1,14 +1,27 @@
-"""Builds the installable extension zip (what `make dist` runs).
+"""Builds the installable extension zips, one per platform (what `make dist` runs).
 
-    python tools/build_dist.py --output-dir dist
+    python tools/build_dist.py [--platform linux-x64 ...] --output-dir dist
 
-1. Stages the add-on's files (no tests, benchmarks, native sources or build files) and
-   the compiled core, splat_tracer/_core.abi3.so, which must have been built.
-2. Adds the dependencies Blender does not ship, as unmodified PyPI wheels (scipy, lazrs
-   and pye57 for each Python that Blender 4.2 to 5.1 use; plyfile, laspy and pyquaternion,
-   pure Python), listed in the staged manifest.
-   numpy is never bundled: Blender has its own.
-3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy wheel).
+writes dist/splat_tracer-<version>-<platform>.zip for linux-x64, windows-x64, macos-arm64
+and macos-x64 (default: all four). For each platform:
+
+1. Builds that platform's native core with tools/build_native.py (Zig; Linux: glibc 2.28),
+   never the development build of `make build`.
+2. Stages the add-on's files (no tests, benchmarks, native sources or build files), the
+   core, and the dependencies Blender does not ship as unmodified PyPI wheels for that
+   platform (scipy, lazrs and pye57 for each Python that Blender 4.2 to 5.1 use; plyfile,
+   laspy and pyquaternion, pure Python), listed in the staged manifest, whose `platforms`
+   is that one platform. A reader's wheel that PyPI lacks for a platform (pye57 on macOS
+   x64) is left out with a warning: that format is then refused there with a message. numpy is never bundled:
+   Blender has its own.
+3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy
+   wheel), `build --split-platforms`: the platform suffix in the name and the generated
+   manifest block that extension repositories read.
+
+One zip per platform rather than one for all: every platform needs its own scipy wheels
+(about 35 MB per Python version), so a single zip would be ~4x the size for everyone; and
+the Linux and macOS cores share the file name _core.abi3.so. blender_ext.py's
+--split-platforms only filters wheels, never other files, so the split is made here.
 """
 from __future__ import annotations
 
@@ -21,17 +34,35 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-STAGE = ROOT / "build" / "dist_stage" / "splat_tracer"
+STAGE_ROOT = ROOT / "build" / "dist_stage"
 WHEEL_CACHE = ROOT / "build" / "wheels"
-# Wheel platform tags accepted, matching the manifest's linux-x64: Blender 4.2+ itself
-# needs glibc 2.28, so manylinux_2_28 wheels load wherever Blender runs.
-PLATFORMS = ("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_17_x86_64", "manylinux2014_x86_64")
-# (requirement, Python versions to fetch it for). Versions as pinned in requirements.txt.
-WHEELS = [("scipy==1.17.1", ("3.11", "3.13")), ("plyfile==1.0.3", ("3.11",)), ("laspy==2.7.0", ("3.11",)),
-          ("lazrs==0.8.2", ("3.11", "3.13")), ("pye57==0.4.19", ("3.11", "3.13")), ("pyquaternion==0.9.9", ("3.11",))]
+# Wheel platform tags pip may pick for each Blender platform, and the pattern of the wheel
+# file names that fit it. Linux: Blender 4.2+ itself needs glibc 2.28, so manylinux_2_28
+# wheels load wherever Blender runs. macOS: pip takes a macosx_X_Y tag as "X.Y or older";
+# scipy's oldest arm64 wheel is for macOS 12 (Blender 4.2 runs on 11.2: see README).
+PLATFORMS = {
+    "linux-x64": (("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_17_x86_64",
+                   "manylinux2014_x86_64"), r".*manylinux.*_x86_64"),
+    "windows-x64": (("win_amd64",), r"win_amd64"),
+    "macos-arm64": (("macosx_12_0_arm64",), r"macosx_\d+_\d+_(arm64|universal2)"),
+    "macos-x64": (("macosx_11_0_x86_64",), r"macosx_\d+_\d+_(x86_64|universal2)"),
+}
+# (requirement, Python versions to fetch it for). scipy: the newest that still loads with
+# the numpy of Blender 4.2 (1.24.x): 1.15.x needs numpy >= 1.23.5 (and < 2.5); 1.16 needs
+# 1.25.2 and 1.17 (the development pin in requirements.txt) 1.26.4 (1.17.1 fails to import
+# with numpy 1.24.4: no numpy.exceptions). One cp311 wheel serves Blender 4.2 to 5.0.
+# The third field: whether the add-on needs it everywhere (True) or only for one reader, which
+# refuses its format with a message where the wheel is missing (False).
+WHEELS = [("scipy==1.15.3", ("3.11", "3.13"), True), ("plyfile==1.0.3", ("3.11",), True),
+          ("laspy==2.7.0", ("3.11",), False), ("lazrs==0.8.2", ("3.11", "3.13"), False),
+          ("pye57==0.4.19", ("3.11", "3.13"), False), ("pyquaternion==0.9.9", ("3.11",), False)]
 PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
-SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "native")
+# The development core (make build) is never shipped: each stage gets its platform's.
+SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "native", "_core*.so", "_core*.pyd")
+
+sys.path.insert(0, str(ROOT / "tools"))
+import build_native  # noqa: E402
 
 
 def blender_ext() -> Path:
@@ -44,60 +75,76 @@ def blender_ext() -> Path:
     return tool
 
 
-def fetch_wheels() -> list[Path]:
+def fetch_wheels(platform: str) -> list[Path]:
     WHEEL_CACHE.mkdir(parents=True, exist_ok=True)
+    tags, platform_pattern = PLATFORMS[platform]
     found = []
-    for requirement, pythons in WHEELS:
+    for requirement, pythons, required in WHEELS:
         name, version = requirement.split("==")
         for py in pythons:
             tag = "cp" + py.replace(".", "")
-            pattern = re.compile(rf"{name}-{re.escape(version)}-(py3-none-any|{tag}-{tag}-.*x86_64.*)\.whl$")
+            pattern = re.compile(rf"{name}-{re.escape(version)}-(py3-none-any|{tag}-{tag}-{platform_pattern})\.whl$")
             cached = [w for w in WHEEL_CACHE.glob("*.whl") if pattern.match(w.name)]
             if not cached:
-                platforms = [arg for p in PLATFORMS for arg in ("--platform", p)]
+                platforms = [arg for p in tags for arg in ("--platform", p)]
                 subprocess.run([sys.executable, "-m", "pip", "download", "--quiet", "--no-deps",
                                 "--only-binary=:all:", "--python-version", py, *platforms,
-                                "--dest", str(WHEEL_CACHE), requirement], check=True)
+                                "--dest", str(WHEEL_CACHE), requirement], check=required,
+                               stderr=None if required else subprocess.DEVNULL)
                 cached = [w for w in WHEEL_CACHE.glob("*.whl") if pattern.match(w.name)]
             if not cached:
-                sys.exit(f"build_dist: no wheel of {requirement} for Python {py}")
-            found.extend(w for w in cached if w not in found)
+                if required:
+                    sys.exit(f"build_dist: no {platform} wheel of {requirement} for Python {py}")
+                print(f"build_dist: warning: no {platform} wheel of {requirement} for Python {py}; its reader "
+                      "refuses that format there", file=sys.stderr)
+            found.extend(w for w in sorted(cached)[-1:] if w not in found)
     return found
 
 
-def stage(wheels: list[Path]) -> None:
-    core = list((ROOT / "splat_tracer").glob("_core*.so"))
-    if not core:
-        sys.exit("build_dist: splat_tracer/_core.abi3.so is not built (run `make build`)")
-    shutil.rmtree(STAGE, ignore_errors=True)
-    STAGE.mkdir(parents=True)
+def stage(platform: str, core: Path, wheels: list[Path]) -> Path:
+    stage_dir = STAGE_ROOT / platform / "splat_tracer"
+    shutil.rmtree(stage_dir, ignore_errors=True)
+    stage_dir.mkdir(parents=True)
     for name in PACKAGE_FILES:
-        shutil.copy2(ROOT / name, STAGE / name)
+        shutil.copy2(ROOT / name, stage_dir / name)
     for name in PACKAGE_DIRS:
-        shutil.copytree(ROOT / name, STAGE / name, ignore=SKIP)
-    (STAGE / "wheels").mkdir()
+        shutil.copytree(ROOT / name, stage_dir / name, ignore=SKIP)
+    shutil.copy2(core, stage_dir / "splat_tracer" / core.name)
+    (stage_dir / "wheels").mkdir()
     for wheel in wheels:
-        shutil.copy2(wheel, STAGE / "wheels" / wheel.name)
-    manifest = (STAGE / "blender_manifest.toml").read_text()
+        shutil.copy2(wheel, stage_dir / "wheels" / wheel.name)
+    manifest = (stage_dir / "blender_manifest.toml").read_text()
+    manifest, n = re.subn(r"(?m)^platforms = \[.*\]$", f'platforms = ["{platform}"]', manifest)
+    if n != 1:
+        sys.exit("build_dist: blender_manifest.toml has no one-line `platforms = [...]`")
     listing = "wheels = [\n" + "".join(f'  "./wheels/{w.name}",\n' for w in wheels) + "]\n"
     manifest = manifest.replace("\n[permissions]", "\n" + listing + "\n[permissions]", 1)
-    (STAGE / "blender_manifest.toml").write_text(manifest)
+    (stage_dir / "blender_manifest.toml").write_text(manifest)
+    return stage_dir
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--platform", action="append", choices=sorted(PLATFORMS),
+                    help="a Blender platform to package (repeatable; default: all)")
     ap.add_argument("--output-dir", default=str(ROOT / "dist"))
     args = ap.parse_args(argv)
     tool = blender_ext()
-    stage(fetch_wheels())
     out = Path(args.output_dir).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    subprocess.run([sys.executable, str(tool), "validate", str(STAGE)], check=True)
-    subprocess.run([sys.executable, str(tool), "build", "--source-dir", str(STAGE), "--output-dir", str(out)],
-                   check=True)
-    zips = sorted(out.glob("splat_tracer-*.zip"), key=lambda p: p.stat().st_mtime)
-    print(f"build_dist: {zips[-1]}")
+    for platform in args.platform or list(PLATFORMS):
+        core = build_native.build(platform, ROOT / "build" / "native")
+        stage_dir = stage(platform, core, fetch_wheels(platform))
+        subprocess.run([sys.executable, str(tool), "validate", str(stage_dir)], check=True)
+        subprocess.run([sys.executable, str(tool), "build", "--split-platforms", "--source-dir", str(stage_dir),
+                        "--output-dir", str(out)], check=True)
+        suffix = platform.replace("-", "_")
+        print(f"build_dist: {out / f'splat_tracer-{version()}-{suffix}.zip'}")
     return 0
+
+
+def version() -> str:
+    return re.search(r'(?m)^version = "([^"]+)"', (ROOT / "blender_manifest.toml").read_text()).group(1)
 
 
 if __name__ == "__main__":
