@@ -160,7 +160,7 @@ def main(argv=None) -> int:
     print("| renderer | threads | time (s) | Mrays/s | vs nearest hit | x Embree rtcIntersect1 |")
     print("|---|---:|---:|---:|---:|---:|")
     nearest = {threads: t for name, threads, t in rows if name.startswith("core trace()")}
-    reference = {threads: t for name, threads, t in rows if name.startswith("Embree 3 rtcIntersect1")}
+    reference = {threads: t for name, threads, t in rows if name.startswith("Embree 3 rtcIntersect1,")}
     for name, threads, t in rows:
         versus = f"{t / reference[threads]:.2f}" if threads in reference else ""
         print(f"| {name} | {threads} | {t:.3f} | {n_rays / t / 1e6:.2f} | {t / nearest[threads]:.2f}x | {versus} |")
