@@ -55,8 +55,10 @@ bool refract(Vec3 wo, Vec3 n, float eta, Vec3 *wt) {
 
 Vec3 schlick(Vec3 f0, float c) { return f0 + (Vec3(1, 1, 1) - f0) * schlick_weight(c); }
 
+}  // namespace
+
 // The lobes of a material at one point, as energy weights.
-struct Lobes {
+struct Integrator::Lobes {
     float metal, glass, plastic;  // metallic, transmissive, opaque dielectric shares (sum 1)
     float f0;                     // opaque dielectric's normal-incidence reflectance
     float spec_eta;               // the IOR whose exact Fresnel has that f0 (1: none)
@@ -107,8 +109,6 @@ struct Lobes {
     }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
 };
-
-}  // namespace
 
 // The cloud a ray travels inside once it has crossed the surface at `sp` (refracted, or
 // passed through a see-through point): entering a splat cloud it is inside it, and its next
@@ -265,7 +265,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         return r;
     };
 
-    L = L + direct_light(sp, here, n, wo, mat, base, lobes.delta, rng, st.camera ? primary : nullptr, tally);
+    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, rng, st.camera ? primary : nullptr, tally);
 
     // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
     // can bring any back, so none is traced.
@@ -351,17 +351,13 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     return L;
 }
 
-Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 wo, const Material &mat,
-                              Vec3 base, bool delta, Sampler &rng, Primary *primary, Tally &tally) const {
+Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                              const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const {
     const std::vector<Light> &lights = scene_.lights();
     if (lights.empty()) return Vec3();  // no lamp: no shadow ray, no work
-    const Lobes lobes(mat, base, sp.front);
-    const float cos_o = std::fmax(dot(n, wo), 1e-6f);
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
-    const bool glossy = !delta && luminance(lobes.specular(cos_o)) > 0.f;
+    const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
-    Vec3 ng = sp.ng;
-    if (dot(ng, wo) < 0.f) ng = ng * -1.f;
     const int k = settings_.shadow_samples;
     const float share = 1.f / float(k);
     Vec3 L;

@@ -61,10 +61,12 @@ class Integrator {
     struct Tally;       // per-tile ray counts
     struct PathState;   // bounce counters, where the ray starts, its throughput
     struct Primary;     // what the passes want from the camera ray's first hit
+    struct Lobes;       // a material's lobes at one point
 
     Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally) const;
-    Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 wo, const Material &m, Vec3 base,
-                      bool delta, Sampler &rng, Primary *primary, Tally &tally) const;
+    // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`.
+    Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                      const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void shade_pixel(int col, int row, Tally &tally) const;
