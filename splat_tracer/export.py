@@ -135,10 +135,11 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats
 
 
-def _materials(obj, cache: dict, report: shading.Report) -> tuple:
-    """The object's material slots as shading.Material (one default for none)."""
+def _materials(slots: list, cache: dict, report: shading.Report) -> tuple:
+    """Blender materials (an object's slots, see _slot_materials) as shading.Material (one
+    default for none)."""
     out = []
-    for m in _slot_materials(obj) or [None]:
+    for m in slots or [None]:
         key = m.name_full if m is not None else None
         if key not in cache:
             cache[key] = export_shading.material_of(m, report)
@@ -179,17 +180,28 @@ class _Frame:
         if len(pos) == 0:
             return None
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
-
-        def build():
-            resources.check(f"point cloud '{obj.name}' ({len(pos):,} splats)", len(pos) * resources.BYTES_PER_SPLAT)
-            return core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed, threads=self.threads,
-                              alphas=alpha)
-
-        geometry, built = self.cache.get(key, build)
-        if built or key not in self.cache.counted:
-            self.splats += len(geometry)
-            self.cache.counted.add(key)
+        geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
+                                len(pos) * resources.BYTES_PER_SPLAT,
+                                lambda: core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed,
+                                                   threads=self.threads, alphas=alpha))
+        self.splats += self._first_use(key, geometry)
         return geometry
+
+    def _cached(self, key, what: str, needed_bytes: int, make):
+        """The geometry under `key`, built by make() when the cache lacks it -- after checking
+        that the build fits in memory (resources.check names `what` when it does not)."""
+        def build():
+            resources.check(what, needed_bytes)
+            return make()
+
+        return self.cache.get(key, build)[0]
+
+    def _first_use(self, key, geometry) -> int:
+        """The geometry's size the first time this frame uses it (instances share it), else 0."""
+        if key in self.cache.counted:
+            return 0
+        self.cache.counted.add(key)
+        return len(geometry)
 
     def mesh(self, obj):
         mesh = obj.data if obj.type == "MESH" else None
@@ -210,14 +222,10 @@ class _Frame:
         if len(tris) == 0:
             return None
         key = ("mesh", _digest(verts, tris, normals, mats))
-        def build():
-            resources.check(f"mesh '{obj.name}' ({len(tris):,} triangles)", len(tris) * resources.BYTES_PER_TRIANGLE)
-            return core.Mesh(verts, tris, normals, mats, threads=self.threads)
-
-        geometry, built = self.cache.get(key, build)
-        if built or key not in self.cache.counted:
-            self.triangles += len(geometry)
-            self.cache.counted.add(key)
+        geometry = self._cached(key, f"mesh '{obj.name}' ({len(tris):,} triangles)",
+                                len(tris) * resources.BYTES_PER_TRIANGLE,
+                                lambda: core.Mesh(verts, tris, normals, mats, threads=self.threads))
+        self.triangles += self._first_use(key, geometry)
         return geometry
 
     def geometry(self, obj):
@@ -275,8 +283,9 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             continue
         parent = inst.parent if inst.is_instance else None
         vis = export_shading.object_visibility(obj, view_layer, parent)
-        materials = _materials(obj, frame.materials, report)
-        if kind == "cloud" and all(m is None for m in _slot_materials(obj)) and geometry_has_colours(obj):
+        slots = _slot_materials(obj)
+        materials = _materials(slots, frame.materials, report)
+        if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
         instances.append(core.Instance(
