@@ -10,7 +10,7 @@ Persistent Data) or during an animation render; otherwise it is freed at once.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -67,6 +67,8 @@ def release_after_job(scene) -> None:
     until the next render."""
     if scene is None or not scene.render.use_persistent_data:
         CACHE.entries.clear()
+
+
 HISTORY: list = []  # stats of the frames rendered in this Blender session, newest last (tests read it)
 _HISTORY_LIMIT = 100
 
@@ -113,7 +115,7 @@ def lit_settings(scene, exported, settings: shading.RenderSettings, headlight: O
             report.once("the scene has no lamp, no emission and a black world: rendered with a headlight "
                         "(Splat Tracer > Lighting)")
     if headlight:
-        settings = shading.RenderSettings(**{**settings.__dict__, "headlight": True})
+        settings = replace(settings, headlight=True)
     return settings, bool(headlight)
 
 
