@@ -23,6 +23,9 @@ def score(truth, hit, depth, normal, directions, splat_radius: float) -> dict:
     return {
         "silhouette_px": int((hit != truth.hit).sum()),
         "silhouette_pct": float(100.0 * (hit != truth.hit).sum() / max(truth.hit.sum(), 1)),
+        # The two kinds apart: holes and rejected surface, against fringes and fattening.
+        "missing_px": int((truth.hit & ~hit).sum()),
+        "extra_px": int((hit & ~truth.hit).sum()),
         "normal_mean_deg": float(angle.mean()) if both.any() else float("nan"),
         "normal_p95_deg": float(np.percentile(angle, 95)) if both.any() else float("nan"),
         "depth_mean_rel": float(rel_depth.mean()) if both.any() else float("nan"),

@@ -31,19 +31,15 @@ void LayerQuery::update() {
     if (first < 0) return;  // cut stays where it was (tmax)
     facing = hits[first].front;
     layer_end = hits[first].t + epsilon * hits[first].radius;
-    next = -1;
+    cut = layer_end;
+    while (count > 0 && hits[count - 1].t > cut) --count;
+    next = -1;  // after the trim: only hits within the window count
     for (int i = first + 1; i < count; ++i) {
         if (!member(i)) {
             next = i;
             break;
         }
     }
-    const bool want_next = far_phase && closed && closed[hits[first].id];
-    if (!want_next)
-        cut = layer_end;
-    else
-        cut = next >= 0 ? (hits[next].t > layer_end ? hits[next].t : layer_end) : kInfinity;
-    while (count > 0 && hits[count - 1].t > cut) --count;
 }
 
 }  // namespace splat

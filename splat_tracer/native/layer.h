@@ -1,19 +1,18 @@
-// The ε-window query: in one BVH traversal, the first layer of splats a ray meets and
-// the first hit after it (docs/ALGORITHM.md, "Visibility computation").
+// The ε-window query: in one BVH traversal, the first layer of splats a ray meets
+// (docs/ALGORITHM.md, "Visibility computation").
 //
 // Definitions, for a ray and a facing `f` that may begin a layer:
 //   first  - the nearest hit of facing f (wrong-intersection elimination: hits of the other
 //            facing before it are artefacts of discs poking out of an edge, and ignored);
 //   layer  - first and every hit of facing f within ε x r_first behind it (its members);
-//   next   - the nearest hit after first that is not a member: a hit of the other facing
-//            anywhere behind first, or a hit of facing f beyond the layer. The far phase
-//            accepts a layer on a closed object only when next exists and has the other
-//            facing (a ray that enters a closed surface must leave it).
+//   next   - the nearest hit after first within the window that is not a member (it has the
+//            other facing), if any. The far phase (visibility.cpp) walks on from the
+//            window's end with further queries when it needs what lies behind.
 //
 // The query keeps the hits in (tmin, cut] sorted in a fixed buffer, where cut shrinks as
-// hits arrive: while no first is known, cut = tmax; then cut = the layer's end, or, when
-// `next` is wanted (far phase, closed object), max(layer end, t of next) once next is known. Boxes beyond cut are
-// pruned, which is what makes the query cost little more than a nearest-hit query.
+// hits arrive: while no first is known, cut = tmax; then cut = the layer's end. Boxes
+// beyond cut are pruned, which is what makes the query cost little more than a nearest-hit
+// query.
 #pragma once
 
 #include <cstdint>
@@ -42,8 +41,6 @@ struct LayerQuery {
                               // back for rays travelling inside an object (refraction)
     bool any_facing = false;  // wrong-intersection elimination off: the layer begins at the
                               // nearest hit whatever its facing, and has that facing
-    bool far_phase = false;   // keep searching for `next` when the first splat is of a
-    const uint8_t *closed = nullptr;  // closed object (per-splat flags, by id)
     float epsilon = 1.f;      // layer depth, in radii of the first splat
     const int32_t *exclude = nullptr;  // splat ids this ray must not hit (secondary rays)
     int n_exclude = 0;
@@ -61,7 +58,7 @@ struct LayerQuery {
 
     // Derived from `hits` (valid after SplatScene::gather_layer()).
     int first = -1;          // index of the first hit, or -1: no layer
-    int next = -1;           // index of the next hit, or -1: none found
+    int next = -1;           // index of the next hit (within the window), or -1: none
     bool facing = true;      // the layer's facing
     float layer_end = 0.f;   // t_first + epsilon * r_first
     float cut = kInfinity;   // hits beyond this are not needed

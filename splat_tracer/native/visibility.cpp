@@ -78,6 +78,88 @@ SurfaceHit resolve_layer(const SplatScene &scene, const LayerQuery &q, const Met
     return s;
 }
 
+// Whether the layer's first hit lies inside the sampled surface rather than beyond its edge
+// (docs/ALGORITHM.md, "Far phase: which layers it tests"). A fringe disc pokes out past
+// an edge or a silhouette: the hit point is then covered only by discs whose centres all
+// lie on one side of it, none of them close. Inside the surface some centre is close, or
+// the centres surround the point. Such a layer is real whatever follows it on the ray --
+// which keeps the far phase away from shells that cross (a belt through a body) and parts
+// thinner than the layer window, where "what follows" is another shell's surface.
+bool inside_sampled_surface(const SplatScene &scene, const Ray &ray, const LayerQuery &q) {
+    // A centre within this share of its radius from the hit: the point is inside the
+    // sampled surface (the radius is the k-NN spacing, ~1.4 sample steps on a grid, so
+    // about half a step). 0.2 to 0.7 tried on the accuracy benchmark (ALGORITHM.md): 0.35
+    // is the largest that keeps crossing shells no worse than nearest-centre; larger
+    // values give back silhouette gain at edges.
+    constexpr float kInnerShare = 0.35f;
+    // Lopsidedness of the member centres around the hit, |sum of offsets| / sum of their
+    // lengths, in the tangent plane: 0 when they surround it, about 0.64 for centres spread
+    // evenly over a half disc (a point just past a straight edge), 1 on one side. Below
+    // this, the point is surrounded (0.3 to 0.6 tried; ALGORITHM.md).
+    constexpr float kSurrounded = 0.6f;
+    const LayerHit &h0 = q.hits[q.first];
+    const Vec3 p = ray.o + ray.d * h0.t;
+    const Vec3 n0 = scene.normal(h0.id);
+    Vec3 sum;
+    float total = 0.f;
+    for (int i = q.first; i < q.count; ++i) {
+        if (!q.member(i)) continue;
+        if (q.hits[i].dist < kInnerShare * q.hits[i].radius) return true;
+        Vec3 v = scene.centre(q.hits[i].id) - p;
+        v = v - n0 * dot(v, n0);
+        sum = sum + v;
+        total += length(v);
+    }
+    return total > 0.f && length(sum) < kSurrounded * total;
+}
+
+// The far phase (docs/ALGORITHM.md, "Far phase: counting entries and exits"): whether the
+// layer `q` of a closed object is real. A ray that enters closed surfaces leaves them all;
+// one inside an object leaves by the exit layer and does not meet a further exit. So, walking
+// on layer by layer (each a window of same-facing hits, as the query makes them), entries
+// count +1 and exits -1: the layer is real when the count comes back to 0, a fringe when the
+// hits end first (for a ray inside: the layer is a fringe when the next layer is another
+// exit). The paper's rule is the first step of this walk; counting on keeps a layer that is
+// followed by a second shell's entry (a finger in a palm) instead of rejecting it as the
+// paper's "front, front" does. One layer query per layer walked, only for layers that may
+// be fringes.
+bool far_phase_accepts(const SplatScene &scene, Ray ray, const LayerQuery &q, const Method &m, bool inside,
+                       const int32_t *exclude, int n_exclude, bool brute_force, TraversalStats *stats) {
+    if (inside_sampled_surface(scene, ray, q)) return true;
+    // A hit of the other facing inside the window: the ray left again at once (a part
+    // thinner than the window) or, inside, met an entry.
+    if (q.next >= 0) return true;
+    // Layers walked before giving up (and rejecting, as the paper's rule would): each is one
+    // more shell surface on the ray; 16 is far more than real models nest.
+    constexpr int kMaxWalk = 16;
+    int depth = 1;  // shells entered and not yet left (rays from outside)
+    ray.tmin = q.layer_end;
+    for (int k = 0; k < kMaxWalk && ray.tmin < ray.tmax; ++k) {
+        LayerQuery w;
+        w.any_facing = true;  // the nearest hit starts the window, whatever its facing
+        w.epsilon = m.epsilon;
+        w.exclude = exclude, w.n_exclude = n_exclude;
+        scene.gather_layer(ray, w, brute_force, stats);
+        if (stats) ++stats->layer_queries;
+        // Nothing more: an exit with nothing behind is real, an entry never left a fringe.
+        if (w.first < 0) return inside;
+        const bool same = w.facing == q.facing;
+        if (inside) return !same;
+        depth += same ? 1 : -1;
+        if (depth == 0) return true;
+        // Hits of the other facing inside the window (`next` is one of them: the query keeps
+        // none beyond the window): both faces of a part thinner than the window, or two
+        // shells crossing. The window is an entry and an exit; skipping to its end without
+        // counting both would lose that exit.
+        if (w.next >= 0) {
+            depth += same ? -1 : 1;
+            if (depth == 0) return true;
+        }
+        ray.tmin = w.layer_end;
+    }
+    return false;
+}
+
 }  // namespace
 
 float near_phase_omega(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk) {
@@ -94,8 +176,6 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
         q.any_facing = !m.eliminate_wrong_hits;
         q.epsilon = m.epsilon;
         q.exclude = exclude, q.n_exclude = n_exclude;
-        q.far_phase = m.far_phase;
-        q.closed = scene.closed_flags();
         scene.gather_layer(ray, q, brute_force, stats);
         if (stats) ++stats->layer_queries;
         if (q.first < 0) {
@@ -114,22 +194,12 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool 
             }
             return SurfaceHit();
         }
-        const bool closed = scene.closed(q.hits[q.first].id);
-        if (m.far_phase && closed) {
-            // A ray that truly enters a closed surface leaves it: the next hit after the
-            // layer must have the other facing. Otherwise the layer is a fringe disc or a
-            // grazed edge: look further along the ray.
-            // A ray inside an object (roles swapped) meets the exit layer, after which there
-            // may be nothing at all; the layer is a fringe only when another layer of the
-            // same facing (a further exit) follows it.
-            const bool next_same = q.next >= 0 && q.hits[q.next].front == q.facing;
-            const bool accepted = inside ? !next_same : (q.next >= 0 && !next_same);
-            if (!accepted) {
-                if (stats) ++stats->far_rejections;
-                ray.tmin = q.layer_end;
-                if (!(ray.tmin < ray.tmax)) return SurfaceHit();
-                continue;
-            }
+        if (m.far_phase && scene.closed(q.hits[q.first].id) &&
+            !far_phase_accepts(scene, ray, q, m, inside, exclude, n_exclude, brute_force, stats)) {
+            if (stats) ++stats->far_rejections;
+            ray.tmin = q.layer_end;  // a fringe or a grazed edge: look further along the ray
+            if (!(ray.tmin < ray.tmax)) return SurfaceHit();
+            continue;
         }
         SurfaceHit s = resolve_layer(scene, q, m);
         if (stats && m.interpolate && s.n_members > 1) ++stats->interpolations;

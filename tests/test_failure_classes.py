@@ -1,0 +1,59 @@
+"""The full method against nearest-centre on one synthetic scene per failure class of the
+far phase (benchmarks/synthetic.py: crossing closed shells, a thin plate, a thin fin, an
+open face, a concave notch, 10x density changes), scored against the exact mesh: the full
+method is no worse on any metric and, where edges exist, better on silhouettes."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+
+import synthetic  # noqa: E402
+from splat_tracer import core  # noqa: E402
+
+W, H = 320, 240
+N_SAMPLES = 40000
+# "No worse" allows this much relative noise (the issue's 2 %), plus an absolute floor for
+# metrics near zero: a hundredth of a degree, a hundredth of a percent of the pixels.
+RELATIVE_NOISE = 0.02
+FLOOR = {"normal_mean_deg": 0.01, "normal_p95_deg": 0.01, "wrong_surface_pct": 0.01, "depth_mean_rel": 1e-5}
+METHODS = {"nearest-centre": core.Method.preset("NEAREST_CENTRE"), "full": core.Method.preset("FULL")}
+
+
+@pytest.fixture(scope="module")
+def scores():
+    return {sc.name: (sc, synthetic.score_methods(sc, METHODS, W, H)) for sc in synthetic.scenes(N_SAMPLES)}
+
+
+@pytest.mark.parametrize("name", [s.name for s in synthetic.scenes(200)])
+def test_full_method_no_worse_than_nearest_centre(scores, name):
+    sc, s = scores[name]
+    near, full = s["nearest-centre"], s["full"]
+    for key, floor in FLOOR.items():
+        assert full[key] <= near[key] * (1 + RELATIVE_NOISE) + floor, (key, full[key], near[key])
+    assert full["silhouette_px"] <= near["silhouette_px"] * (1 + RELATIVE_NOISE) + 2
+    if sc.has_edges and full["closed"]:
+        # The far phase removes the fringes: at least a third fewer wrong-coverage pixels.
+        assert full["silhouette_px"] < 0.67 * near["silhouette_px"], (full["silhouette_px"], near["silhouette_px"])
+
+
+def test_crossing_shells_keep_the_outer_shell(scores):
+    """The paper's rule rejects a layer followed by another entry ("front, front"): on a
+    band through a sphere it showed the sphere through the band on a third of the pixels.
+    Counting entries and exits keeps the band."""
+    _, s = scores["sphere+band"]
+    assert s["full"]["wrong_surface_pct"] < 0.5
+    assert s["full"]["normal_mean_deg"] < 2.0
+
+
+def test_the_closed_guess_of_each_scene():
+    """The importer's guess decides whether the far phase runs: the open-faced cube is open,
+    every other scene closed."""
+    for sc in synthetic.scenes(N_SAMPLES):
+        from splat_tracer import spacing
+
+        guess = spacing.analyse(sc.points, sc.normals).closed_guess
+        assert guess == (sc.name != "open-face cube"), sc.name
