@@ -90,7 +90,7 @@ def run(args) -> list[dict]:
     workdir.mkdir(parents=True, exist_ok=True)
     rows = []
     for model, (vertices, triangles) in models(args.quick):
-        vnormals = meshes.vertex_normals(vertices, triangles)
+        cnormals = meshes.corner_normals(vertices, triangles)
         for cloud_name, points, normals in clouds(vertices, triangles, n_samples):
             if args.quick and cloud_name != "vertices" and model != "sphere":
                 continue
@@ -101,7 +101,7 @@ def run(args) -> list[dict]:
             o, d = cam.rays(width, height)
             o64, d64 = o.astype(np.float64), d.astype(np.float64)
             d64 /= np.linalg.norm(d64, axis=1, keepdims=True)
-            truth = truth_mod.cast(vertices, triangles, vnormals, o64, d64, cam.position, cam.forward)
+            truth = truth_mod.cast(vertices, triangles, cnormals, o64, d64, cam.position, cam.forward)
             base = {"model": model, "cloud": cloud_name, "points": len(points), "guess_closed": hood.closed_guess,
                     "width": width, "height": height}
             print(f"{model:16s} {cloud_name:12s} {len(points):7d} points, closed guess {hood.closed_guess}",

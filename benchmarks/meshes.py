@@ -72,6 +72,34 @@ def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return np.divide(normals, length, out=np.zeros_like(normals), where=length > 0)
 
 
+# The truth's shading normals: what Blender shows with Auto Smooth at its default angle.
+# Faces meeting at a vertex at a sharper angle are not averaged (a CAD model's creases stay
+# sharp); gentler ones are (an organic model stays smooth).
+CREASE_DEG = 60.0
+
+
+def corner_normals(vertices: np.ndarray, triangles: np.ndarray, crease_deg: float = CREASE_DEG) -> np.ndarray:
+    """(F,3,3) unit normals at each triangle corner: the area-weighted mean of the normals
+    of the faces around the corner's vertex within crease_deg of this face's normal."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    face_n = np.cross(b - a, c - a)  # length = 2 x area
+    unit = face_n / np.maximum(np.linalg.norm(face_n, axis=1, keepdims=True), 1e-300)
+    corner_v = triangles.ravel()                     # corner i belongs to face i // 3
+    order = np.argsort(corner_v, kind="stable")
+    counts = np.bincount(corner_v, minlength=len(vertices))
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    deg = counts[corner_v]                          # faces around each corner's vertex
+    first = np.repeat(np.arange(corner_v.size), deg)
+    offset = np.arange(first.size) - np.repeat(np.cumsum(deg) - deg, deg)
+    other = order[starts[corner_v[first]] + offset]  # every corner sharing the vertex
+    fa, fb = first // 3, other // 3
+    keep = np.einsum("ij,ij->i", unit[fa], unit[fb]) >= np.cos(np.radians(crease_deg))
+    out = np.zeros((corner_v.size, 3))
+    np.add.at(out, first[keep], face_n[fb[keep]])
+    out /= np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-300)
+    return out.reshape(-1, 3, 3)
+
+
 def area_samples(vertices: np.ndarray, triangles: np.ndarray, n: int, seed: int = 0):
     """n points uniform by area, each with the exact (geometric) normal of its triangle."""
     rng = np.random.default_rng(seed)

@@ -132,7 +132,7 @@ def score_methods(sc: SyntheticScene, methods: dict, width: int, height: int, ra
     o, d = cam.rays(width, height)
     d64 = d.astype(np.float64)
     d64 /= np.linalg.norm(d64, axis=1, keepdims=True)
-    truth = truth_mod.cast(sc.vertices, sc.triangles, meshes.vertex_normals(sc.vertices, sc.triangles),
+    truth = truth_mod.cast(sc.vertices, sc.triangles, meshes.corner_normals(sc.vertices, sc.triangles),
                            o.astype(np.float64), d64, cam.position, cam.forward)
     cam_local = core.Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
     scene = core.Scene(local, sc.normals, hood.spacing * radius_factor, closed=hood.closed_guess)

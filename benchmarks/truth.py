@@ -11,12 +11,13 @@ import numpy as np
 class Truth:
     hit: np.ndarray            # (P,) bool coverage
     depth: np.ndarray          # (P,) planar depth along the view axis (nan on a miss)
-    smooth_normal: np.ndarray  # (P,3) interpolated vertex normals, facing the camera
+    smooth_normal: np.ndarray  # (P,3) interpolated corner normals (meshes.corner_normals), facing the camera
     face_normal: np.ndarray    # (P,3) geometric normal, facing the camera
     size: float                # the object's bounding-box diagonal
 
 
-def cast(vertices, triangles, vertex_normals, origins, directions, position, forward) -> Truth:
+def cast(vertices, triangles, corner_normals, origins, directions, position, forward) -> Truth:
+    """corner_normals: (F,3,3), see meshes.corner_normals."""
     from embreex import rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
@@ -28,9 +29,9 @@ def cast(vertices, triangles, vertex_normals, origins, directions, position, for
     t = np.where(hit, res["tfar"], np.nan).astype(np.float64)
     points = origins + directions * t[:, None]
     depth = (points - position) @ forward
-    tri = triangles[np.where(hit, res["primID"], 0)]
+    corners = corner_normals[np.where(hit, res["primID"], 0)]
     u, v = res["u"][:, None], res["v"][:, None]
-    smooth = (1 - u - v) * vertex_normals[tri[:, 0]] + u * vertex_normals[tri[:, 1]] + v * vertex_normals[tri[:, 2]]
+    smooth = (1 - u - v) * corners[:, 0] + u * corners[:, 1] + v * corners[:, 2]
     geometric = res["Ng"].astype(np.float64)
     out = []
     for n in (smooth, geometric):

@@ -25,7 +25,8 @@ def _method(choice: str, scene) -> core.Method:
     settings = scene.splat_tracer
     if choice == "SCENE":
         return settings.core_method()
-    return core.Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel)
+    return core.Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel,
+                              crease_angle=settings.core_method().crease_angle)
 
 
 def _store_image(name: str, rgba_top_first: np.ndarray) -> bpy.types.Image:

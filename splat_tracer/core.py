@@ -42,6 +42,9 @@ class Method:
     position: the surface point within the layer: 'FIRST' hit, 'NEAR_PHASE' (the paper's
         convex/concave rule) or 'NEAREST_CENTRE' (Linsen et al.).
     epsilon: depth of a layer, in radii of its first splat.
+    crease_angle: degrees; with interpolation, only the layer's splats whose normal is within
+        this angle of the surface splat's blend (sharp edges stay sharp, like Auto Smooth);
+        180: every splat blends (the paper's).
     """
 
     eliminate_wrong_hits: bool = True
@@ -50,6 +53,7 @@ class Method:
     position: str = "NEAR_PHASE"
     kernel: str = "LINEAR"
     epsilon: float = 1.0
+    crease_angle: float = 180.0
 
     def __post_init__(self):
         if self.position not in POSITION_RULES:
@@ -58,6 +62,8 @@ class Method:
             raise ValueError(f"kernel must be one of {KERNELS}, got {self.kernel!r}")
         if not (np.isfinite(self.epsilon) and self.epsilon >= 0):
             raise ValueError(f"epsilon must be a finite number >= 0, got {self.epsilon!r}")
+        if not (0 <= self.crease_angle <= 180):
+            raise ValueError(f"crease_angle must be between 0 and 180 degrees, got {self.crease_angle!r}")
 
     @classmethod
     def preset(cls, name: str, **overrides) -> "Method":
@@ -78,7 +84,8 @@ class Method:
 
     def as_tuple(self) -> tuple:
         return (self.eliminate_wrong_hits, self.interpolate_normals, self.far_phase,
-                POSITION_RULES.index(self.position), KERNELS.index(self.kernel), float(self.epsilon))
+                POSITION_RULES.index(self.position), KERNELS.index(self.kernel), float(self.epsilon),
+                float(self.crease_angle))
 
 
 def _f32(a, name: str, shape: tuple) -> np.ndarray:

@@ -1,4 +1,6 @@
 """Settings stored in .blend files: scene.splat_tracer and object.splat_tracer."""
+import math
+
 import bpy
 
 from . import core, shading
@@ -20,15 +22,17 @@ _SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_p
 _syncing = False  # set while one property's update writes the others
 
 
-def method_from_switches(switches: dict, epsilon: float, kernel: str) -> core.Method:
-    """The core method for a set of switch values (keys as in _SWITCHES)."""
+def method_from_switches(switches: dict, epsilon: float, kernel: str, crease_angle: float = math.pi) -> core.Method:
+    """The core method for a set of switch values (keys as in _SWITCHES); crease_angle in
+    radians, as Blender stores angles."""
     if switches["use_near_phase"]:
         position = "NEAR_PHASE"
     else:
         position = "NEAREST_CENTRE" if switches["use_nearest_centre"] else "FIRST"
     return core.Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
                        interpolate_normals=switches["use_normal_interpolation"],
-                       far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon)
+                       far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon,
+                       crease_angle=min(180.0, max(0.0, math.degrees(crease_angle))))
 
 
 def _switches_of(preset: str) -> dict:
@@ -110,6 +114,13 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         default="LINEAR",
         description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
     )
+    crease_angle: bpy.props.FloatProperty(
+        name="Crease Angle", subtype="ANGLE", default=math.radians(core.Method().crease_angle),
+        min=0.0, max=math.pi,
+        description="Splats whose normals differ by more than this do not blend, so sharp edges stay sharp "
+                    "(like Auto Smooth); 180 degrees blends every overlapping splat as the paper does, right for "
+                    "scans with estimated normals, while CAD models sampled with exact face normals want less",
+    )
 
     lighting: bpy.props.EnumProperty(
         name="Lighting",
@@ -152,7 +163,7 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
     def core_method(self, **overrides) -> core.Method:
         """The method these settings describe; `overrides` force switches (by property name)
         without touching the stored settings."""
-        return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel)
+        return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel, self.crease_angle)
 
 
 class SplatTracerViewLayerSettings(bpy.types.PropertyGroup):

@@ -31,6 +31,8 @@ def test_presets_set_the_switches_and_switches_set_the_preset(blender, empty_sce
     assert s.method == "NEAREST_CENTRE"
     s.epsilon, s.kernel = 2.5, "SMOOTH"
     assert method() == core.Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
+    s.crease_angle = math.radians(45)  # Blender stores angles in radians, the core takes degrees
+    assert s.core_method().crease_angle == pytest.approx(45)
 
 
 def test_panels_show_only_for_this_engine_and_every_setting_says_what_it_does(blender, empty_scene):

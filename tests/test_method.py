@@ -105,6 +105,26 @@ def test_cube_full_method_puts_the_surface_on_the_cube(cube):
     assert np.abs(general.t[both] - t_true[both]).max() > 0.02
 
 
+def test_crease_angle_keeps_cube_edges_sharp_and_spheres_smooth(cube):
+    """Interpolation blends the discs of both faces over about a radius at each edge (up to
+    45 degrees off the face there); with a crease angle, only the surface splat's side blends
+    and every pixel has its face's normal. On a smooth sphere the crease angle changes
+    nothing: neighbouring normals differ by a few degrees."""
+    scene, o, d, _, t_true, n_true = cube
+    blended = scene.trace_surface(o, d, FULL)
+    sharp = scene.trace_surface(o, d, core.Method.preset("FULL", crease_angle=45))
+    both = (sharp.id >= 0) & np.isfinite(t_true)
+    assert angle_deg(blended.normal[both], n_true[both]).max() > 20
+    assert angle_deg(sharp.normal[both], n_true[both]).max() < 0.01
+    p, n = fibonacci_sphere(20000)
+    sphere, _ = cloud_scene(p, n, closed=True)
+    o, d = camera_rays((0.5, -4.0, 1.2))
+    a, b = sphere.trace_surface(o, d, FULL), sphere.trace_surface(o, d, core.Method.preset("FULL", crease_angle=45))
+    np.testing.assert_array_equal(a.normal, b.normal)
+    with pytest.raises(ValueError, match="crease_angle"):
+        core.Method(crease_angle=200)
+
+
 # Two discs at a sharp edge (the paper's Figs. 9-10), seen by one ray along -x-z.
 # Convex: a roof edge along y at the origin, solid below z = 0 and left of x = 0. Disc A
 # lies on the top face with its centre just inside the edge, so its fringe pokes out over

@@ -51,6 +51,7 @@ class SPLAT_TRACER_PT_visibility(SplatTracerPanel, bpy.types.Panel):
         sub = col.column()
         sub.active = settings.use_normal_interpolation
         sub.prop(settings, "kernel")
+        sub.prop(settings, "crease_angle")
 
 
 class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):

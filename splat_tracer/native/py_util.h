@@ -117,21 +117,27 @@ bool without_gil(F &&fn) {
     return type == nullptr;
 }
 
-// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon), as
-// core.Method.as_tuple() builds it. Returns false with an exception set when invalid.
+// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon[,
+// crease_angle in degrees]), as core.Method.as_tuple() builds it. Returns false with an
+// exception set when invalid.
 inline bool parse_method(PyObject *obj, Method &m) {
     if (obj == Py_None) return true;
     if (!PyTuple_Check(obj)) return PyErr_Format(PyExc_TypeError, "method must be a tuple (see core.Method)"), false;
     int elim, interp, far, position, kernel;
-    float eps;
-    if (!PyArg_ParseTuple(obj, "pppiif;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon)",
-                          &elim, &interp, &far, &position, &kernel, &eps))
+    float eps, crease = 180.f;
+    if (!PyArg_ParseTuple(obj,
+                          "pppiif|f;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon"
+                          "[, crease_angle])",
+                          &elim, &interp, &far, &position, &kernel, &eps, &crease))
         return false;
     if (position < 0 || position > 2) return PyErr_Format(PyExc_ValueError, "method position must be 0, 1 or 2"), false;
     if (kernel < 0 || kernel > 1) return PyErr_Format(PyExc_ValueError, "method kernel must be 0 or 1"), false;
     if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
+    if (!(crease >= 0.f && crease <= 180.f))
+        return PyErr_Format(PyExc_ValueError, "crease angle must be between 0 and 180 degrees"), false;
     m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
     m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
+    m.crease_cos = crease >= 180.f ? -2.f : std::cos(crease * float(M_PI) / 180.f);
     return true;
 }
 

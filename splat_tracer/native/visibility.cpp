@@ -60,8 +60,12 @@ SurfaceHit resolve_layer(const SplatScene &scene, const LayerQuery &q, const Met
     if (m.interpolate && n > 1) {
         Vec3 nsum, csum;
         float wsum = 0.f, asum = 0.f;
+        // At a crease the layer holds discs of both faces: blending them all rounds the edge
+        // over about a radius. With a crease angle, only the surface splat's side blends.
+        const Vec3 own = scene.normal(h.id);
         for (int k = 0; k < n; ++k) {
             const LayerHit &mh = q.hits[idx[k]];
+            if (dot(scene.normal(mh.id), own) < m.crease_cos) continue;
             const float w = kernel_weight(m.kernel, mh.dist, mh.radius);
             nsum = nsum + scene.normal(mh.id) * w;
             csum = csum + scene.colour(mh.id) * w;

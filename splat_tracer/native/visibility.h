@@ -28,6 +28,9 @@ struct Method {
     PositionRule position = PositionRule::NearPhase;
     Kernel kernel = Kernel::Linear;
     float epsilon = 1.f;  // layer depth in radii of the layer's first splat
+    // Edge-aware interpolation: only members whose normal is within the crease angle of the
+    // surface splat's blend into its normal and colour (cosine of the angle; below -1: all).
+    float crease_cos = -2.f;
     // Far-phase rejections a ray may go through before it is declared a miss: each one is a
     // fringe or a grazed edge in front of the surface, a handful at most in practice.
     int max_layers = 8;
