@@ -5,7 +5,8 @@ import math
 
 COLUMNS = [("model", "model"), ("cloud", "cloud"), ("points", "points"), ("renderer", "renderer"),
            ("method", "method"), ("closed", "closed"), ("seconds", "time (s)"), ("cores", "cores"),
-           ("silhouette_px", "silhouette err (px)"), ("normal_mean_deg", "normal err mean (°)"),
+           ("silhouette_px", "silhouette err (px)"), ("missing_px", "missing (px)"), ("extra_px", "extra (px)"),
+           ("normal_mean_deg", "normal err mean (°)"),
            ("normal_p95_deg", "normal err p95 (°)"), ("depth_mean_rel", "depth err (% size)"),
            ("wrong_surface_pct", "wrong surface (%)")]
 SUMMARY_METHODS = {"general", "nearest-centre", "full"}
@@ -22,6 +23,8 @@ def _fmt(key, value):
         return f"{100 * value:.3f}"
     if key in ("normal_mean_deg", "normal_p95_deg", "wrong_surface_pct"):
         return f"{value:.2f}"
+    if key.endswith("_px"):
+        return f"{value:,.0f}"
     if key == "points":
         return f"{value:,}"
     if key == "closed":
@@ -35,7 +38,7 @@ def table(rows) -> str:
     for r in rows:
         if r.get("renderer", "").startswith("paper"):
             cells = [r["model"], r["cloud"], f"{r['points']:,}", r["renderer"], r["method"], "yes",
-                     r["seconds_range"], "?"] + ["–"] * 5
+                     r["seconds_range"], "?"] + ["–"] * (len(COLUMNS) - 8)
         else:
             cells = [_fmt(k, r.get(k)) for k, _ in COLUMNS]
         lines.append("| " + " | ".join(cells) + " |")
@@ -66,9 +69,40 @@ def readme_table(rows) -> str:
     return table(keep)
 
 
+AGGREGATED = ("silhouette_px", "missing_px", "extra_px", "normal_mean_deg", "normal_p95_deg", "depth_mean_rel",
+              "wrong_surface_pct")
+
+
+def per_method(rows) -> str:
+    """One row per core preset over every model and cloud: the mean and the worst of each
+    error, and how often the full method is no worse than nearest-centre (within 2 %)."""
+    core_rows = [r for r in rows if r.get("renderer") == "splat_tracer core" and r.get("method") in SUMMARY_METHODS]
+    lines = ["| method | over | " + " | ".join(dict(COLUMNS)[k] for k in AGGREGATED) + " |",
+             "|---|---|" + "---:|" * len(AGGREGATED)]
+    for method in ("general", "nearest-centre", "full"):
+        mine = [r for r in core_rows if r["method"] == method]
+        if not mine:
+            continue
+        for name, fn in (("mean", lambda v: sum(v) / len(v)), ("worst", max)):
+            cells = [_fmt(k, fn([r[k] for r in mine if r.get(k) is not None and r[k] == r[k]])) for k in AGGREGATED]
+            lines.append(f"| {method} | {name} of {len(mine)} | " + " | ".join(cells) + " |")
+    full = {(r["model"], r["cloud"]): r for r in core_rows if r["method"] == "full"}
+    near = {(r["model"], r["cloud"]): r for r in core_rows if r["method"] == "nearest-centre"}
+    checks = []
+    for key in sorted(full.keys() & near.keys()):
+        worse = [k for k in ("silhouette_px", "normal_mean_deg", "wrong_surface_pct")
+                 if full[key][k] > near[key][k] * 1.02 + (2 if k == "silhouette_px" else 0.01)]
+        if worse:
+            checks.append(f"{key[0]} ({key[1]}): " + ", ".join(worse))
+    verdict = ("full is no worse than nearest-centre on every model in silhouette, mean normal and wrong-surface "
+               "error (2 % noise allowed)" if not checks else "full worse than nearest-centre on: " + "; ".join(checks))
+    return "\n".join(lines) + "\n\n" + verdict + "\n"
+
+
 def markdown(rows) -> str:
     return ("# Run time against error\n\nMade by `python benchmarks/accuracy.py` (see its docstring for what "
-            "each column measures).\n\n## Summary\n\n" + summary(rows) + "\n## Every configuration\n\n" + table(rows))
+            "each column measures).\n\n## Per method, over every model\n\n" + per_method(rows) +
+            "\n## Summary\n\n" + summary(rows) + "\n## Every configuration\n\n" + table(rows))
 
 
 def plot(rows, path) -> None:

@@ -135,7 +135,8 @@ def score_methods(sc: SyntheticScene, methods: dict, width: int, height: int, ra
     truth = truth_mod.cast(sc.vertices, sc.triangles, meshes.corner_normals(sc.vertices, sc.triangles),
                            o.astype(np.float64), d64, cam.position, cam.forward)
     cam_local = core.Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
-    scene = core.Scene(local, sc.normals, hood.spacing * radius_factor, closed=hood.closed_guess)
+    radii = spacing.covering_radii(local, sc.normals, hood.spacing)  # what the importer gives
+    scene = core.Scene(local, sc.normals, radii * radius_factor, closed=hood.closed_guess)
     out = {}
     for label, method in methods.items():
         img = scene.render(cam_local, width, height, method=method)
