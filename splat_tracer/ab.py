@@ -78,13 +78,14 @@ def display_buffer(mode: str, shape, scene: Optional[np.ndarray] = None, a: Opti
         mixed = (1 - OVERLAY_OPACITY) * out[..., :3] + OVERLAY_OPACITY * colour
         out[..., :3][where] = mixed[where]
         out[..., 3][where] = 1.0
+    if mode == "SPLIT" and 0 < cut < w:
+        lo, hi = max(cut - DIVIDER // 2, 0), min(cut - DIVIDER // 2 + DIVIDER, w)
+        out[:, lo:hi] = DIVIDER_RGBA
+    if overlay:  # the legend last, over the divider
         strip = difference.legend(w)
         rows = min(len(strip), h)
         out[h - rows:, :, :3] = difference.srgb_decode(strip[len(strip) - rows:])
         out[h - rows:, :, 3] = 1.0
-    if mode == "SPLIT" and 0 < cut < w:
-        lo, hi = max(cut - DIVIDER // 2, 0), min(cut - DIVIDER // 2 + DIVIDER, w)
-        out[:, lo:hi] = DIVIDER_RGBA
     return out
 
 
