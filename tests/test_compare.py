@@ -199,3 +199,18 @@ def test_a_switch_that_cannot_change_the_image_says_so(blender, cube_in_blender)
     settings.epsilon, settings.use_near_phase = 1.0, True
     differing, notes = _compare(bpy, scene, toggle="use_nearest_centre")
     assert differing == 0 and "same settings" in notes
+    # Normal interpolation with ε 0: one disc per layer, nothing to blend.
+    settings.epsilon = 0.0
+    differing, notes = _compare(bpy, scene, toggle="use_normal_interpolation")
+    assert differing == 0 and "nothing to blend" in notes
+
+
+def test_a_scene_without_clouds_says_the_settings_change_nothing(blender, empty_scene):
+    import math
+    from blender_helpers import add_camera
+    bpy, scene = blender, empty_scene
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0)
+    add_camera(bpy, scene, (0, -5, 0), (math.radians(90), 0, 0))
+    scene.render.resolution_x, scene.render.resolution_y = 64, 48
+    differing, notes = _compare(bpy, scene, a="GENERAL", b="FULL")
+    assert differing == 0 and "no point cloud" in notes and "cannot differ" in notes
