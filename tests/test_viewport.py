@@ -421,6 +421,7 @@ def test_ab_renders_both_settings_and_changing_only_them_rebuilds_nothing(blende
             f12 = session_module.render_frame(depsgraph, slot.core_method()).passes["Combined"]
             assert np.array_equal(images[name].pixels, f12), name
         assert not np.array_equal(images["A"].pixels, images["B"].pixels)
+        assert viewport.status(images, vs.done) == "Splat Tracer | A: 4 samples, B: 4 samples"
 
         # Flipping, moving the wipe, the overlay: nothing is rendered again.
         for change in (lambda: setattr(props, "mode", "A"), lambda: setattr(props, "mode", "B"),

@@ -12,7 +12,6 @@ display transform shows it. Only the GPU upload itself (engine._draw_pixels) is 
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -26,18 +25,10 @@ SPLIT = 0.5
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output-dir", default=str(dev_extension.REPO_ROOT / "docs" / "viewport"))
-    args = ap.parse_args(argv)
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
-    import bpy
+    args, bpy = dev_extension.start_docs_tool(BUILD, __doc__, dev_extension.REPO_ROOT / "docs" / "viewport", argv)
     import numpy as np
-
-    sys.path.insert(0, str(dev_extension.REPO_ROOT))
     import switch_images
 
-    dev_extension.enable_from_source(BUILD)
     addon = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.viewport"]
     ab = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.ab"]
     from splat_tracer import ply
