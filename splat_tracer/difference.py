@@ -11,7 +11,7 @@ image look binary. A legend strip (the ramp and its breakpoints) is drawn with a
 built-in bitmap font, so an image carries its own scale.
 
 Used by the compare operator (images through the scene's view transform) and the viewport's
-difference overlay (`overlay`, through the Standard transform: the viewport's own view
+difference overlay (`ab.display_buffer`, through the Standard transform: the viewport's own view
 transform is applied by the GPU when drawing, after the buffer is built).
 """
 from __future__ import annotations
