@@ -82,6 +82,7 @@ fuzz: build sanitize-tree
 
 docs: build
 	$(VPY) tools/switch_images.py --output-dir docs/switches
+	$(VPY) tools/viewport_images.py --output-dir docs/viewport
 	$(VPY) tools/demo.py --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.

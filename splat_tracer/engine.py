@@ -11,7 +11,7 @@ import traceback
 import bpy
 import numpy as np
 
-from . import session, viewport
+from . import ab, session, viewport
 
 # Blender 5.0 renamed three passes (Cycles and EEVEE write "Diffuse Color", "Emission" and
 # "Object Index" there, "DiffCol", "Emit" and "IndexOB" before). A pass must carry the name
@@ -132,22 +132,33 @@ class SplatTracerEngine(bpy.types.RenderEngine):
     def view_draw(self, context, depsgraph):
         vs = self._viewport_session()
         scene = depsgraph.scene
+        width, height = context.region.width, context.region.height
         vs.set_view(viewport.view_of(scene, depsgraph, context.region, context.region_data, context.space_data))
-        image = vs.latest()
-        if image is not None:
-            _draw_pixels(self, scene, image.pixels, context.region.width, context.region.height)
-            self.update_stats("", f"Splat Tracer | {image.samples} sample{'s' if image.samples > 1 else ''}"
-                                  f"{' at 1/%d resolution' % image.scale if image.scale > 1 else ''}"
-                                  f"{'' if image.final else ' | refining'}")
+        images, version = vs.snapshot()
+        props = scene.splat_tracer.ab
+        mode = props.mode if "A" in images or "B" in images else "OFF"
+        if images:
+            view = scene.view_settings
+            pixels = ab.display_buffer(mode, (height, width, 4), scene=_pixels(images.get("SCENE")),
+                                       a=_pixels(images.get("A")), b=_pixels(images.get("B")), split=props.split,
+                                       overlay=props.show_difference and mode != "OFF", exposure=view.exposure,
+                                       gamma=view.gamma)
+            _draw_pixels(self, scene, pixels, width, height)
+            self.update_stats("", viewport.status(images, vs.done))
         if vs.error:
             self.update_stats("", f"Splat Tracer: {vs.error}")
-        elif not vs.done or image is None or not (image.final and image.generation == vs.generation):
-            self.tag_redraw()  # samples keep arriving (or the last pass is not drawn yet): draw again
+        elif not vs.done or version != getattr(self, "_splat_drawn", None):
+            self.tag_redraw()  # samples keep arriving (or the newest pass is not drawn yet): draw again
+        self._splat_drawn = version if vs.done else None
 
     def __del__(self):
         vs = getattr(self, "_splat_viewport", None)
         if vs is not None:
             vs.close()
+
+
+def _pixels(image):
+    return None if image is None else image.pixels
 
 
 def _draw_pixels(engine, scene, pixels: np.ndarray, width: int, height: int) -> None:

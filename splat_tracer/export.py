@@ -34,6 +34,7 @@ class ExportedScene:
     origin: np.ndarray                 # float64 world position of the local frame's origin
     instances: int = 0
     clouds: int = 0                    # cloud instances
+    closed_clouds: int = 0             # of those, the ones marked Closed Surface (the far phase acts on them)
     meshes: int = 0                    # mesh instances
     splats: int = 0                    # in the unique cloud geometry
     triangles: int = 0                 # in the unique mesh geometry
@@ -170,6 +171,7 @@ class _Frame:
         self.threads = threads
         self.report = report
         self.by_pointer = {}   # evaluated data pointer -> (geometry, kind) within this frame
+        self.closed = set()    # id() of the closed clouds' geometry
         self.materials = {}
         self.splats = self.triangles = 0
 
@@ -185,6 +187,8 @@ class _Frame:
                                 lambda: core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed,
                                                    threads=self.threads, alphas=alpha))
         self.splats += self._first_use(key, geometry)
+        if closed:
+            self.closed.add(id(geometry))
         return geometry
 
     def _cached(self, key, what: str, needed_bytes: int, make):
@@ -262,7 +266,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
     instances, lights = [], []
-    counts = {"cloud": 0, "mesh": 0}
+    counts = {"cloud": 0, "mesh": 0, "closed": 0}
     for inst in depsgraph.object_instances:
         obj = inst.object
         matrix = np.array(inst.matrix_world, dtype=np.float64)
@@ -293,11 +297,12 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             visibility=frozenset(k for k in core.RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
             pass_index=_source(obj).pass_index))
         counts[kind] += 1
+        counts["closed"] += id(geometry) in frame.closed
     render_scene = core.RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
                                     threads=threads)
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
-    return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["mesh"], frame.splats,
-                         frame.triangles, len(lights), emission, report)
+    return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
+                         frame.splats, frame.triangles, len(lights), emission, report)
 
 
 def geometry_has_colours(obj) -> bool:

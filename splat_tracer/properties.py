@@ -67,8 +67,11 @@ def _on_switch(self, context):
         _syncing = False
 
 
-class SplatTracerSceneSettings(bpy.types.PropertyGroup):
-    __slots__ = ()  # Blender 5 warns about registered classes that allow arbitrary attributes
+class _VisibilitySettings:
+    """The settings a visibility comparison varies: the method preset and its switches,
+    epsilon, the kernel and the radius factor. Shared by the scene's settings and the
+    viewport's A/B slots (a mixin: Blender registers the annotations of each class that
+    inherits it)."""
 
     method: bpy.props.EnumProperty(
         name="Method", items=_PRESET_ITEMS, default="FULL", update=_on_method,
@@ -122,6 +125,76 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
                     "scans with estimated normals, while CAD models sampled with exact face normals want less",
     )
 
+    def switches(self) -> dict:
+        return {key: getattr(self, key) for key in _SWITCHES}
+
+    def core_method(self, **overrides) -> core.Method:
+        """The method these settings describe; `overrides` force switches (by property name)
+        without touching the stored settings."""
+        return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel, self.crease_angle)
+
+    def copy_visibility(self, other) -> None:
+        """Sets these settings to `other`'s (the preset follows from the switches)."""
+        global _syncing
+        _syncing = True
+        try:
+            for key in _VISIBILITY_KEYS:
+                setattr(self, key, getattr(other, key))
+        finally:
+            _syncing = False
+
+
+_VISIBILITY_KEYS = ("method",) + _SWITCHES + ("epsilon", "kernel", "crease_angle", "radius_factor")
+
+_AB_MODES = (
+    ("OFF", "Off", "The scene's own settings"),
+    ("A", "A", "Settings A (both A and B render, so flipping to B is instant)"),
+    ("B", "B", "Settings B (both A and B render, so flipping to A is instant)"),
+    ("SPLIT", "Split", "A on the left of the wipe, B on its right"),
+)
+
+
+class SplatTracerABSlot(_VisibilitySettings, bpy.types.PropertyGroup):
+    __slots__ = ()
+
+
+def _on_ab_mode(self, context):
+    """The first time A/B is turned on, A becomes the General preset and B the scene's
+    current settings (the compare operator's default pair when the scene is Full)."""
+    if self.mode == "OFF" or self.initialised:
+        return
+    scene_settings = self.id_data.splat_tracer
+    self.b.copy_visibility(scene_settings)
+    self.a.copy_visibility(scene_settings)
+    self.a.method = "GENERAL"
+    self.initialised = True
+
+
+class SplatTracerAB(bpy.types.PropertyGroup):
+    """The viewport's live A/B comparison (Rendered mode)."""
+    __slots__ = ()
+
+    mode: bpy.props.EnumProperty(name="A/B", items=_AB_MODES, default="OFF", update=_on_ab_mode,
+                                 description="What the Rendered viewport shows: the scene's settings, A, B or a "
+                                             "split view of both")
+    a: bpy.props.PointerProperty(type=SplatTracerABSlot, name="A", description="Settings A")
+    b: bpy.props.PointerProperty(type=SplatTracerABSlot, name="B", description="Settings B")
+    split: bpy.props.FloatProperty(name="Split", default=0.5, min=0.0, max=1.0, subtype="FACTOR",
+                                   description="Where the wipe divides the view: A left of it, B right of it")
+    show_difference: bpy.props.BoolProperty(
+        name="Difference", default=False,
+        description="Colour the pixels where A and B differ visibly by their perceptual difference (the compare "
+                    "operator's scale)",
+    )
+    initialised: bpy.props.BoolProperty(name="Initialised", default=False, options={"HIDDEN"},
+                                        description="Whether A and B were set up from the scene")
+
+
+class SplatTracerSceneSettings(_VisibilitySettings, bpy.types.PropertyGroup):
+    __slots__ = ()  # Blender 5 warns about registered classes that allow arbitrary attributes
+
+    ab: bpy.props.PointerProperty(type=SplatTracerAB, name="A/B",
+                                  description="The viewport's live A/B comparison")
     lighting: bpy.props.EnumProperty(
         name="Lighting",
         items=(("SCENE", "Scene", "The scene's lamps, materials and world, with shadows, reflections and "
@@ -157,13 +230,6 @@ class SplatTracerSceneSettings(bpy.types.PropertyGroup):
         default=shading.RenderSettings.shadow_samples, min=1, soft_max=16, max=_MAX_SHADOW_SAMPLES,
     )
 
-    def switches(self) -> dict:
-        return {key: getattr(self, key) for key in _SWITCHES}
-
-    def core_method(self, **overrides) -> core.Method:
-        """The method these settings describe; `overrides` force switches (by property name)
-        without touching the stored settings."""
-        return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel, self.crease_angle)
 
 
 class SplatTracerViewLayerSettings(bpy.types.PropertyGroup):
@@ -186,7 +252,8 @@ class SplatTracerObjectSettings(bpy.types.PropertyGroup):
     )
 
 
-classes = (SplatTracerSceneSettings, SplatTracerViewLayerSettings, SplatTracerObjectSettings)
+classes = (SplatTracerABSlot, SplatTracerAB, SplatTracerSceneSettings, SplatTracerViewLayerSettings,
+           SplatTracerObjectSettings)
 
 
 def register():

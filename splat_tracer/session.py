@@ -156,6 +156,7 @@ def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=
     t_render = time.perf_counter() - t1
     frame_stats = dict(instances=exported.instances, geometries=len(CACHE.used), built=CACHE.built,
                        reused=CACHE.reused, build_seconds=CACHE.build_seconds, export_seconds=t_export,
+                       clouds=exported.clouds, closed_clouds=exported.closed_clouds,
                        render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
                        view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),

@@ -19,7 +19,7 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import core, shading
+from . import ab, core, shading
 
 # --------------------------------------------------------------------------------------
 # The view
@@ -214,6 +214,7 @@ def pass_schedule(samples: int, coarse_scale: int = COARSE_SCALE) -> list[tuple[
 @dataclass(frozen=True)
 class _Job:
     generation: int
+    variant: str
     render_scene: core.RenderScene
     camera: core.Camera
     view: View
@@ -273,17 +274,31 @@ class Image:
     index: int              # pass index in the schedule
     samples: int
     scale: int
-    final: bool             # the last pass: the F12 image of this view
+    final: bool             # the last pass: the F12 image of this view (with this variant's settings)
+    variant: str = "SCENE"  # 'SCENE', or 'A' / 'B' (the live A/B comparison)
+
+
+def variants_of(props) -> tuple:
+    """What the viewport renders for a scene's settings (scene.splat_tracer): the scene's
+    own settings, or with A/B on (any mode but Off) both A and B, so that flipping between
+    them or splitting the view never waits for a render."""
+    if props.ab.mode == "OFF":
+        return (ab.Variant("SCENE", props.core_method(), float(props.radius_factor)),)
+    return tuple(ab.Variant(name, slot.core_method(), float(slot.radius_factor))
+                 for name, slot in (("A", props.ab.a), ("B", props.ab.b)))
 
 
 class ViewportSession:
     """The viewport's persistent state: the exported scene (kept between redraws), its
-    geometry cache, the settings, the view, and the progressive passes.
+    geometry cache, the settings, the view, and the progressive passes of each variant (the
+    scene's settings, or A and B).
 
     Main thread: update(depsgraph, changes) after a depsgraph update, set_view(view) on each
-    redraw, latest() to draw. Rendering: step() renders the next pass synchronously (tests),
-    or start() runs the passes on a thread. counters: exports, geometry_builds (BVHs built),
-    renders (core render calls = passes), restarts (refinement started over)."""
+    redraw, latest() / snapshot() to draw. Rendering: step() renders the next pass
+    synchronously (tests), or start() runs the passes on a thread. The variants' passes
+    interleave (A's pass 0, B's pass 0, A's pass 1, ...). counters: exports (export_scene
+    calls: one per radius factor in use), geometry_builds (BVHs built), renders (core render
+    calls = passes), restarts (a variant's refinement started over)."""
 
     def __init__(self, coarse_scale: int = COARSE_SCALE):
         from .session import GeometryCache
@@ -292,19 +307,32 @@ class ViewportSession:
         self.counters = dict(exports=0, geometry_builds=0, renders=0, restarts=0)
         self.report = shading.Report()
         self.origin: Optional[np.ndarray] = None
-        self.exported = None
-        self._export_state = None   # (radius factor, frame, world, visible objects) of the export
-        self._state = None          # (method, settings, threads) of the scene
+        self.exports: dict = {}     # radius factor -> ExportedScene
+        self._export_state = None   # (frame, world, visible objects, radius factors) of the exports
+        self._variants: tuple = ()
+        self._states: dict = {}     # variant name -> (variant, settings, threads, render scene) of its job
         self._view: Optional[View] = None
         self._camera: Optional[core.Camera] = None
         self._cond = threading.Condition()
-        self._job: Optional[_Job] = None
-        self._next = 0              # next pass of the job
+        self._jobs: dict = {}       # variant name -> _Job
+        self._next: dict = {}       # variant name -> its next pass
         self._generation = 0
-        self._image: Optional[Image] = None
+        self._images: dict = {}     # variant name -> its latest Image
+        self._version = 0           # counts the images stored
         self._thread: Optional[threading.Thread] = None
         self._closed = False
         self.error: Optional[str] = None
+
+    @property
+    def exported(self):
+        """The exported scene of the first variant (None before the first update)."""
+        if not self._variants:
+            return None
+        return self.exports.get(self._variants[0].radius_factor)
+
+    @property
+    def variants(self) -> tuple:
+        return self._variants
 
     # -- main thread ------------------------------------------------------------------
     def update(self, depsgraph, changes: Optional[Changes] = None) -> None:
@@ -317,33 +345,47 @@ class ViewportSession:
             return
         scene = depsgraph.scene
         props = scene.splat_tracer
+        variants = variants_of(props)
+        factors = tuple(sorted({v.radius_factor for v in variants}))
         # A Scene-only update also comes for hiding an object or assigning another world:
         # what the export depends on besides the datablocks is compared (cheap: no arrays).
-        export_state = (float(props.radius_factor), int(scene.frame_current),
-                        scene.world.name_full if scene.world is not None else None,
-                        tuple(sorted(o.name_full for o in depsgraph.objects)))
-        if changes.export or export_state != self._export_state:
+        # The radius factor is baked into the clouds' splats: each factor in use is its own
+        # export, whose clouds are built for it (meshes are shared through the cache).
+        export_state = (int(scene.frame_current), scene.world.name_full if scene.world is not None else None,
+                        tuple(sorted(o.name_full for o in depsgraph.objects)), factors)
+        exported_now = changes.export or export_state != self._export_state
+        if exported_now:
             if self.origin is None:
                 # Fixed for the session: the instances are placed relative to it, so that a
                 # new view never needs a new export. The scene camera's, as F12 uses.
                 self.origin = export.camera_origin(depsgraph)
             report = shading.Report()
-            self.cache.begin_frame()
+            exports = {}
+            self.cache.begin_frame()  # one cache frame for every factor: none drops another's geometry
             try:
-                exported = export.export_scene(depsgraph, self.cache, self.origin, props.radius_factor,
-                                               scene.render.threads, report)
+                for factor in factors:
+                    exports[factor] = export.export_scene(depsgraph, self.cache, self.origin, factor,
+                                                          scene.render.threads, report)
             except BaseException:
                 self.cache.end_frame(keep=False)
                 raise
             self.cache.end_frame(keep=True)
-            self.counters["exports"] += 1
+            self.counters["exports"] += len(factors)
             self.counters["geometry_builds"] += self.cache.built
-            self.exported, self.report, self._export_state = exported, report, export_state
-        settings, _ = lit_settings(scene, self.exported, export_shading.render_settings_of(scene), None, self.report)
-        state = (props.core_method(), settings, int(scene.render.threads))
-        if changes.export or state != self._state:
-            self._state = state
-            self._restart()
+            self.exports, self.report, self._export_state = exports, report, export_state
+        self._variants = variants
+        first = self.exports[variants[0].radius_factor]
+        settings, _ = lit_settings(scene, first, export_shading.render_settings_of(scene), None, self.report)
+        threads = int(scene.render.threads)
+        states = {v.name: (v, settings, threads, id(self.exports[v.radius_factor].render_scene)) for v in variants}
+        stale = [name for name, state in states.items() if exported_now or self._states.get(name) != state]
+        self._states = states
+        with self._cond:
+            for name in set(self._jobs) - set(states):  # a variant no longer shown
+                del self._jobs[name]
+                self._images.pop(name, None)
+        if stale:
+            self._restart(stale)
 
     def set_view(self, view: View) -> None:
         if view != self._view:
@@ -351,9 +393,17 @@ class ViewportSession:
             self._camera = None
             self._restart()
 
-    def latest(self) -> Optional[Image]:
+    def latest(self, variant: Optional[str] = None) -> Optional[Image]:
+        """The newest image of a variant (default: the first)."""
         with self._cond:
-            return self._image
+            if variant is None:
+                variant = self._variants[0].name if self._variants else "SCENE"
+            return self._images.get(variant)
+
+    def snapshot(self) -> tuple[dict, int]:
+        """({variant: newest Image}, version): version grows with each image stored."""
+        with self._cond:
+            return dict(self._images), self._version
 
     @property
     def generation(self) -> int:
@@ -363,44 +413,56 @@ class ViewportSession:
 
     @property
     def done(self) -> bool:
-        """Whether the current job's last pass is finished (or nothing is to be rendered)."""
+        """Whether every variant's last pass is finished (or nothing is to be rendered)."""
         with self._cond:
-            return self._job is None or self._next >= len(self._job.schedule)
+            return self._finished()
 
     # -- the passes ---------------------------------------------------------------------
-    def _restart(self) -> None:
-        if self.exported is None or self._view is None or self._state is None:
+    def _restart(self, names=None) -> None:
+        """Starts the refinement of these variants (default all) over."""
+        if not self.exports or self._view is None or not self._states:
             return
         self.error = None
         if self._camera is None:
             self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin)
-        method, settings, threads = self._state
         with self._cond:
-            self._generation += 1
-            self._job = _Job(self._generation, self.exported.render_scene, self._camera, self._view, settings, method,
-                             threads, tuple(pass_schedule(settings.samples, self.coarse_scale)))
-            self._next = 0
-            self.counters["restarts"] += 1
+            for name in names if names is not None else list(self._states):
+                variant, settings, threads, _ = self._states[name]
+                self._generation += 1
+                self._jobs[name] = _Job(self._generation, name, self.exports[variant.radius_factor].render_scene,
+                                        self._camera, self._view, settings, variant.method, threads,
+                                        tuple(pass_schedule(settings.samples, self.coarse_scale)))
+                self._next[name] = 0
+                self.counters["restarts"] += 1
             self._cond.notify_all()
 
     def _work(self) -> Optional[tuple[_Job, int]]:
+        """The next pass to render: the variant furthest behind (in variant order on a tie)."""
         with self._cond:
-            if self._job is None or self._next >= len(self._job.schedule):
+            order = [v.name for v in self._variants if v.name in self._jobs]
+            pending = [(self._next[n], i, n) for i, n in enumerate(order)
+                       if self._next[n] < len(self._jobs[n].schedule)]
+            if not pending:
                 return None
-            return self._job, self._next
+            _, _, name = min(pending)
+            return self._jobs[name], self._next[name]
+
+    def _current(self, job: _Job) -> bool:
+        return self._jobs.get(job.variant) is job
 
     def _run(self, job: _Job, index: int) -> None:
         def stop(done, total):
-            return self._closed or self._generation != job.generation
+            return self._closed or not self._current(job)
         pixels = render_pass(job, index, stop)
         with self._cond:
             self.counters["renders"] += 1
-            if pixels is None or job.generation != self._generation:
+            if pixels is None or not self._current(job):
                 return
             scale, samples = job.schedule[index]
-            self._image = Image(pixels, job.view, job.generation, index, samples, scale,
-                                index == len(job.schedule) - 1)
-            self._next = index + 1
+            self._images[job.variant] = Image(pixels, job.view, job.generation, index, samples, scale,
+                                              index == len(job.schedule) - 1, job.variant)
+            self._version += 1
+            self._next[job.variant] = index + 1
 
     def step(self) -> bool:
         """Renders the next pass here; True while more passes remain."""
@@ -410,7 +472,7 @@ class ViewportSession:
         return not self.done
 
     def refine(self) -> Optional[Image]:
-        """Renders every remaining pass here; the last image."""
+        """Renders every remaining pass here; the first variant's last image."""
         while self.step():
             pass
         return self.latest()
@@ -424,7 +486,7 @@ class ViewportSession:
     def _loop(self) -> None:
         while True:
             with self._cond:
-                while not self._closed and (self._job is None or self._next >= len(self._job.schedule)):
+                while not self._closed and self._finished():
                     self._cond.wait()
                 if self._closed:
                     return
@@ -435,10 +497,15 @@ class ViewportSession:
                 self._run(*work)
             except Exception as e:  # noqa: BLE001 - shown by view_draw; never kills Blender
                 with self._cond:
-                    if work[0].generation == self._generation:  # give up on this job until the next change
+                    job = work[0]
+                    if self._current(job):  # give up on this variant until the next change
                         self.error = str(e)
-                        self._next = len(work[0].schedule)
+                        self._next[job.variant] = len(job.schedule)
                 time.sleep(0.01)
+
+    def _finished(self) -> bool:
+        """Whether nothing is left to render (the caller holds the lock)."""
+        return all(self._next[name] >= len(job.schedule) for name, job in self._jobs.items())
 
     def close(self) -> None:
         with self._cond:
@@ -447,6 +514,16 @@ class ViewportSession:
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self._thread = None
+
+
+def status(images: dict, done: bool) -> str:
+    """The viewport's status line for {variant: newest Image}."""
+    def one(image: Image) -> str:
+        text = f"{image.samples} sample{'s' if image.samples > 1 else ''}"
+        return text + (f" at 1/{image.scale} resolution" if image.scale > 1 else "")
+    parts = [one(images["SCENE"])] if "SCENE" in images else [f"{name}: {one(images[name])}" for name in ("A", "B")
+                                                              if name in images]
+    return "Splat Tracer | " + ", ".join(parts) + ("" if done else " | refining")
 
 
 def update_from_depsgraph(session: ViewportSession, depsgraph, first: bool = False) -> Changes:

@@ -343,3 +343,134 @@ def test_the_thread_renders_the_passes_and_a_new_view_restarts_them(blender, emp
         assert vs.latest().pixels.shape == (30, 40, 4) and vs.latest().final
     finally:
         vs.close()
+
+
+# --------------------------------------------------------------------------------------
+# Live A/B: the split buffer, both renders, and what changing A/B costs.
+
+def test_the_split_buffer_shows_a_left_b_right_with_a_divider_and_the_difference_overlay():
+    from splat_tracer import ab, difference
+    h, w = 40, 200
+    a = np.zeros((h, w, 4), np.float32)
+    a[..., 0], a[..., 3] = 0.5, 1.0            # A: red
+    b = np.zeros_like(a)
+    b[..., 2], b[..., 3] = 0.5, 1.0            # B: blue
+    b[:, :20] = a[:, :20]                      # ... except its first 20 columns, where it is A
+    split = 0.3
+    out = ab.display_buffer("SPLIT", a.shape, a=a, b=b, split=split)
+    cut = ab.divider_column(split, w)
+    assert cut == 60
+    line = slice(cut - ab.DIVIDER // 2, cut - ab.DIVIDER // 2 + ab.DIVIDER)
+    assert (out[:, line] == ab.DIVIDER_RGBA).all()
+    np.testing.assert_array_equal(out[:, :line.start], a[:, :line.start])
+    np.testing.assert_array_equal(out[:, line.stop:], b[:, line.stop:])
+    np.testing.assert_array_equal(ab.display_buffer("A", a.shape, a=a, b=b), a)  # no divider at the edges
+    np.testing.assert_array_equal(ab.display_buffer("B", a.shape, a=a, b=b), b)
+    np.testing.assert_array_equal(ab.display_buffer("OFF", a.shape, scene=b, a=a), b)
+    # B not rendered yet (or of another size): transparent on its side.
+    assert (ab.display_buffer("SPLIT", a.shape, a=a, b=None, split=split)[:, line.stop:] == 0).all()
+
+    # The overlay: where A and B differ visibly, the scale's colour (scene-linear, so that the
+    # Standard view transform shows the scale's own colours); the legend along the bottom.
+    over = ab.display_buffer("SPLIT", a.shape, a=a, b=b, split=split, overlay=True)
+    legend = difference.legend(w)
+    rows = h - len(legend)
+    np.testing.assert_allclose(over[rows:, :, :3], difference.srgb_decode(legend), atol=1e-6)
+    de = difference.delta_e(difference.standard_display(a), difference.standard_display(b))
+    assert (de[:, :20] == 0).all() and (de[:, 20:] > 50).all()
+    part = (slice(0, rows), slice(25, line.start))  # A's side, where A and B differ
+    colour = difference.srgb_decode(difference.ramp(de[part]))
+    np.testing.assert_allclose(over[part][..., :3], (1 - ab.OVERLAY_OPACITY) * a[part][..., :3]
+                               + ab.OVERLAY_OPACITY * colour, atol=1e-6)
+    assert (over[part][..., 3] == 1).all()
+    np.testing.assert_array_equal(over[:rows, :20], a[:rows, :20])  # no difference: the image itself
+    # Exposure brightens what is compared, as the view transform does.
+    dim = a * 0.01
+    assert (difference.delta_e(difference.standard_display(dim), difference.standard_display(dim * 2)) <
+            difference.delta_e(difference.standard_display(dim, exposure=4), difference.standard_display(
+                dim * 2, exposure=4))).all()
+
+
+def test_split_position_from_the_mouse():
+    from splat_tracer import ab
+    assert ab.split_at(100, 100, 400) == 0.0
+    assert ab.split_at(300, 100, 400) == 0.5
+    assert ab.split_at(900, 100, 400) == 1.0 and ab.split_at(0, 100, 400) == 0.0  # clamped
+
+
+def test_ab_renders_both_settings_and_changing_only_them_rebuilds_nothing(blender, empty_scene):
+    viewport, session_module = extension_module("viewport"), extension_module("session")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    props = scene.splat_tracer.ab
+    props.mode = "SPLIT"  # the first time: A becomes General, B the scene's settings (Full)
+    assert props.a.method == "GENERAL" and props.b.method == "FULL" and props.initialised
+    vs = viewport.ViewportSession()
+    with _Recorder(bpy) as rec:
+        bpy.context.view_layer.update()
+        vs.set_view(_f12_view(bpy, scene, 80, 60))
+        vs.update(bpy.context.evaluated_depsgraph_get())
+        vs.refine()
+        passes = len(viewport.pass_schedule(4))
+        assert vs.counters == dict(exports=1, geometry_builds=2, renders=2 * passes, restarts=2)
+        images, _ = vs.snapshot()
+        assert sorted(images) == ["A", "B"] and images["A"].final and images["B"].final
+        # Each is the F12 image of its settings.
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        for name, slot in (("A", props.a), ("B", props.b)):
+            f12 = session_module.render_frame(depsgraph, slot.core_method()).passes["Combined"]
+            assert np.array_equal(images[name].pixels, f12), name
+        assert not np.array_equal(images["A"].pixels, images["B"].pixels)
+        assert viewport.status(images, vs.done) == "Splat Tracer | A: 4 samples, B: 4 samples"
+
+        # Flipping, moving the wipe, the overlay: nothing is rendered again.
+        for change in (lambda: setattr(props, "mode", "A"), lambda: setattr(props, "mode", "B"),
+                       lambda: setattr(props, "split", 0.8), lambda: setattr(props, "show_difference", True),
+                       lambda: bpy.ops.splat_tracer.ab_flip()):
+            _, delta = rec.apply(vs, change, scene_setting=True)
+            assert delta == dict(exports=0, geometry_builds=0, renders=0, restarts=0)
+
+        # B's switches or epsilon: only B renders again; nothing is exported or built.
+        for change in (lambda: setattr(props.b, "epsilon", 0.5), lambda: setattr(props.b, "use_far_phase", False)):
+            _, delta = rec.apply(vs, change, scene_setting=True)
+            assert delta == dict(exports=0, geometry_builds=0, renders=passes, restarts=1)
+        # A's kernel: only A.
+        _, delta = rec.apply(vs, lambda: setattr(props.a, "kernel", "SMOOTH"), scene_setting=True)
+        assert delta == dict(exports=0, geometry_builds=0, renders=passes, restarts=1)
+
+        # B's radius factor: its clouds are built for it (the mesh is shared), and both
+        # factors are exported; both render again (their scenes are new).
+        _, delta = rec.apply(vs, lambda: setattr(props.b, "radius_factor", 1.3), scene_setting=True)
+        assert delta == dict(exports=2, geometry_builds=1, renders=2 * passes, restarts=2)
+        assert sorted(vs.exports) == [1.0, pytest.approx(1.3)]
+        # Back to the scene's settings: A and B are dropped; the scene's factor (1) is still built.
+        _, delta = rec.apply(vs, lambda: setattr(props, "mode", "OFF"), scene_setting=True)
+        assert delta["geometry_builds"] == 0 and delta["renders"] == passes
+        assert sorted(vs.snapshot()[0]) == ["SCENE"]
+    vs.close()
+
+
+def test_ab_operators_and_shortcut(blender, empty_scene):
+    bpy, scene = blender, empty_scene
+    settings = scene.splat_tracer
+    props = settings.ab
+    assert props.mode == "OFF"
+    modes = []
+    for _ in range(3):
+        assert bpy.ops.splat_tracer.ab_flip() == {"FINISHED"}
+        modes.append(props.mode)
+    assert modes == ["A", "B", "A"]
+    props.mode = "SPLIT"
+    bpy.ops.splat_tracer.ab_flip()
+    assert props.mode == "A"
+    # Copying: the scene's settings into B, and A's into the scene.
+    settings.method, settings.epsilon, settings.radius_factor = "NEAREST_CENTRE", 2.0, 0.9
+    bpy.ops.splat_tracer.ab_copy(slot="B", direction="FROM_SCENE")
+    assert props.b.core_method() == settings.core_method() and props.b.radius_factor == pytest.approx(0.9)
+    bpy.ops.splat_tracer.ab_copy(slot="A", direction="TO_SCENE")
+    assert settings.method == "GENERAL" and settings.core_method() == props.a.core_method()
+    # The shortcut is in the add-on key configuration's 3D View keymap.
+    keymap = bpy.context.window_manager.keyconfigs.addon.keymaps["3D View"]
+    item = next(k for k in keymap.keymap_items if k.idname == "splat_tracer.ab_flip")
+    assert (item.type, item.shift, item.alt, item.ctrl) == ("B", True, True, False)
+    assert bpy.types.SPLAT_TRACER_PT_viewport_ab.poll(bpy.context)

@@ -11,7 +11,6 @@ difference, rendered through the add-on's own A/B compare operator (toggle) in r
 """
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -57,20 +56,11 @@ def suzanne_scene(bpy, ply, demo):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output-dir", default=str(dev_extension.REPO_ROOT / "docs" / "switches"))
-    args = ap.parse_args(argv)
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
-    import bpy
-
-    sys.path.insert(0, str(dev_extension.REPO_ROOT))
-    sys.path.insert(0, str(dev_extension.REPO_ROOT / "tests"))
+    args, bpy = dev_extension.start_docs_tool(BUILD, __doc__, dev_extension.REPO_ROOT / "docs" / "switches", argv)
     import demo
     import geometry
     from splat_tracer import ply
 
-    dev_extension.enable_from_source(BUILD)
     out_root = Path(args.output_dir).resolve()
     for switch, scene_name in SWITCHES.items():
         bpy.ops.wm.read_homefile(use_empty=True)

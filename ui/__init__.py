@@ -218,6 +218,68 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
         col.prop(light, "use_shadow", text="Cast Shadow")
 
 
+def _draw_slot(layout, settings, name: str) -> None:
+    """One A/B slot: its preset, switches, epsilon, kernel, crease angle and radius factor."""
+    box = layout.box()
+    row = box.row(align=True)
+    row.label(text=f"Settings {name}")
+    op = row.operator("splat_tracer.ab_copy", text="", icon="IMPORT")
+    op.slot, op.direction = name, "FROM_SCENE"
+    op = row.operator("splat_tracer.ab_copy", text="", icon="EXPORT")
+    op.slot, op.direction = name, "TO_SCENE"
+    col = box.column(align=True)
+    col.prop(settings, "method", text="")
+    for key in ("use_wrong_hit_elimination", "use_far_phase", "use_near_phase", "use_nearest_centre",
+                "use_normal_interpolation"):
+        col.prop(settings, key)
+    col.prop(settings, "kernel", text="")
+    col.prop(settings, "crease_angle")
+    col.prop(settings, "epsilon")
+    col.prop(settings, "radius_factor")
+
+
+class SPLAT_TRACER_PT_viewport_ab(bpy.types.Panel):
+    """The viewport's live A/B comparison, in the 3D View's sidebar (N)."""
+    bl_label = "A/B Comparison"
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = "Splat Tracer"
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine == ENGINE
+
+    def draw(self, context):
+        layout = self.layout
+        props = context.scene.splat_tracer.ab
+        shading = getattr(context.space_data, "shading", None)
+        if shading is not None and shading.type != "RENDERED":
+            layout.label(text="Shows in Rendered shading (Z)", icon="INFO")
+        layout.row().prop(props, "mode", expand=True)
+        row = layout.row(align=True)
+        row.operator("splat_tracer.ab_flip", icon="ARROW_LEFTRIGHT")
+        row.prop(props, "show_difference", toggle=True)
+        row = layout.row(align=True)
+        row.active = props.mode == "SPLIT"
+        row.prop(props, "split", slider=True)
+        row.operator("splat_tracer.ab_split_drag", text="", icon="ARROW_LEFTRIGHT")
+        _draw_slot(layout, props.a, "A")
+        _draw_slot(layout, props.b, "B")
+        if props.a.radius_factor != props.b.radius_factor:
+            layout.label(text="Two radius factors: the clouds are built twice", icon="ERROR")
+
+
+def draw_viewport_header(self, context):
+    """A/B buttons in the 3D View's header, in Rendered shading with this engine."""
+    shading = getattr(context.space_data, "shading", None)
+    if context.engine != ENGINE or shading is None or shading.type != "RENDERED":
+        return
+    props = context.scene.splat_tracer.ab
+    row = self.layout.row(align=True)
+    row.prop(props, "mode", expand=True)
+    row.prop(props, "show_difference", text="", icon="IMAGE_REFERENCE")
+
+
 def _draw_surface(layout, idblock, output_type: str, input_name: str) -> None:
     """The node set-up the engine reads, drawn as Cycles' Surface panels draw it."""
     tree = idblock.node_tree
@@ -255,7 +317,7 @@ class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world)
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world, SPLAT_TRACER_PT_viewport_ab)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
 # show for; the ones that show for the built-in BLENDER_RENDER also make sense here.
@@ -274,9 +336,11 @@ def register():
     for cls in classes:
         bpy.utils.register_class(cls)
     _extend_builtin_panels()
+    bpy.types.VIEW3D_HT_header.append(draw_viewport_header)
 
 
 def unregister():
+    bpy.types.VIEW3D_HT_header.remove(draw_viewport_header)
     for panel in _extended_panels:
         panel.COMPAT_ENGINES.discard(ENGINE)
     _extended_panels.clear()
