@@ -10,6 +10,8 @@ Skipped without --bpy (a plain `make test` does not download three Blenders).
 """
 from __future__ import annotations
 
+import os
+import re
 import shutil
 import subprocess
 import sys
@@ -25,16 +27,20 @@ from splat_tracer import ply
 
 ROOT = Path(__file__).resolve().parent.parent
 MATRIX_DIR = ROOT / "build" / "matrix"
-# Blender series -> the packages of its venv, pinned: the newest bpy of the series on PyPI
-# for Python 3.11, and the numpy that Blender release bundles (nothing else of Blender's own
+# Blender series -> (its Python, the packages of its venv, pinned): the newest bpy of the
+# series on PyPI, and the numpy that Blender release bundles (nothing else of Blender's own
 # Python matters to the add-on). bpy 4.2's wheel does not constrain numpy at all; Blender
 # 4.2 ships numpy 1.24.3 (NUMPY_VERSION in its build_files/build_environment/cmake/
-# versions.cmake), whose API the bundled scipy 1.15.3 must load with. bpy 4.5 and 5.0
-# require numpy>=1.26,<2.0 and Blender 4.4+ ships 1.26.4.
+# versions.cmake), which the bundled scipy 1.15.3 must load with. bpy 4.5 and 5.0 require
+# numpy>=1.26,<2.0 and Blender 4.4 to 5.0 ship 1.26.4. bpy 5.1 and 5.2 are for Python 3.13
+# and require numpy>=2.2,<3; Blender 5.1 ships 2.3.4.
 MATRIX = {
-    "4.2": ("bpy==4.2.23", "numpy==1.24.3"),
-    "4.5": ("bpy==4.5.15", "numpy==1.26.4"),
-    "5.0": ("bpy==5.0.1", "numpy==1.26.4"),
+    "4.2.13": ("3.11", "bpy==4.2.13", "numpy==1.24.3"),
+    "4.2": ("3.11", "bpy==4.2.23", "numpy==1.24.3"),
+    "4.5": ("3.11", "bpy==4.5.15", "numpy==1.26.4"),
+    "5.0": ("3.11", "bpy==5.0.1", "numpy==1.26.4"),
+    "5.1": ("3.13", "bpy==5.1.2", "numpy==2.3.4"),
+    "5.2": ("3.13", "bpy==5.2.3", "numpy==2.3.4"),
 }
 INSTALLER = ROOT / "tests" / "install_and_render.py"
 TIMEOUT = 900  # seconds for one bpy process: the first import of a bpy is slow on a busy machine
@@ -50,18 +56,33 @@ def pytest_generate_tests(metafunc):
             reason="the version matrix runs with --bpy SERIES (make test-matrix)"))], scope="module")
 
 
+def interpreter(version: str) -> str:
+    """A Python `version` ("3.13") to make a venv from: this one, python3.13 on PATH, or one
+    of pyenv's (whose shim on PATH fails while pyenv's selected version is another)."""
+    if sys.version_info[:2] == tuple(map(int, version.split("."))):
+        return sys.executable
+    pyenv = Path(os.environ.get("PYENV_ROOT", Path.home() / ".pyenv")) / "versions"
+    for candidate in [shutil.which(f"python{version}"), *sorted(pyenv.glob(f"{version}.*/bin/python{version}"))]:
+        if candidate and subprocess.run([candidate, "-c", ""], capture_output=True).returncode == 0:
+            return str(candidate)
+    pytest.fail(f"the matrix needs Python {version} for this Blender series: no python{version} found on PATH "
+                f"or in {pyenv}")
+
+
 @pytest.fixture(scope="module")
 def bpy_python(series) -> Path:
     """The Python of build/matrix/bpy-<series>/, (re)created when its pins changed."""
+    python, *packages = MATRIX[series]
     venv = MATRIX_DIR / f"bpy-{series}"
     pins = "\n".join(MATRIX[series]) + "\n"
     stamp = venv / "pins.txt"
     if not (stamp.is_file() and stamp.read_text() == pins):
+        base = interpreter(python)
         shutil.rmtree(venv, ignore_errors=True)
         started = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+        subprocess.run([base, "-m", "venv", str(venv)], check=True)
         subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", "--only-binary=:all:",
-                        *MATRIX[series]], check=True)
+                        *packages], check=True)
         stamp.write_text(pins)
         print(f"\nmatrix: created {venv} in {time.perf_counter() - started:.0f} s")
     return venv / "bin" / "python"
@@ -104,7 +125,8 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     started = time.perf_counter()
     install = run(bpy_python, tmp_path, "--install", str(dist_zip), "--via", "cli")
     assert install.returncode == 0, install.stdout + install.stderr
-    assert f"into Blender {series}." in install.stdout, install.stdout
+    version = MATRIX[series][1].split("==")[1]
+    assert f"into Blender {version}" in install.stdout, install.stdout  # this bpy, not another
     assert (tmp_path / "blender_user_config" / "userpref.blend").is_file()  # enabled for the next start
     output = tmp_path / "render.exr"
     job = run(bpy_python, tmp_path, "--output", str(output), *map(str, clouds))
@@ -113,7 +135,8 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     assert job.returncode == 0, log
     # Reported errors (the engine's self.report ERROR, a failed import) and tracebacks fail
     # the run even when Blender carried on.
-    assert not [line for line in log.splitlines() if line.startswith(("Error", "ERROR", "Traceback"))], log
+    # (Blender 5.1+ prefix each line of its log with the time and a category.)
+    assert not [line for line in log.splitlines() if re.search(r"\b(Error|ERROR)\b|Traceback", line)], log
     assert "farm_check: scene 'Scene' renders with Splat Tracer" in job.stdout
     for suffix in (".ply", ".laz", ".e57"):
         assert f"imported {suffix}: 5000 points" in job.stdout, job.stdout
@@ -124,3 +147,13 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     check_sphere_render(output, new_pass_names=tuple(map(int, series.split("."))) >= (5, 0))
     print(f"matrix: bpy {series}: installed, imported 3 formats and rendered in "
           f"{time.perf_counter() - started:.1f} s")
+
+
+def test_the_manifest_claims_exactly_the_tested_range():
+    """blender_version_min is the oldest bpy of the matrix; blender_version_max (the first
+    version not supported) is the minor release after the newest."""
+    manifest = (ROOT / "blender_manifest.toml").read_text()
+    claimed = [re.search(rf'(?m)^blender_version_{end} = "([0-9.]+)"$', manifest).group(1) for end in ("min", "max")]
+    tested = sorted(tuple(map(int, bpy.split("==")[1].split("."))) for _, bpy, _ in MATRIX.values())
+    major, minor, _ = tested[-1]
+    assert claimed == [".".join(map(str, tested[0])), f"{major}.{minor + 1}.0"], (claimed, tested)
