@@ -29,14 +29,19 @@ ROOT = Path(__file__).resolve().parent.parent
 MATRIX_DIR = ROOT / "build" / "matrix"
 # Blender series -> (its Python, the packages of its venv, pinned): the newest bpy of the
 # series on PyPI, and the numpy that Blender release bundles (nothing else of Blender's own
-# Python matters to the add-on). bpy 4.2's wheel does not constrain numpy at all; Blender
-# 4.2 ships numpy 1.24.3 (NUMPY_VERSION in its build_files/build_environment/cmake/
-# versions.cmake), which the bundled scipy 1.15.3 must load with. bpy 4.5 and 5.0 require
-# numpy>=1.26,<2.0 and Blender 4.4 to 5.0 ship 1.26.4. bpy 5.1 and 5.2 are for Python 3.13
-# and require numpy>=2.2,<3; Blender 5.1 ships 2.3.4.
+# Python matters to the add-on). 4.2.13 is the oldest claimed (blender_manifest.toml says
+# why). bpy 4.2's wheel does not constrain numpy; Blender 4.2 ships numpy 1.24.3
+# (NUMPY_VERSION in its build_files/build_environment/cmake/versions.cmake), the oldest
+# that the bundled scipy 1.15.3 must load with. bpy 4.3.0 and 4.4.0 (the only ones of those
+# series on PyPI) do not constrain numpy either, and which one those releases ship was not
+# found: they get 1.24.3, the demanding case (1.26.4 is tested with 4.5 and 5.0). bpy 4.5
+# and 5.0 require numpy>=1.26,<2.0, and 1.26.4 is the NUMPY_VERSION of those releases. bpy
+# 5.1 and 5.2 are for Python 3.13 and require numpy>=2.2,<3; a 5.x versions.cmake has 2.3.4.
 MATRIX = {
     "4.2.13": ("3.11", "bpy==4.2.13", "numpy==1.24.3"),
     "4.2": ("3.11", "bpy==4.2.23", "numpy==1.24.3"),
+    "4.3": ("3.11", "bpy==4.3.0", "numpy==1.24.3"),
+    "4.4": ("3.11", "bpy==4.4.0", "numpy==1.24.3"),
     "4.5": ("3.11", "bpy==4.5.15", "numpy==1.26.4"),
     "5.0": ("3.11", "bpy==5.0.1", "numpy==1.26.4"),
     "5.1": ("3.13", "bpy==5.1.2", "numpy==2.3.4"),
