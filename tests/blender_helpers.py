@@ -109,3 +109,16 @@ def blender_user_env(base: Path) -> dict:
         env[var] = str(base / var.lower())
     env["PYTHONPATH"] = ""
     return env
+
+
+def check_lit_sphere_render(path) -> None:
+    """The second image of install_and_render.py (<name>_lit.exr): the sun lights the
+    sphere's left half as the camera sees it, the right half has only the dim world."""
+    channels = read_exr(path)
+    hit = channels["ViewLayer.Depth.Z"].pixels < 1e9
+    grey = sum(channels[f"ViewLayer.Combined.{c}"].pixels for c in "RGB") / 3
+    third = WIDTH // 3
+    left, right = grey[:, :third][hit[:, :third]], grey[:, -third:][hit[:, -third:]]
+    assert left.size and right.size, "the sphere is missing from a side"
+    # Lambert with 3 W/m^2 against a 0.05 world: several times brighter, by any measure.
+    assert left.mean() > 5 * right.mean() > 0.0, (left.mean(), right.mean())

@@ -105,8 +105,25 @@ if hasattr(scene.render.image_settings, "media_type"):  # Blender 5.0+; before, 
 scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
 scene.render.image_settings.color_depth = "32"
 scene.render.filepath = args.output
-bpy.ops.render.render(write_still=True)
+bpy.ops.render.render(write_still=True)  # no light at all: the headlight
 print(f"rendered with {scene.render.engine} in Blender {bpy.app.version_string}")
+
+# Again lit, through what the engine reads of a scene (lamps, world nodes, materials, Cycles'
+# settings): a sun whose light travels along +X (lighting the sphere's left half as the
+# camera sees it) and a dim grey world. Written next to OUTPUT as <name>_lit.exr.
+sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+sun.data.energy = 3.0  # W/m^2
+sun.rotation_euler = (0.0, -math.pi / 2, 0.0)  # its -Z axis onto +X
+scene.collection.objects.link(sun)
+scene.world = bpy.data.worlds.new("World")
+if bpy.app.version < (5, 0, 0):
+    scene.world.use_nodes = True  # always on (and deprecated) from Blender 5.0
+background = next(n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND")
+background.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
+scene.splat_tracer.samples = 4  # enough for the left/right comparison, and quick
+scene.render.filepath = str(Path(args.output).with_name(Path(args.output).stem + "_lit.exr"))
+bpy.ops.render.render(write_still=True)
+print(f"rendered lit with {scene.render.engine}")
 try:  # the add-on lives under bl_ext.*: no top-level name may leak from the zip
     import splat_tracer  # noqa: F401
     sys.exit("splat_tracer is importable as a top-level module")

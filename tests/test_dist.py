@@ -7,7 +7,7 @@ import sys
 import zipfile
 from pathlib import Path
 
-from blender_helpers import blender_user_env, check_sphere_render
+from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
 from geometry import fibonacci_sphere
 from splat_tracer import ply
 
@@ -53,3 +53,4 @@ def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
     site = list(tmp_path.glob("blender_user_*/**/.local/lib/python3.*/site-packages"))
     assert site and (site[0] / "plyfile.py").is_file() and (site[0] / "scipy").is_dir(), site
     check_sphere_render(output, new_pass_names=True)
+    check_lit_sphere_render(tmp_path / "render_lit.exr")

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from blender_helpers import blender_user_env, check_sphere_render
+from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
 from geometry import fibonacci_sphere
 from splat_tracer import ply
 
@@ -150,6 +150,7 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     for module in ("scipy", "plyfile", "laspy", "lazrs", "pye57"):
         assert f"bundled: {module} " in job.stdout, f"{module} was not imported from the zip's wheels"
     check_sphere_render(output, new_pass_names=tuple(map(int, series.split("."))) >= (5, 0))
+    check_lit_sphere_render(tmp_path / "render_lit.exr")
     print(f"matrix: bpy {series}: installed, imported 3 formats and rendered in "
           f"{time.perf_counter() - started:.1f} s")
 
