@@ -57,7 +57,8 @@ if args.install:
     else:
         bpy.ops.extensions.package_install_files(filepath=args.install, repo="user_default", enable_on_install=True)
     assert "bl_ext.user_default.splat_tracer" in bpy.context.preferences.addons, "extension not enabled"
-    print(f"installed with the {args.via} into Blender {bpy.app.version_string}")
+    print(f"installed with the {args.via} into Blender {bpy.app.version_string} "
+          f"(online access: {bpy.app.online_access})")
 elif args.output:
     # A new Blender reads userpref.blend at start-up and enables the add-ons it lists; the
     # bpy module starts from factory preferences instead, so read them here. bpy 4.2 as a

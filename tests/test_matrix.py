@@ -132,6 +132,7 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     assert install.returncode == 0, install.stdout + install.stderr
     version = MATRIX[series][1].split("==")[1]
     assert f"into Blender {version}" in install.stdout, install.stdout  # this bpy, not another
+    assert "(online access: False)" in install.stdout  # the wheels come from the zip, not the network
     assert (tmp_path / "blender_user_config" / "userpref.blend").is_file()  # enabled for the next start
     output = tmp_path / "render.exr"
     job = run(bpy_python, tmp_path, "--output", str(output), *map(str, clouds))
