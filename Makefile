@@ -9,7 +9,7 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
 
-.PHONY: all venv build native demo test test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
+.PHONY: all venv build native demo test test-matrix test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
 
 all: build
 
@@ -37,6 +37,17 @@ demo: build
 
 test: build
 	$(VPY) -m pytest tests
+
+# The version matrix: the linux-x64 zip (`make dist`'s) installed from the command line into
+# each Blender the manifest claims, as the bpy module, each in its own venv with the Python
+# and numpy that release ships (build/matrix/bpy-<series>/, made on first use: a ~370 MB
+# download and ~1 GB on disk each; 5.1 and 5.2 need a python3.13, from PATH or pyenv),
+# clouds of every format imported and one rendered and checked (tests/test_matrix.py).
+# MATRIX picks series (the keys of test_matrix.py's table).
+MATRIX ?= 4.2.13 4.2 4.3 4.4 4.5 5.0 5.1 5.2
+
+test-matrix: $(STAMP)
+	cd tests && ../$(VPY) -m pytest -q -p no:cacheprovider --durations=0 test_matrix.py $(MATRIX:%=--bpy %)
 
 # --- Sanitizers -------------------------------------------------------------------------
 # The native core built with AddressSanitizer + UndefinedBehaviorSanitizer (setup.py,

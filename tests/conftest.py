@@ -33,3 +33,24 @@ def empty_scene(blender):
     scene = blender.context.scene
     scene.render.engine = "SPLAT_TRACER"
     return scene
+
+
+def pytest_addoption(parser):
+    parser.addoption("--bpy", action="append", default=[], metavar="SERIES",
+                     help="test_matrix.py: a Blender series to install the zip into (4.2, 4.5, 5.0; repeatable); "
+                          "without it those tests are skipped (make test-matrix passes them)")
+
+
+@pytest.fixture(scope="session")
+def dist_zip(tmp_path_factory):
+    """The Linux zip only (the platform this machine can install and render); `make dist`
+    builds the other three the same way, their binaries are checked by test_portable.py."""
+    import subprocess
+
+    out = tmp_path_factory.mktemp("dist")
+    subprocess.run([sys.executable, str(ROOT / "tools" / "build_dist.py"), "--platform", "linux-x64",
+                    "--output-dir", str(out)], check=True)
+    (zip_path,) = out.glob("splat_tracer-*.zip")
+    assert zip_path.name.endswith("-linux_x64.zip")  # blender_ext.py --split-platforms naming
+    return zip_path
+

@@ -2,31 +2,16 @@
 installs it, with its bundled wheels, and rendering with SPLAT_TRACER."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import zipfile
 from pathlib import Path
 
-import numpy as np
-import pytest
-
+from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
 from geometry import fibonacci_sphere
 from splat_tracer import ply
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-@pytest.fixture(scope="module")
-def dist_zip(tmp_path_factory):
-    """The Linux zip only (the platform this machine can install and render); `make dist`
-    builds the other three the same way, their binaries are checked by test_portable.py."""
-    out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, str(ROOT / "tools" / "build_dist.py"), "--platform", "linux-x64",
-                    "--output-dir", str(out)], check=True)
-    (zip_path,) = out.glob("splat_tracer-*.zip")
-    assert zip_path.name.endswith("-linux_x64.zip")  # blender_ext.py --split-platforms naming
-    return zip_path
 
 
 def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
@@ -52,28 +37,20 @@ def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
 
 
 def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
+    """Installed as a user does (Install from Disk), in the development venv's bpy 5.0.1;
+    test_matrix.py installs it the farm's way into each Blender series."""
     p, n = fibonacci_sphere(5000)
     ply_path = tmp_path / "sphere.ply"
     ply.write_ply(str(ply_path), p, n)
-    env = dict(os.environ)
-    for var in ("BLENDER_USER_CONFIG", "BLENDER_USER_SCRIPTS", "BLENDER_USER_RESOURCES"):
-        env[var] = str(tmp_path / var.lower())
-    env["PYTHONPATH"] = ""  # nothing from this source tree: only what the zip installs
     output = tmp_path / "render.exr"
-    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "install_and_render.py"), str(dist_zip),
-                           str(ply_path), str(output)], cwd=tmp_path, env=env, capture_output=True, text=True,
-                          timeout=600)
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "install_and_render.py"), "--install", str(dist_zip),
+                           "--output", str(output), str(ply_path)], cwd=tmp_path, env=blender_user_env(tmp_path),
+                          capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     bundled = next(w for w in zipfile.ZipFile(dist_zip).namelist() if w.startswith("wheels/scipy-") and "cp311" in w)
     assert f"bundled: scipy {bundled.split('-')[1]} " in proc.stdout, proc.stdout  # not the venv's scipy
     # Blender installed the bundled wheels for this Python into the extensions' site-packages.
     site = list(tmp_path.glob("blender_user_*/**/.local/lib/python3.*/site-packages"))
     assert site and (site[0] / "plyfile.py").is_file() and (site[0] / "scipy").is_dir(), site
-    import OpenEXR
-
-    exr = OpenEXR.File(str(output), separate_channels=True)
-    depth = next(part.channels["ViewLayer.Depth.Z"].pixels for part in exr.parts
-                 if "ViewLayer.Depth.Z" in part.channels)
-    hit = depth < 1e9
-    assert 0.2 < hit.mean() < 0.6
-    np.testing.assert_allclose(depth[hit].min(), 4.0, atol=0.02)  # the sphere's nearest point
+    check_sphere_render(output, new_pass_names=True)
+    check_lit_sphere_render(tmp_path / "render_lit.exr")

@@ -9,7 +9,7 @@ and macos-x64 (default: all four). For each platform:
    never the development build of `make build`.
 2. Stages the add-on's files (no tests, benchmarks, native sources or build files), the
    core, and the dependencies Blender does not ship as unmodified PyPI wheels for that
-   platform (scipy, lazrs and pye57 for each Python that Blender 4.2 to 5.1 use; plyfile,
+   platform (scipy, lazrs and pye57 for each Python that Blender 4.2 to 5.2 use; plyfile,
    laspy and pyquaternion, pure Python), listed in the staged manifest, whose `platforms`
    is that one platform. A reader's wheel that PyPI lacks for a platform (pye57 on macOS
    x64) is left out with a warning: that format is then refused there with a message. numpy is never bundled:
