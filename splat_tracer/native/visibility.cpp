@@ -83,23 +83,19 @@ SurfaceHit resolve_layer(const SplatScene &scene, const LayerQuery &q, const Met
 }
 
 // Whether the layer's first hit lies inside the sampled surface rather than beyond its edge
-// (docs/ALGORITHM.md, "Far phase: which layers it tests"). A fringe disc pokes out past
-// an edge or a silhouette: the hit point is then covered only by discs whose centres all
-// lie on one side of it, none of them close. Inside the surface some centre is close, or
-// the centres surround the point. Such a layer is real whatever follows it on the ray --
-// which keeps the far phase away from shells that cross (a belt through a body) and parts
-// thinner than the layer window, where "what follows" is another shell's surface.
+// (docs/ALGORITHM.md, "Far phase: which layers it tests"). A fringe disc pokes out past an
+// edge or a silhouette: the hit point is then covered only by discs whose centres all lie
+// on one side of it. Inside the surface the centres surround it. Such a layer is real
+// whatever follows it on the ray -- which keeps the far phase away from shells that cross
+// (a belt through a body) and parts thinner than the layer window, where "what follows"
+// is another shell's surface, and saves most rays the search behind the layer.
 bool inside_sampled_surface(const SplatScene &scene, const Ray &ray, const LayerQuery &q) {
-    // A centre within this share of its radius from the hit: the point is inside the
-    // sampled surface (the radius is the k-NN spacing, ~1.4 sample steps on a grid, so
-    // about half a step). 0.2 to 0.7 tried on the accuracy benchmark (ALGORITHM.md): 0.35
-    // is the largest that keeps crossing shells no worse than nearest-centre; larger
-    // values give back silhouette gain at edges.
-    constexpr float kInnerShare = 0.35f;
     // Lopsidedness of the member centres around the hit, |sum of offsets| / sum of their
     // lengths, in the tangent plane: 0 when they surround it, about 0.64 for centres spread
-    // evenly over a half disc (a point just past a straight edge), 1 on one side. Below
-    // this, the point is surrounded (0.3 to 0.6 tried; ALGORITHM.md).
+    // evenly over a half disc (a point on a straight edge), 1 on one side. Below this, the
+    // point is surrounded. Measured (ALGORITHM.md): fringe hits beyond a cube's edge have a
+    // median of 0.76, hits on its faces 0.17 (0.72 at the 99th percentile, near edges:
+    // those go on to the walk below, which accepts them); 0.3 to 0.6 tried.
     constexpr float kSurrounded = 0.6f;
     const LayerHit &h0 = q.hits[q.first];
     const Vec3 p = ray.o + ray.d * h0.t;
@@ -108,7 +104,6 @@ bool inside_sampled_surface(const SplatScene &scene, const Ray &ray, const Layer
     float total = 0.f;
     for (int i = q.first; i < q.count; ++i) {
         if (!q.member(i)) continue;
-        if (q.hits[i].dist < kInnerShare * q.hits[i].radius) return true;
         Vec3 v = scene.centre(q.hits[i].id) - p;
         v = v - n0 * dot(v, n0);
         sum = sum + v;
@@ -117,11 +112,24 @@ bool inside_sampled_surface(const SplatScene &scene, const Ray &ray, const Layer
     return total > 0.f && length(sum) < kSurrounded * total;
 }
 
+// How many surfaces a window of same-facing hits crosses: 2 when its members' normals
+// split by more than 60 degrees from the first's (the exits of two crossing shells meet in
+// one window near their crossing), else 1. 60: a smooth surface's members differ by a few
+// degrees; the shells of the benchmark cross at about 90.
+int surfaces_in_window(const SplatScene &scene, const LayerQuery &w) {
+    constexpr float kSplitCos = 0.5f;  // cos 60 degrees
+    const Vec3 n0 = scene.normal(w.hits[w.first].id);
+    for (int i = w.first + 1; i < w.count; ++i)
+        if (w.member(i) && dot(scene.normal(w.hits[i].id), n0) < kSplitCos) return 2;
+    return 1;
+}
+
 // The far phase (docs/ALGORITHM.md, "Far phase: counting entries and exits"): whether the
 // layer `q` of a closed object is real. A ray that enters closed surfaces leaves them all;
 // one inside an object leaves by the exit layer and does not meet a further exit. So, walking
 // on layer by layer (each a window of same-facing hits, as the query makes them), entries
-// count +1 and exits -1: the layer is real when the count comes back to 0, a fringe when the
+// count +1 and exits -1 (a window whose members' normals split counts as two surfaces, see
+// surfaces_in_window): the layer is real when the count comes back to 0, a fringe when the
 // hits end first (for a ray inside: the layer is a fringe when the next layer is another
 // exit). The paper's rule is the first step of this walk; counting on keeps a layer that is
 // followed by a second shell's entry (a finger in a palm) instead of rejecting it as the
@@ -149,8 +157,9 @@ bool far_phase_accepts(const SplatScene &scene, Ray ray, const LayerQuery &q, co
         if (w.first < 0) return inside;
         const bool same = w.facing == q.facing;
         if (inside) return !same;
-        depth += same ? 1 : -1;
-        if (depth == 0) return true;
+        const int surfaces = surfaces_in_window(scene, w);
+        depth += same ? surfaces : -surfaces;
+        if (depth <= 0) return true;
         // Hits of the other facing inside the window (`next` is one of them: the query keeps
         // none beyond the window): both faces of a part thinner than the window, or two
         // shells crossing. The window is an entry and an exit; skipping to its end without
