@@ -149,9 +149,9 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
 # Each sample's radius is raised to the largest empty circle it is on (in its tangent plane,
 # among its COVER_K nearest neighbours), so every gap between samples is covered. Circles
 # across a gap wider than COVER_MAX_GAP are a boundary's (a rim, a hole, a silhouette seen
-# in the tangent plane) and are not covered: that would fatten the boundary. The raise is
-# capped at COVER_CAP x the k-NN spacing: on the benchmark's randomly sampled clouds 1.3
-# already leaves no pinhole at 640x480, and a larger cap only fattens silhouettes.
+# in the tangent plane) and are not covered: that would fatten the boundary. Nor are circles
+# wider than COVER_CAP x the k-NN spacing (holes): on the benchmark's randomly sampled clouds
+# 1.3 already leaves no pinhole at 640x480, and a larger cap only fattens silhouettes.
 COVER_K = 12
 COVER_MAX_GAP = np.radians(162.0)  # 0.9 pi: a near-straight boundary still counts as one
 COVER_CAP = 1.3
@@ -177,7 +177,9 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
         a, b = x * x + y * y, x2 * x2 + y2 * y2
         cx, cy = (y2 * a - y * b) / d, (x * b - x2 * a) / d
         r = np.hypot(cx, cy)
-    candidate = (gap < COVER_MAX_GAP) & np.isfinite(r) & (r > spacing[:, None])
+    # Only circles the cap lets a disc reach: a larger one is a hole (or three nearly
+    # collinear samples, whose circle is huge and, in float32, looks empty).
+    candidate = (gap < COVER_MAX_GAP) & (r > spacing[:, None]) & (r <= COVER_CAP * spacing[:, None])
     out = spacing.copy()
     rows = np.flatnonzero(candidate.any(axis=1))  # only these can raise the radius
     if rows.size:
@@ -192,7 +194,7 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
 def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray, workers: int = -1,
                    tree=None) -> np.ndarray:
     """(N,) float32 radii with no pinhole between samples: each point's k-NN spacing raised
-    to the largest empty circle it is on, at most COVER_CAP x the spacing (see above)."""
+    to the largest empty circle it is on, if at most COVER_CAP x the spacing (see above)."""
     from scipy.spatial import cKDTree
 
     pts = np.asarray(points, dtype=np.float64)
@@ -210,4 +212,4 @@ def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray,
         _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
         offsets = (pts[nbr[:, 1:]] - pts[idx, None]).astype(np.float32)
         out[idx] = _covering(offsets, nrm[idx], s[idx])
-    return np.minimum(out, COVER_CAP * s)
+    return out
