@@ -104,11 +104,13 @@ bench-quick: build
 	$(VPY) benchmarks/trace_throughput.py --quick
 	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
 	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
+	$(VPY) benchmarks/viewport_latency.py --quick
 
 bench: build
 	$(VPY) benchmarks/trace_throughput.py
 	$(VPY) benchmarks/accuracy.py --output benchmarks/results
 	$(VPY) benchmarks/frame_time.py --output benchmarks/results
+	$(VPY) benchmarks/viewport_latency.py --output benchmarks/results/viewport_latency.md
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

@@ -12,6 +12,7 @@ and view_draw, and hands the thread immutable snapshots (a RenderScene, a Camera
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -192,23 +193,43 @@ def classify(updates: Iterable) -> Changes:
 # --------------------------------------------------------------------------------------
 # Progressive rendering
 
-COARSE_SCALE = 4   # the first pass: 1 sample at 1/COARSE_SCALE of the resolution, upscaled
+COARSE_SCALE = 4   # the first pass: 1 sample at 1/COARSE_SCALE of the resolution (at least), upscaled
 GROWTH = 4         # each later pass renders GROWTH times the samples of the one before
+# Pixels of the first pass at most (its divisor grows with the view): on the demo scene
+# (benchmarks/viewport_latency.py) 1 lit sample of 20,000 pixels takes about 50 ms on 2
+# cores, which keeps the first image within issue 13's ~100 ms of a change.
+COARSE_PIXELS = 20_000
 
 
-def pass_schedule(samples: int, coarse_scale: int = COARSE_SCALE) -> list[tuple[int, int]]:
+def pass_schedule(samples: int, coarse_scale: int = COARSE_SCALE, pixels: int = 0) -> list[tuple[int, int]]:
     """(resolution divisor, samples) of each pass: a coarse pass, then full resolution with
     1, 4, 16, ... samples up to `samples`. Each pass is a complete render from scratch, so
     the last one is the F12 image (same samples, same seed): the core numbers a pixel's
     samples from 0 and has no sample offset, so passes cannot be accumulated exactly (see
-    the README); the repeated work is at most 1/(GROWTH-1) of the last pass."""
+    the README); the repeated work is at most 1/(GROWTH-1) of the last pass.
+
+    pixels: the window's size. A large view's coarse pass is divided further, to at most
+    COARSE_PIXELS, and halved divisors follow it while a pass would still be four times
+    that or more (1280x720: 1/7, 1/3, then full resolution), so that a picture comes within
+    ~100 ms and sharpens before the first full-resolution pass."""
+    if coarse_scale > 1 and pixels > 0:
+        coarse_scale = max(coarse_scale, math.ceil(math.sqrt(pixels / COARSE_PIXELS)))
     out = [(coarse_scale, 1)] if coarse_scale > 1 else []
+    scale = coarse_scale // 2
+    while scale > 1 and pixels / (scale * scale) >= 4 * COARSE_PIXELS:
+        out.append((scale, 1))
+        scale //= 2
     s = 1
     while True:
         out.append((1, s))
         if s >= samples:
             return out
         s = min(samples, s * GROWTH)
+
+
+def _window_pixels(view: View) -> int:
+    """The pixels a pass of this view renders at full resolution (its border window's)."""
+    return 0 if view.window is None else int(view.window[2]) * int(view.window[3])
 
 
 @dataclass(frozen=True)
@@ -431,7 +452,8 @@ class ViewportSession:
                 self._generation += 1
                 self._jobs[name] = _Job(self._generation, name, self.exports[variant.radius_factor].render_scene,
                                         self._camera, self._view, settings, variant.method, threads,
-                                        tuple(pass_schedule(settings.samples, self.coarse_scale)))
+                                        tuple(pass_schedule(settings.samples, self.coarse_scale,
+                                                            _window_pixels(self._view))))
                 self._next[name] = 0
                 self.counters["restarts"] += 1
             self._cond.notify_all()

@@ -135,6 +135,11 @@ def test_pass_schedule_ends_with_the_scenes_samples():
     assert viewport.pass_schedule(16) == [(4, 1), (1, 1), (1, 4), (1, 16)]
     assert viewport.pass_schedule(1) == [(4, 1), (1, 1)]
     assert viewport.pass_schedule(20)[-1] == (1, 20)
+    # A large view: the first pass stays near COARSE_PIXELS, halved divisors follow.
+    big = viewport.pass_schedule(16, pixels=1280 * 720)
+    assert big == [(7, 1), (3, 1), (1, 1), (1, 4), (1, 16)]
+    assert (1280 / 7) * (720 / 7) <= viewport.COARSE_PIXELS
+    assert viewport.pass_schedule(16, pixels=80 * 60) == viewport.pass_schedule(16)  # small: unchanged
 
 
 # --------------------------------------------------------------------------------------
