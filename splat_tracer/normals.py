@@ -33,6 +33,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .progress import chunks, nothing
+
 DEFAULT_K = 16          # PCA neighbours: enough for a stable plane fit with noise, small enough for creases
 GRAPH_K = 8             # neighbours in the orientation graph
 MIN_POINTS = 3          # a plane needs three points
@@ -51,8 +53,9 @@ class Orientation:
     components: int          # connected components of the neighbour graph
 
 
-def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None) -> np.ndarray:
-    """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours."""
+def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None) -> np.ndarray:
+    """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
+    progress: progress.ProgressFn, called between chunks (it may raise Cancelled)."""
     from scipy.spatial import cKDTree
 
     pts = np.asarray(points, dtype=np.float64)
@@ -63,7 +66,7 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     tree = tree if tree is not None else cKDTree(pts)
     out = np.empty((n, 3))
     order = tree.indices
-    for start in range(0, n, _CHUNK):
+    for start in chunks(n, _CHUNK, progress, "estimating normals"):
         idx = order[start:start + _CHUNK]
         _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
         q = pts[nbr]
@@ -89,8 +92,9 @@ def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.nd
 
 
 def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", scanners=None,
-           k: int = GRAPH_K, workers: int = -1, tree=None) -> Orientation:
-    """Flips `normals` (unit, any sign) consistently; see the module's text."""
+           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None) -> Orientation:
+    """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
+    for estimate (the steps of the propagation are single library calls: reported between them)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
     from scipy.spatial import cKDTree
@@ -116,6 +120,8 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         if (anchor_sign != 0).all():
             return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1)
 
+    report = progress or nothing
+    report(0.0, "orienting normals: neighbour graph")
     tree = tree if tree is not None else cKDTree(pts)
     _, nbr = tree.query(pts, k=k + 1, workers=workers)
     i = np.repeat(np.arange(n), k)
@@ -125,7 +131,10 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     w = 1.0 - np.abs(np.einsum("ij,ij->i", nrm[i], nrm[j]))
     w += ACROSS_WEIGHT * 0.5 * (np.abs(np.einsum("ij,ij->i", nrm[i], d)) + np.abs(np.einsum("ij,ij->i", nrm[j], d)))
     w += 1e-9  # csgraph treats a zero weight as no edge
+    report(0.4, "orienting normals: spanning tree")
     mst = minimum_spanning_tree(coo_matrix((w, (i, j)), shape=(n, n)).tocsr())
+    del i, j, d, w
+    report(0.8, "orienting normals: propagation")
     n_comp, labels = connected_components(mst, directed=False)
 
     # A seed for every component the rules leave without an anchor: its point farthest from

@@ -52,6 +52,7 @@ class PointCloud:
     oriented: bool = True            # False: the normals' axes are right but their signs arbitrary
     dropped_rows: int = 0            # rows dropped for non-finite coordinates (text, LAS, E57)
     format: str = "PLY"              # what the file was read as (for the notes)
+    budget_dropped: int = 0          # points left out to keep within the import's point budget
     notes: list = field(default_factory=list)  # what the reader changed or ignored, one sentence each
 
     def __len__(self) -> int:

@@ -24,6 +24,7 @@ import numpy as np
 
 from . import core, normals as normals_mod, spacing
 from .ply import CloudFileError, PointCloud
+from .progress import Steps
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
 BULK_PERCENTILES = (1.0, 99.0)
@@ -63,6 +64,8 @@ class PreparedCloud:
     normals_oriented: str = ""         # the orientation mode used when the import chose the signs
     ambiguous: int = 0                 # points whose orientation was ambiguous
     normal_k: int = 0
+    statistical_outliers: int = 0      # points left out by statistical outlier removal
+    statistical_ratio: float = 0.0
 
     def notes(self, k: int) -> list[str]:
         """What the import changed or found, one sentence each (the import's warnings)."""
@@ -90,6 +93,10 @@ class PreparedCloud:
                          f"{self.first_outlier_row}); "
                          + ("dropped" if self.outliers_dropped else "kept (import with Outliers: Drop to leave "
                                                                      "them out)"))
+        if self.statistical_outliers:
+            notes.append(f"{self.statistical_outliers:,} points were left out by statistical outlier removal (mean "
+                         f"distance to their {spacing.SOR_K} nearest neighbours more than {self.statistical_ratio:g} "
+                         "standard deviations above the cloud's mean)")
         if self.clamped_radii:
             notes.append(f"{self.clamped_radii:,} splat radii were reduced to {self.radius_cap:.4g} "
                          f"({RADIUS_CAP:g} x the {RADIUS_CAP_PERCENTILE:g}th percentile of the spacing): "
@@ -157,10 +164,13 @@ def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
 
 
 def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outliers: bool = False,
-            workers: int = -1, normal_k: int = normals_mod.DEFAULT_K, orientation: str = "AUTO") -> PreparedCloud:
+            workers: int = -1, normal_k: int = normals_mod.DEFAULT_K, orientation: str = "AUTO",
+            statistical_ratio: float = 0.0, progress=None) -> PreparedCloud:
     """Frame, outliers, normals (estimated and oriented when the file has none; oriented
     when their signs are arbitrary), analysis and radii of a cloud; raises CloudFileError
-    naming `path`. orientation: AUTO, PROPAGATE, UP or SCANNER (normals.py)."""
+    naming `path`. orientation: AUTO, PROPAGATE, UP or SCANNER (normals.py).
+    statistical_ratio > 0: statistical outlier removal with that many standard deviations
+    (spacing.statistical_inliers). progress: progress.ProgressFn (it may raise Cancelled)."""
     if len(cloud) < spacing.MIN_POINTS:  # refused before the neighbour search, which needs them
         usable = len(cloud) + cloud.merged_duplicates
         raise CloudFileError(
@@ -173,10 +183,23 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     first_outlier = int(rows[np.argmin(bulk)]) if outliers else -1
     if outliers and drop_outliers:
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
+    needs_normals = cloud.normals is None or not cloud.oriented
+    # Shares of the progress bar, by what each step costs (measured at 1M points: the
+    # normals' estimation and orientation take about as long as the radii's analysis).
+    weights = {"statistical": 1.0 if statistical_ratio > 0 else 0.0, "estimate": 2.0 if cloud.normals is None else 0.0,
+               "orient": 1.0 if needs_normals else 0.0, "radii": 2.0}
+    step = Steps(progress, weights)
+    statistical = 0
+    if statistical_ratio > 0 and len(cloud) > spacing.MIN_POINTS:
+        keep = spacing.statistical_inliers(cloud.positions, statistical_ratio, workers=workers,
+                                           progress=step("statistical"))
+        statistical = int(len(keep) - keep.sum())
+        if statistical:
+            cloud, bulk = _subset(cloud, keep), bulk[keep]
     _check_float32_safe(cloud.positions, bulk, path)
     origin, local = core.local_frame(cloud.positions, bulk)
-    estimated, oriented_by, ambiguous = cloud.normals is None, "", 0
-    if cloud.normals is None or not cloud.oriented:
+    estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
+    if needs_normals:
         if cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
             raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
                                  f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
@@ -184,20 +207,24 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
 
         rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
         tree = cKDTree(rel)
-        axes = cloud.normals if cloud.normals is not None else normals_mod.estimate(rel, normal_k, workers, tree)
+        axes = (cloud.normals if cloud.normals is not None
+                else normals_mod.estimate(rel, normal_k, workers, tree, progress=step("estimate")))
         oriented_by = resolve_orientation(cloud, orientation)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
-        result = normals_mod.orient(rel, axes, oriented_by, scanners, workers=workers, tree=tree)
+        result = normals_mod.orient(rel, axes, oriented_by, scanners, workers=workers, tree=tree,
+                                    progress=step("orient"))
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
     try:
-        hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers)
+        hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
+                               tree=tree if len(inliers) == len(local) else None)
     except spacing.SpacingError as e:
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
                              outliers > 0 and drop_outliers, normals_estimated=estimated, normals_oriented=oriented_by,
-                             ambiguous=ambiguous, normal_k=normal_k if estimated else 0)
+                             ambiguous=ambiguous, normal_k=normal_k if estimated else 0,
+                             statistical_outliers=statistical, statistical_ratio=statistical_ratio)
     if cloud.radii is None:
         radii = np.empty(len(local), np.float32)
         radii[inliers] = hood.spacing

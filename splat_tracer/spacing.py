@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .progress import chunks
+
 DEFAULT_K = 6
 # A splat's size comes from its distance to other points: a cloud needs at least one
 # point besides each one (the importer refuses fewer distinct positions).
@@ -105,8 +107,11 @@ def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.nda
     return gaps.max(axis=1) > BOUNDARY_GAP
 
 
-def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1) -> Neighbourhood:
-    """k-NN spacing of every point and, with normals, the boundary count and closed guess."""
+def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
+            tree=None) -> Neighbourhood:
+    """k-NN spacing of every point and, with normals, the boundary count and closed guess.
+    progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
+    cKDTree of `points` already built."""
     from scipy.spatial import cKDTree  # imported here: only import needs scipy
 
     pts = np.asarray(points, dtype=np.float64)
@@ -116,11 +121,14 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     k = int(min(k, n - 1))
     kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
     nrm = None if normals is None else np.asarray(normals, dtype=np.float64)
-    tree = cKDTree(pts)
+    if tree is not None:
+        pts = tree.data  # the same points, maybe with more precision (float64 offsets)
+    else:
+        tree = cKDTree(pts)
     order = tree.indices  # leaf order of the tree: neighbouring points are adjacent
     spacing = np.empty(n, np.float32)
     boundary = 0
-    for start in range(0, n, _CHUNK):
+    for start in chunks(n, _CHUNK, progress, "splat radii"):
         idx = order[start:start + _CHUNK]
         dist, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)  # +1: the point itself
         spacing[idx] = dist[:, k]
@@ -135,6 +143,34 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         spacing[degenerate] = np.median(good)
     closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
     return Neighbourhood(spacing, n_degenerate, boundary, bool(closed))
+
+
+# Statistical outlier removal (as PCL's StatisticalOutlierRemoval and Open3D's
+# remove_statistical_outlier do it): a point whose mean distance to its SOR_K nearest
+# neighbours exceeds the mean of that distance over the cloud by more than `ratio`
+# standard deviations is an outlier. 20 neighbours is Open3D's documented example and
+# enough for the mean distance of a surface point to be stable.
+SOR_K = 20
+
+
+def statistical_inliers(points: np.ndarray, ratio: float, k: int = SOR_K, workers: int = -1, progress=None,
+                        tree=None) -> np.ndarray:
+    """(N,) bool: the points kept by statistical outlier removal (see SOR_K)."""
+    from scipy.spatial import cKDTree
+
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    k = int(min(k, n - 1))
+    if k < 1:
+        return np.ones(n, bool)
+    tree = tree if tree is not None else cKDTree(pts)
+    order = tree.indices
+    mean = np.empty(n)
+    for start in chunks(n, _CHUNK, progress, "statistical outliers"):
+        idx = order[start:start + _CHUNK]
+        dist, _ = tree.query(pts[idx], k=k + 1, workers=workers)  # +1: the point itself
+        mean[idx] = dist[:, 1:].mean(axis=1)
+    return mean <= mean.mean() + ratio * mean.std()
 
 
 def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tuple[np.ndarray, int]:
