@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .progress import chunks, nothing
+from .spacing import neighbour_tree
 
 DEFAULT_K = 16          # PCA neighbours: enough for a stable plane fit with noise, small enough for creases
 GRAPH_K = 8             # neighbours in the orientation graph
@@ -56,14 +57,13 @@ class Orientation:
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None) -> np.ndarray:
     """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled)."""
-    from scipy.spatial import cKDTree
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
         raise ValueError(f"need at least {MIN_POINTS} points to estimate normals, got {n}")
     k = int(min(max(k, 2), n - 1))
-    tree = tree if tree is not None else cKDTree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
     out = np.empty((n, 3))
     order = tree.indices
     for start in chunks(n, _CHUNK, progress, "estimating normals"):
@@ -97,7 +97,6 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     for estimate (the steps of the propagation are single library calls: reported between them)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
-    from scipy.spatial import cKDTree
 
     if mode not in MODES:
         raise ValueError(f"unknown orientation mode {mode!r}")
@@ -122,7 +121,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
 
     report = progress or nothing
     report(0.0, "orienting normals: neighbour graph")
-    tree = tree if tree is not None else cKDTree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
     _, nbr = tree.query(pts, k=k + 1, workers=workers)
     i = np.repeat(np.arange(n), k)
     j = nbr[:, 1:].ravel()

@@ -203,10 +203,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         if cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
             raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
                                  f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
-        from scipy.spatial import cKDTree
-
         rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
-        tree = cKDTree(rel)
+        step("estimate")(0.0, "neighbour tree")
+        tree = spacing.neighbour_tree(rel)
         axes = (cloud.normals if cloud.normals is not None
                 else normals_mod.estimate(rel, normal_k, workers, tree, progress=step("estimate")))
         oriented_by = resolve_orientation(cloud, orientation)
@@ -230,10 +229,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         radii[inliers] = hood.spacing
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
-            from scipy.spatial import cKDTree
-
             kk = min(k, len(local) - 1)
-            dist, _ = cKDTree(local).query(local[strays], k=kk + 1, workers=workers)
+            dist, _ = spacing.neighbour_tree(local).query(local[strays], k=kk + 1, workers=workers)
             radii[strays] = dist[:, kk]
         cap = np.float32(RADIUS_CAP * np.percentile(hood.spacing, RADIUS_CAP_PERCENTILE))
         clamped = radii > cap

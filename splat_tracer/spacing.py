@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .progress import chunks
+from .progress import chunks, scaled
 
 DEFAULT_K = 6
 # A splat's size comes from its distance to other points: a cloud needs at least one
@@ -35,6 +35,13 @@ MIN_POINTS = 2
 BOUNDARY_K = 24
 BOUNDARY_GAP = np.radians(160.0)
 CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sqrt(N)
+# The boundary test costs 24 neighbours and an angular sort per point, most of an import's
+# time: beyond BOUNDARY_SAMPLE points it runs on that many points drawn at random (a fixed
+# seed: the same guess every time) and the count is scaled up. The guess compares the
+# boundary fraction with 0.2/sqrt(N); an open surface's rim is 4/sqrt(N), so at 10M points
+# 200k samples expect about 250 rim hits against a limit of about 13: far apart.
+BOUNDARY_SAMPLE = 200_000
+BOUNDARY_SEED = 0
 # Queries go in chunks of this many points, in the kd-tree's own (spatially coherent)
 # order, so that each chunk walks the same few branches: this is what keeps 10M-point
 # scans within seconds and bounds the memory of the (chunk, k+1) arrays.
@@ -57,9 +64,11 @@ class Neighbourhood:
     degenerate: int          # points whose spacing was 0 (k+ duplicates): given the median
     boundary: int            # points on a boundary (only when normals were given)
     closed_guess: bool       # boundary < CLOSED_MAX_BOUNDARY x sqrt(N)
+    tested: int = 0          # points given the boundary test (all, or BOUNDARY_SAMPLE of a larger cloud)
 
     def describe(self) -> str:
-        return (f"{self.boundary} of {len(self.spacing)} points look like a boundary "
+        about = "" if self.tested >= len(self.spacing) else f"about (from {self.tested:,} sampled) "
+        return (f"{about}{self.boundary} of {len(self.spacing)} points look like a boundary "
                 f"(limit {CLOSED_MAX_BOUNDARY * np.sqrt(len(self.spacing)):.0f} for a closed surface)")
 
 
@@ -91,6 +100,17 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     return keep
 
 
+def neighbour_tree(points: np.ndarray):
+    """scipy's cKDTree of the points, built for the importer's all-points queries: the
+    sliding-midpoint split and no node shrinking (balanced_tree=False, compact_nodes=False)
+    build about 3x faster than the default median split, and queries made in the tree's own
+    leaf order (which every caller uses) are no slower -- measured at 1M points on a terrain:
+    build 0.21 s against 0.64 s, a k=7 query of every point 0.7 s against 1.1 s."""
+    from scipy.spatial import cKDTree
+
+    return cKDTree(points, balanced_tree=False, compact_nodes=False)
+
+
 def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
     """offsets (n, k, 3) from each point to its neighbours; normals (n, 3) unit; the
     neighbours' normals (n, k, 3)."""
@@ -112,7 +132,6 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     """k-NN spacing of every point and, with normals, the boundary count and closed guess.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
     cKDTree of `points` already built."""
-    from scipy.spatial import cKDTree  # imported here: only import needs scipy
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -124,16 +143,28 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     if tree is not None:
         pts = tree.data  # the same points, maybe with more precision (float64 offsets)
     else:
-        tree = cKDTree(pts)
+        tree = neighbour_tree(pts)
     order = tree.indices  # leaf order of the tree: neighbouring points are adjacent
     spacing = np.empty(n, np.float32)
     boundary = 0
-    for start in chunks(n, _CHUNK, progress, "splat radii"):
+    tested = order if n <= BOUNDARY_SAMPLE else None  # the points given the boundary test
+    report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
+    for start in chunks(n, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        dist, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)  # +1: the point itself
-        spacing[idx] = dist[:, k]
-        if nrm is not None:
+        together = nrm is not None and tested is not None  # one query for both
+        # +1: the point itself; alone, only the k-th distance is returned (no (n, k) arrays)
+        dist, nbr = tree.query(pts[idx], k=kq + 1 if together else [k + 1], workers=workers)
+        spacing[idx] = dist[:, k] if together else dist[:, 0]
+        if together:
             boundary += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
+    if nrm is not None and tested is None:
+        tested = np.sort(np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
+        hits = 0
+        for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "closed surface guess"):
+            idx = tested[start:start + _CHUNK]
+            _, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)
+            hits += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
+        boundary = int(round(hits * n / len(tested)))
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
     if n_degenerate:
@@ -142,7 +173,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
             raise SpacingError("all points coincide: the spacing is zero everywhere")
         spacing[degenerate] = np.median(good)
     closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
-    return Neighbourhood(spacing, n_degenerate, boundary, bool(closed))
+    return Neighbourhood(spacing, n_degenerate, boundary, bool(closed), n if tested is None else len(tested))
 
 
 # Statistical outlier removal (as PCL's StatisticalOutlierRemoval and Open3D's
@@ -156,14 +187,13 @@ SOR_K = 20
 def statistical_inliers(points: np.ndarray, ratio: float, k: int = SOR_K, workers: int = -1, progress=None,
                         tree=None) -> np.ndarray:
     """(N,) bool: the points kept by statistical outlier removal (see SOR_K)."""
-    from scipy.spatial import cKDTree
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     k = int(min(k, n - 1))
     if k < 1:
         return np.ones(n, bool)
-    tree = tree if tree is not None else cKDTree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
     order = tree.indices
     mean = np.empty(n)
     for start in chunks(n, _CHUNK, progress, "statistical outliers"):
