@@ -38,6 +38,15 @@ _TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progr
 _REPORTED = (ply.CloudFileError, MemoryError, ValueError, Cancelled)
 
 
+def _decimal(value: float) -> float:
+    """A float property's value as the decimal the user typed: Blender stores it as float32,
+    and 0.001 in float32 is 0.0010000000475, which moves a georeferenced coordinate of 5e9 mm
+    by 0.24 m. The shortest decimal that gives the same float32 is what was meant."""
+    import numpy as np
+
+    return float(np.format_float_positional(np.float32(value), unique=True))
+
+
 class _WindowProgress:
     """Blender's progress on the cursor (wm.progress_*), for synchronous runs with a window."""
 
@@ -58,7 +67,6 @@ class _Work:
     module's text. Subclasses set self.work in execute() and call self.run(context)."""
 
     use_job: bpy.props.BoolProperty(options={"HIDDEN", "SKIP_SAVE"}, default=False)
-    label = "splat_tracer"
     _job = None
     _timer = None
 
@@ -72,7 +80,7 @@ class _Work:
             return {"RUNNING_MODAL"}
         bar = None if bpy.app.background or context.window_manager is None else _WindowProgress(context.window_manager)
         try:
-            result = self.work(TerminalProgress(self.label) if bar is None else bar)
+            result = self.work(TerminalProgress(self.bl_label) if bar is None else bar)
         except _REPORTED as e:
             return self._refused(e)
         finally:
@@ -226,7 +234,7 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
         axes = axis_conversion(from_forward=self.axis_forward, from_up=self.axis_up).to_3x3()
         return importer.ImportOptions(
             self.neighbours, self.outliers == "DROP", self.normal_neighbours, self.orientation, self.columns,
-            [list(row) for row in axes], self.global_scale, self.max_points,
+            [list(row) for row in axes], _decimal(self.global_scale), self.max_points,
             self.std_ratio if self.statistical_outliers else 0.0)
 
     def invoke(self, context, event):

@@ -205,8 +205,10 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
     except ValueError as e:
         raise CloudFileError(f"{path}: {e}") from None
     cloud = apply_budget(cloud, options.max_points, scaled(progress, 0.2, 0.25))
-    return prepare.prepare(cloud, path, options.k, options.drop_outliers, options.workers, options.normal_k,
-                           options.orientation, options.statistical_ratio, scaled(progress, 0.25, 1.0))
+    prepared = prepare.prepare(cloud, path, options.k, options.drop_outliers, options.workers, options.normal_k,
+                               options.orientation, options.statistical_ratio, scaled(progress, 0.25, 1.0))
+    report(1.0, f"prepared {len(prepared.local):,} splats")
+    return prepared
 
 
 def _ply_has_normals(path: str) -> bool:

@@ -26,6 +26,7 @@ from .ply import CloudFileError, PointCloud, make_cloud, read_ply, srgb_to_linea
 FORMATS = ("PLY", "LAS", "E57", "TEXT")
 EXTENSIONS = (".ply", ".las", ".laz", ".e57", ".xyz", ".pts", ".txt", ".csv")
 _SNIFF_BYTES = 4096
+_TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 file text in another encoding
 
 
 def sniff(path: str) -> str:
@@ -48,6 +49,11 @@ def sniff(path: str) -> str:
             return "TEXT"
         except UnicodeDecodeError as e:
             if e.start >= len(head) - 3:  # a character cut by the sniffing window
+                return "TEXT"
+            # Mostly printable ASCII with a few other bytes: text in another encoding (Latin-1,
+            # Windows-1252), which read_text refuses naming the first such byte.
+            printable = sum(1 for b in head if 32 <= b < 127 or b in (9, 10, 13))
+            if printable >= _TEXT_SHARE * len(head):
                 return "TEXT"
     what = "a PLY header" if head.lower().startswith(b"ply") else f"{head[:8]!r}"
     raise CloudFileError(f"{path}: not a point-cloud format this importer reads (it starts with {what}; "
@@ -267,7 +273,9 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}) and no other point-cloud format") from None
+        line = data[:e.start].count(b"\n") + 1
+        raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
+                             "other point-cloud format; save it as UTF-8 or ASCII") from None
     text = text.translate(_SEPARATORS)
     # The header: lines before the first one made of numbers only.
     offset, header, first = 0, [], None
