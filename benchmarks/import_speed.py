@@ -170,9 +170,10 @@ def run_case(case: str, path: str) -> dict:
             del v
             base = _maxrss()
             t0 = time.perf_counter()
-            axes = normals.estimate(pts, NORMAL_K)
+            graph = np.empty((len(pts), normals.GRAPH_K + 1), np.int32)  # as prepare.py does
+            axes = normals.estimate(pts, NORMAL_K, graph=graph)
             t_est = time.perf_counter() - t0
-            result = normals.orient(pts, axes, "PROPAGATE")
+            result = normals.orient(pts, axes, "PROPAGATE", graph=graph)
             out["seconds"] = time.perf_counter() - t0
             out["stages"] = {"estimate (PCA)": t_est, "orient": out["seconds"] - t_est}
             out["points"] = len(pts)

@@ -44,6 +44,9 @@ AMBIGUOUS_RULE = 0.2    # cos 78 degrees
 ACROSS_WEIGHT = 1.0     # the weight of |n . d| against 1 - |n_i . n_j|
 MODES = ("PROPAGATE", "UP", "SCANNER")
 _CHUNK = 1 << 15
+# smallest_eigenvectors: a cross product below this x p^2 means eigenvalues too close for the
+# closed form's vector (its error grows as the inverse of the gap); eigh decides those.
+_EIGEN_TOLERANCE = 1e-3
 
 
 @dataclass
@@ -54,9 +57,12 @@ class Orientation:
     components: int          # connected components of the neighbour graph
 
 
-def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None) -> np.ndarray:
+def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
+             graph=None) -> np.ndarray:
     """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
-    progress: progress.ProgressFn, called between chunks (it may raise Cancelled)."""
+    progress: progress.ProgressFn, called between chunks (it may raise Cancelled). graph:
+    an (N, m) int32 array to fill with each point's m nearest (itself first), m <= k + 1,
+    for orient() to reuse instead of searching again."""
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -69,12 +75,45 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     for start in chunks(n, _CHUNK, progress, "estimating normals"):
         idx = order[start:start + _CHUNK]
         _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
+        if graph is not None:
+            graph[idx] = nbr[:, :graph.shape[1]]
         q = pts[nbr]
         q -= q.mean(axis=1, keepdims=True)
-        cov = np.einsum("nki,nkj->nij", q, q)
-        _, vec = np.linalg.eigh(cov)  # ascending eigenvalues
-        out[idx] = vec[:, :, 0]
+        out[idx] = smallest_eigenvectors(np.einsum("nki,nkj->nij", q, q))
     return out
+
+
+def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:
+    """(N,3) unit eigenvectors of the smallest eigenvalue of symmetric 3x3 matrices, in
+    closed form (about 10x faster than numpy's batched eigh, which calls LAPACK once per
+    matrix): the eigenvalue by the trigonometric solution of the characteristic cubic
+    (Smith 1961), its vector as the largest cross product of two rows of cov - lambda I.
+    Matrices where that is ill-conditioned (the smallest eigenvalue nearly repeated: a
+    neighbourhood along a line, or isotropic) go to eigh."""
+    a = cov
+    q = np.trace(a, axis1=1, axis2=2) / 3.0
+    p1 = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2
+    p2 = (a[:, 0, 0] - q) ** 2 + (a[:, 1, 1] - q) ** 2 + (a[:, 2, 2] - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    safe_p = np.where(p > 0, p, 1.0)
+    b = (a - q[:, None, None] * np.eye(3)) / safe_p[:, None, None]
+    r = np.clip(np.linalg.det(b) / 2.0, -1.0, 1.0)
+    phi = np.arccos(r) / 3.0
+    smallest = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    m = a - smallest[:, None, None] * np.eye(3)
+    crosses = np.stack([np.cross(m[:, 0], m[:, 1]), np.cross(m[:, 0], m[:, 2]), np.cross(m[:, 1], m[:, 2])], 1)
+    length = np.linalg.norm(crosses, axis=2)
+    best = np.argmax(length, axis=1)
+    rows = np.arange(len(a))
+    vec = crosses[rows, best]
+    size = length[rows, best]
+    # well conditioned: the cross product is of the order of p^2 (the gap between eigenvalues)
+    ok = size > _EIGEN_TOLERANCE * p * p
+    vec = vec / np.where(ok, size, 1.0)[:, None]
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        vec[bad] = np.linalg.eigh(a[bad])[1][:, :, 0]
+    return vec
 
 
 def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.ndarray:
@@ -92,7 +131,7 @@ def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.nd
 
 
 def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", scanners=None,
-           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None) -> Orientation:
+           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None) -> Orientation:
     """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
     for estimate (the steps of the propagation are single library calls: reported between them)."""
     from scipy.sparse import coo_matrix
@@ -121,18 +160,28 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
 
     report = progress or nothing
     report(0.0, "orienting normals: neighbour graph")
-    tree = tree if tree is not None else neighbour_tree(pts)
-    _, nbr = tree.query(pts, k=k + 1, workers=workers)
-    i = np.repeat(np.arange(n), k)
-    j = nbr[:, 1:].ravel()
-    d = pts[j] - pts[i]
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    w = 1.0 - np.abs(np.einsum("ij,ij->i", nrm[i], nrm[j]))
-    w += ACROSS_WEIGHT * 0.5 * (np.abs(np.einsum("ij,ij->i", nrm[i], d)) + np.abs(np.einsum("ij,ij->i", nrm[j], d)))
-    w += 1e-9  # csgraph treats a zero weight as no edge
+    if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
+        nbr = graph[:, :k + 1]
+    else:
+        tree = tree if tree is not None else neighbour_tree(pts)
+        order = tree.indices  # queried in the tree's leaf order: 3x faster than in file order
+        nbr = np.empty((n, k + 1), np.int64)
+        nbr[order] = tree.query(pts[order], k=k + 1, workers=workers)[1]
+    # The edges' weights, each point against its k neighbours (broadcast: no repeated copies
+    # of each point's row); float32 is ample for weights in 0..2.
+    j = np.ascontiguousarray(nbr[:, 1:])
+    n32 = nrm.astype(np.float32)
+    nj = n32[j]
+    d = pts[j] - pts[:, None]  # float64 differences: exact at any offset
+    d = (d / np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)).astype(np.float32)
+    w = 1.0 - np.abs((n32[:, None] * nj).sum(axis=2))
+    w += ACROSS_WEIGHT * 0.5 * (np.abs((n32[:, None] * d).sum(axis=2)) + np.abs((nj * d).sum(axis=2)))
+    del nj, d
     report(0.4, "orienting normals: spanning tree")
-    mst = minimum_spanning_tree(coo_matrix((w, (i, j)), shape=(n, n)).tocsr())
-    del i, j, d, w
+    w = w.ravel().astype(np.float64) + 1e-9  # csgraph treats a zero weight as no edge
+    i = np.repeat(np.arange(n, dtype=np.int32), k)
+    mst = minimum_spanning_tree(coo_matrix((w, (i, j.ravel())), shape=(n, n)).tocsr())
+    del i, j, w
     report(0.8, "orienting normals: propagation")
     n_comp, labels = connected_components(mst, directed=False)
 

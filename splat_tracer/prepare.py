@@ -206,12 +206,17 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel)
+        graph = None
+        if cloud.normals is None and normal_k >= normals_mod.GRAPH_K and len(rel) > normal_k + 1:
+            # the orientation reuses the estimation's nearest neighbours
+            graph = np.empty((len(rel), normals_mod.GRAPH_K + 1), np.int32)
         axes = (cloud.normals if cloud.normals is not None
-                else normals_mod.estimate(rel, normal_k, workers, tree, progress=step("estimate")))
+                else normals_mod.estimate(rel, normal_k, workers, tree, progress=step("estimate"), graph=graph))
         oriented_by = resolve_orientation(cloud, orientation)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
         result = normals_mod.orient(rel, axes, oriented_by, scanners, workers=workers, tree=tree,
-                                    progress=step("orient"))
+                                    progress=step("orient"), graph=graph)
+        del graph
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
