@@ -72,6 +72,7 @@ class _Work:
 
     def run(self, context) -> set:
         if self.use_job and not bpy.app.background and context.window is not None:
+            self.use_job = False  # a redo (Adjust Last Operation) re-runs synchronously
             wm = context.window_manager
             self._job = Job(self.work).start()
             self._timer = wm.event_timer_add(_TIMER_SECONDS, window=context.window)
@@ -239,7 +240,8 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
 
     def invoke(self, context, event):
         self.use_job = True
-        if self.filepath or self.directory and len(self.files):  # dropped files: confirm the options
+        # Dropped files (directory and files are set, and never remembered): confirm the options.
+        if self.directory and len(self.files) or self.properties.is_property_set("filepath"):
             return self.invoke_popup(context)
         return ImportHelper.invoke(self, context, event)
 
