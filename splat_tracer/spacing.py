@@ -84,6 +84,10 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     if n < 2:
         return keep
     h = np.bitwise_xor.reduce(pts.view(np.uint64) * _HASH_MULTIPLIERS, axis=1)  # wraps modulo 2^64
+    hs = np.sort(h)  # a sort alone first (twice as fast as argsort): most clouds have no repeats
+    if not (hs[1:] == hs[:-1]).any():
+        return keep
+    del hs
     order = np.argsort(h, kind="stable")
     same = h[order[1:]] == h[order[:-1]]
     if not same.any():
@@ -128,10 +132,11 @@ def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.nda
 
 
 def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
-            tree=None) -> Neighbourhood:
+            tree=None, known_spacing=None) -> Neighbourhood:
     """k-NN spacing of every point and, with normals, the boundary count and closed guess.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
-    cKDTree of `points` already built."""
+    cKDTree of `points` already built; known_spacing: the (N,) distances to the k-th
+    nearest other point when a search already found them (normals.estimate)."""
 
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -145,11 +150,16 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     else:
         tree = neighbour_tree(pts)
     order = tree.indices  # leaf order of the tree: neighbouring points are adjacent
-    spacing = np.empty(n, np.float32)
+    spacing = np.empty(n, np.float32) if known_spacing is None else np.array(known_spacing, np.float32)
     boundary = 0
     tested = order if n <= BOUNDARY_SAMPLE else None  # the points given the boundary test
+    if known_spacing is not None and nrm is not None and tested is not None:
+        tested = None  # below: the boundary test alone, on every point
+        sample = order
+    else:
+        sample = None
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
-    for start in chunks(n, _CHUNK, report, "splat radii"):
+    for start in chunks(n if known_spacing is None else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
         together = nrm is not None and tested is not None  # one query for both
         # +1: the point itself; alone, only the k-th distance is returned (no (n, k) arrays)
@@ -158,9 +168,10 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         if together:
             boundary += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
     if nrm is not None and tested is None:
-        tested = np.sort(np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
+        tested = sample if sample is not None else np.sort(
+            np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
         hits = 0
-        for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "closed surface guess"):
+        for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "splat radii: closed surface guess"):
             idx = tested[start:start + _CHUNK]
             _, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)
             hits += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
