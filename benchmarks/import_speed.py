@@ -8,15 +8,17 @@ field, its true normals known), with colours and, for LAS, intensity and classif
 Two files: a binary little-endian PLY (x y z nx ny nz as float32, red green blue as uchar:
 what scanning software exports) and a LAS 1.4 file (point format 7: 16-bit colour,
 millimetre scale, a UTM-like offset). Every case runs in a fresh Python process, so that
-its peak memory (ru_maxrss, which sees numpy's and native allocations, unlike tracemalloc)
-is its own; memory per point is that peak minus the process's peak just before the case
-(Python, bpy, the extension loaded), over N.
+its peak memory is its own: the peak RSS (which sees numpy's and native allocations, unlike
+tracemalloc) is reset to the current RSS just before the case (Linux's clear_refs) and read
+after it; memory per point is that peak minus the RSS before the case (Python, bpy, the
+extension loaded), over N.
 
 Cases:
 - Splat Tracer, PLY with normals: read, checks, origin, k-NN radii, the Blender object
   (the import operator's own functions: importer.load, then create_objects).
 - Splat Tracer, LAS: the same; LAS has no normals, so they are estimated and oriented:
-  the table gives the import without that step (total minus it) and with it.
+  the table gives the import with that step and without it (the same pipeline given +Z
+  normals, as if the file had them: the radii then need their own neighbour search).
 - Splat Tracer, normal estimation alone: PCA over 16 neighbours and the orientation (on
   the PLY's points, its normals ignored).
 - Blender's PLY importer (bpy.ops.wm.ply_import; a mesh of vertices, no radii, no analysis).
@@ -130,14 +132,39 @@ class Stages:
         return out
 
 
-def _maxrss() -> int:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024  # Linux: kilobytes
+def _status(field: str) -> int:
+    """A memory figure of this process in bytes from /proc/self/status (VmRSS, VmHWM)."""
+    with open("/proc/self/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) * 1024
+    raise KeyError(field)
+
+
+def _start_peak() -> int:
+    """Resets the process's peak RSS to its current RSS (Linux: /proc/self/clear_refs 5) and
+    returns that RSS: the case's peak is then its own, not start-up's (importing bpy peaks
+    higher than a 10M-point mesh adds, which ru_maxrss alone would hide). Without /proc:
+    ru_maxrss, the peak so far."""
+    try:
+        with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
+            f.write("5")
+        return _status("VmRSS")
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def _peak_since(base: int) -> int:
+    try:
+        return _status("VmHWM") - base
+    except OSError:
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024 - base
 
 
 def run_case(case: str, path: str) -> dict:
     """One measurement in this process: wall seconds and peak memory beyond the start."""
     out = {"case": case}
-    if case in ("ours", "ours_normals", "blender"):
+    if case in ("ours", "ours_given_normals", "ours_normals", "blender"):
         import dev_extension
 
         home = dev_extension.isolate_user_dirs()
@@ -149,13 +176,29 @@ def run_case(case: str, path: str) -> dict:
                    if name.startswith("bl_ext.") and name.endswith(".splat_tracer.operators.import_cloud"))
         importer = next(m for name, m in sys.modules.items()
                         if name.startswith("bl_ext.") and name.endswith(".splat_tracer.splat_tracer.importer"))
-        normals = next(m for name, m in sys.modules.items()
-                       if name.startswith("bl_ext.") and name.endswith(".splat_tracer.splat_tracer.normals"))
-        base = _maxrss()
+        normals, readers, prepare = (next(m for name, m in sys.modules.items() if name.startswith("bl_ext.")
+                                          and name.endswith(f".splat_tracer.splat_tracer.{module}"))
+                                     for module in ("normals", "readers", "prepare"))
+        base = _start_peak()
         t0 = time.perf_counter()
         if case == "ours":
             stages = Stages()
             prep = importer.load(path, importer.ImportOptions(), stages)
+            t_load = time.perf_counter() - t0
+            ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
+            out["seconds"] = time.perf_counter() - t0
+            out["stages"] = stages.durations(t_load)
+            out["stages"]["blender object"] = out["seconds"] - t_load
+            out["points"] = len(prep.local)
+        elif case == "ours_given_normals":  # the import without estimating normals: as if the file had them
+            from dataclasses import replace
+
+            stages = Stages()
+            stages(0.0, "reading")
+            cloud = readers.read_cloud(path)
+            cloud = replace(cloud, normals=np.tile(np.float32([0, 0, 1]), (len(cloud), 1)), oriented=True)
+            stages(0.2, "read ")
+            prep = prepare.prepare(cloud, path, progress=stages)
             t_load = time.perf_counter() - t0
             ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
             out["seconds"] = time.perf_counter() - t0
@@ -168,7 +211,7 @@ def run_case(case: str, path: str) -> dict:
             v = PlyData.read(path)["vertex"].data
             pts = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
             del v
-            base = _maxrss()
+            base = _start_peak()
             t0 = time.perf_counter()
             graph = np.empty((len(pts), normals.GRAPH_K + 1), np.int32)  # as prepare.py does
             axes = normals.estimate(pts, NORMAL_K, graph=graph)
@@ -182,11 +225,11 @@ def run_case(case: str, path: str) -> dict:
             bpy.ops.wm.ply_import(filepath=path)
             out["seconds"] = time.perf_counter() - t0
             out["points"] = len(bpy.context.active_object.data.vertices)
-        out["peak_bytes"] = _maxrss() - base
+        out["peak_bytes"] = _peak_since(base)
         return out
     import open3d as o3d  # the Open3D cases run in Open3D's own environment
 
-    base = _maxrss()
+    base = _start_peak()
     t0 = time.perf_counter()
     pcd = o3d.io.read_point_cloud(path)
     out["read_seconds"] = time.perf_counter() - t0
@@ -198,7 +241,7 @@ def run_case(case: str, path: str) -> dict:
         out["seconds"] = time.perf_counter() - t1
     else:
         out["seconds"] = out["read_seconds"]
-    out["peak_bytes"] = _maxrss() - base
+    out["peak_bytes"] = _peak_since(base)
     return out
 
 
@@ -215,7 +258,7 @@ def spawn(python: str, case: str, path: Path) -> dict:
 
 ROWS = [  # (key, renderer, file, what)
     ("ours_ply", "Splat Tracer import", "PLY", "read, checks, k-NN radii, Blender object (file has normals)"),
-    ("ours_las", "Splat Tracer import", "LAS", "the same, without estimating normals (total minus that step)"),
+    ("ours_las", "Splat Tracer import", "LAS", "the same, normals not estimated (given as +Z, as if the file had them)"),
     ("ours_las_total", "Splat Tracer import", "LAS", "all of it, normals estimated and oriented"),
     ("blender_ply", "Blender `wm.ply_import`", "PLY", "a mesh of vertices (no radii, no analysis)"),
     ("open3d_ply", "Open3D `read_point_cloud`", "PLY", "a PointCloud in memory (no Blender object)"),
@@ -247,7 +290,8 @@ def main(argv=None) -> int:
     if o3d is None:
         o3d_why = f"no Python with open3d at {args.open3d_python} (`make bench` creates build/o3d)"
     results = {}
-    runs = [("ours_ply", me, "ours", ply_path), ("ours_las_total", me, "ours", las_path),
+    runs = [("ours_ply", me, "ours", ply_path), ("ours_las", me, "ours_given_normals", las_path),
+            ("ours_las_total", me, "ours", las_path),
             ("blender_ply", me, "blender", ply_path), ("ours_normals", me, "ours_normals", ply_path)]
     if o3d:
         runs += [("open3d_ply", o3d, "open3d_read", ply_path), ("open3d_normals", o3d, "open3d_normals", ply_path)]
@@ -258,10 +302,6 @@ def main(argv=None) -> int:
                                           if "seconds" in r else f"failed: {r['error']}"), flush=True)
         if key.startswith("open3d") and "error" in r and o3d_why is None:
             o3d_why = f"Open3D failed: {r['error']}"
-    las = results.get("ours_las_total", {})
-    if "stages" in las:
-        normal_time = las["stages"].get("normals", 0.0)
-        results["ours_las"] = dict(las, seconds=las["seconds"] - normal_time, peak_bytes=None)
     nm = results.get("ours_normals", {})
     if "stages" in nm:
         results["ours_pca"] = dict(nm, seconds=nm["stages"]["estimate (PCA)"], peak_bytes=None)
@@ -286,7 +326,7 @@ def main(argv=None) -> int:
             continue
         mem = "" if r.get("peak_bytes") is None else f"{r['peak_bytes'] / n:.0f}"
         lines.append(f"| {who} | {file} | {what} | {r['seconds']:.2f} | {mem} |")
-    for key in ("ours_ply", "ours_las_total", "ours_normals"):
+    for key in ("ours_ply", "ours_las", "ours_las_total", "ours_normals"):
         if "stages" in results.get(key, {}):
             st = results[key]["stages"]
             lines.append("")
