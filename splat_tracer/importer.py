@@ -28,13 +28,14 @@ from . import normals, prepare, readers, resources, spacing
 from .ply import CloudFileError, PointCloud
 from .progress import ProgressFn, nothing, scaled
 
-# Peak memory of an import per point, measured by benchmarks/import_speed.py (peak RSS minus
-# the process's before, 1M and 10M points): reading and preparing a cloud whose file has
-# normals (positions in float64, normals, colours, the k-d tree and the chunked neighbour
-# arrays), and the extra for estimating and orienting normals (the orientation's neighbour
-# graph of 8 edges per point and its spanning tree dominate), each rounded up.
-BYTES_PER_POINT_READ = 400
-BYTES_PER_POINT_NORMALS = 1200
+# Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
+# (peak RSS above the process's RSS before the import, Blender object included): 257 bytes
+# for a PLY with normals and 223 for a LAS given normals (positions in float64, colours,
+# attributes, the k-d tree, the float32 copies handed to Blender), rounded up; and the
+# extra for estimating normals and orienting them along the neighbour graph (503 bytes on
+# top of the positions: the graph's 8 edges per point and its spanning tree), rounded up.
+BYTES_PER_POINT_READ = 300
+BYTES_PER_POINT_NORMALS = 600
 # The budget's grid: at most this many refinements of the cell size (each one sort of the
 # cells' keys); a surface's occupied cells grow with 1/cell^2, so two or three suffice.
 BUDGET_ITERATIONS = 8
