@@ -319,11 +319,13 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
             out = []
             for i, (name, points, scanners, mode) in enumerate(jobs):
                 step = Steps(scaled(progress, i / len(jobs), (i + 1) / len(jobs), f"{name}: "),
-                             {"estimate": 2.0, "orient": 1.0, "radii": 2.0})
+                             {"normals": 3.0, "radii": 1.0})
                 try:
-                    axes = normals.estimate(points, normal_k, progress=step("estimate"))
-                    result = normals.orient(points, axes, mode, scanners, progress=step("orient"))
-                    hood = spacing.analyse(points, result.normals, k, progress=step("radii"))
+                    tree = spacing.neighbour_tree(points)
+                    result, known = normals.estimate_and_orient(points, normal_k, mode, scanners, radius_k=k,
+                                                                tree=tree, progress=step("normals"))
+                    hood = spacing.analyse(points, result.normals, k, progress=step("radii"), tree=tree,
+                                           known_spacing=known)
                 except (ValueError, MemoryError) as e:
                     raise ValueError(f"{name}: {e}") from None
                 out.append((name, result, hood))

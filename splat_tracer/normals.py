@@ -85,6 +85,29 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     return out
 
 
+def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PROPAGATE", scanners=None,
+                        axes=None, radius_k: int = 0, workers: int = -1, tree=None, progress=None):
+    """(Orientation, spacing or None): estimate() then orient() sharing one neighbour
+    search (the orientation's graph and, for radius_k in 1..k, each point's distance to its
+    radius_k-th nearest other point: spacing.analyse's known_spacing). axes: the file's own
+    unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
+    estimating = axes is None
+    share = 2.0 / 3.0 if estimating else 0.0
+    graph = spacing = None
+    if estimating and k >= GRAPH_K and n > k + 1:
+        graph = np.empty((n, GRAPH_K + 1), np.int32)
+        if 1 <= radius_k <= k:
+            spacing = (radius_k, np.empty(n, np.float32))
+    if estimating:
+        axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing)
+    result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
+                    graph=graph)
+    return result, None if spacing is None else spacing[1]
+
+
 def _covariances(q: np.ndarray) -> np.ndarray:
     """(n,3,3) scatter matrices of the (n,k,3) neighbourhoods about their means: the six
     distinct sums by elementwise products (twice as fast as einsum's general contraction)."""

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import core, normals as normals_mod, spacing
 from .ply import CloudFileError, PointCloud
-from .progress import Steps
+from .progress import Steps, scaled
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
 BULK_PERCENTILES = (1.0, 99.0)
@@ -214,27 +214,18 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel)
-        graph = None
-        if cloud.normals is None and normal_k >= normals_mod.GRAPH_K and len(rel) > normal_k + 1:
-            # the orientation reuses the estimation's nearest neighbours
-            graph = np.empty((len(rel), normals_mod.GRAPH_K + 1), np.int32)
-        if cloud.normals is None and k <= normal_k and bulk.all() and len(rel) > normal_k + 1:
-            known_spacing = (k, np.empty(len(rel), np.float32))  # the radii's search is part of the normals'
-        axes = (cloud.normals if cloud.normals is not None
-                else normals_mod.estimate(rel, normal_k, workers, tree, progress=step("estimate"), graph=graph,
-                                          spacing=known_spacing))
         oriented_by = resolve_orientation(cloud, orientation)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
-        result = normals_mod.orient(rel, axes, oriented_by, scanners, workers=workers, tree=tree,
-                                    progress=step("orient"), graph=graph)
-        del graph
+        result, known_spacing = normals_mod.estimate_and_orient(
+            rel, normal_k, oriented_by, scanners, cloud.normals, k if bulk.all() else 0, workers, tree,
+            scaled(progress, *step.span("estimate", "orient")))
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
     try:
         hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
                                tree=tree if len(inliers) == len(local) else None,
-                               known_spacing=None if known_spacing is None else known_spacing[1])
+                               known_spacing=known_spacing)
     except spacing.SpacingError as e:
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,

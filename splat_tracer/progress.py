@@ -51,6 +51,10 @@ class Steps:
     def __call__(self, name: str) -> ProgressFn:
         return scaled(self.progress, *self.ranges[name])
 
+    def span(self, first: str, last: str) -> tuple:
+        """(start, end) of the steps first..last together."""
+        return self.ranges[first][0], self.ranges[last][1]
+
 
 def chunks(total: int, size: int, progress: Optional[ProgressFn], message: str):
     """range(0, total, size), reporting the share done before each chunk."""

@@ -168,7 +168,7 @@ def test_a_count_too_large_for_memory_is_refused_before_reading(tmp_path, monkey
     p, n = fibonacci_sphere(2000)
     path = _write(tmp_path / "big.ply", p, n)
     monkeypatch.setattr(readers, "read_cloud", lambda *a: pytest.fail("read before the memory check"))
-    resources.override(1 << 20)  # 1 MiB free
+    resources.override(100 << 10)  # 100 KiB free
     try:
         with pytest.raises(ply.CloudFileError, match=r"declares 2,000 points; importing them needs about .* GB "
                                                       r"of memory but only 0.0 GB are available") as err:
