@@ -181,24 +181,18 @@ def run_case(case: str, path: str) -> dict:
                                      for module in ("normals", "readers", "prepare"))
         base = _start_peak()
         t0 = time.perf_counter()
-        if case == "ours":
+        if case in ("ours", "ours_given_normals"):
             stages = Stages()
-            prep = importer.load(path, importer.ImportOptions(), stages)
-            t_load = time.perf_counter() - t0
-            ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
-            out["seconds"] = time.perf_counter() - t0
-            out["stages"] = stages.durations(t_load)
-            out["stages"]["blender object"] = out["seconds"] - t_load
-            out["points"] = len(prep.local)
-        elif case == "ours_given_normals":  # the import without estimating normals: as if the file had them
-            from dataclasses import replace
+            if case == "ours":
+                prep = importer.load(path, importer.ImportOptions(), stages)
+            else:  # the import without estimating normals: as if the file had them
+                from dataclasses import replace
 
-            stages = Stages()
-            stages(0.0, "reading")
-            cloud = readers.read_cloud(path)
-            cloud = replace(cloud, normals=np.tile(np.float32([0, 0, 1]), (len(cloud), 1)), oriented=True)
-            stages(0.2, "read ")
-            prep = prepare.prepare(cloud, path, progress=stages)
+                stages(0.0, "reading")
+                cloud = readers.read_cloud(path)
+                cloud = replace(cloud, normals=np.tile(np.float32([0, 0, 1]), (len(cloud), 1)), oriented=True)
+                stages(0.2, "read ")
+                prep = prepare.prepare(cloud, path, progress=stages)
             t_load = time.perf_counter() - t0
             ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
             out["seconds"] = time.perf_counter() - t0
