@@ -246,7 +246,7 @@ def read_ply(path: str) -> PointCloud:
     if gaussians.is_gaussian(names):
         return gaussians.read_gaussians(path, v, names)
 
-    pos = np.column_stack([v[c].astype(np.float64) for c in "xyz"])
+    pos = _columns(v, ("x", "y", "z"))
     finite = np.isfinite(pos).all(axis=1)  # rows without are dropped and counted (make_cloud)
 
     radii = None
@@ -265,7 +265,7 @@ def read_ply(path: str) -> PointCloud:
 
     normals = None
     if {"nx", "ny", "nz"} <= names:
-        normals = np.column_stack([v[c].astype(np.float64) for c in ("nx", "ny", "nz")])
+        normals = _columns(v, ("nx", "ny", "nz"))
     ignored = [p.name for p in ply["vertex"].properties if p.name not in _KNOWN_PROPERTIES]
     notes = [f"vertex properties ignored (not a splat's): {', '.join(ignored)}"] if ignored else []
     return make_cloud(path, pos, normals, colours, radii, drop_non_finite=True, notes=notes)
@@ -273,6 +273,14 @@ def read_ply(path: str) -> PointCloud:
 
 # The vertex properties a (non-Gaussian) PLY is read for; others are ignored and said.
 _KNOWN_PROPERTIES = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "radius"}
+
+
+def _columns(v, names) -> np.ndarray:
+    """(N, len(names)) float64 from fields of a structured array, converted in one pass."""
+    out = np.empty((len(v), len(names)))
+    for i, name in enumerate(names):
+        out[:, i] = v[name]
+    return out
 
 
 def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, radii=None, attributes=None,
@@ -296,7 +304,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
         # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
         # point is dropped and counted, never rendered with a garbage orientation.
         nrm = np.asarray(normals, dtype=np.float64)
-        length = np.linalg.norm(nrm, axis=1)
+        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))  # np.linalg.norm: 5x slower at 10M
         ok = np.isfinite(length) & (length > 0)
         dropped = int((keep & ~ok).sum())
         if not (ok & keep).any():

@@ -78,17 +78,20 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     pathological (every neighbour at distance 0: 200k copies of one point took 90 s), so
     they are found first, in O(N log N): rows are sorted by a hash of their bits, and only
     rows sharing a hash are sorted and compared by value."""
-    pts = np.ascontiguousarray(points, dtype=np.float64) + 0.0  # + 0.0 turns -0.0 into 0.0
+    pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     keep = np.ones(n, bool)
     if n < 2:
         return keep
-    bits = pts.view(np.uint64)
-    # The high half folded into the low first: a multiplication only carries bits upward, and
-    # coordinates read from float32 have their 29 low mantissa bits zero, which left the hash
-    # 35 bits (a 10M-point float32 scan had ~1,500 false collisions and took the slow path).
-    bits = bits ^ (bits >> np.uint64(32))
-    h = np.bitwise_xor.reduce(bits * _HASH_MULTIPLIERS, axis=1)  # wraps modulo 2^64
+    h = np.zeros(n, np.uint64)
+    for axis in range(3):  # a column at a time: no (N,3) temporaries
+        bits = (pts[:, axis] + 0.0).view(np.uint64)  # + 0.0 turns -0.0 into 0.0 (and copies)
+        # The high half folded into the low first: a multiplication only carries bits upward,
+        # and coordinates read from float32 have their 29 low mantissa bits zero, which left
+        # the hash 35 bits (a 10M-point float32 scan had ~1,500 false collisions, 4x slower).
+        bits ^= bits >> np.uint64(32)
+        bits *= _HASH_MULTIPLIERS[axis]  # wraps modulo 2^64
+        h ^= bits
     del bits
     hs = np.sort(h)  # a sort alone first (twice as fast as argsort): most clouds have no repeats
     if not (hs[1:] == hs[:-1]).any():
@@ -102,7 +105,7 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     shared[1:] |= same
     shared[:-1] |= same
     rows = np.sort(order[shared])  # rows with a hash some other row has, in file order
-    sub = pts[rows]
+    sub = pts[rows] + 0.0
     by_value = np.lexsort((sub[:, 2], sub[:, 1], sub[:, 0]))  # stable: earlier rows first
     ordered = sub[by_value]
     repeat = (ordered[1:] == ordered[:-1]).all(axis=1)
