@@ -199,7 +199,7 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
     # Only PLY can say from its header whether normals follow; assume the worst elsewhere.
     check_memory(path, kind, options, estimates_normals=kind != "PLY" or not _ply_has_normals(path))
     report(0.0, f"reading {name}")
-    cloud = readers.read_cloud(path, options.columns)
+    cloud = readers.read_cloud(path, options.columns, scaled(progress, 0.0, 0.2, f"{name}: "))
     report(0.2, f"read {len(cloud):,} points")
     try:
         cloud = transform(cloud, options.axes, options.scale)

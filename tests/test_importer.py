@@ -123,6 +123,28 @@ def test_a_cancel_at_any_stage_stops_the_import(tmp_path, at):
         importer.load(_bare_sphere(tmp_path), progress=progress)
 
 
+@pytest.mark.parametrize("compress", [False, True], ids=["LAS", "LAZ"])
+def test_las_reading_reports_progress_by_chunks_and_can_be_cancelled(tmp_path, monkeypatch, compress):
+    import laspy
+
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.header.scales = np.full(3, 0.001)
+    las.x, las.y, las.z = RNG.uniform(0, 10, (3, 1000))
+    path = tmp_path / ("scan.laz" if compress else "scan.las")
+    las.write(str(path), do_compress=compress)
+    monkeypatch.setattr(readers, "_LAS_CHUNK", 300)
+    seen = []
+    cloud = readers.read_cloud(str(path), progress=lambda f, m: seen.append(f))
+    assert len(cloud) == 1000 and seen == [0.0, 0.3, 0.6, 0.9]
+    np.testing.assert_allclose(cloud.positions[:, 0], np.asarray(las.x), atol=1e-9)
+
+    def cancel_at_the_third_chunk(fraction, message):  # reading is the import's first fifth
+        if message == f"{path.name}: reading" and fraction >= 0.6 * 0.2:
+            raise Cancelled("cancelled while reading")
+    with pytest.raises(Cancelled, match="while reading"):
+        importer.load(str(path), progress=cancel_at_the_third_chunk)
+
+
 def test_a_job_runs_on_a_worker_thread_and_is_cancelled_at_its_next_progress_call():
     started, release = threading.Event(), threading.Event()
 
