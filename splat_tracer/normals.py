@@ -65,7 +65,6 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     for orient() to reuse instead of searching again. spacing: (m, (N,) float32 array) to
     fill with each point's distance to its m-th nearest other point (m <= k), the splat
     radius's spacing (spacing.analyse) without a search of its own."""
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:

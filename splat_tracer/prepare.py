@@ -192,10 +192,13 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     if outliers and drop_outliers:
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
     needs_normals = cloud.normals is None or not cloud.oriented
-    # Shares of the progress bar, by what each step costs (measured at 1M points: the
-    # normals' estimation and orientation take about as long as the radii's analysis).
-    weights = {"statistical": 1.0 if statistical_ratio > 0 else 0.0, "estimate": 2.0 if cloud.normals is None else 0.0,
-               "orient": 1.0 if needs_normals else 0.0, "radii": 2.0}
+    # Shares of the progress bar, roughly as the steps' times at 1M-10M points: the normals'
+    # estimation about twice its orientation; the radii as much as the estimation when they
+    # need their own neighbour search (the file has normals), a fifth of it when they reuse
+    # the estimation's.
+    estimating = cloud.normals is None
+    weights = {"statistical": 1.0 if statistical_ratio > 0 else 0.0, "estimate": 2.0 if estimating else 0.0,
+               "orient": 1.0 if needs_normals else 0.0, "radii": 0.4 if estimating else 2.0}
     step = Steps(progress, weights)
     statistical = 0
     if statistical_ratio > 0 and len(cloud) > spacing.MIN_POINTS:

@@ -142,7 +142,6 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
     cKDTree of `points` already built; known_spacing: the (N,) distances to the k-th
     nearest other point when a search already found them (normals.estimate)."""
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
@@ -203,7 +202,6 @@ SOR_K = 20
 def statistical_inliers(points: np.ndarray, ratio: float, k: int = SOR_K, workers: int = -1, progress=None,
                         tree=None) -> np.ndarray:
     """(N,) bool: the points kept by statistical outlier removal (see SOR_K)."""
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     k = int(min(k, n - 1))
