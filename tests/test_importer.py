@@ -375,3 +375,31 @@ def test_background_import_prints_progress_and_estimate_normals_still_works(blen
         o.select_set(o == obj)
     assert bpy.ops.splat_tracer.estimate_normals(orientation="PROPAGATE") == {"FINISHED"}
     assert "Estimate Splat Normals:" in capfd.readouterr().out
+
+
+def test_a_job_cancelled_midway_in_blender_leaves_nothing(blender, empty_scene, tmp_path):
+    """What the modal operator does, less its window's events: the import's work on a worker
+    thread (the extension's own Job and pipeline), cancelled while it runs; nothing exists."""
+    from blender_helpers import extension_module
+
+    bpy = blender
+    progress, ext_importer = extension_module("splat_tracer.progress"), extension_module("splat_tracer.importer")
+    path = _bare_sphere(tmp_path, 20000)
+    before = _counts(bpy)
+    reached, cancelled = threading.Event(), threading.Event()
+
+    def work(report):
+        def watch(fraction, message):
+            report(fraction, message)  # raises Cancelled once the job is cancelled
+            if message.startswith("estimating normals") and not reached.is_set():
+                reached.set()
+                cancelled.wait(30)  # midway: the main thread cancels now
+        return ext_importer.load_many([path], progress=watch)
+    job = progress.Job(work).start()
+    assert reached.wait(30)
+    job.cancel()
+    cancelled.set()
+    assert job.wait(30)
+    with pytest.raises(progress.Cancelled):
+        job.result()
+    assert _counts(bpy) == before
