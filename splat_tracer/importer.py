@@ -29,13 +29,13 @@ from .ply import CloudFileError, PointCloud
 from .progress import ProgressFn, nothing, scaled
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
-# (peak RSS above the process's RSS before the import, Blender object included): 257 bytes
+# (peak RSS above the process's RSS before the import, Blender object included): 210 bytes
 # for a PLY with normals and 223 for a LAS given normals (positions in float64, colours,
 # attributes, the k-d tree, the float32 copies handed to Blender), rounded up; and the
-# extra for estimating normals and orienting them along the neighbour graph (503 bytes on
+# extra for estimating normals and orienting them along the neighbour graph (275 bytes on
 # top of the positions: the graph's 8 edges per point and its spanning tree), rounded up.
 BYTES_PER_POINT_READ = 300
-BYTES_PER_POINT_NORMALS = 600
+BYTES_PER_POINT_NORMALS = 350
 # The budget's grid: at most this many refinements of the cell size (each one sort of the
 # cells' keys); a surface's occupied cells grow with 1/cell^2, so two or three suffice.
 BUDGET_ITERATIONS = 8
