@@ -1,16 +1,26 @@
 """File > Import > Splat Point Cloud, and drag-and-drop of point-cloud files into the 3D
 viewport (PLY incl. Gaussian-splatting PLY, LAS/LAZ, E57, XYZ/PTS/TXT/CSV: the reader is
 chosen by the file's content, splat_tracer/readers.py); and Estimate Splat Normals, which
-(re)estimates the normals and radii of existing cloud objects."""
+(re)estimates the normals and radii of existing cloud objects.
+
+Both do their work (splat_tracer/importer.py, normals.py: no Blender data) before they touch
+Blender's data, in one step at the end; an error or a cancel before then leaves nothing,
+and one during it removes what it made. Run from the interface (the file browser,
+drag-and-drop, the button), the work runs on a worker thread while a modal timer shows its
+progress in the status bar and Esc cancels it. Run from a script (`bpy.ops...(filepath=...)`)
+it runs synchronously: a progress bar on the cursor, or lines on the terminal in background
+mode (`blender -b`).
+"""
 from __future__ import annotations
 
 import os
 
 import bpy
-from bpy_extras.io_utils import ImportHelper
+from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
 
-from ..splat_tracer import normals, ply, prepare, readers, spacing
+from ..splat_tracer import importer, normals, ply, prepare, readers, spacing
 from ..splat_tracer.cloud_object import NORMAL, RADIUS, create_cloud_object
+from ..splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress, scaled
 
 SCANNER = "scanner_position"  # point attribute: the scanner that saw the point (object-local)
 ORIENTATION_HINT = "splat_tracer_orientation"  # custom property: the file's own orientation mode
@@ -22,16 +32,142 @@ _ORIENTATION_ITEMS = [
     ("UP", "Upward", "Towards +Z (aerial scans); walls take their neighbours' side"),
     ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files); else Neighbour Graph"),
 ]
+_TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progress
+# What a failed or cancelled run reports, and which exceptions are the user's problem
+# (reported) rather than a bug (raised).
+_REPORTED = (ply.CloudFileError, MemoryError, ValueError, Cancelled)
 
 
-def load_cloud(path: str, k: int, drop_outliers: bool = False, normal_k: int = normals.DEFAULT_K,
-               orientation: str = "AUTO", columns: str = "") -> prepare.PreparedCloud:
-    """Reads (any supported format) and prepares one file; raises ply.CloudFileError with the file named."""
-    return prepare.prepare(readers.read_cloud(path, columns), path, k, drop_outliers,
-                           normal_k=normal_k, orientation=orientation)
+def _decimal(value: float) -> float:
+    """A float property's value as the decimal the user typed: Blender stores it as float32,
+    and 0.001 in float32 is 0.0010000000475, which moves a georeferenced coordinate of 5e9 mm
+    by 0.24 m. The shortest decimal that gives the same float32 is what was meant."""
+    import numpy as np
+
+    return float(np.format_float_positional(np.float32(value), unique=True))
 
 
-class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
+class _WindowProgress:
+    """Blender's progress on the cursor (wm.progress_*), for synchronous runs with a window."""
+
+    def __init__(self, wm):
+        self.wm = wm
+        wm.progress_begin(0, 100)
+
+    def __call__(self, fraction: float, message: str) -> None:
+        self.wm.progress_update(int(100 * fraction))
+
+    def end(self) -> None:
+        self.wm.progress_end()
+
+
+class _Work:
+    """An operator whose `work(progress)` (no Blender data) may run on a worker thread, and
+    whose `finish(context, result)` (Blender data) then runs on the main thread; see the
+    module's text. Subclasses set self.work in execute() and call self.run(context)."""
+
+    use_job: bpy.props.BoolProperty(options={"HIDDEN", "SKIP_SAVE"}, default=False)
+    _job = None
+    _timer = None
+
+    def run(self, context) -> set:
+        if self.use_job and not bpy.app.background and context.window is not None:
+            self.use_job = False  # a redo (Adjust Last Operation) re-runs synchronously
+            wm = context.window_manager
+            self._job = Job(self.work).start()
+            self._timer = wm.event_timer_add(_TIMER_SECONDS, window=context.window)
+            wm.progress_begin(0, 100)
+            wm.modal_handler_add(self)
+            return {"RUNNING_MODAL"}
+        bar = None if bpy.app.background or context.window_manager is None else _WindowProgress(context.window_manager)
+        try:
+            result = self.work(TerminalProgress(self.bl_label) if bar is None else bar)
+        except _REPORTED as e:
+            return self._refused(e)
+        finally:
+            if bar is not None:
+                bar.end()
+        return self.finish(context, result)
+
+    def _refused(self, error) -> set:
+        self.report({"WARNING"} if isinstance(error, Cancelled) else {"ERROR"},
+                    f"{self.bl_label}: cancelled, nothing was changed" if isinstance(error, Cancelled) else str(error))
+        return {"CANCELLED"}
+
+    def _status(self, context, text) -> None:
+        if context.workspace is not None:
+            context.workspace.status_text_set(text)
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == "ESC" and event.value == "PRESS":
+            job.cancel()  # the worker stops at its next progress call
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER":
+            return {"PASS_THROUGH"}
+        wm = context.window_manager
+        if not job.done:
+            wm.progress_update(int(100 * job.fraction))
+            self._status(context, f"{self.bl_label}: {100 * job.fraction:.0f} % {job.message} (Esc to cancel)")
+            return {"RUNNING_MODAL"}
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        self._status(context, None)
+        try:
+            result = job.result()
+        except _REPORTED as e:
+            return self._refused(e)
+        return self.finish(context, result)
+
+    def cancel(self, context):  # Blender ends the operator (e.g. the file is closed): stop the worker
+        if self._job is not None:
+            self._job.cancel()
+            self._job.wait()
+            context.window_manager.event_timer_remove(self._timer)
+            context.window_manager.progress_end()
+            self._status(context, None)
+
+
+def create_objects(context, loaded, notes_for, progress=None) -> list:
+    """One object per (path, PreparedCloud). On any exception (a cancel through `progress`
+    included) everything it created is removed -- objects, meshes, and the shared node group
+    and material when this call made them -- and the exception re-raised."""
+    before = {id_type: {x.as_pointer() for x in getattr(bpy.data, id_type)}
+              for id_type in ("objects", "meshes", "node_groups", "materials")}
+    created = []
+    try:
+        for i, (path, prep) in enumerate(loaded):
+            if progress is not None:
+                progress(i / len(loaded), f"creating {os.path.basename(path)}")
+            name = os.path.splitext(os.path.basename(path))[0] or "Splats"
+            attributes = dict(prep.cloud.attributes)
+            if prep.cloud.scanners is not None:
+                attributes[SCANNER] = prep.cloud.scanners - prep.origin
+            obj = create_cloud_object(name, prep.local, prep.cloud.normals, prep.radii, prep.cloud.colours,
+                                      location=tuple(prep.origin), collection=context.collection,
+                                      attributes=attributes)
+            created.append(obj)
+            obj["splat_tracer_source"] = path
+            obj["splat_tracer_format"] = prep.cloud.format
+            obj[ORIENTATION_HINT] = prep.cloud.orientation
+            obj.splat_tracer.closed = prep.hood.closed_guess
+            obj["splat_tracer_closed_guess"] = prep.hood.describe()
+            notes = notes_for(prep)
+            if notes:  # kept with the object: reports scroll away
+                obj["splat_tracer_import_notes"] = "\n".join(notes)
+        if progress is not None:
+            progress(1.0, "created")
+    except BaseException:
+        for id_type in ("objects", "meshes", "node_groups", "materials"):  # users first, then what they use
+            collection = getattr(bpy.data, id_type)
+            for item in [x for x in collection if x.as_pointer() not in before[id_type]]:
+                collection.remove(item)
+        raise
+    return created
+
+
+@orientation_helper(axis_forward="Y", axis_up="Z")
+class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
     """Import point clouds (PLY, Gaussian-splatting PLY, LAS/LAZ, E57, XYZ/PTS/TXT/CSV) as splat objects, one per file"""
 
     bl_idname = "splat_tracer.import_cloud"
@@ -71,49 +207,55 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
                     "or guessed",
         default="",
     )
+    global_scale: bpy.props.FloatProperty(
+        name="Scale", description="Multiply the file's coordinates (and radii) by this (e.g. 0.001 for millimetres)",
+        default=1.0, min=1e-6, max=1e6, soft_min=0.001, soft_max=1000.0,
+    )
+    max_points: bpy.props.IntProperty(
+        name="Point Budget", description="Import at most this many points of each file, left out evenly over "
+                                         "space and the same on every import (0: all points)",
+        default=0, min=0,
+    )
+    statistical_outliers: bpy.props.BoolProperty(
+        name="Statistical Outlier Removal",
+        description="Leave out points whose mean distance to their 20 nearest neighbours is far above the cloud's",
+        default=False,
+    )
+    std_ratio: bpy.props.FloatProperty(
+        name="Standard Deviations", description="Statistical outlier removal: how many standard deviations above "
+                                                "the mean distance a point may lie", default=2.0, min=0.1, max=10.0,
+    )
 
     def paths(self) -> list[str]:
         if self.files and self.directory:
             return [os.path.join(self.directory, f.name) for f in self.files if f.name]
         return [self.filepath]
 
+    def import_options(self) -> importer.ImportOptions:
+        axes = axis_conversion(from_forward=self.axis_forward, from_up=self.axis_up).to_3x3()
+        return importer.ImportOptions(
+            self.neighbours, self.outliers == "DROP", self.normal_neighbours, self.orientation, self.columns,
+            [list(row) for row in axes], _decimal(self.global_scale), self.max_points,
+            self.std_ratio if self.statistical_outliers else 0.0)
+
+    def invoke(self, context, event):
+        self.use_job = True
+        # Dropped files (directory and files are set, and never remembered): confirm the options.
+        if self.directory and len(self.files) or self.properties.is_property_set("filepath"):
+            return self.invoke_popup(context)
+        return ImportHelper.invoke(self, context, event)
+
     def execute(self, context):
         # Read and check every file before creating anything: one bad file imports nothing.
-        loaded = []
-        for path in self.paths():
-            try:
-                loaded.append((path, load_cloud(path, self.neighbours, self.outliers == "DROP", self.normal_neighbours,
-                                                self.orientation, self.columns)))
-            except (ply.CloudFileError, MemoryError) as e:
-                self.report({"ERROR"}, str(e))
-                return {"CANCELLED"}
-        created = []
-        try:
-            for path, prep in loaded:
-                name = os.path.splitext(os.path.basename(path))[0] or "Splats"
-                attributes = dict(prep.cloud.attributes)
-                if prep.cloud.scanners is not None:
-                    attributes[SCANNER] = prep.cloud.scanners - prep.origin
-                obj = create_cloud_object(name, prep.local, prep.cloud.normals, prep.radii, prep.cloud.colours,
-                                          location=tuple(prep.origin), collection=context.collection,
-                                          attributes=attributes)
-                obj["splat_tracer_source"] = path
-                obj["splat_tracer_format"] = prep.cloud.format
-                obj[ORIENTATION_HINT] = prep.cloud.orientation
-                obj.splat_tracer.closed = prep.hood.closed_guess
-                obj["splat_tracer_closed_guess"] = prep.hood.describe()
-                created.append(obj)
-                notes = prep.notes(self.neighbours)
-                for note in notes:
-                    self.report({"WARNING"}, f"{path}: {note}")
-                if notes:  # kept with the object: reports scroll away
-                    obj["splat_tracer_import_notes"] = "\n".join(notes)
-        except Exception:
-            for obj in created:
-                mesh = obj.data
-                bpy.data.objects.remove(obj)
-                bpy.data.meshes.remove(mesh)
-            raise
+        paths, options = self.paths(), self.import_options()  # read here: properties belong to the main thread
+        self.work = lambda progress: importer.load_many(paths, options, progress)
+        return self.run(context)
+
+    def finish(self, context, loaded) -> set:
+        created = create_objects(context, loaded, lambda prep: prep.notes(self.neighbours))
+        for path, prep in loaded:
+            for note in prep.notes(self.neighbours):
+                self.report({"WARNING"}, f"{path}: {note}")
         for obj in context.view_layer.objects.selected:
             obj.select_set(False)
         for obj in created:
@@ -125,7 +267,7 @@ class SPLAT_TRACER_OT_import_cloud(bpy.types.Operator, ImportHelper):
         return {"FINISHED"}
 
 
-class SPLAT_TRACER_OT_estimate_normals(bpy.types.Operator):
+class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
     """(Re)estimate the normals and splat radii of the selected splat clouds from their points"""
 
     bl_idname = "splat_tracer.estimate_normals"
@@ -151,13 +293,15 @@ class SPLAT_TRACER_OT_estimate_normals(bpy.types.Operator):
     def execute(self, context):
         import numpy as np
 
-        done = []
+        jobs = []  # (name, points, scanners, mode): read here, on the main thread
         for obj in self.clouds(context):
             mesh = obj.data
             n = len(mesh.vertices)
+            if n < normals.MIN_POINTS:
+                self.report({"ERROR"}, f"{obj.name}: {n} points, too few to estimate normals")
+                return {"CANCELLED"}
             co = np.empty(n * 3, np.float32)
             mesh.vertices.foreach_get("co", co)
-            points = co.reshape(-1, 3).astype(np.float64)
             scanners = None
             if SCANNER in mesh.attributes:
                 scanners = np.empty(n * 3, np.float32)
@@ -168,16 +312,37 @@ class SPLAT_TRACER_OT_estimate_normals(bpy.types.Operator):
                 mode = obj.get(ORIENTATION_HINT, "PROPAGATE")
             if mode == "SCANNER" and scanners is None:
                 mode = "PROPAGATE"
-            if n < normals.MIN_POINTS:
-                self.report({"ERROR"}, f"{obj.name}: {n} points, too few to estimate normals")
-                return {"CANCELLED"}
-            try:
-                axes = normals.estimate(points, self.normal_neighbours)
-                result = normals.orient(points, axes, mode, scanners)
-                hood = spacing.analyse(points, result.normals, self.neighbours)
-            except (ValueError, MemoryError) as e:
-                self.report({"ERROR"}, f"{obj.name}: {e}")
-                return {"CANCELLED"}
+            jobs.append((obj.name, co.reshape(-1, 3).astype(np.float64), scanners, mode))
+        normal_k, k = self.normal_neighbours, self.neighbours
+
+        def work(progress):
+            out = []
+            for i, (name, points, scanners, mode) in enumerate(jobs):
+                step = Steps(scaled(progress, i / len(jobs), (i + 1) / len(jobs), f"{name}: "),
+                             {"normals": 3.0, "radii": 1.0})
+                try:
+                    tree = spacing.neighbour_tree(points)
+                    result, known = normals.estimate_and_orient(points, normal_k, mode, scanners, radius_k=k,
+                                                                tree=tree, progress=step("normals"))
+                    hood = spacing.analyse(points, result.normals, k, progress=step("radii"), tree=tree,
+                                           known_spacing=known)
+                except (ValueError, MemoryError) as e:
+                    raise ValueError(f"{name}: {e}") from None
+                out.append((name, result, hood))
+            return out
+
+        self.work = work
+        return self.run(context)
+
+    def finish(self, context, results) -> set:
+        import numpy as np
+
+        for name, result, hood in results:  # the objects may be gone when a worker finishes
+            obj = bpy.data.objects.get(name)
+            if obj is None or obj.type != "MESH" or len(obj.data.vertices) != len(result.normals):
+                self.report({"WARNING"}, f"{name}: changed while its normals were estimated; left as it was")
+                continue
+            mesh = obj.data
             mesh.attributes[NORMAL].data.foreach_set("vector", result.normals.ravel())
             if self.radii and RADIUS in mesh.attributes:
                 cap = np.float32(prepare.RADIUS_CAP * np.percentile(hood.spacing, prepare.RADIUS_CAP_PERCENTILE))
@@ -187,10 +352,13 @@ class SPLAT_TRACER_OT_estimate_normals(bpy.types.Operator):
             obj["splat_tracer_closed_guess"] = hood.describe()
             ambiguous = int(result.ambiguous.sum())
             if ambiguous:
-                self.report({"WARNING"}, f"{obj.name}: {ambiguous:,} points' orientation was ambiguous")
-            done.append(obj.name)
-        self.report({"INFO"}, f"Estimated normals of {', '.join(done)}")
+                self.report({"WARNING"}, f"{name}: {ambiguous:,} points' orientation was ambiguous")
+        self.report({"INFO"}, f"Estimated normals of {', '.join(name for name, _, _ in results)}")
         return {"FINISHED"}
+
+    def invoke(self, context, event):
+        self.use_job = True
+        return self.execute(context)
 
 
 class SPLAT_TRACER_FH_ply(bpy.types.FileHandler):

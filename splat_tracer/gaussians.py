@@ -58,10 +58,6 @@ def read_gaussians(path: str, v, names) -> "PointCloud":  # noqa: F821
     three_d = "scale_2" in names
     col = lambda c: np.asarray(v[c], dtype=np.float64)  # noqa: E731
     pos = np.column_stack([col(c) for c in "xyz"])
-    bad = ~np.isfinite(pos).all(axis=1)
-    if bad.any():
-        raise CloudFileError(f"{path}: {int(bad.sum())} Gaussians have non-finite coordinates "
-                             f"(first: row {np.flatnonzero(bad)[0]})")
     q = np.column_stack([col(f"rot_{i}") for i in range(4)])
     log_scales = np.column_stack([col(f"scale_{i}") for i in range(3 if three_d else 2)])
     with np.errstate(over="ignore", invalid="ignore"):
@@ -93,6 +89,6 @@ def read_gaussians(path: str, v, names) -> "PointCloud":  # noqa: F821
     if rest:
         notes.append(f"the {rest} view-dependent colour coefficients (f_rest_*) are ignored: each splat has its "
                      "Gaussian's base (DC) colour")
-    cloud = make_cloud(path, pos, normals, colours, radii, format="3DGS" if three_d else "2DGS",
+    cloud = make_cloud(path, pos, normals, colours, radii, drop_non_finite=True, format="3DGS" if three_d else "2DGS",
                        oriented=False, notes=notes)
     return cloud

@@ -33,6 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .progress import chunks, nothing, scaled
+from .spacing import neighbour_tree
+
 DEFAULT_K = 16          # PCA neighbours: enough for a stable plane fit with noise, small enough for creases
 GRAPH_K = 8             # neighbours in the orientation graph
 MIN_POINTS = 3          # a plane needs three points
@@ -41,6 +44,9 @@ AMBIGUOUS_RULE = 0.2    # cos 78 degrees
 ACROSS_WEIGHT = 1.0     # the weight of |n . d| against 1 - |n_i . n_j|
 MODES = ("PROPAGATE", "UP", "SCANNER")
 _CHUNK = 1 << 15
+# smallest_eigenvectors: a cross product below this x p^2 means eigenvalues too close for the
+# closed form's vector (its error grows as the inverse of the gap); eigh decides those.
+_EIGEN_TOLERANCE = 1e-3
 
 
 @dataclass
@@ -51,27 +57,97 @@ class Orientation:
     components: int          # connected components of the neighbour graph
 
 
-def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None) -> np.ndarray:
-    """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours."""
-    from scipy.spatial import cKDTree
-
+def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
+             graph=None, spacing=None) -> np.ndarray:
+    """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
+    progress: progress.ProgressFn, called between chunks (it may raise Cancelled). graph:
+    an (N, m) int32 array to fill with each point's m nearest (itself first), m <= k + 1,
+    for orient() to reuse instead of searching again. spacing: (m, (N,) float32 array) to
+    fill with each point's distance to its m-th nearest other point (m <= k), the splat
+    radius's spacing (spacing.analyse) without a search of its own."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
         raise ValueError(f"need at least {MIN_POINTS} points to estimate normals, got {n}")
     k = int(min(max(k, 2), n - 1))
-    tree = tree if tree is not None else cKDTree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
     out = np.empty((n, 3))
     order = tree.indices
-    for start in range(0, n, _CHUNK):
+    for start in chunks(n, _CHUNK, progress, "estimating normals"):
         idx = order[start:start + _CHUNK]
-        _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
-        q = pts[nbr]
-        q -= q.mean(axis=1, keepdims=True)
-        cov = np.einsum("nki,nkj->nij", q, q)
-        _, vec = np.linalg.eigh(cov)  # ascending eigenvalues
-        out[idx] = vec[:, :, 0]
+        dist, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
+        if graph is not None:
+            graph[idx] = nbr[:, :graph.shape[1]]
+        if spacing is not None:
+            spacing[1][idx] = dist[:, spacing[0]]
+        out[idx] = smallest_eigenvectors(_covariances(pts[nbr]))
     return out
+
+
+def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PROPAGATE", scanners=None,
+                        axes=None, radius_k: int = 0, workers: int = -1, tree=None, progress=None):
+    """(Orientation, spacing or None): estimate() then orient() sharing one neighbour
+    search (the orientation's graph and, for radius_k in 1..k, each point's distance to its
+    radius_k-th nearest other point: spacing.analyse's known_spacing). axes: the file's own
+    unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    tree = tree if tree is not None else neighbour_tree(pts)
+    estimating = axes is None
+    share = 2.0 / 3.0 if estimating else 0.0
+    graph = spacing = None
+    if estimating and k >= GRAPH_K and n > k + 1:
+        graph = np.empty((n, GRAPH_K + 1), np.int32)
+        if 1 <= radius_k <= k:
+            spacing = (radius_k, np.empty(n, np.float32))
+    if estimating:
+        axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing)
+    result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
+                    graph=graph)
+    return result, None if spacing is None else spacing[1]
+
+
+def _covariances(q: np.ndarray) -> np.ndarray:
+    """(n,3,3) scatter matrices of the (n,k,3) neighbourhoods about their means: the six
+    distinct sums by elementwise products (twice as fast as einsum's general contraction)."""
+    q = q - q.mean(axis=1, keepdims=True)
+    x, y, z = q[..., 0], q[..., 1], q[..., 2]
+    xx, yy, zz = (x * x).sum(1), (y * y).sum(1), (z * z).sum(1)
+    xy, xz, yz = (x * y).sum(1), (x * z).sum(1), (y * z).sum(1)
+    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], 1)
+
+
+def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:
+    """(N,3) unit eigenvectors of the smallest eigenvalue of symmetric 3x3 matrices, in
+    closed form (about 10x faster than numpy's batched eigh, which calls LAPACK once per
+    matrix): the eigenvalue by the trigonometric solution of the characteristic cubic
+    (Smith 1961), its vector as the largest cross product of two rows of cov - lambda I.
+    Matrices where that is ill-conditioned (the smallest eigenvalue nearly repeated: a
+    neighbourhood along a line, or isotropic) go to eigh."""
+    a = cov
+    q = np.trace(a, axis1=1, axis2=2) / 3.0
+    p1 = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2
+    p2 = (a[:, 0, 0] - q) ** 2 + (a[:, 1, 1] - q) ** 2 + (a[:, 2, 2] - q) ** 2 + 2.0 * p1
+    p = np.sqrt(p2 / 6.0)
+    safe_p = np.where(p > 0, p, 1.0)
+    b = (a - q[:, None, None] * np.eye(3)) / safe_p[:, None, None]
+    r = np.clip(np.linalg.det(b) / 2.0, -1.0, 1.0)
+    phi = np.arccos(r) / 3.0
+    smallest = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    m = a - smallest[:, None, None] * np.eye(3)
+    crosses = np.stack([np.cross(m[:, 0], m[:, 1]), np.cross(m[:, 0], m[:, 2]), np.cross(m[:, 1], m[:, 2])], 1)
+    length = np.linalg.norm(crosses, axis=2)
+    best = np.argmax(length, axis=1)
+    rows = np.arange(len(a))
+    vec = crosses[rows, best]
+    size = length[rows, best]
+    # well conditioned: the cross product is of the order of p^2 (the gap between eigenvalues)
+    ok = size > _EIGEN_TOLERANCE * p * p
+    vec = vec / np.where(ok, size, 1.0)[:, None]
+    bad = np.flatnonzero(~ok)
+    if len(bad):
+        vec[bad] = np.linalg.eigh(a[bad])[1][:, :, 0]
+    return vec
 
 
 def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.ndarray:
@@ -89,11 +165,11 @@ def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.nd
 
 
 def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", scanners=None,
-           k: int = GRAPH_K, workers: int = -1, tree=None) -> Orientation:
-    """Flips `normals` (unit, any sign) consistently; see the module's text."""
-    from scipy.sparse import coo_matrix
+           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None) -> Orientation:
+    """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
+    for estimate (the steps of the propagation are single library calls: reported between them)."""
+    from scipy.sparse import coo_matrix, csr_matrix
     from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
-    from scipy.spatial import cKDTree
 
     if mode not in MODES:
         raise ValueError(f"unknown orientation mode {mode!r}")
@@ -116,16 +192,40 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         if (anchor_sign != 0).all():
             return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1)
 
-    tree = tree if tree is not None else cKDTree(pts)
-    _, nbr = tree.query(pts, k=k + 1, workers=workers)
-    i = np.repeat(np.arange(n), k)
-    j = nbr[:, 1:].ravel()
-    d = pts[j] - pts[i]
-    d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-300)
-    w = 1.0 - np.abs(np.einsum("ij,ij->i", nrm[i], nrm[j]))
-    w += ACROSS_WEIGHT * 0.5 * (np.abs(np.einsum("ij,ij->i", nrm[i], d)) + np.abs(np.einsum("ij,ij->i", nrm[j], d)))
-    w += 1e-9  # csgraph treats a zero weight as no edge
-    mst = minimum_spanning_tree(coo_matrix((w, (i, j)), shape=(n, n)).tocsr())
+    if n < 2:  # no neighbour to agree with: the sign is the rule's, or as it is
+        signs = np.where(anchor_sign < 0, -1.0, 1.0)
+        return Orientation((nrm * signs[:, None]).astype(np.float32), anchor_sign == 0, mode, n)
+    report = progress or nothing
+    report(0.0, "orienting normals: neighbour graph")
+    if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
+        nbr = graph[:, :k + 1]
+    else:
+        tree = tree if tree is not None else neighbour_tree(pts)
+        order = tree.indices  # queried in the tree's leaf order: 3x faster than in file order
+        nbr = np.empty((n, k + 1), np.int64)
+        nbr[order] = tree.query(pts[order], k=k + 1, workers=workers)[1]
+    j = np.ascontiguousarray(nbr[:, 1:])
+    w = np.empty((n, k))
+    # The edges' weights, each point against its k neighbours, in chunks of points in the
+    # tree's leaf order when there is a tree (neighbours' rows then lie close in memory).
+    rows = tree.indices if tree is not None else np.arange(n)
+    for start in chunks(n, _CHUNK, scaled(report, 0.0, 0.4), "orienting normals: neighbour graph"):
+        idx = rows[start:start + _CHUNK]
+        ji = j[idx]
+        ni, nj = nrm[idx], nrm[ji]
+        d = pts[ji] - pts[idx, None]
+        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
+        w[idx] = (1.0 - np.abs(np.einsum("nj,nkj->nk", ni, nj))
+                  + ACROSS_WEIGHT * 0.5 * (np.abs(np.einsum("nj,nkj->nk", ni, d)) + np.abs(np.einsum("nkj,nkj->nk", nj, d))))
+    report(0.4, "orienting normals: spanning tree")
+    w = w.ravel() + 1e-9  # csgraph treats a zero weight as no edge
+    # Row i holds point i's k edges: the CSR arrays are the neighbour table itself (no COO
+    # conversion), and the tree may overwrite them (30 % faster at 1M points, no copy).
+    graph_csr = csr_matrix((w, j.ravel(), np.arange(0, n * k + 1, k)), shape=(n, n))
+    del j, w
+    mst = minimum_spanning_tree(graph_csr, overwrite=True)
+    del graph_csr
+    report(0.8, "orienting normals: propagation")
     n_comp, labels = connected_components(mst, directed=False)
 
     # A seed for every component the rules leave without an anchor: its point farthest from

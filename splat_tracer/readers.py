@@ -22,10 +22,13 @@ import warnings
 import numpy as np
 
 from .ply import CloudFileError, PointCloud, make_cloud, read_ply, srgb_to_linear, _unit_colours
+from .progress import Cancelled
 
 FORMATS = ("PLY", "LAS", "E57", "TEXT")
 EXTENSIONS = (".ply", ".las", ".laz", ".e57", ".xyz", ".pts", ".txt", ".csv")
 _SNIFF_BYTES = 4096
+_LAS_CHUNK = 1 << 20  # LAS/LAZ points read at a time (about 0.1-0.5 s each)
+_TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 file text in another encoding
 
 
 def sniff(path: str) -> str:
@@ -49,19 +52,25 @@ def sniff(path: str) -> str:
         except UnicodeDecodeError as e:
             if e.start >= len(head) - 3:  # a character cut by the sniffing window
                 return "TEXT"
+            # Mostly printable ASCII with a few other bytes: text in another encoding (Latin-1,
+            # Windows-1252), which read_text refuses naming the first such byte.
+            printable = sum(1 for b in head if 32 <= b < 127 or b in (9, 10, 13))
+            if printable >= _TEXT_SHARE * len(head):
+                return "TEXT"
     what = "a PLY header" if head.lower().startswith(b"ply") else f"{head[:8]!r}"
     raise CloudFileError(f"{path}: not a point-cloud format this importer reads (it starts with {what}; "
                          "known: PLY, LAS/LAZ, E57, and XYZ/PTS/TXT/CSV text)")
 
 
-def read_cloud(path: str, columns: str = "") -> PointCloud:
-    """Reads any supported file; `columns` maps a text file's columns (see read_text)."""
+def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
+    """Reads any supported file; `columns` maps a text file's columns (see read_text).
+    progress: progress.ProgressFn, called while reading LAS/LAZ (others read in one call)."""
     path = os.fspath(path)
     kind = sniff(path)
     if kind == "PLY":
         return read_ply(path)
     if kind == "LAS":
-        return read_las(path)
+        return read_las(path, progress)
     if kind == "E57":
         return read_e57(path)
     try:
@@ -86,7 +95,8 @@ def _colour_channels(path: str, channels: dict) -> np.ndarray:
     return np.column_stack([srgb_to_linear(np.clip(rgb, 0, 1)), np.ones(len(rgb))]).astype(np.float32)
 
 
-def read_las(path: str) -> PointCloud:
+def read_las(path: str, progress=None) -> PointCloud:
+    """progress: progress.ProgressFn, called between chunks of _LAS_CHUNK points."""
     try:
         import laspy
     except ImportError:
@@ -113,31 +123,42 @@ def read_las(path: str) -> PointCloud:
             if compressed and not laspy.LazBackend.detect_available():
                 raise CloudFileError(f"{path}: is compressed (LAZ) and no LAZ backend is installed (the lazrs "
                                      "package decompresses it)")
-            las = reader.read()
-    except CloudFileError:
+            dims = set(header.point_format.dimension_names)
+            fields = [c for c in ("red", "green", "blue") if {"red", "green", "blue"} <= dims]
+            fields += [a for a in ("intensity", "classification", "return_number") if a in dims]
+            # In chunks, so that a long read (LAZ decompresses at a few million points a
+            # second) reports progress and can be cancelled between them.
+            parts = {name: [] for name in ("x", "y", "z", *fields)}
+            read = 0
+            for chunk in reader.chunk_iterator(_LAS_CHUNK):
+                if progress is not None:
+                    progress(read / max(header.point_count, 1), "reading")
+                for name in ("x", "y", "z"):  # scaled and offset: float64
+                    parts[name].append(np.asarray(chunk[name], np.float64))
+                for name in fields:
+                    parts[name].append(np.asarray(chunk[name]))
+                read += len(chunk)
+    except (CloudFileError, Cancelled):
         raise
     except Exception as e:  # laspy raises LaspyException, ValueError, struct errors...
         raise CloudFileError(f"{path}: not a valid LAS/LAZ file ({e})") from None
-    n = len(las.points)
-    if n == 0:
+    if read == 0:
         raise CloudFileError(f"{path}: contains no points")
-    if n != header.point_count:
+    if read != header.point_count:
         raise CloudFileError(f"{path}: early end-of-file: the header declares {header.point_count:,} points but "
-                             f"only {n:,} could be read")
-    pos = np.column_stack([np.asarray(las.x, np.float64), np.asarray(las.y, np.float64),
-                           np.asarray(las.z, np.float64)])
-    dims = set(las.point_format.dimension_names)
+                             f"only {read:,} could be read")
+    column = {name: np.concatenate(chunks) for name, chunks in parts.items()}
+    del parts
+    pos = np.column_stack([column["x"], column["y"], column["z"]])
     colours, notes = None, []
-    if {"red", "green", "blue"} <= dims:
-        channels = {c: np.asarray(las[c]) for c in ("red", "green", "blue")}
+    if "red" in column:
+        channels = {c: column[c] for c in ("red", "green", "blue")}
         if any(c.any() for c in channels.values()):
             colours = _colour_channels(path, channels)
         else:
             notes.append("its colour fields are all zero: imported without colours")
-    attributes = {}
-    for name in ("intensity", "classification", "return_number"):
-        if name in dims:
-            attributes[name] = np.asarray(las[name]).astype(np.int32)
+    attributes = {name: column[name].astype(np.int32) for name in ("intensity", "classification", "return_number")
+                  if name in column}
     return make_cloud(path, pos, None, colours, None, attributes, drop_non_finite=True,
                       format="LAZ" if compressed else "LAS", orientation="UP", notes=notes)
 
@@ -267,7 +288,9 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}) and no other point-cloud format") from None
+        line = data[:e.start].count(b"\n") + 1
+        raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
+                             "other point-cloud format; save it as UTF-8 or ASCII") from None
     text = text.translate(_SEPARATORS)
     # The header: lines before the first one made of numbers only.
     offset, header, first = 0, [], None
