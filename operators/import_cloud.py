@@ -216,6 +216,12 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
                                          "space and the same on every import (0: all points)",
         default=0, min=0,
     )
+    hole_free: bpy.props.BoolProperty(
+        name="Close Gaps",
+        description="Raise a splat's radius where the gap to its neighbours would leave a pinhole (to the largest "
+                    "empty circle it lies on, at most 1.3 times its neighbour spacing)",
+        default=True,
+    )
     statistical_outliers: bpy.props.BoolProperty(
         name="Statistical Outlier Removal",
         description="Leave out points whose mean distance to their 20 nearest neighbours is far above the cloud's",
@@ -236,7 +242,7 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
         return importer.ImportOptions(
             self.neighbours, self.outliers == "DROP", self.normal_neighbours, self.orientation, self.columns,
             [list(row) for row in axes], _decimal(self.global_scale), self.max_points,
-            self.std_ratio if self.statistical_outliers else 0.0)
+            self.std_ratio if self.statistical_outliers else 0.0, hole_free=self.hole_free)
 
     def invoke(self, context, event):
         self.use_job = True
@@ -281,6 +287,11 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
     radii: bpy.props.BoolProperty(name="Radii", description="Also recompute each splat's radius from the "
                                   "distance to its k-th nearest point", default=True)
     neighbours: bpy.props.IntProperty(name="Radius Neighbours (k)", default=spacing.DEFAULT_K, min=1, max=64)
+    hole_free: bpy.props.BoolProperty(
+        name="Close Gaps",
+        description="With Radii: raise a splat's radius where the gap to its neighbours would leave a pinhole",
+        default=True,
+    )
 
     @staticmethod
     def clouds(context):
@@ -313,7 +324,7 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
             if mode == "SCANNER" and scanners is None:
                 mode = "PROPAGATE"
             jobs.append((obj.name, co.reshape(-1, 3).astype(np.float64), scanners, mode))
-        normal_k, k = self.normal_neighbours, self.neighbours
+        normal_k, k, hole_free = self.normal_neighbours, self.neighbours, self.hole_free
 
         def work(progress):
             out = []
@@ -326,9 +337,11 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
                                                                 tree=tree, progress=step("normals"))
                     hood = spacing.analyse(points, result.normals, k, progress=step("radii"), tree=tree,
                                            known_spacing=known)
+                    radii = (spacing.covering_radii(points, result.normals, hood.spacing, tree=tree)
+                             if hole_free else hood.spacing)
                 except (ValueError, MemoryError) as e:
                     raise ValueError(f"{name}: {e}") from None
-                out.append((name, result, hood))
+                out.append((name, result, hood, radii))
             return out
 
         self.work = work
@@ -337,7 +350,7 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
     def finish(self, context, results) -> set:
         import numpy as np
 
-        for name, result, hood in results:  # the objects may be gone when a worker finishes
+        for name, result, hood, radii in results:  # the objects may be gone when a worker finishes
             obj = bpy.data.objects.get(name)
             if obj is None or obj.type != "MESH" or len(obj.data.vertices) != len(result.normals):
                 self.report({"WARNING"}, f"{name}: changed while its normals were estimated; left as it was")
@@ -346,14 +359,14 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
             mesh.attributes[NORMAL].data.foreach_set("vector", result.normals.ravel())
             if self.radii and RADIUS in mesh.attributes:
                 cap = np.float32(prepare.RADIUS_CAP * np.percentile(hood.spacing, prepare.RADIUS_CAP_PERCENTILE))
-                mesh.attributes[RADIUS].data.foreach_set("value", np.minimum(hood.spacing, cap))
+                mesh.attributes[RADIUS].data.foreach_set("value", np.minimum(radii, cap))
             mesh.update()
             obj.splat_tracer.closed = hood.closed_guess
             obj["splat_tracer_closed_guess"] = hood.describe()
             ambiguous = int(result.ambiguous.sum())
             if ambiguous:
                 self.report({"WARNING"}, f"{name}: {ambiguous:,} points' orientation was ambiguous")
-        self.report({"INFO"}, f"Estimated normals of {', '.join(name for name, _, _ in results)}")
+        self.report({"INFO"}, f"Estimated normals of {', '.join(name for name, *_ in results)}")
         return {"FINISHED"}
 
     def invoke(self, context, event):

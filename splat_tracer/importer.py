@@ -57,6 +57,7 @@ class ImportOptions:
     scale: float = 1.0
     max_points: int = 0                   # the point budget; 0: every point
     statistical_ratio: float = 0.0        # > 0: statistical outlier removal with this many std deviations
+    hole_free: bool = True                # k-NN radii raised to close gaps (spacing.covering_radii)
     workers: int = -1
 
 
@@ -207,7 +208,8 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
         raise CloudFileError(f"{path}: {e}") from None
     cloud = apply_budget(cloud, options.max_points, scaled(progress, 0.2, 0.25))
     prepared = prepare.prepare(cloud, path, options.k, options.drop_outliers, options.workers, options.normal_k,
-                               options.orientation, options.statistical_ratio, scaled(progress, 0.25, 1.0))
+                               options.orientation, options.statistical_ratio, scaled(progress, 0.25, 1.0),
+                               options.hole_free)
     report(1.0, f"prepared {len(prepared.local):,} splats")
     return prepared
 

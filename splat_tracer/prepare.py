@@ -173,12 +173,13 @@ def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
 
 def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outliers: bool = False,
             workers: int = -1, normal_k: int = normals_mod.DEFAULT_K, orientation: str = "AUTO",
-            statistical_ratio: float = 0.0, progress=None) -> PreparedCloud:
+            statistical_ratio: float = 0.0, progress=None, hole_free: bool = True) -> PreparedCloud:
     """Frame, outliers, normals (estimated and oriented when the file has none; oriented
     when their signs are arbitrary), analysis and radii of a cloud; raises CloudFileError
     naming `path`. orientation: AUTO, PROPAGATE, UP or SCANNER (normals.py).
     statistical_ratio > 0: statistical outlier removal with that many standard deviations
-    (spacing.statistical_inliers). progress: progress.ProgressFn (it may raise Cancelled)."""
+    (spacing.statistical_inliers). progress: progress.ProgressFn (it may raise Cancelled).
+    hole_free: k-NN radii raised where gaps between samples would show (spacing.covering_radii)."""
     if len(cloud) < spacing.MIN_POINTS:  # refused before the neighbour search, which needs them
         usable = len(cloud) + cloud.merged_duplicates
         raise CloudFileError(
@@ -198,7 +199,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     # the estimation's.
     estimating = cloud.normals is None
     weights = {"statistical": 1.0 if statistical_ratio > 0 else 0.0, "estimate": 2.0 if estimating else 0.0,
-               "orient": 1.0 if needs_normals else 0.0, "radii": 0.4 if estimating else 2.0}
+               "orient": 1.0 if needs_normals else 0.0, "radii": 0.4 if estimating else 2.0,
+               "closing gaps": 1.0 if hole_free and cloud.radii is None else 0.0}
     step = Steps(progress, weights)
     statistical = 0
     if statistical_ratio > 0 and len(cloud) > spacing.MIN_POINTS:
@@ -225,10 +227,13 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
+    # One k-d tree of the bulk for the analysis and the gaps: the normals' when it is that.
+    radii_tree = tree if len(inliers) == len(local) else None
+    if radii_tree is None and hole_free and cloud.radii is None and len(inliers) >= spacing.MIN_POINTS:
+        radii_tree = spacing.neighbour_tree(local[inliers].astype(np.float64))
     try:
         hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
-                               tree=tree if len(inliers) == len(local) else None,
-                               known_spacing=known_spacing)
+                               tree=radii_tree, known_spacing=known_spacing)
     except spacing.SpacingError as e:
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
@@ -238,6 +243,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     if cloud.radii is None:
         radii = np.empty(len(local), np.float32)
         radii[inliers] = hood.spacing
+        if hole_free:
+            radii[inliers] = spacing.covering_radii(local[inliers], cloud.normals[inliers], hood.spacing, workers,
+                                                    tree=radii_tree, progress=step("closing gaps"))
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
             kk = min(k, len(local) - 1)

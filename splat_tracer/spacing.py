@@ -230,11 +230,13 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
 # among its COVER_K nearest neighbours), so every gap between samples is covered. Circles
 # across a gap wider than COVER_MAX_GAP are a boundary's (a rim, a hole, a silhouette seen
 # in the tangent plane) and are not covered: that would fatten the boundary. Nor are circles
-# wider than COVER_CAP x the k-NN spacing (holes): on the benchmark's randomly sampled clouds
-# 1.3 already leaves no pinhole at 640x480, and a larger cap only fattens silhouettes.
+# wider than COVER_HOLE x the k-NN spacing (holes). The raise is capped at COVER_CAP x the
+# spacing: on the benchmark's randomly sampled clouds 1.3 leaves few pinholes at 640x480,
+# and a larger cap fattens silhouettes.
 COVER_K = 12
 COVER_MAX_GAP = np.radians(162.0)  # 0.9 pi: a near-straight boundary still counts as one
 COVER_CAP = 1.3
+COVER_HOLE = 3.0  # circles up to this x the spacing count as gaps between samples
 
 
 def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> np.ndarray:
@@ -257,9 +259,10 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
         a, b = x * x + y * y, x2 * x2 + y2 * y2
         cx, cy = (y2 * a - y * b) / d, (x * b - x2 * a) / d
         r = np.hypot(cx, cy)
-    # Only circles the cap lets a disc reach: a larger one is a hole (or three nearly
-    # collinear samples, whose circle is huge and, in float32, looks empty).
-    candidate = (gap < COVER_MAX_GAP) & (r > spacing[:, None]) & (r <= COVER_CAP * spacing[:, None])
+    # A circle wider than COVER_HOLE x the spacing is a hole, not a gap (or three nearly
+    # collinear samples, whose circle is huge and, in float32, looks empty); below that, a
+    # gap the cap cannot reach is still narrowed (the radius is capped, not left alone).
+    candidate = (gap < COVER_MAX_GAP) & (r > spacing[:, None]) & (r <= COVER_HOLE * spacing[:, None])
     out = spacing.copy()
     rows = np.flatnonzero(candidate.any(axis=1))  # only these can raise the radius
     if rows.size:
@@ -272,11 +275,10 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
 
 
 def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray, workers: int = -1,
-                   tree=None) -> np.ndarray:
+                   tree=None, progress=None) -> np.ndarray:
     """(N,) float32 radii with no pinhole between samples: each point's k-NN spacing raised
-    to the largest empty circle it is on, if at most COVER_CAP x the spacing (see above)."""
-    from scipy.spatial import cKDTree
-
+    to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
+    tree: a cKDTree of `points` already built; progress: as analyse's."""
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float32)
     nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
@@ -284,12 +286,15 @@ def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray,
     k = int(min(COVER_K, len(pts) - 1))
     if k < 2:
         return s.copy()
-    tree = tree if tree is not None else cKDTree(pts)
+    if tree is not None:
+        pts = tree.data  # the same points, maybe with more precision
+    else:
+        tree = neighbour_tree(pts)
     out = np.empty(len(pts), np.float32)
     chunk = _CHUNK // 4  # (chunk, k, k) float32 arrays for the emptiness test
-    for start in range(0, len(pts), chunk):
+    for start in chunks(len(pts), chunk, progress, "splat radii: closing gaps"):
         idx = tree.indices[start:start + chunk]  # the tree's (spatially coherent) order
         _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
         offsets = (pts[nbr[:, 1:]] - pts[idx, None]).astype(np.float32)
         out[idx] = _covering(offsets, nrm[idx], s[idx])
-    return out
+    return np.minimum(out, COVER_CAP * s)
