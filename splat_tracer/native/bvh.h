@@ -23,13 +23,32 @@ struct BVHNode {
 };
 static_assert(sizeof(BVHNode) == 32, "nodes are meant to be two per cache line");
 
+// A primitive while the tree is built: its box, with the id in the spare lane (32 bytes,
+// two SSE loads). The records themselves are partitioned (not an index array into the
+// boxes), so that every pass over a node's range reads memory in order.
+struct alignas(16) BuildPrim {
+    float lo[4];  // lo.xyz, 0
+    float hi[3];
+    uint32_t id;
+
+    BuildPrim() = default;
+    BuildPrim(const AABB &b, uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z, 0.f}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
+};
+static_assert(sizeof(BuildPrim) == 32, "two build records per cache line");
+
 struct BVH {
     std::vector<BVHNode> nodes;       // nodes[0] is the root
     std::vector<uint32_t> prim_order; // leaf ranges index this; it maps to the input order
 
-    // Builds over `bounds` (one box per primitive, all non-empty). Subtrees above a size
-    // threshold are built on their own threads, up to `threads` at once.
+    // Builds over `bounds` (one box per primitive, all non-empty) on `threads` threads (0:
+    // all cores): the top levels split one at a time with the binning shared by every
+    // thread, then the subtrees, largest first, each on one thread.
     void build(const std::vector<AABB> &bounds, int threads);
+    // The same from build records (consumed: freed before returning).
+    void build(std::vector<BuildPrim> &&prims, int threads);
+
+    // Bytes the tree keeps (nodes and leaf order).
+    size_t memory_bytes() const { return nodes.capacity() * sizeof(BVHNode) + prim_order.capacity() * 4; }
 
     // Deepest path from the root: bounds the traversal stack.
     int depth() const;

@@ -309,8 +309,8 @@ PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
     Py_ssize_t leaves = 0, max_leaf = 0;
     for (const BVHNode &n : bvh.nodes)
         if (n.leaf()) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count);
-    return Py_BuildValue("{s:n,s:n,s:i,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
-                         bvh.depth(), "max_leaf_size", max_leaf);
+    return Py_BuildValue("{s:n,s:n,s:i,s:n,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
+                         bvh.depth(), "max_leaf_size", max_leaf, "bytes", Py_ssize_t(scene_of(self).memory_bytes()));
 }
 
 PyMethodDef Scene_methods[] = {
@@ -326,7 +326,7 @@ PyMethodDef Scene_methods[] = {
      "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
      "out_members=None, inside=None, exclude=None, threads=0, brute_force=False)\n--\n\n"
      "The surface each ray sees under the visibility method (see core.py)."},
-    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH."},
+    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
     {nullptr, nullptr, 0, nullptr},
 };
 
