@@ -33,6 +33,11 @@ inline F4 operator*(F4 a, F4 b) { return _mm_mul_ps(a.v, b.v); }
 // second operand when either is NaN).
 inline F4 min4(F4 a, F4 b) { return _mm_min_ps(a.v, b.v); }
 inline F4 max4(F4 a, F4 b) { return _mm_max_ps(a.v, b.v); }
+// Every lane of a when `which`, else of b (no branch).
+inline F4 select4(bool which, F4 a, F4 b) {
+    const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-int32_t(which)));
+    return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
+}
 // Lanes truncated towards zero (the caller clamps them into int range first).
 inline void truncate4(F4 a, int32_t out[4]) { _mm_storeu_si128(reinterpret_cast<__m128i *>(out), _mm_cvttps_epi32(a.v)); }
 #else
@@ -59,6 +64,7 @@ SPLAT_F4_OP(operator*, a.v[i] * b.v[i])
 SPLAT_F4_OP(min4, a.v[i] < b.v[i] ? a.v[i] : b.v[i])
 SPLAT_F4_OP(max4, a.v[i] > b.v[i] ? a.v[i] : b.v[i])
 #undef SPLAT_F4_OP
+inline F4 select4(bool which, F4 a, F4 b) { return which ? a : b; }
 inline void truncate4(F4 a, int32_t out[4]) {
     for (int i = 0; i < 4; ++i) out[i] = int32_t(a.v[i]);
 }
