@@ -12,6 +12,9 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdlib>
+#include <memory>
+#include <new>
 #include <system_error>
 #include <thread>
 #include <utility>
@@ -122,10 +125,10 @@ struct Bins {
 
 struct Builder {
     std::vector<BuildPrim> &prims;
-    std::vector<BVHNode> &nodes;
+    BVHNode *nodes;  // room for 2n - 1, written as they are made (see BVH::build)
     std::atomic<uint32_t> used{1};
 
-    Builder(std::vector<BuildPrim> &p, std::vector<BVHNode> &n) : prims(p), nodes(n) {}
+    Builder(std::vector<BuildPrim> &p, BVHNode *n) : prims(p), nodes(n) {}
 
     void make_leaf(const Range &r) {
         nodes[r.node].first = r.begin;
@@ -321,14 +324,21 @@ void BVH::build(std::vector<BuildPrim> &&input, int threads) {
     nodes.clear();
     prim_order.clear();
     if (n == 0) return;  // no nodes at all: traversals check for that
-    nodes.assign(2 * size_t(n) - 1, BVHNode{AABB(), 0, 0});
+    // Room for the most nodes a tree of n leaves can have, left uninitialised: the pages
+    // of the part never used (about half) are then never touched. The nodes used are
+    // copied out at the end.
+    struct Free {
+        void operator()(void *p) const { std::free(p); }
+    };
+    std::unique_ptr<BVHNode, Free> room(static_cast<BVHNode *>(std::malloc((2 * size_t(n) - 1) * sizeof(BVHNode))));
+    if (!room) throw std::bad_alloc();
     F4 lo = F4::broadcast(kInfinity), hi = F4::broadcast(-kInfinity), clo = lo, chi = hi;
     for (const BuildPrim &p : prims) {
         const F4 c = centroid_of(p);
         lo = min4(lo, lo_of(p)), hi = max4(hi, hi_of(p)), clo = min4(clo, c), chi = max4(chi, c);
     }
-    nodes[0].box = to_aabb(lo, hi);
-    Builder b(prims, nodes);
+    room.get()[0].box = to_aabb(lo, hi);
+    Builder b(prims, room.get());
     const Range root{0, 0, n, clo, chi, 0};
     if (threads <= 1 || n <= kParallelThreshold) {
         b.build_subtree(root);
@@ -349,8 +359,7 @@ void BVH::build(std::vector<BuildPrim> &&input, int threads) {
         std::sort(open.begin(), open.end(), [](const Range &x, const Range &y) { return x.count() > y.count(); });
         parallel_for(open.size(), threads, [&](size_t i) { b.build_subtree(open[i]); }, [](size_t) { return true; });
     }
-    nodes.resize(b.used.load());
-    nodes.shrink_to_fit();
+    nodes.assign(room.get(), room.get() + b.used.load());
     prim_order.resize(n);
     for (uint32_t i = 0; i < n; ++i) prim_order[i] = prims[i].id;
 }

@@ -36,6 +36,7 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     constexpr size_t kChunk = 1 << 16;
     const size_t chunks = (n + kChunk - 1) / kChunk;
     std::vector<BuildPrim> prims(n);
+    std::vector<PackedSplat> packed(n);  // input order, until the leaf order is known
     std::vector<size_t> bad(chunks, n);
     std::vector<const char *> why(chunks, nullptr);
     std::vector<AABB> chunk_bounds(chunks);
@@ -57,7 +58,8 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
                     return;
                 }
                 const Vec3 nn(float(nv[0] / len), float(nv[1] / len), float(nv[2] / len));
-                const AABB box = disc_bounds(Vec3(c[0], c[1], c[2]), nn, radii[i]);
+                packed[i] = PackedSplat{Vec3(c[0], c[1], c[2]), radii[i], nn, int32_t(i)};
+                const AABB box = disc_bounds(packed[i].c, nn, radii[i]);
                 prims[i] = BuildPrim(box, uint32_t(i));
                 chunk_bounds[k].grow(box);
                 if (colours) colours_[i] = Vec3(colours[3 * i], colours[3 * i + 1], colours[3 * i + 2]);
@@ -76,16 +78,14 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
         [&](size_t k) {
             for (size_t s = k * kChunk, end = std::min(n, s + kChunk); s < end; ++s) {
                 const uint32_t i = bvh_.prim_order[s];
-                const float *c = centres + 3 * i, *nv = normals + 3 * i;
-                const double len = std::sqrt(double(nv[0]) * nv[0] + double(nv[1]) * nv[1] + double(nv[2]) * nv[2]);
-                const Vec3 nn(float(nv[0] / len), float(nv[1] / len), float(nv[2] / len));
-                splats_[s] = PackedSplat{Vec3(c[0], c[1], c[2]), radii[i], nn, int32_t(i)};
+                splats_[s] = packed[i];
                 slot_[i] = uint32_t(s);
             }
         },
         [](size_t) { return true; });
     // The packed splats hold the leaf order (their ids): the tree's copy is not kept.
     std::vector<uint32_t>().swap(bvh_.prim_order);
+    std::vector<PackedSplat>().swap(packed);
 }
 
 size_t SplatScene::memory_bytes() const {
