@@ -296,17 +296,70 @@ struct Builder {
     }
 };
 
-// Iterative (an explicit stack): a recursion would follow whatever `first` says.
-int depth_of(const std::vector<BVHNode> &nodes) {
+// Iterative (an explicit stack): a recursion would follow whatever `child` says.
+int depth_of(const std::vector<WideNode> &nodes) {
     int deepest = 0;
     std::vector<std::pair<uint32_t, int>> stack{{0u, 1}};
     while (!stack.empty()) {
         const auto [i, d] = stack.back();
         stack.pop_back();
         deepest = std::max(deepest, d);
-        if (!nodes[i].leaf()) stack.push_back({nodes[i].first, d + 1}), stack.push_back({nodes[i].first + 1, d + 1});
+        for (int k = 0; k < 4; ++k)
+            if (nodes[i].child[k] != kNoChild && nodes[i].count[k] == 0) stack.push_back({nodes[i].child[k], d + 1});
     }
     return deepest;
+}
+
+// The binary tree as 4-wide nodes: each takes the children of a binary node and opens
+// the largest (by surface area) of them that is not a leaf until it holds four.
+void collapse(const BVHNode *bin, std::vector<WideNode> &wide) {
+    wide.clear();
+    wide.emplace_back();
+    std::vector<std::pair<uint32_t, uint32_t>> todo;  // (binary node, wide node to fill)
+    auto fill = [&](uint32_t w, const uint32_t *kids, int n) {
+        for (int k = 0; k < 4; ++k) {
+            WideNode &nd = wide[w];
+            if (k >= n) {
+                for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = kInfinity, nd.box[2 * a + 1][k] = -kInfinity;
+                nd.child[k] = kNoChild, nd.count[k] = 0;
+                continue;
+            }
+            const BVHNode &c = bin[kids[k]];
+            for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = c.box.lo[a], nd.box[2 * a + 1][k] = c.box.hi[a];
+            if (c.leaf()) {
+                nd.child[k] = c.first, nd.count[k] = c.count;
+            } else {
+                const uint32_t child = uint32_t(wide.size());
+                wide[w].child[k] = child, wide[w].count[k] = 0;
+                wide.emplace_back();
+                todo.push_back({kids[k], child});
+            }
+        }
+    };
+    if (bin[0].leaf()) {
+        const uint32_t root = 0;
+        fill(0, &root, 1);
+    } else {
+        todo.push_back({0u, 0u});
+    }
+    while (!todo.empty()) {
+        const auto [b, w] = todo.back();
+        todo.pop_back();
+        uint32_t kids[4] = {bin[b].first, bin[b].first + 1};
+        int n = 2;
+        while (n < 4) {
+            int open = -1;
+            float area = -1.f;
+            for (int k = 0; k < n; ++k)
+                if (!bin[kids[k]].leaf() && bin[kids[k]].box.half_area() > area) open = k, area = bin[kids[k]].box.half_area();
+            if (open < 0) break;
+            const uint32_t first = bin[kids[open]].first;
+            kids[open] = first;
+            kids[n++] = first + 1;
+        }
+        fill(w, kids, n);
+    }
+    wide.shrink_to_fit();
 }
 
 }  // namespace
@@ -359,7 +412,7 @@ void BVH::build(std::vector<BuildPrim> &&input, int threads) {
         std::sort(open.begin(), open.end(), [](const Range &x, const Range &y) { return x.count() > y.count(); });
         parallel_for(open.size(), threads, [&](size_t i) { b.build_subtree(open[i]); }, [](size_t) { return true; });
     }
-    nodes.assign(room.get(), room.get() + b.used.load());
+    collapse(room.get(), nodes);
     prim_order.resize(n);
     for (uint32_t i = 0; i < n; ++i) prim_order[i] = prims[i].id;
 }

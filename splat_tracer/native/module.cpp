@@ -307,8 +307,9 @@ PyObject *Scene_bounds(PyObject *self, void *) {
 PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
     const BVH &bvh = scene_of(self).bvh();
     Py_ssize_t leaves = 0, max_leaf = 0;
-    for (const BVHNode &n : bvh.nodes)
-        if (n.leaf()) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count);
+    for (const WideNode &n : bvh.nodes)
+        for (int k = 0; k < 4; ++k)
+            if (n.count[k]) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count[k]);
     return Py_BuildValue("{s:n,s:n,s:i,s:n,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
                          bvh.depth(), "max_leaf_size", max_leaf, "bytes", Py_ssize_t(scene_of(self).memory_bytes()));
 }

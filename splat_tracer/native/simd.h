@@ -38,6 +38,14 @@ inline F4 select4(bool which, F4 a, F4 b) {
     const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-int32_t(which)));
     return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
 }
+// Per lane x > y ? a : b, and x < y ? a : b (false for NaN: b).
+inline F4 select_gt(F4 x, F4 y, F4 a, F4 b) {
+    const __m128 m = _mm_cmpgt_ps(x.v, y.v);
+    return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
+}
+inline F4 select_lt(F4 x, F4 y, F4 a, F4 b) { return select_gt(y, x, a, b); }
+// Bit i set where lane i of a <= lane i of b.
+inline int mask_le(F4 a, F4 b) { return _mm_movemask_ps(_mm_cmple_ps(a.v, b.v)); }
 // Lanes truncated towards zero (the caller clamps them into int range first).
 inline void truncate4(F4 a, int32_t out[4]) { _mm_storeu_si128(reinterpret_cast<__m128i *>(out), _mm_cvttps_epi32(a.v)); }
 #else
@@ -65,6 +73,17 @@ SPLAT_F4_OP(min4, a.v[i] < b.v[i] ? a.v[i] : b.v[i])
 SPLAT_F4_OP(max4, a.v[i] > b.v[i] ? a.v[i] : b.v[i])
 #undef SPLAT_F4_OP
 inline F4 select4(bool which, F4 a, F4 b) { return which ? a : b; }
+inline F4 select_gt(F4 x, F4 y, F4 a, F4 b) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = x.v[i] > y.v[i] ? a.v[i] : b.v[i];
+    return r;
+}
+inline F4 select_lt(F4 x, F4 y, F4 a, F4 b) { return select_gt(y, x, a, b); }
+inline int mask_le(F4 a, F4 b) {
+    int m = 0;
+    for (int i = 0; i < 4; ++i) m |= (a.v[i] <= b.v[i]) << i;
+    return m;
+}
 inline void truncate4(F4 a, int32_t out[4]) {
     for (int i = 0; i < 4; ++i) out[i] = int32_t(a.v[i]);
 }
