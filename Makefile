@@ -102,11 +102,13 @@ dist: $(STAMP)
 
 bench-quick: build
 	$(VPY) benchmarks/trace_throughput.py --quick
+	$(VPY) benchmarks/scale.py --quick
 	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
 	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
 
 bench: build
 	$(VPY) benchmarks/trace_throughput.py
+	$(VPY) benchmarks/scale.py
 	$(VPY) benchmarks/accuracy.py --output benchmarks/results
 	$(VPY) benchmarks/frame_time.py --output benchmarks/results
 

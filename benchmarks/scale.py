@@ -11,7 +11,7 @@ floor, lit by one sun that casts the torus' shadow onto the floor. For each size
   thread (the speed-up from cores), median of interleaved runs;
 - bytes per splat kept after the build, from the core's own accounting (Scene.bvh_stats()
   'bytes') and from the process' resident memory (RSS after the build minus before, the
-  input arrays already freed);
+  input arrays already freed), and the peak while building (input arrays included);
 - a 1920x1080 frame of core.RenderScene with the full method, 1 sample, the sun's shadow
   rays and no bounce (the integrator path Blender uses);
 - Embree 3's build of the same discs (benchmarks/embree_harness.cpp, its own
@@ -82,7 +82,7 @@ def rss_bytes() -> int:
 def kept_rss(n_splats: int) -> float:
     """Bytes per splat the process keeps for a built scene, measured in a fresh process: RSS
     after the build with the input arrays freed (and freed heap handed back to the system)
-    minus RSS before the input was made."""
+    minus RSS before the input was made; and the peak (input included) the same way."""
     code = f"""
 import ctypes, gc, sys
 sys.path.insert(0, {str(HERE)!r}); sys.path.insert(0, {str(HERE.parent)!r})
@@ -94,10 +94,15 @@ s = core.Scene(c, n, r, closed=True)
 del c, n, r
 gc.collect()
 ctypes.CDLL("libc.so.6").malloc_trim(0)
-print((scale.rss_bytes() - before) / {n_splats})
+import resource
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print((scale.rss_bytes() - before) / {n_splats}, (peak - before) / {n_splats})
 """
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
-    return float(run.stdout.strip().splitlines()[-1]) if run.returncode == 0 else float("nan")
+    if run.returncode:
+        return float("nan"), float("nan")
+    kept, peak = run.stdout.strip().splitlines()[-1].split()
+    return float(kept), float(peak)
 
 
 def timed_builds(c, n, r, rounds: int) -> dict:
@@ -167,13 +172,13 @@ def main(argv=None) -> int:
           f"build medians of {rounds} interleaved round(s); frame {width}x{height}, full method, 1 sample, one sun "
           f"with shadows, on all threads. Shared machine: timings vary by +-25 %.")
     print("| splats | build, default threads (s) | build, 1 thread (s) | speed-up | Embree build (s) "
-          "| kept B/splat (core) | kept B/splat (RSS) | frame (s) | shadow rays |")
-    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "| kept B/splat (core) | kept B/splat (RSS) | peak B/splat (RSS, input included) | frame (s) | shadow rays |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for n_splats in sizes:
         c, n, r = torus_cloud(n_splats)
         embree = None if args.no_embree else embree_build(c, n, r, Path("build") / "bench-scale")
         builds = timed_builds(c, n, r, rounds) if rounds > 0 else {0: float("nan"), 1: float("nan")}
-        rss_kept = kept_rss(n_splats)
+        rss_kept, rss_peak = kept_rss(n_splats)
         scene = core.Scene(c, n, r, closed=True)
         del c, n, r
         gc.collect()
@@ -182,7 +187,7 @@ def main(argv=None) -> int:
         label = f"{n_splats / 1e6:g}M"
         em = f"{embree:.2f}" if embree is not None else "n/a"
         print(f"| {label} | {builds[0]:.2f} | {builds[1]:.2f} | {builds[1] / builds[0]:.2f}x | {em} "
-              f"| {core_kept:.1f} | {rss_kept:.1f} | {seconds:.2f} | {counters.get('shadow_rays', 0):,} |", flush=True)
+              f"| {core_kept:.1f} | {rss_kept:.1f} | {rss_peak:.0f} | {seconds:.2f} | {counters.get('shadow_rays', 0):,} |", flush=True)
         del scene
         gc.collect()
     return 0

@@ -12,13 +12,11 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cstdlib>
-#include <memory>
-#include <new>
 #include <system_error>
 #include <thread>
 #include <utility>
 
+#include "buffer.h"
 #include "parallel.h"
 #include "simd.h"
 
@@ -124,11 +122,11 @@ struct Bins {
 };
 
 struct Builder {
-    std::vector<BuildPrim> &prims;
+    BuildPrim *prims;
     BVHNode *nodes;  // room for 2n - 1, written as they are made (see BVH::build)
     std::atomic<uint32_t> used{1};
 
-    Builder(std::vector<BuildPrim> &p, BVHNode *n) : prims(p), nodes(n) {}
+    Builder(BuildPrim *p, BVHNode *n) : prims(p), nodes(n) {}
 
     void make_leaf(const Range &r) {
         nodes[r.node].first = r.begin;
@@ -241,7 +239,7 @@ struct Builder {
             const Vec3 e = cb.extent();
             const int axis = (e.x >= e.y && e.x >= e.z) ? 0 : (e.y >= e.z ? 1 : 2);
             mid = r.begin + count / 2;
-            std::nth_element(prims.begin() + r.begin, prims.begin() + mid, prims.begin() + r.end,
+            std::nth_element(prims + r.begin, prims + mid, prims + r.end,
                              [axis](const BuildPrim &a, const BuildPrim &b) {
                                  return a.lo[axis] * 0.5f + a.hi[axis] * 0.5f < b.lo[axis] * 0.5f + b.hi[axis] * 0.5f;
                              });
@@ -270,7 +268,7 @@ struct Builder {
         // Branchless (Lomuto, swapping every record): [begin, k) goes left, [k, i) right.
         // A two-sided (Hoare) partition branched per record and mispredicted about every
         // other time: this one took a third off a 10M build.
-        BuildPrim *p = prims.data();
+        BuildPrim *p = prims;
         uint32_t k = r.begin;
         const F4 inf = F4::broadcast(kInfinity), ninf = F4::broadcast(-kInfinity);
         for (uint32_t i = r.begin; i < r.end; ++i) {
@@ -312,8 +310,9 @@ int depth_of(const std::vector<WideNode> &nodes) {
 
 // The binary tree as 4-wide nodes: each takes the children of a binary node and opens
 // the largest (by surface area) of them that is not a leaf until it holds four.
-void collapse(const BVHNode *bin, std::vector<WideNode> &wide) {
+void collapse(const BVHNode *bin, uint32_t used, std::vector<WideNode> &wide) {
     wide.clear();
+    wide.reserve(used / 2 + 1);  // at most one per interior binary node; trimmed at the end
     wide.emplace_back();
     std::vector<std::pair<uint32_t, uint32_t>> todo;  // (binary node, wide node to fill)
     auto fill = [&](uint32_t w, const uint32_t *kids, int n) {
@@ -367,12 +366,13 @@ void collapse(const BVHNode *bin, std::vector<WideNode> &wide) {
 void BVH::build(const std::vector<AABB> &bounds, int threads) {
     std::vector<BuildPrim> prims(bounds.size());
     for (size_t i = 0; i < bounds.size(); ++i) prims[i] = BuildPrim(bounds[i], uint32_t(i));
-    build(std::move(prims), threads);
+    build(prims.data(), prims.size(), threads);
+    prim_order.resize(prims.size());
+    for (size_t i = 0; i < prims.size(); ++i) prim_order[i] = prims[i].id;
 }
 
-void BVH::build(std::vector<BuildPrim> &&input, int threads) {
-    std::vector<BuildPrim> prims = std::move(input);  // freed on return
-    const uint32_t n = uint32_t(prims.size());
+void BVH::build(BuildPrim *prims, size_t count, int threads) {
+    const uint32_t n = uint32_t(count);
     threads = resolve_threads(threads);
     nodes.clear();
     prim_order.clear();
@@ -380,18 +380,15 @@ void BVH::build(std::vector<BuildPrim> &&input, int threads) {
     // Room for the most nodes a tree of n leaves can have, left uninitialised: the pages
     // of the part never used (about half) are then never touched. The nodes used are
     // copied out at the end.
-    struct Free {
-        void operator()(void *p) const { std::free(p); }
-    };
-    std::unique_ptr<BVHNode, Free> room(static_cast<BVHNode *>(std::malloc((2 * size_t(n) - 1) * sizeof(BVHNode))));
-    if (!room) throw std::bad_alloc();
+    Buffer<BVHNode> room(2 * size_t(n) - 1);
     F4 lo = F4::broadcast(kInfinity), hi = F4::broadcast(-kInfinity), clo = lo, chi = hi;
-    for (const BuildPrim &p : prims) {
+    for (uint32_t i = 0; i < n; ++i) {
+        const BuildPrim &p = prims[i];
         const F4 c = centroid_of(p);
         lo = min4(lo, lo_of(p)), hi = max4(hi, hi_of(p)), clo = min4(clo, c), chi = max4(chi, c);
     }
-    room.get()[0].box = to_aabb(lo, hi);
-    Builder b(prims, room.get());
+    room.data()[0].box = to_aabb(lo, hi);
+    Builder b(prims, room.data());
     const Range root{0, 0, n, clo, chi, 0};
     if (threads <= 1 || n <= kParallelThreshold) {
         b.build_subtree(root);
@@ -412,9 +409,7 @@ void BVH::build(std::vector<BuildPrim> &&input, int threads) {
         std::sort(open.begin(), open.end(), [](const Range &x, const Range &y) { return x.count() > y.count(); });
         parallel_for(open.size(), threads, [&](size_t i) { b.build_subtree(open[i]); }, [](size_t) { return true; });
     }
-    collapse(room.get(), nodes);
-    prim_order.resize(n);
-    for (uint32_t i = 0; i < n; ++i) prim_order[i] = prims[i].id;
+    collapse(room.data(), b.used.load(), nodes);
 }
 
 int BVH::depth() const { return nodes.empty() ? 0 : depth_of(nodes); }

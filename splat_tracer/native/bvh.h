@@ -60,8 +60,9 @@ struct BVH {
     // all cores): the top levels split one at a time with the binning shared by every
     // thread, then the subtrees, largest first, each on one thread.
     void build(const std::vector<AABB> &bounds, int threads);
-    // The same from build records (consumed: freed before returning).
-    void build(std::vector<BuildPrim> &&prims, int threads);
+    // The same from `count` build records, which it leaves in leaf order (their ids are
+    // then what prim_order would be; prim_order is left empty).
+    void build(BuildPrim *prims, size_t count, int threads);
 
     // Bytes the tree keeps (nodes and leaf order).
     size_t memory_bytes() const { return nodes.capacity() * sizeof(WideNode) + prim_order.capacity() * 4; }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "parallel.h"
 
@@ -35,8 +36,9 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     // the one reported, whichever thread met it first.
     constexpr size_t kChunk = 1 << 16;
     const size_t chunks = (n + kChunk - 1) / kChunk;
-    std::vector<BuildPrim> prims(n);
-    std::vector<PackedSplat> packed(n);  // input order, until the leaf order is known
+    // Left uninitialised: the threads of the loop below touch their pages first.
+    Buffer<BuildPrim> prims(n);
+    Buffer<PackedSplat> packed(n);  // input order, until the leaf order is known
     std::vector<size_t> bad(chunks, n);
     std::vector<const char *> why(chunks, nullptr);
     std::vector<AABB> chunk_bounds(chunks);
@@ -70,26 +72,26 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
         if (why[k]) bad_splat(bad[k], why[k]);
         bounds_.grow(chunk_bounds[k]);
     }
-    bvh_.build(std::move(prims), threads);
-    splats_.resize(n);
-    slot_.resize(n);
+    bvh_.build(prims.data(), n, threads);
+    // The splats in leaf order, written over the build records (read each before it is
+    // overwritten): the same size, and their pages are already there.
+    static_assert(sizeof(BuildPrim) == sizeof(PackedSplat), "splats are packed over the build records");
+    slot_.allocate(n);
     parallel_for(
         chunks, threads,
         [&](size_t k) {
             for (size_t s = k * kChunk, end = std::min(n, s + kChunk); s < end; ++s) {
-                const uint32_t i = bvh_.prim_order[s];
-                splats_[s] = packed[i];
+                const uint32_t i = prims[s].id;  // leaf order
+                std::memcpy(static_cast<void *>(&prims[s]), &packed[i], sizeof(PackedSplat));
                 slot_[i] = uint32_t(s);
             }
         },
         [](size_t) { return true; });
-    // The packed splats hold the leaf order (their ids): the tree's copy is not kept.
-    std::vector<uint32_t>().swap(bvh_.prim_order);
-    std::vector<PackedSplat>().swap(packed);
+    splats_.adopt(prims);
 }
 
 size_t SplatScene::memory_bytes() const {
-    return splats_.capacity() * sizeof(PackedSplat) + slot_.capacity() * sizeof(uint32_t) +
+    return splats_.bytes() + slot_.bytes() +
            colours_.capacity() * sizeof(Vec3) + closed_.capacity() + alphas_.capacity() * sizeof(float) +
            bvh_.memory_bytes();
 }

@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "buffer.h"
 #include "bvh.h"
 #include "disc.h"
 #include "layer.h"
@@ -71,8 +72,8 @@ class SplatScene {
     template <class Visit>
     void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
 
-    std::vector<PackedSplat> splats_;  // BVH order
-    std::vector<uint32_t> slot_;       // input id -> index in splats_
+    Buffer<PackedSplat> splats_;  // BVH order
+    Buffer<uint32_t> slot_;       // input id -> index in splats_
     std::vector<Vec3> colours_;        // input order; empty without per-point colours
     std::vector<uint8_t> closed_;
     std::vector<float> alphas_;
