@@ -100,11 +100,37 @@ size_t SplatScene::memory_bytes() const {
 template <class Visit>
 void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats) const {
     uint64_t discs = 0;
+#ifdef SPLAT_SSE2
+    const DiscRay disc_ray(ray);
+#endif
     traverse_bvh(
         bvh_, ray, limit,
         [&](uint32_t first, uint32_t count) {
             discs += count;
-            for (uint32_t k = first, end = first + count; k < end; ++k) {
+            uint32_t k = first;
+            const uint32_t end = first + count;
+#ifdef SPLAT_SSE2
+            // Four discs at a time (the same arithmetic as intersect_disc), in leaf order;
+            // the last group takes the leaf's last four discs, skipping those already seen.
+            if (count >= 4) {
+                for (;;) {
+                    const uint32_t base = std::min(k, end - 4);
+                    const float *d[4];
+                    for (int j = 0; j < 4; ++j) d[j] = &splats_[base + j].c.x;
+                    float t[4], dist2[4];
+                    int mask = intersect_discs4(disc_ray, d, t, dist2) & (0xf << (k - base));
+                    while (mask) {
+                        const int j = __builtin_ctz(unsigned(mask));
+                        mask &= mask - 1;
+                        const PackedSplat &s = splats_[base + j];
+                        visit(s, DiscHit{t[j], dist2[j], dot(ray.d, s.n) < 0.f});
+                    }
+                    k = base + 4;
+                    if (k >= end) break;
+                }
+            }
+#endif
+            for (; k < end; ++k) {
                 const PackedSplat &s = splats_[k];
                 DiscHit h;
                 if (intersect_disc(ray, s.c, s.n, s.r, &h)) visit(s, h);
