@@ -345,16 +345,19 @@ void collapse(const BVHNode *bin, uint32_t used, std::vector<WideNode> &wide) {
         const auto [b, w] = todo.back();
         todo.pop_back();
         uint32_t kids[4] = {bin[b].first, bin[b].first + 1};
+        // Area of each kid that can be opened (-1: a leaf), computed once.
+        auto area_of = [&](uint32_t i) { return bin[i].leaf() ? -1.f : bin[i].box.half_area(); };
+        float area[4] = {area_of(kids[0]), area_of(kids[1])};
         int n = 2;
         while (n < 4) {
             int open = -1;
-            float area = -1.f;
+            float largest = -1.f;
             for (int k = 0; k < n; ++k)
-                if (!bin[kids[k]].leaf() && bin[kids[k]].box.half_area() > area) open = k, area = bin[kids[k]].box.half_area();
+                if (area[k] > largest) open = k, largest = area[k];
             if (open < 0) break;
             const uint32_t first = bin[kids[open]].first;
-            kids[open] = first;
-            kids[n++] = first + 1;
+            kids[open] = first, area[open] = area_of(first);
+            kids[n] = first + 1, area[n] = area_of(first + 1), ++n;
         }
         fill(w, kids, n);
     }
