@@ -11,7 +11,9 @@ beside them, on the same discs, rays and threads, Embree 3's own oriented-disc p
 (rtcIntersect1 one ray at a time, rtcIntersect16 in 4x4 pixel packets; embree_harness.cpp,
 built against Debian's libembree-dev, installed when missing and possible -- the row is
 skipped with a message otherwise), with its hits checked against the core's; and the
-paper's own figure. Without ../shared (a user's clone), an analytic sphere of the same size
+paper's own figure. Every row is timed once per round, the core's and Embree's interleaved
+(the machine is shared: a change in load then falls on all rows alike); medians of the
+rounds. Without ../shared (a user's clone), an analytic sphere of the same size
 stands in for the bunny, and the table says so.
 """
 from __future__ import annotations
@@ -151,8 +153,9 @@ def main(argv=None) -> int:
                 hits = result
         if embree_run is not None:
             for threads in thread_counts:
-                for key, value in embree_run(threads).items():
-                    embree_times[threads][key].append(value)
+                one = embree_run(threads)
+                for key, values in embree_times[threads].items():
+                    values.append(one[key])
     rows = [(name, threads, statistics.median(ts)) for (name, threads, _), ts in zip(runs, times)]
     coverage = float((hits.id >= 0).mean())
 
