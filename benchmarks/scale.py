@@ -171,6 +171,7 @@ def main(argv=None) -> int:
     rounds = args.rounds or (1 if args.quick else 3)
     width, height = (960, 540) if args.quick else (1920, 1080)
     print(f"scale: torus, closed, {COVER:g} discs per point; hardware threads: {core_threads()}; "
+          f"box and disc tests in {core.simd_path()}; "
           f"build medians of {rounds} interleaved round(s); frame {width}x{height}, full method, 1 sample, one sun "
           f"with shadows, on all threads. Shared machine: timings vary by +-25 %.")
     print("| splats | build, default threads (s) | build, 1 thread (s) | speed-up | Embree build (s) "

@@ -19,6 +19,7 @@
 #include "parallel.h"
 #include "py_util.h"
 #include "render.h"
+#include "simd.h"
 #include "splat_scene.h"
 
 namespace {
@@ -350,6 +351,15 @@ PyType_Spec Scene_spec = {"splat_tracer._core.Scene", sizeof(SceneObject), 0, Py
 
 PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(resolve_threads(0)); }
 
+// Which code path the box and disc tests were compiled for (simd.h): what the benchmarks print.
+PyObject *simd_path(PyObject *, PyObject *) {
+#ifdef SPLAT_SSE2
+    return PyUnicode_FromString("SSE2");
+#else
+    return PyUnicode_FromString("plain floats");
+#endif
+}
+
 PyObject *set_thread_budget(PyObject *, PyObject *arg) {
     const long budget = PyLong_AsLong(arg);
     if (budget == -1 && PyErr_Occurred()) return nullptr;
@@ -360,6 +370,7 @@ PyObject *set_thread_budget(PyObject *, PyObject *arg) {
 
 PyMethodDef module_methods[] = {
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
+    {"simd_path", simd_path, METH_NOARGS, "The instruction set the BVH's box and disc tests use: 'SSE2' or 'plain floats'."},
     {"_set_thread_budget", set_thread_budget, METH_O,
      "Test seam: the core may start this many more threads, then thread creation fails as if the system "
      "refused it (-1: no limit)."},
