@@ -79,14 +79,20 @@ def test_results_do_not_depend_on_thread_count():
 
 
 def test_build_does_not_depend_on_thread_count():
-    """Above 32k splats the top of the tree is split with the binning shared by the threads,
-    then subtrees are built on threads: the same tree and the same hits as on one thread."""
+    """Above 32k splats the top of the tree is split with the binning and (above 128k) the
+    partitioning shared by the threads, then subtrees are built on threads, and (above 64k
+    binary nodes) collapsed into wide nodes on threads: the same tree, the same leaf order
+    and so the same results of every query as on one thread."""
     rng = np.random.default_rng(5)
-    discs = random_discs(70000, rng)
+    discs = random_discs(150000, rng)
     one, two = core.Scene(*discs, threads=1), core.Scene(*discs, threads=2)
     assert one.bvh_stats() == two.bvh_stats()
     o, d = rng.uniform(-2, 2, size=(20000, 3)), rng.normal(size=(20000, 3))
     assert_same_hits(one.trace(o, d), two.trace(o, d))
+    full = core.Method.preset("FULL")
+    a, b = one.trace_surface(o, d, full, members=True), two.trace_surface(o, d, full, members=True)
+    for field in ("t", "id", "normal", "members"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
     assert_same_hits(two.trace(o[:1000], d[:1000]), two.trace(o[:1000], d[:1000], brute_force=True))
 
 

@@ -133,28 +133,34 @@ struct Builder {
         nodes[r.node].count = r.count();
     }
 
-    // Bins [begin, end) on up to `threads` threads.
-    void bin(const Range &r, const Binner &bn, int bins, int axis, Bins &out, int threads) {
-        const uint32_t n = r.count();
-        if (threads <= 1 || n < kParallelBinning) return out.fill(&prims[r.begin], n, bn, bins, axis);
-        std::vector<Bins> part(static_cast<size_t>(threads));
+    // job(t) for t in [0, threads): on threads of their own, this one doing job(0) and the
+    // jobs of any thread the system refused.
+    template <class Job>
+    static void on_threads(int threads, Job &&job) {
         std::vector<std::thread> pool;
-        const uint32_t step = (n + threads - 1) / threads;
-        auto job = [&](int t) {
-            const uint32_t b = std::min(n, t * step), e = std::min(n, b + step);
-            part[t].fill(&prims[r.begin + b], e - b, bn, bins, axis);
-        };
         int t = 1;
         for (; t < threads; ++t) {
             try {
                 pool.push_back(start_thread([&job, t] { job(t); }));
             } catch (const std::system_error &) {
-                break;  // refused: this thread bins the rest
+                break;  // refused: this thread does the rest
             }
         }
         job(0);
         for (int k = t; k < threads; ++k) job(k);
         for (auto &th : pool) th.join();
+    }
+
+    // Bins [begin, end) on up to `threads` threads.
+    void bin(const Range &r, const Binner &bn, int bins, int axis, Bins &out, int threads) {
+        const uint32_t n = r.count();
+        if (threads <= 1 || n < kParallelBinning) return out.fill(&prims[r.begin], n, bn, bins, axis);
+        std::vector<Bins> part(static_cast<size_t>(threads));
+        const uint32_t step = (n + threads - 1) / threads;
+        on_threads(threads, [&](int t) {
+            const uint32_t b = std::min(n, t * step), e = std::min(n, b + step);
+            part[t].fill(&prims[r.begin + b], e - b, bn, bins, axis);
+        });
         out = part[0];
         for (int k = 1; k < threads; ++k) out.add(part[k]);
     }
@@ -229,7 +235,7 @@ struct Builder {
                     else blo = min4(blo, bs.lo[best_axis][b]), bhi = max4(bhi, bs.hi[best_axis][b]);
                 }
                 lbox = to_aabb(alo, ahi), rbox = to_aabb(blo, bhi);
-                mid = partition(r, bn, best_axis, best_bin, llo, lhi, rlo, rhi);
+                mid = partition(r, bn, best_axis, best_bin, llo, lhi, rlo, rhi, threads);
                 have = true;
             }
         }
@@ -264,14 +270,15 @@ struct Builder {
 
     // Records whose bin along `axis` is at most `best` first; both sides' centroid bounds
     // gathered on the way. Returns the partition point.
-    uint32_t partition(const Range &r, const Binner &bn, int axis, int best, F4 &llo, F4 &lhi, F4 &rlo, F4 &rhi) {
+    uint32_t partition(uint32_t begin, uint32_t end, const Binner &bn, int axis, int best, F4 &llo, F4 &lhi, F4 &rlo,
+                       F4 &rhi) {
         // Branchless (Lomuto, swapping every record): [begin, k) goes left, [k, i) right.
         // A two-sided (Hoare) partition branched per record and mispredicted about every
         // other time: this one took a third off a 10M build.
         BuildPrim *p = prims;
-        uint32_t k = r.begin;
+        uint32_t k = begin;
         const F4 inf = F4::broadcast(kInfinity), ninf = F4::broadcast(-kInfinity);
-        for (uint32_t i = r.begin; i < r.end; ++i) {
+        for (uint32_t i = begin; i < end; ++i) {
             const BuildPrim q = p[i];
             const F4 c = centroid_of(q);
             int32_t b[4];
@@ -286,6 +293,59 @@ struct Builder {
         return k;
     }
 
+    // Nodes above kParallelBinning records: kSlices slices partitioned apart (on up to
+    // `threads` threads), then the records on the wrong side of the overall partition point
+    // swapped pairwise, in order. The slices do not depend on the thread count, so neither
+    // does the order the records end in (nor, then, the leaf order of the splats).
+    static constexpr int kSlices = 8;
+    uint32_t partition(const Range &r, const Binner &bn, int axis, int best, F4 &llo, F4 &lhi, F4 &rlo, F4 &rhi,
+                       int threads) {
+        const uint32_t n = r.count();
+        if (n < kParallelBinning) return partition(r.begin, r.end, bn, axis, best, llo, lhi, rlo, rhi);
+        struct Slice {
+            uint32_t begin, end, mid;
+            F4 llo, lhi, rlo, rhi;
+        };
+        std::vector<Slice> slice(kSlices);
+        const uint32_t step = (n + kSlices - 1) / kSlices;
+        const int workers = std::max(1, std::min(threads, kSlices));
+        on_threads(workers, [&](int w) {
+            for (int t = w; t < kSlices; t += workers) {
+                Slice &sl = slice[t];
+                sl.begin = r.begin + std::min(n, t * step), sl.end = r.begin + std::min(n, t * step + step);
+                sl.llo = sl.rlo = F4::broadcast(kInfinity), sl.lhi = sl.rhi = F4::broadcast(-kInfinity);
+                sl.mid = partition(sl.begin, sl.end, bn, axis, best, sl.llo, sl.lhi, sl.rlo, sl.rhi);
+            }
+        });
+        uint32_t mid = r.begin;
+        for (const Slice &sl : slice) {
+            mid += sl.mid - sl.begin;
+            llo = min4(llo, sl.llo), lhi = max4(lhi, sl.lhi), rlo = min4(rlo, sl.rlo), rhi = max4(rhi, sl.rhi);
+        }
+        // Right-goers before mid are the slices' right parts there, left-goers from mid on
+        // their left parts there: as many of each.
+        size_t a = 0, b = 0;
+        uint32_t i = slice[0].mid, j = 0;
+        auto next_wrong_right = [&]() -> bool {  // i: next right-goer before mid
+            for (;;) {
+                if (a == slice.size() || slice[a].mid >= mid) return false;
+                if (i < std::min(slice[a].end, mid)) return true;
+                if (++a < slice.size()) i = slice[a].mid;
+            }
+        };
+        auto next_wrong_left = [&]() -> bool {  // j: next left-goer from mid on
+            for (;;) {
+                if (b == slice.size()) return false;
+                const uint32_t lo = std::max(slice[b].begin, mid);
+                if (j < lo) j = lo;
+                if (j < slice[b].mid) return true;
+                ++b;
+            }
+        };
+        while (next_wrong_right() && next_wrong_left()) std::swap(prims[i++], prims[j++]);
+        return mid;
+    }
+
     void build_subtree(const Range &r) {
         Range left, right;
         if (!split(r, left, right, 1)) return;
@@ -295,7 +355,7 @@ struct Builder {
 };
 
 // Iterative (an explicit stack): a recursion would follow whatever `child` says.
-int depth_of(const std::vector<WideNode> &nodes) {
+int depth_of(const Buffer<WideNode> &nodes) {
     int deepest = 0;
     std::vector<std::pair<uint32_t, int>> stack{{0u, 1}};
     while (!stack.empty()) {
@@ -309,42 +369,18 @@ int depth_of(const std::vector<WideNode> &nodes) {
 }
 
 // The binary tree as 4-wide nodes: each takes the children of a binary node and opens
-// the largest (by surface area) of them that is not a leaf until it holds four.
-void collapse(const BVHNode *bin, uint32_t used, std::vector<WideNode> &wide) {
-    wide.clear();
-    wide.reserve(used / 2 + 1);  // at most one per interior binary node; trimmed at the end
-    wide.emplace_back();
-    std::vector<std::pair<uint32_t, uint32_t>> todo;  // (binary node, wide node to fill)
-    auto fill = [&](uint32_t w, const uint32_t *kids, int n) {
-        for (int k = 0; k < 4; ++k) {
-            WideNode &nd = wide[w];
-            if (k >= n) {
-                for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = kInfinity, nd.box[2 * a + 1][k] = -kInfinity;
-                nd.child[k] = kNoChild, nd.count[k] = 0;
-                continue;
-            }
-            const BVHNode &c = bin[kids[k]];
-            for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = c.box.lo[a], nd.box[2 * a + 1][k] = c.box.hi[a];
-            if (c.leaf()) {
-                nd.child[k] = c.first, nd.count[k] = c.count;
-            } else {
-                const uint32_t child = uint32_t(wide.size());
-                wide[w].child[k] = child, wide[w].count[k] = 0;
-                wide.emplace_back();
-                todo.push_back({kids[k], child});
-            }
-        }
+// the largest (by surface area) of them that is not a leaf until it holds four. What a wide
+// node holds depends only on its binary node's subtree, so subtrees can be collapsed apart.
+struct Collapse {
+    const BVHNode *bin;
+    struct Todo {
+        uint32_t b, w;  // binary node, wide node (in the vector being filled) to fill from it
     };
-    if (bin[0].leaf()) {
-        const uint32_t root = 0;
-        fill(0, &root, 1);
-    } else {
-        todo.push_back({0u, 0u});
-    }
-    while (!todo.empty()) {
-        const auto [b, w] = todo.back();
-        todo.pop_back();
-        uint32_t kids[4] = {bin[b].first, bin[b].first + 1};
+
+    // Fills out[t.w] from binary node t.b, appending a wide node (and a todo entry) for each
+    // child that is not a leaf.
+    void step(const Todo &t, std::vector<WideNode> &out, std::vector<Todo> &todo) const {
+        uint32_t kids[4] = {bin[t.b].first, bin[t.b].first + 1};
         // Area of each kid that can be opened (-1: a leaf), computed once.
         auto area_of = [&](uint32_t i) { return bin[i].leaf() ? -1.f : bin[i].box.half_area(); };
         float area[4] = {area_of(kids[0]), area_of(kids[1])};
@@ -359,9 +395,96 @@ void collapse(const BVHNode *bin, uint32_t used, std::vector<WideNode> &wide) {
             kids[open] = first, area[open] = area_of(first);
             kids[n] = first + 1, area[n] = area_of(first + 1), ++n;
         }
-        fill(w, kids, n);
+        fill(t.w, kids, n, out, todo);
     }
-    wide.shrink_to_fit();
+
+    void fill(uint32_t w, const uint32_t *kids, int n, std::vector<WideNode> &out, std::vector<Todo> &todo) const {
+        for (int k = 0; k < 4; ++k) {
+            WideNode &nd = out[w];
+            if (k >= n) {
+                for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = kInfinity, nd.box[2 * a + 1][k] = -kInfinity;
+                nd.child[k] = kNoChild, nd.count[k] = 0;
+                continue;
+            }
+            const BVHNode &c = bin[kids[k]];
+            for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = c.box.lo[a], nd.box[2 * a + 1][k] = c.box.hi[a];
+            if (c.leaf()) {
+                nd.child[k] = c.first, nd.count[k] = c.count;
+            } else {
+                const uint32_t child = uint32_t(out.size());
+                nd.child[k] = child, nd.count[k] = 0;
+                out.emplace_back();  // nd is not used past this point
+                todo.push_back({kids[k], child});
+            }
+        }
+    }
+
+    // Everything below the entries of `todo`, depth first, into `out`.
+    void drain(std::vector<Todo> &todo, std::vector<WideNode> &out) const {
+        while (!todo.empty()) {
+            const Todo t = todo.back();
+            todo.pop_back();
+            step(t, out, todo);
+        }
+    }
+};
+
+// On one thread, depth first; on more, the top breadth first until there are subtrees
+// enough for every thread, then those subtrees each on a thread into their own arrays,
+// copied (their indices shifted) into place by the threads. The same nodes either way.
+// The top array reserves more than it can need (only the pages written are touched).
+void collapse(const BVHNode *bin, uint32_t used, Buffer<WideNode> &out, int threads) {
+    const Collapse c{bin};
+    std::vector<WideNode> top;
+    top.reserve(used / 2 + 1);  // at most one per interior binary node
+    top.emplace_back();
+    std::vector<Collapse::Todo> todo;
+    std::vector<Collapse::Todo> roots;
+    std::vector<std::vector<WideNode>> parts;
+    if (bin[0].leaf()) {
+        const uint32_t root = 0;
+        c.fill(0, &root, 1, top, todo);
+    } else if (threads <= 1 || used < (1u << 16)) {
+        todo.push_back({0u, 0u});
+        c.drain(todo, top);
+    } else {
+        todo.push_back({0u, 0u});
+        size_t head = 0;
+        while (head < todo.size() && todo.size() - head < size_t(16 * threads)) c.step(todo[head++], top, todo);
+        roots.assign(todo.begin() + head, todo.end());
+        parts.resize(roots.size());
+        parallel_for(
+            roots.size(), threads,
+            [&](size_t i) {
+                std::vector<WideNode> &local = parts[i];
+                local.emplace_back();  // local 0 stands for top[roots[i].w]
+                std::vector<Collapse::Todo> st{{roots[i].b, 0u}};
+                c.drain(st, local);
+            },
+            [](size_t) { return true; });
+        for (size_t i = 0; i < roots.size(); ++i) top[roots[i].w] = parts[i][0];
+    }
+    std::vector<size_t> offset(parts.size());
+    size_t total = top.size();
+    for (size_t i = 0; i < parts.size(); ++i) offset[i] = total, total += parts[i].size() - 1;
+    out.allocate(total);
+    std::copy(top.begin(), top.end(), out.begin());
+    std::vector<WideNode>().swap(top);
+    // Part i's node j >= 1 goes to offset[i] + j - 1; its root's children were already
+    // pointing into the part: shifted with the rest.
+    auto place = [&](size_t i) {
+        const std::vector<WideNode> &local = parts[i];
+        const uint32_t shift = uint32_t(offset[i] - 1);
+        auto shifted = [&](WideNode nd) {
+            for (int k = 0; k < 4; ++k)
+                if (nd.count[k] == 0 && nd.child[k] != kNoChild) nd.child[k] += shift;
+            return nd;
+        };
+        out[roots[i].w] = shifted(local[0]);
+        for (size_t j = 1; j < local.size(); ++j) out[offset[i] + j - 1] = shifted(local[j]);
+        std::vector<WideNode>().swap(parts[i]);
+    };
+    if (!parts.empty()) parallel_for(parts.size(), threads, place, [](size_t) { return true; });
 }
 
 }  // namespace
@@ -377,7 +500,7 @@ void BVH::build(const std::vector<AABB> &bounds, int threads) {
 void BVH::build(BuildPrim *prims, size_t count, int threads) {
     const uint32_t n = uint32_t(count);
     threads = resolve_threads(threads);
-    nodes.clear();
+    nodes.release();
     prim_order.clear();
     if (n == 0) return;  // no nodes at all: traversals check for that
     // Room for the most nodes a tree of n leaves can have, left uninitialised: the pages
@@ -412,7 +535,7 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
         std::sort(open.begin(), open.end(), [](const Range &x, const Range &y) { return x.count() > y.count(); });
         parallel_for(open.size(), threads, [&](size_t i) { b.build_subtree(open[i]); }, [](size_t) { return true; });
     }
-    collapse(room.data(), b.used.load(), nodes);
+    collapse(room.data(), b.used.load(), nodes, threads);
 }
 
 int BVH::depth() const { return nodes.empty() ? 0 : depth_of(nodes); }

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "aabb.h"
+#include "buffer.h"
 #include "simd.h"
 
 namespace splat {
@@ -52,7 +53,7 @@ struct alignas(16) BuildPrim {
 static_assert(sizeof(BuildPrim) == 32, "two build records per cache line");
 
 struct BVH {
-    std::vector<WideNode> nodes;      // nodes[0] is the root (always entered: it has the
+    Buffer<WideNode> nodes;           // nodes[0] is the root (always entered: it has the
                                       // root's box as its only child, or the root's children)
     std::vector<uint32_t> prim_order; // leaf ranges index this; it maps to the input order
 
@@ -65,7 +66,7 @@ struct BVH {
     void build(BuildPrim *prims, size_t count, int threads);
 
     // Bytes the tree keeps (nodes and leaf order).
-    size_t memory_bytes() const { return nodes.capacity() * sizeof(WideNode) + prim_order.capacity() * 4; }
+    size_t memory_bytes() const { return nodes.bytes() + prim_order.capacity() * 4; }
 
     // Deepest path from the root: bounds the traversal stack.
     int depth() const;
