@@ -374,13 +374,12 @@ int depth_of(const Buffer<WideNode> &nodes) {
 struct Collapse {
     const BVHNode *bin;
     struct Todo {
-        uint32_t b, w;  // binary node, wide node (in the vector being filled) to fill from it
+        uint32_t b, w;  // binary node, index of the wide node made from it
     };
 
-    // Fills out[t.w] from binary node t.b, appending a wide node (and a todo entry) for each
-    // child that is not a leaf.
-    void step(const Todo &t, std::vector<WideNode> &out, std::vector<Todo> &todo) const {
-        uint32_t kids[4] = {bin[t.b].first, bin[t.b].first + 1};
+    // The (up to four) binary nodes that become binary node b's wide node's children.
+    int kids_of(uint32_t b, uint32_t kids[4]) const {
+        kids[0] = bin[b].first, kids[1] = bin[b].first + 1;
         // Area of each kid that can be opened (-1: a leaf), computed once.
         auto area_of = [&](uint32_t i) { return bin[i].leaf() ? -1.f : bin[i].box.half_area(); };
         float area[4] = {area_of(kids[0]), area_of(kids[1])};
@@ -395,12 +394,15 @@ struct Collapse {
             kids[open] = first, area[open] = area_of(first);
             kids[n] = first + 1, area[n] = area_of(first + 1), ++n;
         }
-        fill(t.w, kids, n, out, todo);
+        return n;
     }
 
-    void fill(uint32_t w, const uint32_t *kids, int n, std::vector<WideNode> &out, std::vector<Todo> &todo) const {
+    // The wide node over `kids`; alloc() gives the index of each child wide node, which is
+    // queued in `todo`.
+    template <class Alloc>
+    WideNode make(const uint32_t *kids, int n, Alloc &&alloc, std::vector<Todo> &todo) const {
+        WideNode nd;
         for (int k = 0; k < 4; ++k) {
-            WideNode &nd = out[w];
             if (k >= n) {
                 for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = kInfinity, nd.box[2 * a + 1][k] = -kInfinity;
                 nd.child[k] = kNoChild, nd.count[k] = 0;
@@ -411,80 +413,84 @@ struct Collapse {
             if (c.leaf()) {
                 nd.child[k] = c.first, nd.count[k] = c.count;
             } else {
-                const uint32_t child = uint32_t(out.size());
-                nd.child[k] = child, nd.count[k] = 0;
-                out.emplace_back();  // nd is not used past this point
-                todo.push_back({kids[k], child});
+                nd.child[k] = alloc(), nd.count[k] = 0;
+                todo.push_back({kids[k], nd.child[k]});
             }
         }
+        return nd;
     }
 
-    // Everything below the entries of `todo`, depth first, into `out`.
-    void drain(std::vector<Todo> &todo, std::vector<WideNode> &out) const {
+    // Everything below the entries of `todo`, depth first: store(index, node) for each.
+    template <class Store, class Alloc>
+    void drain(std::vector<Todo> &todo, Store &&store, Alloc &&alloc) const {
+        uint32_t kids[4];
         while (!todo.empty()) {
             const Todo t = todo.back();
             todo.pop_back();
-            step(t, out, todo);
+            store(t.w, make(kids, kids_of(t.b, kids), alloc, todo));
         }
+    }
+
+    // How many wide nodes lie below binary node b's own.
+    size_t count_below(uint32_t b) const {
+        std::vector<uint32_t> stack{b};
+        size_t total = 0;
+        uint32_t kids[4];
+        while (!stack.empty()) {
+            const uint32_t i = stack.back();
+            stack.pop_back();
+            for (int k = 0, n = kids_of(i, kids); k < n; ++k)
+                if (!bin[kids[k]].leaf()) ++total, stack.push_back(kids[k]);
+        }
+        return total;
     }
 };
 
-// On one thread, depth first; on more, the top breadth first until there are subtrees
-// enough for every thread, then those subtrees each on a thread into their own arrays,
-// copied (their indices shifted) into place by the threads. The same nodes either way.
-// The top array reserves more than it can need (only the pages written are touched).
+// On one thread, depth first. On more: the top breadth first until there are subtrees
+// enough for every thread; their sizes counted on the threads; then each written on a
+// thread straight into its place in the final array. The same nodes either way.
 void collapse(const BVHNode *bin, uint32_t used, Buffer<WideNode> &out, int threads) {
     const Collapse c{bin};
     std::vector<WideNode> top;
-    top.reserve(used / 2 + 1);  // at most one per interior binary node
-    top.emplace_back();
     std::vector<Collapse::Todo> todo;
-    std::vector<Collapse::Todo> roots;
-    std::vector<std::vector<WideNode>> parts;
+    auto store_top = [&](uint32_t w, const WideNode &nd) { top[w] = nd; };
+    auto alloc_top = [&] { return top.emplace_back(), uint32_t(top.size() - 1); };
+    top.emplace_back();
     if (bin[0].leaf()) {
         const uint32_t root = 0;
-        c.fill(0, &root, 1, top, todo);
+        top[0] = c.make(&root, 1, alloc_top, todo);
     } else if (threads <= 1 || used < (1u << 16)) {
+        top.reserve(used / 2 + 1);  // at most one per interior binary node: only the pages used are touched
         todo.push_back({0u, 0u});
-        c.drain(todo, top);
+        c.drain(todo, store_top, alloc_top);
     } else {
         todo.push_back({0u, 0u});
         size_t head = 0;
-        while (head < todo.size() && todo.size() - head < size_t(16 * threads)) c.step(todo[head++], top, todo);
-        roots.assign(todo.begin() + head, todo.end());
-        parts.resize(roots.size());
+        uint32_t kids[4];
+        while (head < todo.size() && todo.size() - head < size_t(16 * threads)) {
+            const Collapse::Todo t = todo[head++];
+            top[t.w] = c.make(kids, c.kids_of(t.b, kids), alloc_top, todo);
+        }
+        const std::vector<Collapse::Todo> roots(todo.begin() + head, todo.end());
+        std::vector<size_t> offset(roots.size() + 1);
+        parallel_for(roots.size(), threads, [&](size_t i) { offset[i + 1] = c.count_below(roots[i].b); },
+                     [](size_t) { return true; });
+        offset[0] = top.size();
+        for (size_t i = 0; i < roots.size(); ++i) offset[i + 1] += offset[i];
+        out.allocate(offset.back());
+        std::copy(top.begin(), top.end(), out.begin());
         parallel_for(
             roots.size(), threads,
             [&](size_t i) {
-                std::vector<WideNode> &local = parts[i];
-                local.emplace_back();  // local 0 stands for top[roots[i].w]
-                std::vector<Collapse::Todo> st{{roots[i].b, 0u}};
-                c.drain(st, local);
+                uint32_t next = uint32_t(offset[i]);
+                std::vector<Collapse::Todo> st{roots[i]};
+                c.drain(st, [&](uint32_t w, const WideNode &nd) { out[w] = nd; }, [&] { return next++; });
             },
             [](size_t) { return true; });
-        for (size_t i = 0; i < roots.size(); ++i) top[roots[i].w] = parts[i][0];
+        return;
     }
-    std::vector<size_t> offset(parts.size());
-    size_t total = top.size();
-    for (size_t i = 0; i < parts.size(); ++i) offset[i] = total, total += parts[i].size() - 1;
-    out.allocate(total);
+    out.allocate(top.size());
     std::copy(top.begin(), top.end(), out.begin());
-    std::vector<WideNode>().swap(top);
-    // Part i's node j >= 1 goes to offset[i] + j - 1; its root's children were already
-    // pointing into the part: shifted with the rest.
-    auto place = [&](size_t i) {
-        const std::vector<WideNode> &local = parts[i];
-        const uint32_t shift = uint32_t(offset[i] - 1);
-        auto shifted = [&](WideNode nd) {
-            for (int k = 0; k < 4; ++k)
-                if (nd.count[k] == 0 && nd.child[k] != kNoChild) nd.child[k] += shift;
-            return nd;
-        };
-        out[roots[i].w] = shifted(local[0]);
-        for (size_t j = 1; j < local.size(); ++j) out[offset[i] + j - 1] = shifted(local[j]);
-        std::vector<WideNode>().swap(parts[i]);
-    };
-    if (!parts.empty()) parallel_for(parts.size(), threads, place, [](size_t) { return true; });
 }
 
 }  // namespace
