@@ -102,6 +102,7 @@ dist: $(STAMP)
 
 bench-quick: build
 	$(VPY) benchmarks/trace_throughput.py --quick
+	$(VPY) benchmarks/scale.py --quick
 	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
 	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
 	$(VPY) benchmarks/viewport_latency.py --quick
@@ -119,6 +120,7 @@ $(O3D)/.installed-stamp:
 
 bench: build $(O3D)/.installed-stamp
 	$(VPY) benchmarks/trace_throughput.py
+	$(VPY) benchmarks/scale.py
 	$(VPY) benchmarks/accuracy.py --output benchmarks/results
 	$(VPY) benchmarks/frame_time.py --output benchmarks/results
 	$(VPY) benchmarks/viewport_latency.py --output benchmarks/results/viewport_latency.md

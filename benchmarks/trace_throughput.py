@@ -11,7 +11,9 @@ beside them, on the same discs, rays and threads, Embree 3's own oriented-disc p
 (rtcIntersect1 one ray at a time, rtcIntersect16 in 4x4 pixel packets; embree_harness.cpp,
 built against Debian's libembree-dev, installed when missing and possible -- the row is
 skipped with a message otherwise), with its hits checked against the core's; and the
-paper's own figure. Without ../shared (a user's clone), an analytic sphere of the same size
+paper's own figure. Every row is timed once per round, the core's and Embree's interleaved
+(the machine is shared: a change in load then falls on all rows alike); medians of the
+rounds. Without ../shared (a user's clone), an analytic sphere of the same size
 stands in for the bunny, and the table says so.
 """
 from __future__ import annotations
@@ -76,9 +78,10 @@ def embree_available(install: bool) -> str | None:
     return None if EMBREE_HEADER.is_file() else "libembree-dev installed without embree3/rtcore.h"
 
 
-def embree_reference(local, normals, radii, origins, dirs, thread_counts, repeats, install, work: Path):
-    """{threads: {'intersect1_s', 'intersect16_s', 'build_s'}} and the hit distances of
-    rtcIntersect1, or (None, reason)."""
+def embree_runner(local, normals, radii, origins, dirs, install, work: Path):
+    """A function run(threads) -> {'intersect1_s', 'intersect16_s', 'build_s'} (one round of
+    the harness: its own build, then each query once) writing rtcIntersect1's hit distances
+    to work/hits.f32, or (None, reason)."""
     reason = embree_available(install)
     if reason:
         return None, reason
@@ -94,14 +97,15 @@ def embree_reference(local, normals, radii, origins, dirs, thread_counts, repeat
     discs = np.column_stack([local, radii, n]).astype(np.float32)
     discs.tofile(work / "discs.f32")
     np.column_stack([origins, dirs]).astype(np.float32).tofile(work / "rays.f32")
-    results = {}
-    for threads in thread_counts:
-        run = subprocess.run([str(exe), str(work / "discs.f32"), str(work / "rays.f32"), str(work / "hits.f32"),
-                              str(threads), str(repeats)], input=f"{WIDTH}\n", capture_output=True, text=True)
-        if run.returncode:
-            return None, f"the Embree harness failed: {run.stderr.strip()[-300:]}"
-        results[threads] = json.loads(run.stdout.strip().splitlines()[-1])
-    return (results, np.fromfile(work / "hits.f32", np.float32)), None
+
+    def run(threads: int) -> dict:
+        out = subprocess.run([str(exe), str(work / "discs.f32"), str(work / "rays.f32"), str(work / "hits.f32"),
+                              str(threads), "1"], input=f"{WIDTH}\n", capture_output=True, text=True)
+        if out.returncode:
+            raise RuntimeError(f"the Embree harness failed: {out.stderr.strip()[-300:]}")
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    return run, None
 
 
 def main(argv=None) -> int:
@@ -120,26 +124,51 @@ def main(argv=None) -> int:
     n_rays = len(origins)
 
     full = core.Method.preset("FULL")
-    rows = []
-    for threads in sorted({1, cores}):
-        t_trace, hits = timed(lambda: scene.trace(origins, dirs, normals=False, threads=threads), repeats)
-        rows.append(("core trace(), nearest hit", threads, t_trace))
+    # Every row is timed once per round and the rounds interleave the core's rows with
+    # Embree's, so that a change in the machine's load (it is shared) falls on all of them
+    # alike; each row's time is its median over the rounds.
+    runs = []  # (row name, threads, function)
+    thread_counts = sorted({1, cores})
+    for threads in thread_counts:
+        runs.append(("core trace(), nearest hit", threads,
+                     lambda threads=threads: scene.trace(origins, dirs, normals=False, threads=threads)))
         for preset in core.PRESETS:
             method = core.Method.preset(preset)
-            t, _ = timed(lambda: scene.trace_surface(origins, dirs, method, threads=threads), repeats)
-            rows.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads, t))
-        t_render, _ = timed(lambda: scene.render(cam, WIDTH, HEIGHT, threads=threads, method=full), repeats)
-        rows.append(("core render(), full method, headlight shading", threads, t_render))
+            runs.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads,
+                         lambda threads=threads, method=method: scene.trace_surface(origins, dirs, method,
+                                                                                    threads=threads)))
+        runs.append(("core render(), full method, headlight shading", threads,
+                     lambda threads=threads: scene.render(cam, WIDTH, HEIGHT, threads=threads, method=full)))
+    embree_run, why_not = embree_runner(local, normals, radii, origins, dirs, install=not args.quick,
+                                        work=HERE.parent / "build" / "embree")
+    times = [[] for _ in runs]
+    embree_times = {t: {"intersect1_s": [], "intersect16_s": [], "build_s": []} for t in thread_counts}
+    hits = None
+    for _ in range(repeats):
+        for k, (_, _, fn) in enumerate(runs):
+            t0 = time.perf_counter()
+            result = fn()
+            times[k].append(time.perf_counter() - t0)
+            if k == 0:
+                hits = result
+        if embree_run is not None:
+            for threads in thread_counts:
+                one = embree_run(threads)
+                for key, values in embree_times[threads].items():
+                    values.append(one[key])
+    rows = [(name, threads, statistics.median(ts)) for (name, threads, _), ts in zip(runs, times)]
     coverage = float((hits.id >= 0).mean())
 
-    embree, why_not = embree_reference(local, normals, radii, origins, dirs, sorted({1, cores}), repeats,
-                                       install=not args.quick, work=HERE.parent / "build" / "embree")
+    embree = None
     agreement = None
-    if embree is not None:
-        results, embree_t = embree
+    if embree_run is not None:
+        results = {t: {key: statistics.median(v) for key, v in r.items()} for t, r in embree_times.items()}
+        embree_t = np.fromfile(HERE.parent / "build" / "embree" / "hits.f32", np.float32)
+        embree = (results, embree_t)
         core_t = hits.t
         both_miss = np.isinf(core_t) & np.isinf(embree_t)
-        close = np.abs(embree_t - core_t) <= AGREE_RELATIVE * np.abs(core_t)
+        with np.errstate(invalid="ignore"):  # inf - inf where both miss
+            close = np.abs(embree_t - core_t) <= AGREE_RELATIVE * np.abs(core_t)
         agreement = float((both_miss | close).mean())
         for threads, r in sorted(results.items()):
             rows.append(("Embree 3 rtcIntersect1, nearest hit", threads, r["intersect1_s"]))
@@ -148,8 +177,9 @@ def main(argv=None) -> int:
     stats = scene.bvh_stats()
     print(f"# Trace throughput: {name}, {len(local):,} splats, {WIDTH}x{HEIGHT} = {n_rays:,} rays, "
           f"{coverage:.1%} of pixels hit")
-    print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} nodes, "
-          f"depth {stats['depth']}, median of {repeats} runs each\n")
+    print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} 4-wide nodes, "
+          f"box and disc tests in {core.simd_path()} (no -march=native, no run-time dispatch); "
+          f"depth {stats['depth']}; median of {repeats} interleaved rounds (every row once per round)\n")
     if embree is None:
         print(f"# Embree reference skipped: {why_not}\n")
     else:

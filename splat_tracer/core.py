@@ -24,6 +24,7 @@ from . import _core
 PARALLEL_COSINE = _core.PARALLEL_COSINE
 MAX_LAYER_HITS = _core.MAX_LAYER_HITS  # per-ray hit buffer of the ε-window query
 hardware_threads = _core.hardware_threads
+simd_path = _core.simd_path  # 'SSE2' or 'plain floats': the BVH's box and disc tests
 
 POSITION_RULES = ("FIRST", "NEAR_PHASE", "NEAREST_CENTRE")
 KERNELS = ("LINEAR", "SMOOTH")

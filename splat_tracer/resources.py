@@ -7,12 +7,13 @@ from __future__ import annotations
 import os
 from typing import Optional
 
-# Bytes per splat while its BVH is built, counted from the native structures: kept after the
-# build 141 (the packed splat 32; centre, normal, colour 3 x 12; radius 4; closed flag 1; BVH
-# nodes 2 x 32; leaf order 4) plus the build's temporaries 64 (a box of 24 and a build
-# record of 40 per splat), plus the Python arrays being passed in (position, normal, radius,
-# colour as float32: 40).
-BYTES_PER_SPLAT = 141 + 64 + 40
+# Bytes per splat while its BVH is built, counted from the native structures at the build's
+# peak (issue #12): what is kept, 66 at most (the packed splat 32 in leaf order; its slot 4;
+# closed flag 1; colour 12 and alpha 4 when given; 4-wide BVH nodes about 13), plus the
+# build's temporaries 77 (a build record 32; the splats packed in input order 32; the
+# binary nodes about 13), plus the Python arrays being passed in (position, normal,
+# radius, colour as float32: 40). benchmarks/scale.py measures the peak (RSS) next to it.
+BYTES_PER_SPLAT = 66 + 77 + 40
 # Per triangle: kept 184 (packed triangle 40; three corners 36; three corner normals 36;
 # material 4; BVH 64; leaf order 4) + build temporaries 64 + Python arrays (indices 12,
 # corner normals 36, material 4; vertices are shared and fewer).

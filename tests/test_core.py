@@ -78,6 +78,35 @@ def test_results_do_not_depend_on_thread_count():
     assert_same_hits(scene.trace(o, d, threads=1), scene.trace(o, d, threads=2))
 
 
+def test_build_does_not_depend_on_thread_count():
+    """Above 32k splats the top of the tree is split with the binning and (above 128k) the
+    partitioning shared by the threads, then subtrees are built on threads, and (above 64k
+    binary nodes) collapsed into wide nodes on threads: the same tree, the same leaf order
+    and so the same results of every query as on one thread."""
+    rng = np.random.default_rng(5)
+    discs = random_discs(150000, rng)
+    one, two = core.Scene(*discs, threads=1), core.Scene(*discs, threads=2)
+    assert one.bvh_stats() == two.bvh_stats()
+    o, d = rng.uniform(-2, 2, size=(20000, 3)), rng.normal(size=(20000, 3))
+    assert_same_hits(one.trace(o, d), two.trace(o, d))
+    full = core.Method.preset("FULL")
+    a, b = one.trace_surface(o, d, full, members=True), two.trace_surface(o, d, full, members=True)
+    for field in ("t", "id", "normal", "members"):
+        np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
+    assert_same_hits(two.trace(o[:1000], d[:1000]), two.trace(o[:1000], d[:1000], brute_force=True))
+
+
+def test_scene_keeps_at_most_64_bytes_per_splat():
+    """Issue #12: centres, normals and radii stored once (in leaf order), no colour array
+    without colours, the 4-wide tree shrunk to the nodes used."""
+    from geometry import sphere_cloud
+    c, n, r = sphere_cloud(200000)
+    plain = core.Scene(c, n, r, closed=True).bvh_stats()["bytes"] / len(c)
+    assert plain <= 64, plain
+    coloured = core.Scene(c, n, r, colours=np.ones_like(c)).bvh_stats()["bytes"] / len(c)
+    assert coloured == pytest.approx(plain + 12, abs=0.01)
+
+
 def single_disc(normal=(0, 0, 1), radius=1.0, centre=(0, 0, 0)):
     return core.Scene([centre], [normal], [radius])
 

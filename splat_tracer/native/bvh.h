@@ -1,4 +1,6 @@
-// Bounding volume hierarchy over primitive boxes: binned SAH build, 32-byte nodes.
+// Bounding volume hierarchy over primitive boxes: binned SAH build of a binary tree,
+// collapsed into 4-wide nodes whose four child boxes are tested at once (SSE where the
+// target has SSE2, the same arithmetic in plain floats elsewhere).
 //
 // The tree only knows boxes; what a leaf holds is the caller's business (see
 // splat_scene.h, which stores its splats in the order of `prim_order`).
@@ -11,9 +13,12 @@
 #include <vector>
 
 #include "aabb.h"
+#include "buffer.h"
+#include "simd.h"
 
 namespace splat {
 
+// The binary tree the builder makes (bvh.cpp), before it is collapsed.
 struct BVHNode {
     AABB box;
     uint32_t first;  // interior: index of the left child (right = first + 1); leaf: first primitive
@@ -23,13 +28,45 @@ struct BVHNode {
 };
 static_assert(sizeof(BVHNode) == 32, "nodes are meant to be two per cache line");
 
+// Four children: their boxes by axis (lo x of each, then hi x, ...), and per child either
+// a node (count 0: `child` indexes the nodes) or a leaf (`count` primitives from `child`).
+// Unused slots have count 0 and child kNoChild.
+struct alignas(16) WideNode {
+    float box[6][4];  // lo x, hi x, lo y, hi y, lo z, hi z; one lane per child
+    uint32_t child[4];
+    uint32_t count[4];
+};
+static_assert(sizeof(WideNode) == 128, "a wide node is two cache lines");
+constexpr uint32_t kNoChild = 0xffffffffu;
+
+// A primitive while the tree is built: its box, with the id in the spare lane (32 bytes,
+// two SSE loads). The records themselves are partitioned (not an index array into the
+// boxes), so that every pass over a node's range reads memory in order.
+struct alignas(16) BuildPrim {
+    float lo[4];  // lo.xyz, 0
+    float hi[3];
+    uint32_t id;
+
+    BuildPrim() = default;
+    BuildPrim(const AABB &b, uint32_t i) : lo{b.lo.x, b.lo.y, b.lo.z, 0.f}, hi{b.hi.x, b.hi.y, b.hi.z}, id(i) {}
+};
+static_assert(sizeof(BuildPrim) == 32, "two build records per cache line");
+
 struct BVH {
-    std::vector<BVHNode> nodes;       // nodes[0] is the root
+    Buffer<WideNode> nodes;           // nodes[0] is the root (always entered: it has the
+                                      // root's box as its only child, or the root's children)
     std::vector<uint32_t> prim_order; // leaf ranges index this; it maps to the input order
 
-    // Builds over `bounds` (one box per primitive, all non-empty). Subtrees above a size
-    // threshold are built on their own threads, up to `threads` at once.
+    // Builds over `bounds` (one box per primitive, all non-empty) on `threads` threads (0:
+    // all cores): the top levels split one at a time with the binning shared by every
+    // thread, then the subtrees, largest first, each on one thread.
     void build(const std::vector<AABB> &bounds, int threads);
+    // The same from `count` build records, which it leaves in leaf order (their ids are
+    // then what prim_order would be; prim_order is left empty).
+    void build(BuildPrim *prims, size_t count, int threads);
+
+    // Bytes the tree keeps (nodes and leaf order).
+    size_t memory_bytes() const { return nodes.bytes() + prim_order.capacity() * 4; }
 
     // Deepest path from the root: bounds the traversal stack.
     int depth() const;
@@ -62,22 +99,53 @@ struct TraversalStats {
     }
 };
 
+// The slab test of intersect_box() (aabb.h) on a wide node's four boxes at once, with
+// the same arithmetic lane by lane: the same entry distances, the same misses. Returns a
+// mask of the children entered within (tmin, tmax) and their entry distances.
+struct WideRay {
+    F4 o[3], inv_d[3];
+    explicit WideRay(const Ray &ray) {
+        for (int k = 0; k < 3; ++k) o[k] = F4::broadcast(ray.o[k]), inv_d[k] = F4::broadcast(1.f / ray.d[k]);
+    }
+};
+
+inline int intersect_wide(const WideNode &nd, const WideRay &r, float tmin, float tmax, float entry[4]) {
+    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
+    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
+    const F4 zero = F4::broadcast(0.f);
+    F4 t0 = F4::broadcast(tmin), t1 = F4::broadcast(tmax);
+    for (int k = 0; k < 3; ++k) {
+        const F4 a = (F4::load(nd.box[2 * k]) - r.o[k]) * r.inv_d[k];
+        const F4 b = (F4::load(nd.box[2 * k + 1]) - r.o[k]) * r.inv_d[k];
+        // tn = min(a, b), tf = max(a, b) as the scalar swap makes them (a NaN stays where
+        // it was: in tn when a is NaN, ...), then widened by scaling.
+        F4 tn = select_gt(a, b, b, a), tf = select_gt(a, b, a, b);
+        tn = tn * select_gt(tn, zero, shrink, grow);
+        tf = tf * select_gt(tf, zero, grow, shrink);
+        // t0 = tn > t0 ? tn : t0: a NaN distance leaves t0 and t1 as they were.
+        t0 = select_gt(tn, t0, tn, t0);
+        t1 = select_lt(tf, t1, tf, t1);
+    }
+    t0.store(entry);
+    return mask_le(t0, t1);
+}
+
 // Front-to-back traversal shared by every query of every tree: `leaf(first, count)` is called
 // for each leaf the ray enters within (tmin, min(tmax, limit)), nearer child first; it returns
 // true to stop at once (occlusion queries). The leaf may lower `limit` as it learns (nearest
 // hit so far, the layer query's cut); boxes entered beyond it are skipped. The comparison is
-// inclusive so that equal-t hits with a smaller id are still found.
+// inclusive so that equal-t hits with a smaller id are still found. `node_count` counts the
+// wide nodes and the leaves entered.
 template <class Leaf>
 void traverse_bvh(const BVH &bvh, const Ray &ray, const float &limit, Leaf &&leaf, uint64_t *node_count) {
     if (bvh.nodes.empty()) return;
-    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
-    const BVHNode *nodes = bvh.nodes.data();
+    const WideRay wr(ray);
+    const WideNode *nodes = bvh.nodes.data();
     struct Pending {
-        uint32_t node;
+        uint32_t child, count;  // as in WideNode
         float entry;
-    } stack[kStackSize];
+    } stack[3 * kStackSize];
     int sp = 0;
-    uint32_t node = 0;
     uint64_t visited = 0;
     struct Flush {  // adds the count on every way out
         uint64_t *out;
@@ -86,22 +154,31 @@ void traverse_bvh(const BVH &bvh, const Ray &ray, const float &limit, Leaf &&lea
             if (out) *out += n;
         }
     } flush{node_count, visited};
-    if (intersect_box(nodes[0].box, ray.o, inv_d, ray.tmin, std::fmin(ray.tmax, limit)) == kInfinity) return;
+    Pending cur{0, 0, 0.f};
     for (;;) {
-        const BVHNode &nd = nodes[node];
         ++visited;
-        if (nd.leaf()) {
-            if (leaf(nd.first, nd.count)) return;
+        if (cur.count) {
+            if (leaf(cur.child, cur.count)) return;
         } else {
-            // The nearer child is visited first, the other one pushed with its entry.
-            const float tmax = std::fmin(ray.tmax, limit);
-            uint32_t a = nd.first, b = nd.first + 1;
-            float ta = intersect_box(nodes[a].box, ray.o, inv_d, ray.tmin, tmax);
-            float tb = intersect_box(nodes[b].box, ray.o, inv_d, ray.tmin, tmax);
-            if (ta > tb) std::swap(ta, tb), std::swap(a, b);
-            if (ta != kInfinity) {
-                if (tb != kInfinity) stack[sp++] = {b, tb};
-                node = a;
+            const WideNode &nd = nodes[cur.child];
+            float t[4];
+            int mask = intersect_wide(nd, wr, ray.tmin, std::fmin(ray.tmax, limit), t);
+            for (int k = 0; k < 4; ++k)
+                if (nd.child[k] == kNoChild) mask &= ~(1 << k);
+            if (mask) {
+                // Entered children sorted by entry (at most four: insertion), the nearer
+                // visited first, the others pushed farthest first.
+                Pending hit[4];
+                int n = 0;
+                for (int k = 0; k < 4; ++k) {
+                    if (!(mask >> k & 1)) continue;
+                    const Pending p{nd.child[k], nd.count[k], t[k]};
+                    int j = n++;
+                    while (j > 0 && hit[j - 1].entry > p.entry) hit[j] = hit[j - 1], --j;
+                    hit[j] = p;
+                }
+                for (int j = n - 1; j > 0; --j) stack[sp++] = hit[j];
+                cur = hit[0];
                 continue;
             }
         }
@@ -110,7 +187,7 @@ void traverse_bvh(const BVH &bvh, const Ray &ray, const float &limit, Leaf &&lea
             if (sp == 0) return;
             --sp;
             if (stack[sp].entry <= limit) {
-                node = stack[sp].node;
+                cur = stack[sp];
                 break;
             }
         }

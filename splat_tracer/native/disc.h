@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "ray.h"
+#include "simd.h"
 
 namespace splat {
 
@@ -36,5 +37,43 @@ inline bool intersect_disc(const Ray &ray, Vec3 c, Vec3 n, float r, DiscHit *out
     out->front = dn < 0.f;
     return true;
 }
+
+#ifdef SPLAT_SSE2
+// intersect_disc() on four discs at once, lane by lane the same operations in the same
+// order (SSE2 has no fused multiply-add: every product is rounded as in the scalar code),
+// so the same hits with the same t and dist2. `disc[k]` points at {c.x, c.y, c.z, r,
+// n.x, n.y, n.z, *} (a PackedSplat). Returns the mask of hits; out_* per lane.
+struct DiscRay {
+    __m128 o[3], d[3], tmin, tmax;
+    explicit DiscRay(const Ray &ray) {
+        for (int k = 0; k < 3; ++k) o[k] = _mm_set1_ps(ray.o[k]), d[k] = _mm_set1_ps(ray.d[k]);
+        tmin = _mm_set1_ps(ray.tmin), tmax = _mm_set1_ps(ray.tmax);
+    }
+};
+
+inline int intersect_discs4(const DiscRay &r, const float *const disc[4], float out_t[4], float out_dist2[4]) {
+    __m128 c0 = _mm_loadu_ps(disc[0]), c1 = _mm_loadu_ps(disc[1]), c2 = _mm_loadu_ps(disc[2]),
+           c3 = _mm_loadu_ps(disc[3]);
+    __m128 n0 = _mm_loadu_ps(disc[0] + 4), n1 = _mm_loadu_ps(disc[1] + 4), n2 = _mm_loadu_ps(disc[2] + 4),
+           n3 = _mm_loadu_ps(disc[3] + 4);
+    _MM_TRANSPOSE4_PS(c0, c1, c2, c3);  // c.x, c.y, c.z, r
+    _MM_TRANSPOSE4_PS(n0, n1, n2, n3);  // n.x, n.y, n.z, (id)
+    const __m128 dn = _mm_add_ps(_mm_add_ps(_mm_mul_ps(r.d[0], n0), _mm_mul_ps(r.d[1], n1)), _mm_mul_ps(r.d[2], n2));
+    const __m128 abs_dn = _mm_andnot_ps(_mm_set1_ps(-0.f), dn);
+    // |dn| < kParallelCosine rejects; NaN passes this test, as in the scalar code.
+    __m128 ok = _mm_cmpnlt_ps(abs_dn, _mm_set1_ps(kParallelCosine));
+    const __m128 ocx = _mm_sub_ps(c0, r.o[0]), ocy = _mm_sub_ps(c1, r.o[1]), ocz = _mm_sub_ps(c2, r.o[2]);
+    const __m128 t = _mm_div_ps(
+        _mm_add_ps(_mm_add_ps(_mm_mul_ps(ocx, n0), _mm_mul_ps(ocy, n1)), _mm_mul_ps(ocz, n2)), dn);
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpgt_ps(t, r.tmin), _mm_cmplt_ps(t, r.tmax)));  // false for NaN
+    const __m128 px = _mm_sub_ps(_mm_mul_ps(r.d[0], t), ocx), py = _mm_sub_ps(_mm_mul_ps(r.d[1], t), ocy),
+                 pz = _mm_sub_ps(_mm_mul_ps(r.d[2], t), ocz);
+    const __m128 dist2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(px, px), _mm_mul_ps(py, py)), _mm_mul_ps(pz, pz));
+    ok = _mm_and_ps(ok, _mm_cmpngt_ps(dist2, _mm_mul_ps(c3, c3)));  // dist2 > r^2 rejects (NaN does not)
+    const int mask = _mm_movemask_ps(ok);
+    if (mask) _mm_storeu_ps(out_t, t), _mm_storeu_ps(out_dist2, dist2);
+    return mask;
+}
+#endif
 
 }  // namespace splat

@@ -19,6 +19,7 @@
 #include "parallel.h"
 #include "py_util.h"
 #include "render.h"
+#include "simd.h"
 #include "splat_scene.h"
 
 namespace {
@@ -307,10 +308,11 @@ PyObject *Scene_bounds(PyObject *self, void *) {
 PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
     const BVH &bvh = scene_of(self).bvh();
     Py_ssize_t leaves = 0, max_leaf = 0;
-    for (const BVHNode &n : bvh.nodes)
-        if (n.leaf()) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count);
-    return Py_BuildValue("{s:n,s:n,s:i,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
-                         bvh.depth(), "max_leaf_size", max_leaf);
+    for (const WideNode &n : bvh.nodes)
+        for (int k = 0; k < 4; ++k)
+            if (n.count[k]) ++leaves, max_leaf = std::max<Py_ssize_t>(max_leaf, n.count[k]);
+    return Py_BuildValue("{s:n,s:n,s:i,s:n,s:n}", "nodes", Py_ssize_t(bvh.nodes.size()), "leaves", leaves, "depth",
+                         bvh.depth(), "max_leaf_size", max_leaf, "bytes", Py_ssize_t(scene_of(self).memory_bytes()));
 }
 
 PyMethodDef Scene_methods[] = {
@@ -326,7 +328,7 @@ PyMethodDef Scene_methods[] = {
      "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
      "out_members=None, inside=None, exclude=None, threads=0, brute_force=False)\n--\n\n"
      "The surface each ray sees under the visibility method (see core.py)."},
-    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH."},
+    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
     {nullptr, nullptr, 0, nullptr},
 };
 
@@ -349,6 +351,15 @@ PyType_Spec Scene_spec = {"splat_tracer._core.Scene", sizeof(SceneObject), 0, Py
 
 PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(resolve_threads(0)); }
 
+// Which code path the box and disc tests were compiled for (simd.h): what the benchmarks print.
+PyObject *simd_path(PyObject *, PyObject *) {
+#ifdef SPLAT_SSE2
+    return PyUnicode_FromString("SSE2");
+#else
+    return PyUnicode_FromString("plain floats");
+#endif
+}
+
 PyObject *set_thread_budget(PyObject *, PyObject *arg) {
     const long budget = PyLong_AsLong(arg);
     if (budget == -1 && PyErr_Occurred()) return nullptr;
@@ -359,6 +370,7 @@ PyObject *set_thread_budget(PyObject *, PyObject *arg) {
 
 PyMethodDef module_methods[] = {
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
+    {"simd_path", simd_path, METH_NOARGS, "The instruction set the BVH's box and disc tests use: 'SSE2' or 'plain floats'."},
     {"_set_thread_budget", set_thread_budget, METH_O,
      "Test seam: the core may start this many more threads, then thread creation fails as if the system "
      "refused it (-1: no limit)."},

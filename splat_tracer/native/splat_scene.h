@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "buffer.h"
 #include "bvh.h"
 #include "disc.h"
 #include "layer.h"
@@ -42,16 +43,21 @@ class SplatScene {
     const AABB &bounds() const { return bounds_; }
     const BVH &bvh() const { return bvh_; }
 
-    Vec3 centre(int32_t id) const { return centres_[id]; }
-    Vec3 normal(int32_t id) const { return normals_[id]; }
+    // Attributes by input id. Centres, normals and radii are stored once, in leaf order
+    // (the packed splats); slot_ maps an input id to its place there.
+    Vec3 centre(int32_t id) const { return splats_[slot_[id]].c; }
+    Vec3 normal(int32_t id) const { return splats_[slot_[id]].n; }
+    float radius(int32_t id) const { return splats_[slot_[id]].r; }
     bool closed(int32_t id) const { return closed_[id] != 0; }
     const uint8_t *closed_flags() const { return closed_.data(); }
     bool any_closed() const { return any_closed_; }    // the far phase has work here
     bool has_colours() const { return has_colours_; }  // per-point colours were given
-    Vec3 colour(int32_t id) const { return colours_[id]; }
+    Vec3 colour(int32_t id) const { return has_colours_ ? colours_[id] : Vec3(1.f, 1.f, 1.f); }
     float alpha(int32_t id) const { return alphas_.empty() ? 1.f : alphas_[id]; }
     bool has_alphas() const { return !alphas_.empty(); }
-    float radius(int32_t id) const { return radii_[id]; }
+
+    // Bytes kept after the build: the splats, their attributes and the BVH.
+    size_t memory_bytes() const;
 
     // Nearest hit in (ray.tmin, ray.tmax), either facing.
     Hit intersect(const Ray &ray, TraversalStats *stats = nullptr) const;
@@ -66,10 +72,11 @@ class SplatScene {
     template <class Visit>
     void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
 
-    std::vector<PackedSplat> splats_;  // BVH order
-    std::vector<Vec3> centres_, normals_, colours_;
+    Buffer<PackedSplat> splats_;  // BVH order
+    Buffer<uint32_t> slot_;       // input id -> index in splats_
+    std::vector<Vec3> colours_;        // input order; empty without per-point colours
     std::vector<uint8_t> closed_;
-    std::vector<float> radii_, alphas_;
+    std::vector<float> alphas_;
     bool any_closed_ = false, has_colours_ = false;
     AABB bounds_;
     BVH bvh_;

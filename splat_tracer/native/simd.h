@@ -1,0 +1,93 @@
+// Four floats in one SSE register where the target has SSE2 (every x86-64), else four
+// plain floats with the same semantics: the code that uses it stays portable (the macOS
+// arm64 build is compiled without SSE) and gives the same results on both paths.
+// -DSPLAT_NO_SIMD builds the plain path on x86-64 too (how it was tested).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#if (defined(__SSE2__) || defined(_M_X64) || defined(_M_AMD64)) && !defined(SPLAT_NO_SIMD)
+#include <emmintrin.h>
+#define SPLAT_SSE2 1
+#endif
+
+namespace splat {
+
+#ifdef SPLAT_SSE2
+struct F4 {
+    __m128 v;
+    F4() = default;
+    F4(__m128 x) : v(x) {}
+    static F4 load(const float *p) { return _mm_loadu_ps(p); }
+    static F4 broadcast(float x) { return _mm_set1_ps(x); }
+    // Lanes 0-2 from p[0..2] and 0 in lane 3 (p[3] must be readable: one 16-byte load).
+    static F4 load3(const float *p) {
+        return _mm_and_ps(_mm_loadu_ps(p), _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1)));
+    }
+    void store(float *p) const { _mm_storeu_ps(p, v); }
+};
+inline F4 operator+(F4 a, F4 b) { return _mm_add_ps(a.v, b.v); }
+inline F4 operator-(F4 a, F4 b) { return _mm_sub_ps(a.v, b.v); }
+inline F4 operator*(F4 a, F4 b) { return _mm_mul_ps(a.v, b.v); }
+// min4(a, b) = a < b ? a : b and max4(a, b) = a > b ? a : b, per lane (minps/maxps: the
+// second operand when either is NaN).
+inline F4 min4(F4 a, F4 b) { return _mm_min_ps(a.v, b.v); }
+inline F4 max4(F4 a, F4 b) { return _mm_max_ps(a.v, b.v); }
+// Every lane of a when `which`, else of b (no branch).
+inline F4 select4(bool which, F4 a, F4 b) {
+    const __m128 m = _mm_castsi128_ps(_mm_set1_epi32(-int32_t(which)));
+    return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
+}
+// Per lane x > y ? a : b, and x < y ? a : b (false for NaN: b).
+inline F4 select_gt(F4 x, F4 y, F4 a, F4 b) {
+    const __m128 m = _mm_cmpgt_ps(x.v, y.v);
+    return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
+}
+inline F4 select_lt(F4 x, F4 y, F4 a, F4 b) { return select_gt(y, x, a, b); }
+// Bit i set where lane i of a <= lane i of b.
+inline int mask_le(F4 a, F4 b) { return _mm_movemask_ps(_mm_cmple_ps(a.v, b.v)); }
+// Lanes truncated towards zero (the caller clamps them into int range first).
+inline void truncate4(F4 a, int32_t out[4]) { _mm_storeu_si128(reinterpret_cast<__m128i *>(out), _mm_cvttps_epi32(a.v)); }
+#else
+struct F4 {
+    float v[4];
+    static F4 load(const float *p) {
+        F4 r;
+        std::memcpy(r.v, p, sizeof r.v);
+        return r;
+    }
+    static F4 broadcast(float x) { return F4{{x, x, x, x}}; }
+    static F4 load3(const float *p) { return F4{{p[0], p[1], p[2], 0.f}}; }
+    void store(float *p) const { std::memcpy(p, v, sizeof v); }
+};
+#define SPLAT_F4_OP(name, expr)                          \
+    inline F4 name(F4 a, F4 b) {                         \
+        F4 r;                                            \
+        for (int i = 0; i < 4; ++i) r.v[i] = (expr);     \
+        return r;                                        \
+    }
+SPLAT_F4_OP(operator+, a.v[i] + b.v[i])
+SPLAT_F4_OP(operator-, a.v[i] - b.v[i])
+SPLAT_F4_OP(operator*, a.v[i] * b.v[i])
+SPLAT_F4_OP(min4, a.v[i] < b.v[i] ? a.v[i] : b.v[i])
+SPLAT_F4_OP(max4, a.v[i] > b.v[i] ? a.v[i] : b.v[i])
+#undef SPLAT_F4_OP
+inline F4 select4(bool which, F4 a, F4 b) { return which ? a : b; }
+inline F4 select_gt(F4 x, F4 y, F4 a, F4 b) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = x.v[i] > y.v[i] ? a.v[i] : b.v[i];
+    return r;
+}
+inline F4 select_lt(F4 x, F4 y, F4 a, F4 b) { return select_gt(y, x, a, b); }
+inline int mask_le(F4 a, F4 b) {
+    int m = 0;
+    for (int i = 0; i < 4; ++i) m |= (a.v[i] <= b.v[i]) << i;
+    return m;
+}
+inline void truncate4(F4 a, int32_t out[4]) {
+    for (int i = 0; i < 4; ++i) out[i] = int32_t(a.v[i]);
+}
+#endif
+
+}  // namespace splat
