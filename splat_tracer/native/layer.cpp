@@ -31,10 +31,11 @@ void LayerQuery::update() {
     if (first < 0) return;  // cut stays where it was (tmax)
     facing = hits[first].front;
     layer_end = hits[first].t + epsilon * hits[first].radius;
-    cut = layer_end;
+    // Any later first is nearer, so its window ends before t_first + ε x max_radius.
+    cut = hits[first].t + epsilon * (max_radius > hits[first].radius ? max_radius : hits[first].radius);
     while (count > 0 && hits[count - 1].t > cut) --count;
     next = -1;  // after the trim: only hits within the window count
-    for (int i = first + 1; i < count; ++i) {
+    for (int i = first + 1; i < count && hits[i].t <= layer_end; ++i) {
         if (!member(i)) {
             next = i;
             break;

@@ -10,9 +10,11 @@
 //            window's end with further queries when it needs what lies behind.
 //
 // The query keeps the hits in (tmin, cut] sorted in a fixed buffer, where cut shrinks as
-// hits arrive: while no first is known, cut = tmax; then cut = the layer's end. Boxes
-// beyond cut are pruned, which is what makes the query cost little more than a nearest-hit
-// query.
+// hits arrive: while no first is known, cut = tmax; then cut = t_first + ε x the largest
+// radius in the scene -- not the layer's end, which a nearer first with a larger radius,
+// met later in the traversal, could move out past hits already dropped (the result then
+// depended on the order the traversal met the hits). Boxes beyond cut are pruned, which is
+// what makes the query cost little more than a nearest-hit query.
 #pragma once
 
 #include <cstdint>
@@ -42,6 +44,8 @@ struct LayerQuery {
     bool any_facing = false;  // wrong-intersection elimination off: the layer begins at the
                               // nearest hit whatever its facing, and has that facing
     float epsilon = 1.f;      // layer depth, in radii of the first splat
+    float max_radius = 0.f;   // the largest radius any splat offered may have (0: trust each
+                              // first's own, exact only if hits arrive in order)
     const int32_t *exclude = nullptr;  // splat ids this ray must not hit (secondary rays)
     int n_exclude = 0;
 

@@ -42,6 +42,7 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     std::vector<size_t> bad(chunks, n);
     std::vector<const char *> why(chunks, nullptr);
     std::vector<AABB> chunk_bounds(chunks);
+    std::vector<float> chunk_max_radius(chunks, 0.f);
     parallel_for(
         chunks, threads,
         [&](size_t k) {
@@ -64,6 +65,7 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
                 const AABB box = disc_bounds(packed[i].c, nn, radii[i]);
                 prims[i] = BuildPrim(box, uint32_t(i));
                 chunk_bounds[k].grow(box);
+                chunk_max_radius[k] = std::max(chunk_max_radius[k], radii[i]);
                 if (colours) colours_[i] = Vec3(colours[3 * i], colours[3 * i + 1], colours[3 * i + 2]);
             }
         },
@@ -71,6 +73,7 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     for (size_t k = 0; k < chunks; ++k) {
         if (why[k]) bad_splat(bad[k], why[k]);
         bounds_.grow(chunk_bounds[k]);
+        max_radius_ = std::max(max_radius_, chunk_max_radius[k]);
     }
     bvh_.build(prims.data(), n, threads);
     // The splats in leaf order, written over the build records (read each before it is
@@ -157,6 +160,7 @@ void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, T
         if (!q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
     };
     q.cut = ray.tmax;
+    q.max_radius = max_radius_;
     if (brute_force) {
         for (const PackedSplat &s : splats_) {
             DiscHit h;

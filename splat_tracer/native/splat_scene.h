@@ -78,6 +78,7 @@ class SplatScene {
     std::vector<uint8_t> closed_;
     std::vector<float> alphas_;
     bool any_closed_ = false, has_colours_ = false;
+    float max_radius_ = 0.f;  // bounds any layer's window (LayerQuery::max_radius)
     AABB bounds_;
     BVH bvh_;
 };
