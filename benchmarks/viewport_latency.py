@@ -77,46 +77,35 @@ def main(argv=None) -> int:
     rows = {name: [] for name in ("first update (export, every build)", "new view (orbit)", "setting (epsilon)",
                                   "lamp power", "one cloud edited")}
     counters = {}
+    def measure(session, row: str, changes=None, first: bool = False) -> None:
+        """Times the session's update for `changes` (none: only the view changed) and its
+        first passes after it, into rows[row]."""
+        upd = 0.0
+        if changes is not None or first:
+            bpy.context.view_layer.update()
+            t0 = time.perf_counter()
+            session.update(bpy.context.evaluated_depsgraph_get(), changes)
+            upd = time.perf_counter() - t0
+        c, f = first_passes(session)
+        rows[row].append((upd, upd + c, upd + f))
+
     for r in range(rounds):
         session = viewport.ViewportSession()
         try:
             session.set_view(view(0.0))
-            t0 = time.perf_counter()
-            session.update(bpy.context.evaluated_depsgraph_get())
-            upd = time.perf_counter() - t0
-            c, f = first_passes(session)
-            rows["first update (export, every build)"].append((upd, upd + c, upd + f))
-
+            measure(session, "first update (export, every build)", first=True)
             session.set_view(view(5.0 + r))
-            c, f = first_passes(session)
-            rows["new view (orbit)"].append((0.0, c, f))
-
+            measure(session, "new view (orbit)")
             scene.splat_tracer.epsilon = 1.0 + 0.1 * (r + 1)
-            t0 = time.perf_counter()
-            session.update(bpy.context.evaluated_depsgraph_get(), viewport.Changes(settings=True))
-            upd = time.perf_counter() - t0
-            c, f = first_passes(session)
-            rows["setting (epsilon)"].append((upd, upd + c, upd + f))
-
+            measure(session, "setting (epsilon)", viewport.Changes(settings=True))
             lamp.data.energy *= 1.1
-            bpy.context.view_layer.update()
-            t0 = time.perf_counter()
-            session.update(bpy.context.evaluated_depsgraph_get(), viewport.Changes(export=True))
-            upd = time.perf_counter() - t0
-            c, f = first_passes(session)
-            rows["lamp power"].append((upd, upd + c, upd + f))
-
+            measure(session, "lamp power", viewport.Changes(export=True))
             radius = cloud.data.attributes["splat_radius"].data
             values = np.empty(len(radius), np.float32)
             radius.foreach_get("value", values)
             radius.foreach_set("value", values * 1.01)
             cloud.data.update()
-            bpy.context.view_layer.update()
-            t0 = time.perf_counter()
-            session.update(bpy.context.evaluated_depsgraph_get(), viewport.Changes(export=True))
-            upd = time.perf_counter() - t0
-            c, f = first_passes(session)
-            rows["one cloud edited"].append((upd, upd + c, upd + f))
+            measure(session, "one cloud edited", viewport.Changes(export=True))
             counters = dict(session.counters)
         finally:
             session.close()
