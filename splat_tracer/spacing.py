@@ -120,20 +120,32 @@ def neighbour_tree(points: np.ndarray):
     return cKDTree(points, balanced_tree=False, compact_nodes=False)
 
 
+def _tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(u, v): unit vectors spanning each point's tangent plane (normals (n, 3) unit), in
+    the normals' dtype."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]).astype(normals.dtype)
+    u = np.cross(normals, helper)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return u, np.cross(normals, u)
+
+
+def _angular_gaps(sorted_angles: np.ndarray) -> np.ndarray:
+    """(n, k) angles between each neighbour and the next around the point (the last one
+    to the first, across 2 pi), from angles sorted along axis 1."""
+    wrapped = np.concatenate([sorted_angles, sorted_angles[:, :1] + 2 * np.pi], axis=1)
+    return np.diff(wrapped, axis=1)
+
+
 def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
     """offsets (n, k, 3) from each point to its neighbours; normals (n, 3) unit; the
     neighbours' normals (n, k, 3)."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    u = np.cross(normals, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(normals, u)
+    u, v = _tangent_frame(normals)
     depth = np.maximum(-np.einsum("nkj,nj->nk", offsets, normals), 0.0)  # below the tangent plane
     tilt = nbr_normals - np.einsum("nkj,nj->nk", nbr_normals, normals)[..., None] * normals[:, None]
     tilt_len = np.linalg.norm(tilt, axis=2, keepdims=True)
     unfolded = offsets + depth[..., None] * np.divide(tilt, tilt_len, out=np.zeros_like(tilt), where=tilt_len > 1e-6)
     ang = np.sort(np.arctan2(np.einsum("nkj,nj->nk", unfolded, v), np.einsum("nkj,nj->nk", unfolded, u)), axis=1)
-    gaps = np.diff(np.concatenate([ang, ang[:, :1] + 2 * np.pi], axis=1), axis=1)
-    return gaps.max(axis=1) > BOUNDARY_GAP
+    return _angular_gaps(ang).max(axis=1) > BOUNDARY_GAP
 
 
 def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
@@ -223,11 +235,11 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
     return hood.spacing, hood.degenerate
 
 
-# Hole-free radii (docs/ALGORITHM.md, "Radius: covering the gaps"). A point of the surface
-# is left uncovered when it is farther from every sample than their radii: the worst such
-# points are the Voronoi vertices, the centres of the empty circles through three samples.
-# Each sample's radius is raised to the largest empty circle it is on (in its tangent plane,
-# among its COVER_K nearest neighbours), so every gap between samples is covered. Circles
+# Gap-closing radii (docs/ALGORITHM.md, "Radius"; the import option Close Gaps). A point of
+# the surface is left uncovered when it is farther from every sample than their radii: the
+# worst such points are the Voronoi vertices, the centres of the empty circles through three
+# samples. Each sample's radius is raised towards the largest empty circle it is on (in its
+# tangent plane, among its COVER_K nearest neighbours), so that gaps between samples close. Circles
 # across a gap wider than COVER_MAX_GAP are a boundary's (a rim, a hole, a silhouette seen
 # in the tangent plane) and are not covered: that would fatten the boundary. Nor are circles
 # wider than COVER_HOLE x the k-NN spacing (holes). The raise is capped at COVER_CAP x the
@@ -243,16 +255,13 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
     """offsets (n, k, 3) to each point's neighbours, normals (n, 3), spacing (n,): the radius
     of the largest empty circle through the point and two angularly adjacent neighbours, if
     larger than the spacing (else the spacing)."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, np.float32([[1, 0, 0]]), np.float32([[0, 1, 0]]))
-    u = np.cross(normals, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(normals, u)
+    u, v = _tangent_frame(normals)
     x, y = np.einsum("nkj,nj->nk", offsets, u), np.einsum("nkj,nj->nk", offsets, v)
     ang = np.arctan2(y, x)
     order = np.argsort(ang, axis=1)
     x, y, ang = (np.take_along_axis(a, order, axis=1) for a in (x, y, ang))
     x2, y2 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
-    gap = np.diff(np.concatenate([ang, ang[:, :1] + 2 * np.pi], axis=1), axis=1)
+    gap = _angular_gaps(ang)
     # Circumcentre of (0, 0), (x, y), (x2, y2); collinear triples have none.
     d = 2 * (x * y2 - y * x2)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -276,8 +285,8 @@ def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> 
 
 def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray, workers: int = -1,
                    tree=None, progress=None) -> np.ndarray:
-    """(N,) float32 radii with no pinhole between samples: each point's k-NN spacing raised
-    to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
+    """(N,) float32 radii that close the gaps between samples: each point's k-NN spacing
+    raised to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
     tree: a cKDTree of `points` already built; progress: as analyse's."""
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float32)

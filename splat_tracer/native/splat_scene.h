@@ -49,7 +49,6 @@ class SplatScene {
     Vec3 normal(int32_t id) const { return splats_[slot_[id]].n; }
     float radius(int32_t id) const { return splats_[slot_[id]].r; }
     bool closed(int32_t id) const { return closed_[id] != 0; }
-    const uint8_t *closed_flags() const { return closed_.data(); }
     bool any_closed() const { return any_closed_; }    // the far phase has work here
     bool has_colours() const { return has_colours_; }  // per-point colours were given
     Vec3 colour(int32_t id) const { return has_colours_ ? colours_[id] : Vec3(1.f, 1.f, 1.f); }

@@ -160,10 +160,10 @@ bool far_phase_accepts(const SplatScene &scene, Ray ray, const LayerQuery &q, co
         const int surfaces = surfaces_in_window(scene, w);
         depth += same ? surfaces : -surfaces;
         if (depth <= 0) return true;
-        // Hits of the other facing inside the window (`next` is one of them: the query keeps
-        // none beyond the window): both faces of a part thinner than the window, or two
-        // shells crossing. The window is an entry and an exit; skipping to its end without
-        // counting both would lose that exit.
+        // Hits of the other facing inside the window (`next` is the first of them; the query
+        // looks for it within the window only): both faces of a part thinner than the
+        // window, or two shells crossing. The window is an entry and an exit; skipping to its
+        // end without counting both would lose that exit.
         if (w.next >= 0) {
             depth += same ? -1 : 1;
             if (depth == 0) return true;
