@@ -51,8 +51,8 @@ def box_solid(x_edges, y_edges, z_edges, filled: np.ndarray):
         for sign, mask in ((1.0, lo & ~hi), (-1.0, hi & ~lo)):
             for idx in zip(*np.nonzero(mask)):
                 i = idx[0]  # face at edges[axis][i] (the padded offset cancels here)
-                rest = [idx[1] - 1, idx[2] - 1]  # cell indices along the two other axes
-                cu, cv = rest  # np.moveaxis(..., axis, 0) keeps the other two axes in order
+                # The cell's indices along the other two axes (np.moveaxis keeps their order).
+                cu, cv = idx[1] - 1, idx[2] - 1
                 u0, u1 = edges[u_axis][cu], edges[u_axis][cu + 1]
                 v0, v1 = edges[v_axis][cv], edges[v_axis][cv + 1]
                 quad = np.zeros((4, 3))
