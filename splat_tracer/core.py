@@ -114,6 +114,80 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     return origin, (pts - origin).astype(np.float32)
 
 
+class PointIndex:
+    """k nearest neighbours among float32 points: a k-d tree in the compiled core
+    (native/neighbours.h), for the import's neighbourhood work (spacing.py, normals.py).
+
+        index = core.PointIndex(points)           # (N,3)
+        dist, ids = index.knn(index.order[:1000], k=6)
+
+    Queries name points of the index by row and return their k nearest *other* points,
+    nearest first (distances, ids); `knn_at` asks about any positions. Walking `order` (the
+    tree's order: neighbouring points are adjacent) in chunks keeps each chunk's queries in
+    one part of the tree, and lets the caller report progress and cancel between chunks.
+    threads: 0 for all cores."""
+
+    def __init__(self, points: np.ndarray, threads: int = 0):
+        self.points = _f32(points, "points", (-1, 3))
+        self.threads = int(threads)
+        self._index = _core.PointIndex(self.points, self.threads)
+        self.order = np.empty(len(self.points), np.int32)
+        self._index.order(self.order)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @staticmethod
+    def _rows(rows) -> np.ndarray:
+        return np.ascontiguousarray(rows, dtype=np.int32).reshape(-1)
+
+    def knn(self, rows, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(dist float32 (m,k), ids int32 (m,k)): each row's k nearest other points."""
+        rows = self._rows(rows)
+        dist, ids = np.empty((len(rows), k), np.float32), np.empty((len(rows), k), np.int32)
+        self._index.knn(rows, k, dist, ids, self.threads)
+        return dist, ids
+
+    def knn_at(self, positions, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """(dist, ids) of the k nearest points of the index to each (m,3) position."""
+        pos = _f32(positions, "positions", (-1, 3))
+        dist, ids = np.empty((len(pos), k), np.float32), np.empty((len(pos), k), np.int32)
+        self._index.knn_at(pos, k, dist, ids, self.threads)
+        return dist, ids
+
+    def kth_distance(self, rows, k: int) -> np.ndarray:
+        """(m,) float32: each row's distance to its k-th nearest other point."""
+        rows = self._rows(rows)
+        out = np.empty(len(rows), np.float32)
+        self._index.kth(rows, k, out, self.threads)
+        return out
+
+    def covering(self, rows, normals: np.ndarray, spacing: np.ndarray, k: int, hole: float, max_gap: float
+                 ) -> np.ndarray:
+        """(m,) float32 gap-closing radii (spacing.covering_radii's rule: the largest empty
+        circle through the point and two angularly adjacent neighbours among its k nearest,
+        in its tangent plane, when between spacing and hole x spacing and not across an
+        angular gap of max_gap radians or more). normals (N,3) unit and spacing (N,) are per
+        point of the index."""
+        rows = self._rows(rows)
+        out = np.empty(len(rows), np.float32)
+        self._index.covering(rows, _f32(normals, "normals", (len(self), 3)), _f32(spacing, "spacing", (len(self),)),
+                             k, float(hole), float(max_gap), out, self.threads)
+        return out
+
+    def pca(self, rows, k: int, graph_width: int = 0, spacing_k: int = 0):
+        """(normals float64 (m,3), graph int32 (m, graph_width) or None, spacing float32 (m,)
+        or None): each row's PCA normal over itself and its k nearest (unoriented); the
+        graph holds the row itself, then its graph_width - 1 nearest; spacing, the distance to
+        its spacing_k-th nearest other point."""
+        rows = self._rows(rows)
+        normals = np.empty((len(rows), 3))
+        graph = np.empty((len(rows), graph_width), np.int32) if graph_width else None
+        spacing = np.empty(len(rows), np.float32) if spacing_k else None
+        self._index.pca(rows, k, normals, graph, spacing_k, spacing, self.threads)
+        return normals, graph, spacing
+
+
 def _window(window, width: int, height: int) -> tuple[int, int, int, int]:
     """(x0, y0, w, h) of a render window, checked before its buffers are allocated (a bad
     window such as (-1, -1, 1, 2**31 - 1) used to ask numpy for 34 GB before the core

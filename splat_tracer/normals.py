@@ -2,9 +2,10 @@
 consistent orientation.
 
 Estimation: each point's normal is the eigenvector of the smallest eigenvalue of the
-covariance of its k nearest neighbours (itself included). The k-NN queries go in chunks in
-the kd-tree's own (spatially coherent) order, batched eigen-decompositions, no per-point
-Python.
+covariance of its k nearest neighbours (itself included), computed in the compiled core
+(core.PointIndex.pca: the search, the covariance in float64 about the point, the
+eigenvector in closed form with Jacobi rotations where the eigenvalues nearly repeat),
+in chunks of points in the k-d tree's own (spatially coherent) order.
 
 Orientation (the PCA axis has no sign):
 - SCANNER: towards the scanner that saw the point (E57 poses);
@@ -44,9 +45,6 @@ AMBIGUOUS_RULE = 0.2    # cos 78 degrees
 ACROSS_WEIGHT = 1.0     # the weight of |n . d| against 1 - |n_i . n_j|
 MODES = ("PROPAGATE", "UP", "SCANNER")
 _CHUNK = 1 << 15
-# smallest_eigenvectors: a cross product below this x p^2 means eigenvalues too close for the
-# closed form's vector (its error grows as the inverse of the gap); eigh decides those.
-_EIGEN_TOLERANCE = 1e-3
 
 
 @dataclass
@@ -70,17 +68,18 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     if n < MIN_POINTS:
         raise ValueError(f"need at least {MIN_POINTS} points to estimate normals, got {n}")
     k = int(min(max(k, 2), n - 1))
-    tree = tree if tree is not None else neighbour_tree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
     out = np.empty((n, 3))
-    order = tree.indices
+    order = tree.order
+    width = 0 if graph is None else graph.shape[1]
+    spacing_k = 0 if spacing is None else spacing[0]
     for start in chunks(n, _CHUNK, progress, "estimating normals"):
         idx = order[start:start + _CHUNK]
-        dist, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
+        out[idx], nbr, dist = tree.pca(idx, k, width, spacing_k)
         if graph is not None:
-            graph[idx] = nbr[:, :graph.shape[1]]
+            graph[idx] = nbr
         if spacing is not None:
-            spacing[1][idx] = dist[:, spacing[0]]
-        out[idx] = smallest_eigenvectors(_covariances(pts[nbr]))
+            spacing[1][idx] = dist
     return out
 
 
@@ -92,7 +91,7 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    tree = tree if tree is not None else neighbour_tree(pts)
+    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
     estimating = axes is None
     share = 2.0 / 3.0 if estimating else 0.0
     graph = spacing = None
@@ -105,49 +104,6 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
                     graph=graph)
     return result, None if spacing is None else spacing[1]
-
-
-def _covariances(q: np.ndarray) -> np.ndarray:
-    """(n,3,3) scatter matrices of the (n,k,3) neighbourhoods about their means: the six
-    distinct sums by elementwise products (twice as fast as einsum's general contraction)."""
-    q = q - q.mean(axis=1, keepdims=True)
-    x, y, z = q[..., 0], q[..., 1], q[..., 2]
-    xx, yy, zz = (x * x).sum(1), (y * y).sum(1), (z * z).sum(1)
-    xy, xz, yz = (x * y).sum(1), (x * z).sum(1), (y * z).sum(1)
-    return np.stack([np.stack([xx, xy, xz], -1), np.stack([xy, yy, yz], -1), np.stack([xz, yz, zz], -1)], 1)
-
-
-def smallest_eigenvectors(cov: np.ndarray) -> np.ndarray:
-    """(N,3) unit eigenvectors of the smallest eigenvalue of symmetric 3x3 matrices, in
-    closed form (about 10x faster than numpy's batched eigh, which calls LAPACK once per
-    matrix): the eigenvalue by the trigonometric solution of the characteristic cubic
-    (Smith 1961), its vector as the largest cross product of two rows of cov - lambda I.
-    Matrices where that is ill-conditioned (the smallest eigenvalue nearly repeated: a
-    neighbourhood along a line, or isotropic) go to eigh."""
-    a = cov
-    q = np.trace(a, axis1=1, axis2=2) / 3.0
-    p1 = a[:, 0, 1] ** 2 + a[:, 0, 2] ** 2 + a[:, 1, 2] ** 2
-    p2 = (a[:, 0, 0] - q) ** 2 + (a[:, 1, 1] - q) ** 2 + (a[:, 2, 2] - q) ** 2 + 2.0 * p1
-    p = np.sqrt(p2 / 6.0)
-    safe_p = np.where(p > 0, p, 1.0)
-    b = (a - q[:, None, None] * np.eye(3)) / safe_p[:, None, None]
-    r = np.clip(np.linalg.det(b) / 2.0, -1.0, 1.0)
-    phi = np.arccos(r) / 3.0
-    smallest = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
-    m = a - smallest[:, None, None] * np.eye(3)
-    crosses = np.stack([np.cross(m[:, 0], m[:, 1]), np.cross(m[:, 0], m[:, 2]), np.cross(m[:, 1], m[:, 2])], 1)
-    length = np.linalg.norm(crosses, axis=2)
-    best = np.argmax(length, axis=1)
-    rows = np.arange(len(a))
-    vec = crosses[rows, best]
-    size = length[rows, best]
-    # well conditioned: the cross product is of the order of p^2 (the gap between eigenvalues)
-    ok = size > _EIGEN_TOLERANCE * p * p
-    vec = vec / np.where(ok, size, 1.0)[:, None]
-    bad = np.flatnonzero(~ok)
-    if len(bad):
-        vec[bad] = np.linalg.eigh(a[bad])[1][:, :, 0]
-    return vec
 
 
 def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.ndarray:
@@ -200,15 +156,16 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
         nbr = graph[:, :k + 1]
     else:
-        tree = tree if tree is not None else neighbour_tree(pts)
-        order = tree.indices  # queried in the tree's leaf order: 3x faster than in file order
-        nbr = np.empty((n, k + 1), np.int64)
-        nbr[order] = tree.query(pts[order], k=k + 1, workers=workers)[1]
+        tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+        order = tree.order  # queried in the tree's order: a leaf of points at a time
+        nbr = np.empty((n, k + 1), np.int32)
+        nbr[order, 0] = order
+        nbr[order, 1:] = tree.knn(order, k)[1]
     j = np.ascontiguousarray(nbr[:, 1:])
     w = np.empty((n, k))
     # The edges' weights, each point against its k neighbours, in chunks of points in the
     # tree's leaf order when there is a tree (neighbours' rows then lie close in memory).
-    rows = tree.indices if tree is not None else np.arange(n)
+    rows = tree.order if tree is not None else np.arange(n)
     for start in chunks(n, _CHUNK, scaled(report, 0.0, 0.4), "orienting normals: neighbour graph"):
         idx = rows[start:start + _CHUNK]
         ji = j[idx]

@@ -230,7 +230,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     # One k-d tree of the bulk for the analysis and the gaps: the normals' when it is that.
     radii_tree = tree if len(inliers) == len(local) else None
     if radii_tree is None and hole_free and cloud.radii is None and len(inliers) >= spacing.MIN_POINTS:
-        radii_tree = spacing.neighbour_tree(local[inliers].astype(np.float64))
+        radii_tree = spacing.neighbour_tree(local[inliers])
     try:
         hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
                                tree=radii_tree, known_spacing=known_spacing)
@@ -249,7 +249,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
             kk = min(k, len(local) - 1)
-            dist, _ = spacing.neighbour_tree(local).query(local[strays], k=kk + 1, workers=workers)
+            dist, _ = spacing.neighbour_tree(local).knn_at(local[strays], kk + 1)  # each finds itself first
             radii[strays] = dist[:, kk]
         cap = np.float32(RADIUS_CAP * np.percentile(hood.spacing, RADIUS_CAP_PERCENTILE))
         clamped = radii > cap

@@ -42,9 +42,9 @@ CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sq
 # 200k samples expect about 250 rim hits against a limit of about 13: far apart.
 BOUNDARY_SAMPLE = 200_000
 BOUNDARY_SEED = 0
-# Queries go in chunks of this many points, in the kd-tree's own (spatially coherent)
-# order, so that each chunk walks the same few branches: this is what keeps 10M-point
-# scans within seconds and bounds the memory of the (chunk, k+1) arrays.
+# Queries go in chunks of this many points, in the k-d tree's own (spatially coherent)
+# order: the core then answers a leaf of points at a time (core.PointIndex), the chunks
+# bound the memory of the (chunk, k) arrays, and progress and cancelling act between them.
 _CHUNK = 1 << 16
 
 
@@ -109,15 +109,16 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     return keep
 
 
-def neighbour_tree(points: np.ndarray):
-    """scipy's cKDTree of the points, built for the importer's all-points queries: the
-    sliding-midpoint split and no node shrinking (balanced_tree=False, compact_nodes=False)
-    build about 3x faster than the default median split, and queries made in the tree's own
-    leaf order (which every caller uses) are no slower -- measured at 1M points on a terrain:
-    build 0.21 s against 0.64 s, a k=7 query of every point 0.7 s against 1.1 s."""
-    from scipy.spatial import cKDTree
+def neighbour_tree(points: np.ndarray, threads: int = 0):
+    """The compiled core's k-d tree of the points (core.PointIndex, float32), built for the
+    importer's all-points queries: asked about runs of its own order (`order`), it answers
+    a leaf of points at a time. Measured at 1M points on a terrain against scipy's cKDTree
+    (the sliding-midpoint build the importer used before): build and a k = 6 search of every
+    point in about a third of the time, and the gap-closing radii and PCA normals, computed
+    natively beside the search, 3-4x faster than numpy over the neighbour arrays."""
+    from . import core
 
-    return cKDTree(points, balanced_tree=False, compact_nodes=False)
+    return core.PointIndex(points, threads)
 
 
 def _tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -152,7 +153,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
             tree=None, known_spacing=None) -> Neighbourhood:
     """k-NN spacing of every point and, with normals, the boundary count and closed guess.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
-    cKDTree of `points` already built; known_spacing: the (N,) distances to the k-th
+    neighbour_tree of `points` already built; known_spacing: the (N,) distances to the k-th
     nearest other point when a search already found them (normals.estimate)."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -161,11 +162,9 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     k = int(min(k, n - 1))
     kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
     nrm = None if normals is None else np.asarray(normals, dtype=np.float64)
-    if tree is not None:
-        pts = tree.data  # the same points, maybe with more precision (float64 offsets)
-    else:
-        tree = neighbour_tree(pts)
-    order = tree.indices  # leaf order of the tree: neighbouring points are adjacent
+    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+    pts = tree.points  # the positions the tree holds (float32)
+    order = tree.order  # the tree's order: neighbouring points are adjacent
     spacing = np.empty(n, np.float32) if known_spacing is None else np.array(known_spacing, np.float32)
     boundary = 0
     tested = order if n <= BOUNDARY_SAMPLE else None  # the points given the boundary test
@@ -177,20 +176,20 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
     for start in chunks(n if known_spacing is None else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        together = nrm is not None and tested is not None  # one query for both
-        # +1: the point itself; alone, only the k-th distance is returned (no (n, k) arrays)
-        dist, nbr = tree.query(pts[idx], k=kq + 1 if together else [k + 1], workers=workers)
-        spacing[idx] = dist[:, k] if together else dist[:, 0]
-        if together:
-            boundary += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
+        if nrm is not None and tested is not None:  # one search for both
+            dist, nbr = tree.knn(idx, kq)
+            spacing[idx] = dist[:, k - 1]
+            boundary += int(_boundary_mask(pts[nbr] - pts[idx, None], nrm[idx], nrm[nbr]).sum())
+        else:  # only the k-th distance (no (n, k) arrays)
+            spacing[idx] = tree.kth_distance(idx, k)
     if nrm is not None and tested is None:
         tested = sample if sample is not None else np.sort(
             np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
         hits = 0
         for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "splat radii: closed surface guess"):
             idx = tested[start:start + _CHUNK]
-            _, nbr = tree.query(pts[idx], k=kq + 1, workers=workers)
-            hits += int(_boundary_mask(pts[nbr[:, 1:]] - pts[idx, None], nrm[idx], nrm[nbr[:, 1:]]).sum())
+            _, nbr = tree.knn(idx, kq)
+            hits += int(_boundary_mask(pts[nbr] - pts[idx, None], nrm[idx], nrm[nbr]).sum())
         boundary = int(round(hits * n / len(tested)))
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
@@ -219,13 +218,12 @@ def statistical_inliers(points: np.ndarray, ratio: float, k: int = SOR_K, worker
     k = int(min(k, n - 1))
     if k < 1:
         return np.ones(n, bool)
-    tree = tree if tree is not None else neighbour_tree(pts)
-    order = tree.indices
+    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+    order = tree.order
     mean = np.empty(n)
     for start in chunks(n, _CHUNK, progress, "statistical outliers"):
         idx = order[start:start + _CHUNK]
-        dist, _ = tree.query(pts[idx], k=k + 1, workers=workers)  # +1: the point itself
-        mean[idx] = dist[:, 1:].mean(axis=1)
+        mean[idx] = tree.knn(idx, k)[0].mean(axis=1)
     return mean <= mean.mean() + ratio * mean.std()
 
 
@@ -244,66 +242,30 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
 # in the tangent plane) and are not covered: that would fatten the boundary. Nor are circles
 # wider than COVER_HOLE x the k-NN spacing (holes). The raise is capped at COVER_CAP x the
 # spacing: on the benchmark's randomly sampled clouds 1.3 leaves few pinholes at 640x480,
-# and a larger cap fattens silhouettes.
+# and a larger cap fattens silhouettes. A circle counts when it is empty: no neighbour
+# strictly inside (a long thin triangle's circle is not a gap). The compiled core computes
+# the rule (native/neighbours.cpp, covering_radius), beside the neighbour search.
 COVER_K = 12
 COVER_MAX_GAP = np.radians(162.0)  # 0.9 pi: a near-straight boundary still counts as one
 COVER_CAP = 1.3
 COVER_HOLE = 3.0  # circles up to this x the spacing count as gaps between samples
 
 
-def _covering(offsets: np.ndarray, normals: np.ndarray, spacing: np.ndarray) -> np.ndarray:
-    """offsets (n, k, 3) to each point's neighbours, normals (n, 3), spacing (n,): the radius
-    of the largest empty circle through the point and two angularly adjacent neighbours, if
-    larger than the spacing (else the spacing)."""
-    u, v = _tangent_frame(normals)
-    x, y = np.einsum("nkj,nj->nk", offsets, u), np.einsum("nkj,nj->nk", offsets, v)
-    ang = np.arctan2(y, x)
-    order = np.argsort(ang, axis=1)
-    x, y, ang = (np.take_along_axis(a, order, axis=1) for a in (x, y, ang))
-    x2, y2 = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
-    gap = _angular_gaps(ang)
-    # Circumcentre of (0, 0), (x, y), (x2, y2); collinear triples have none.
-    d = 2 * (x * y2 - y * x2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a, b = x * x + y * y, x2 * x2 + y2 * y2
-        cx, cy = (y2 * a - y * b) / d, (x * b - x2 * a) / d
-        r = np.hypot(cx, cy)
-    # A circle wider than COVER_HOLE x the spacing is a hole, not a gap (or three nearly
-    # collinear samples, whose circle is huge and, in float32, looks empty); below that, a
-    # gap the cap cannot reach is still narrowed (the radius is capped, not left alone).
-    candidate = (gap < COVER_MAX_GAP) & (r > spacing[:, None]) & (r <= COVER_HOLE * spacing[:, None])
-    out = spacing.copy()
-    rows = np.flatnonzero(candidate.any(axis=1))  # only these can raise the radius
-    if rows.size:
-        cx, cy, r, x, y, candidate = (a[rows] for a in (cx, cy, r, x, y, candidate))
-        # Empty: no neighbour strictly inside (a long thin triangle's circle is not a gap).
-        inside = (np.hypot(cx[:, :, None] - x[:, None, :], cy[:, :, None] - y[:, None, :])
-                  < r[:, :, None] * (1 - 1e-4)).any(axis=2)
-        out[rows] = np.maximum(spacing[rows], np.where(candidate & ~inside, r, 0).max(axis=1))
-    return out
-
-
 def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray, workers: int = -1,
                    tree=None, progress=None) -> np.ndarray:
     """(N,) float32 radii that close the gaps between samples: each point's k-NN spacing
     raised to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
-    tree: a cKDTree of `points` already built; progress: as analyse's."""
-    pts = np.asarray(points, dtype=np.float64)
+    tree: a neighbour_tree of `points` already built; progress: as analyse's. The rule is
+    computed in the compiled core (core.PointIndex.covering)."""
     nrm = np.asarray(normals, dtype=np.float32)
     nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
     s = np.asarray(spacing, dtype=np.float32)
-    k = int(min(COVER_K, len(pts) - 1))
+    k = int(min(COVER_K, len(points) - 1))
     if k < 2:
         return s.copy()
-    if tree is not None:
-        pts = tree.data  # the same points, maybe with more precision
-    else:
-        tree = neighbour_tree(pts)
-    out = np.empty(len(pts), np.float32)
-    chunk = _CHUNK // 4  # (chunk, k, k) float32 arrays for the emptiness test
-    for start in chunks(len(pts), chunk, progress, "splat radii: closing gaps"):
-        idx = tree.indices[start:start + chunk]  # the tree's (spatially coherent) order
-        _, nbr = tree.query(pts[idx], k=k + 1, workers=workers)
-        offsets = (pts[nbr[:, 1:]] - pts[idx, None]).astype(np.float32)
-        out[idx] = _covering(offsets, nrm[idx], s[idx])
+    tree = tree if tree is not None else neighbour_tree(points, 0 if workers < 0 else workers)
+    out = np.empty(len(s), np.float32)
+    for start in chunks(len(s), _CHUNK, progress, "splat radii: closing gaps"):
+        idx = tree.order[start:start + _CHUNK]  # the tree's (spatially coherent) order
+        out[idx] = tree.covering(idx, nrm, s, k, COVER_HOLE, COVER_MAX_GAP)
     return np.minimum(out, COVER_CAP * s)

@@ -1,0 +1,445 @@
+#include "neighbours.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+
+#include "parallel.h"
+#include "ray.h"
+#include "splat_scene.h"
+
+namespace splat {
+
+namespace {
+
+struct BuildPoint {
+    float c[3];
+    uint32_t id;
+};
+
+// A node's cell while building: the parent's cell cut at the split (not the tight box of
+// its points: the widest side of the cell is the split axis, as in a classic k-d tree).
+struct Cell {
+    float lo[3], hi[3];
+    int widest() const {
+        const float e0 = hi[0] - lo[0], e1 = hi[1] - lo[1], e2 = hi[2] - lo[2];
+        return e0 >= e1 ? (e0 >= e2 ? 0 : 2) : (e1 >= e2 ? 1 : 2);
+    }
+};
+
+}  // namespace
+
+// The k best candidates so far, nearest first (insertion into a sorted array: k is small).
+struct PointIndex::Best {
+    int k, count = 0;
+    float *d2;
+    uint32_t *slot;          // tree-order positions (turned into input ids at the end)
+    uint32_t exclude;        // a tree-order position never to return (kNone: none)
+    float worst = std::numeric_limits<float>::infinity();  // the k-th distance, once k are found
+};
+
+namespace {
+
+// Inserts (d, s) into the sorted candidates d2/slot (count of k; d < worst) and returns the
+// new worst. On locals, not on a Best: stores through d2 could alias its members and force
+// reloads in the hot loop.
+inline float insert(float d, uint32_t s, int k, int &count, float *d2, uint32_t *slot, float worst) {
+    int i = count < k ? count++ : k - 1;
+    for (; i > 0 && d2[i - 1] > d; --i) d2[i] = d2[i - 1], slot[i] = slot[i - 1];
+    d2[i] = d, slot[i] = s;
+    return count == k ? d2[k - 1] : worst;
+}
+
+}  // namespace
+
+PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
+    if (n == 0) throw InputError("a point index needs at least one point");
+    if (n >= size_t(kNone)) throw InputError("too many points for a point index (at most 2^32 - 2)");
+    std::vector<BuildPoint> pts(n);
+    Cell root{{xyz[0], xyz[1], xyz[2]}, {xyz[0], xyz[1], xyz[2]}};
+    for (size_t i = 0; i < n; ++i) {
+        const float *p = xyz + 3 * i;
+        for (int a = 0; a < 3; ++a) {
+            if (!within_range(p[a]))
+                throw InputError("point " + std::to_string(i) + " is not finite or beyond 1e18");
+            pts[i].c[a] = p[a];
+            root.lo[a] = std::min(root.lo[a], p[a]), root.hi[a] = std::max(root.hi[a], p[a]);
+        }
+        pts[i].id = uint32_t(i);
+    }
+    std::copy(root.lo, root.lo + 3, bounds_.lo), std::copy(root.hi, root.hi + 3, bounds_.hi);
+    while (((uint64_t(n) + (uint64_t(1) << depth_) - 1) >> depth_) > kLeafSize) ++depth_;
+    const size_t inner = (size_t(1) << depth_) - 1;
+    split_.resize(inner);
+    axis_.resize(inner);
+
+    // Splits node (depth d) at its middle; returns the children's cells.
+    auto split_node = [&](uint32_t node, int d, const Cell &cell, Cell &left, Cell &right) {
+        const size_t b = begin(node, d), e = begin(node + 1, d);  // node + 1: the next at this depth
+        const size_t mid = begin(2 * node + 2, d + 1);
+        const int a = cell.widest();
+        std::nth_element(pts.begin() + b, pts.begin() + mid, pts.begin() + e,
+                         [a](const BuildPoint &p, const BuildPoint &q) { return p.c[a] < q.c[a]; });
+        const float s = pts[mid].c[a];
+        split_[node] = s, axis_[node] = uint8_t(a);
+        left = right = cell;
+        left.hi[a] = s, right.lo[a] = s;
+    };
+    // The top levels one at a time (a level's nodes on the threads), then whole subtrees,
+    // depth first, one per task: a subtree's points stay in the cache of the thread that
+    // splits them. kSubtreeTasks per thread balance the subtrees' uneven work.
+    constexpr int kSubtreeTasksPerThread = 8;
+    const int workers = resolve_threads(threads);
+    int top = 0;
+    while (top < depth_ && (1 << top) < kSubtreeTasksPerThread * workers) ++top;
+    std::vector<Cell> cells{root}, next;
+    const auto always = [](size_t) { return true; };
+    for (int d = 0; d < top; ++d) {
+        const uint32_t first = (1u << d) - 1u;
+        next.assign(size_t(2) << d, Cell{});
+        parallel_for(size_t(1) << d, threads, [&](size_t j) {
+            split_node(first + uint32_t(j), d, cells[j], next[2 * j], next[2 * j + 1]);
+        }, always);
+        cells.swap(next);
+    }
+    if (top < depth_) {
+        const uint32_t first = (1u << top) - 1u;
+        parallel_for(cells.size(), threads, [&](size_t j) {
+            struct Item { uint32_t node; int d; Cell cell; };
+            std::vector<Item> stack{{first + uint32_t(j), top, cells[j]}};
+            while (!stack.empty()) {
+                const Item it = stack.back();
+                stack.pop_back();
+                Cell l, r;
+                split_node(it.node, it.d, it.cell, l, r);
+                if (it.d + 1 < depth_) {
+                    stack.push_back({2 * it.node + 2, it.d + 1, r});
+                    stack.push_back({2 * it.node + 1, it.d + 1, l});
+                }
+            }
+        }, always);
+    }
+    x_.resize(n), y_.resize(n), z_.resize(n);
+    id_.resize(n);
+    slot_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        x_[i] = pts[i].c[0], y_[i] = pts[i].c[1], z_[i] = pts[i].c[2];
+        id_[i] = pts[i].id;
+        slot_[pts[i].id] = uint32_t(i);
+    }
+}
+
+void PointIndex::scan(size_t b, size_t e, const float q[3], Best &best) const {
+    // Distances a leaf's worth at a time, in a loop the compiler vectorises (the
+    // coordinates are stored by axis), then the few candidates nearer than the k-th.
+    float d[kLeafSize];
+    const int k = best.k;
+    int count = best.count;
+    float worst = best.worst, *d2 = best.d2;
+    uint32_t *slot = best.slot;
+    for (; b < e; b += kLeafSize) {
+        const size_t m = std::min(kLeafSize, e - b);
+        const float *x = &x_[b], *y = &y_[b], *z = &z_[b];
+        for (size_t i = 0; i < m; ++i) {
+            const float dx = x[i] - q[0], dy = y[i] - q[1], dz = z[i] - q[2];
+            d[i] = dx * dx + dy * dy + dz * dz;
+        }
+        if (best.exclude != kNone && best.exclude - b < m) d[best.exclude - b] = std::numeric_limits<float>::infinity();
+        for (size_t i = 0; i < m; ++i)
+            if (d[i] < worst) worst = insert(d[i], uint32_t(b + i), k, count, d2, slot, worst);
+    }
+    best.count = count, best.worst = worst;
+}
+
+void PointIndex::search(const float q[3], Best &best, uint32_t node, int depth, float mindist, float off[3],
+                        size_t skip_b, size_t skip_e) const {
+    const size_t b = begin(node, depth), e = begin(node + 1, depth);  // node + 1: the next at this depth
+    if (b >= skip_b && e <= skip_e) return;
+    if (depth == depth_) {
+        scan(b, e, q, best);
+        return;
+    }
+    const int a = axis_[node];
+    const float diff = q[a] - split_[node];
+    const uint32_t near = 2 * node + (diff < 0.f ? 1 : 2), far = 4 * node + 3 - near;
+    search(q, best, near, depth + 1, mindist, off, skip_b, skip_e);
+    // The far cell lies at least |diff| away along `a`: replace the query's distance to the
+    // cell along that axis (nanoflann's incremental bound).
+    const float d = diff * diff, far_dist = mindist - off[a] + d;
+    if (far_dist < best.worst) {
+        const float saved = off[a];
+        off[a] = d;
+        search(q, best, far, depth + 1, far_dist, off, skip_b, skip_e);
+        off[a] = saved;
+    }
+}
+
+uint32_t PointIndex::leaf_of(size_t s) const {
+    uint32_t node = 0;
+    for (int d = 0; d < depth_; ++d) node = s < begin(2 * node + 2, d + 1) ? 2 * node + 1 : 2 * node + 2;
+    return node;
+}
+
+int PointIndex::nearest(const float q[3], uint32_t exclude, int k, float *d2, uint32_t *ids) const {
+    Best best{k, 0, d2, ids, exclude == kNone ? kNone : slot_[exclude]};
+    size_t skip_b = 0, skip_e = 0;
+    if (exclude != kNone) {  // a point of the index: its own leaf first, for a tight bound
+        const uint32_t leaf = leaf_of(best.exclude);
+        skip_b = begin(leaf, depth_), skip_e = begin(leaf + 1, depth_);
+        scan(skip_b, skip_e, q, best);
+    }
+    float off[3] = {0.f, 0.f, 0.f};
+    search(q, best, 0, 0, 0.f, off, skip_b, skip_e);
+    for (int i = 0; i < best.count; ++i) ids[i] = id_[ids[i]];
+    return best.count;
+}
+
+int PointIndex::nearest_of(uint32_t id, int k, float *d2, uint32_t *ids) const {
+    const uint32_t s = slot_[id];
+    const float q[3] = {x_[s], y_[s], z_[s]};
+    return nearest(q, id, k, d2, ids);
+}
+
+namespace {
+
+// Squared distance between two boxes (0 when they touch or overlap).
+inline float box_gap2(const float alo[3], const float ahi[3], const float blo[3], const float bhi[3]) {
+    float d = 0.f;
+    for (int a = 0; a < 3; ++a) {
+        const float g = std::max(0.f, std::max(alo[a] - bhi[a], blo[a] - ahi[a]));
+        d += g * g;
+    }
+    return d;
+}
+
+// leaf_nearest gathers at most this many candidate points for one leaf, else its points
+// search one by one: a cluster of coincident points makes every leaf of the cluster a
+// candidate of every other (their cells all touch), which one search per point, whose
+// bound is then 0, avoids. 64 leaves: far more than a surface's leaves need (10-20).
+constexpr size_t kMaxGathered = 64 * PointIndex::kLeafSize;
+
+}  // namespace
+
+void PointIndex::gather(uint32_t node, int depth, const Box &cell, const Box &box, float r2, size_t skip_b,
+                        size_t skip_e, std::vector<std::pair<uint32_t, Box>> &leaves, size_t &points) const {
+    const size_t b = begin(node, depth), e = begin(node + 1, depth);
+    if ((b >= skip_b && e <= skip_e) || points > kMaxGathered) return;
+    if (box_gap2(cell.lo, cell.hi, box.lo, box.hi) > r2) return;
+    if (depth == depth_) {
+        leaves.push_back({node, cell});
+        points += e - b;
+        return;
+    }
+    const int a = axis_[node];
+    Box left = cell, right = cell;
+    left.hi[a] = right.lo[a] = split_[node];
+    gather(2 * node + 1, depth + 1, left, box, r2, skip_b, skip_e, leaves, points);
+    gather(2 * node + 2, depth + 1, right, box, r2, skip_b, skip_e, leaves, points);
+}
+
+void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *ids) const {
+    const size_t m = e - b;  // <= kLeafSize: one leaf's points at most
+    // The smallest subtree around the leaf with k + 1 points: every point's first candidates.
+    uint32_t node = leaf_of(b);
+    int depth = depth_;
+    while (begin(node + 1, depth) - begin(node, depth) < size_t(k) + 1) node = (node - 1) / 2, --depth;
+    const size_t sb = begin(node, depth), se = begin(node + 1, depth);
+    Best best[kLeafSize];
+    Box box{{x_[b], y_[b], z_[b]}, {x_[b], y_[b], z_[b]}};
+    float r2 = 0.f;
+    for (size_t i = 0; i < m; ++i) {
+        const size_t s = b + i;
+        const float q[3] = {x_[s], y_[s], z_[s]};
+        best[i] = Best{k, 0, d2 + i * k, ids + i * k, uint32_t(s)};
+        scan(sb, se, q, best[i]);
+        r2 = std::max(r2, best[i].worst);
+        for (int a = 0; a < 3; ++a) box.lo[a] = std::min(box.lo[a], q[a]), box.hi[a] = std::max(box.hi[a], q[a]);
+    }
+    // Every point's k nearest lie within its k-th candidate's distance, at most sqrt(r2)
+    // from the box: the leaves whose cells come that close, outside the subtree.
+    thread_local std::vector<std::pair<uint32_t, Box>> leaves;
+    leaves.clear();
+    size_t points = 0;
+    gather(0, 0, bounds_, box, r2, sb, se, leaves, points);
+    for (size_t i = 0; i < m; ++i) {
+        const size_t s = b + i;
+        const float q[3] = {x_[s], y_[s], z_[s]};
+        if (points > kMaxGathered) {
+            float off[3] = {0.f, 0.f, 0.f};
+            search(q, best[i], 0, 0, 0.f, off, sb, se);
+        } else {
+            for (const auto &[leaf, cell] : leaves)
+                if (box_gap2(cell.lo, cell.hi, q, q) < best[i].worst)
+                    scan(begin(leaf, depth_), begin(leaf + 1, depth_), q, best[i]);
+        }
+        for (int j = 0; j < k; ++j) ids[i * k + j] = id_[ids[i * k + j]];
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Geometry from the neighbours
+
+namespace {
+
+// A monotonic stand-in for atan2(y, x) mapped to [0, 2 pi): in [0, 4), no trigonometry
+// (the "diamond angle"). Sorting by it orders vectors around the origin as the angle does.
+inline double pseudo_angle(double x, double y) {
+    const double l1 = std::fabs(x) + std::fabs(y);
+    if (l1 == 0.0) return 0.0;  // a coincident neighbour (atan2(0, 0) = 0 as well)
+    const double p = x / l1;
+    return y < 0.0 ? 3.0 + p : 1.0 - p;
+}
+
+}  // namespace
+
+float covering_radius(const PointIndex &index, uint32_t id, const uint32_t *ids, int m, const float normal[3],
+                      float spacing, float hole, float max_gap) {
+    if (m < 2) return spacing;
+    // Tangent frame (u, v): u = n x helper, the helper an axis far from n.
+    const double n[3] = {normal[0], normal[1], normal[2]};
+    const double h[3] = {std::fabs(n[0]) < 0.9 ? 1.0 : 0.0, std::fabs(n[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+    double u[3] = {n[1] * h[2] - n[2] * h[1], n[2] * h[0] - n[0] * h[2], n[0] * h[1] - n[1] * h[0]};
+    const double ul = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    for (double &c : u) c /= ul;
+    const double v[3] = {n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]};
+    float p[3];
+    index.position(id, p);
+    double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
+    int order[PointIndex::kMaxK];
+    for (int j = 0; j < m; ++j) {
+        float q[3];
+        index.position(ids[j], q);
+        const double o[3] = {double(q[0] - p[0]), double(q[1] - p[1]), double(q[2] - p[2])};
+        x[j] = o[0] * u[0] + o[1] * u[1] + o[2] * u[2];
+        y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
+        ang[j] = pseudo_angle(x[j], y[j]);
+        order[j] = j;
+    }
+    std::sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
+    double best = spacing;
+    const double lo = spacing, hi = double(hole) * spacing;
+    for (int i = 0; i < m; ++i) {
+        const int a = order[i], b = order[(i + 1) % m];
+        // Circumcentre of (0, 0), (x_a, y_a), (x_b, y_b); collinear triples have none.
+        const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
+        if (d == 0.0) continue;
+        const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
+        const double cx = (y[b] * sa - y[a] * sb) / d, cy = (x[a] * sb - x[b] * sa) / d;
+        const double r = std::sqrt(cx * cx + cy * cy);
+        if (!(r > lo && r <= hi && r > best)) continue;
+        // The angular gap from a to b, counter-clockwise in [0, 2 pi) (the last pair wraps
+        // round); only for the few circles that would raise the radius.
+        double gap = std::atan2(d, 2.0 * (x[a] * x[b] + y[a] * y[b]));
+        if (gap < 0.0) gap += 2.0 * M_PI;
+        if (!(gap < max_gap)) continue;
+        // Empty: no neighbour strictly inside (1e-4: the two on the circle, in rounding).
+        const double inner = r * (1.0 - 1e-4);
+        bool empty = true;
+        for (int j = 0; j < m && empty; ++j)
+            empty = !((cx - x[j]) * (cx - x[j]) + (cy - y[j]) * (cy - y[j]) < inner * inner);
+        if (empty) best = r;
+    }
+    return float(best);
+}
+
+namespace {
+
+double det3(const double m[3][3]) {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+// Cyclic Jacobi rotations: slow but exact for any symmetric matrix (repeated eigenvalues
+// included), for the few the closed form cannot decide.
+void jacobi_smallest(const double a6[6], double out[3]) {
+    double a[3][3] = {{a6[0], a6[3], a6[4]}, {a6[3], a6[1], a6[5]}, {a6[4], a6[5], a6[2]}};
+    double v[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int sweep = 0; sweep < 50; ++sweep) {  // converges quadratically: a handful suffice
+        const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        const double diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if (off <= 1e-30 * diag || off == 0.0) break;
+        for (int p = 0; p < 2; ++p)
+            for (int q = p + 1; q < 3; ++q) {
+                if (a[p][q] == 0.0) continue;
+                const double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+                const double t = (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
+                const double c = 1.0 / std::sqrt(t * t + 1.0), s = t * c;
+                for (int r = 0; r < 3; ++r) {  // a <- a J
+                    const double arp = a[r][p], arq = a[r][q];
+                    a[r][p] = c * arp - s * arq, a[r][q] = s * arp + c * arq;
+                }
+                for (int r = 0; r < 3; ++r) {  // a <- J^T a
+                    const double apr = a[p][r], aqr = a[q][r];
+                    a[p][r] = c * apr - s * aqr, a[q][r] = s * apr + c * aqr;
+                }
+                for (int r = 0; r < 3; ++r) {  // v <- v J
+                    const double vrp = v[r][p], vrq = v[r][q];
+                    v[r][p] = c * vrp - s * vrq, v[r][q] = s * vrp + c * vrq;
+                }
+            }
+    }
+    int best = 0;
+    for (int i = 1; i < 3; ++i)
+        if (a[i][i] < a[best][best]) best = i;
+    for (int r = 0; r < 3; ++r) out[r] = v[r][best];
+}
+
+}  // namespace
+
+void smallest_eigenvector(const double a6[6], double out[3]) {
+    // Closed form (Smith 1961): the smallest eigenvalue by the trigonometric solution of the
+    // characteristic cubic, its vector as the largest cross product of two rows of A - lambda I.
+    const double q = (a6[0] + a6[1] + a6[2]) / 3.0;
+    const double p1 = a6[3] * a6[3] + a6[4] * a6[4] + a6[5] * a6[5];
+    const double p2 = (a6[0] - q) * (a6[0] - q) + (a6[1] - q) * (a6[1] - q) + (a6[2] - q) * (a6[2] - q) + 2.0 * p1;
+    const double p = std::sqrt(p2 / 6.0);
+    if (p > 0.0 && std::isfinite(p)) {
+        const double b[3][3] = {{(a6[0] - q) / p, a6[3] / p, a6[4] / p},
+                                {a6[3] / p, (a6[1] - q) / p, a6[5] / p},
+                                {a6[4] / p, a6[5] / p, (a6[2] - q) / p}};
+        const double r = std::clamp(det3(b) / 2.0, -1.0, 1.0);
+        const double lambda = q + 2.0 * p * std::cos(std::acos(r) / 3.0 + 2.0 * M_PI / 3.0);
+        const double m[3][3] = {{a6[0] - lambda, a6[3], a6[4]}, {a6[3], a6[1] - lambda, a6[5]},
+                                {a6[4], a6[5], a6[2] - lambda}};
+        double best[3] = {0, 0, 0}, best_len = -1.0;
+        const int pairs[3][2] = {{0, 1}, {0, 2}, {1, 2}};
+        for (const auto &pr : pairs) {
+            const double *r0 = m[pr[0]], *r1 = m[pr[1]];
+            const double c[3] = {r0[1] * r1[2] - r0[2] * r1[1], r0[2] * r1[0] - r0[0] * r1[2],
+                                 r0[0] * r1[1] - r0[1] * r1[0]};
+            const double len = std::sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]);
+            if (len > best_len) best_len = len, best[0] = c[0], best[1] = c[1], best[2] = c[2];
+        }
+        // Well conditioned: the cross product is of the order of p^2 (the eigenvalue gap);
+        // its direction's error grows as the inverse of the gap. 1e-3: normals.py's
+        // _EIGEN_TOLERANCE, which measured this threshold.
+        if (best_len > 1e-3 * p * p) {
+            for (int i = 0; i < 3; ++i) out[i] = best[i] / best_len;
+            return;
+        }
+    }
+    jacobi_smallest(a6, out);
+}
+
+void pca_normal(const PointIndex &index, uint32_t id, const uint32_t *ids, int found, double normal[3]) {
+    // About the point itself first (offsets are small: no cancellation), then the mean.
+    float p[3];
+    index.position(id, p);
+    double s[3] = {0, 0, 0}, ss[6] = {0, 0, 0, 0, 0, 0};
+    for (int j = 0; j < found; ++j) {
+        float q[3];
+        index.position(ids[j], q);
+        const double o[3] = {double(q[0]) - p[0], double(q[1]) - p[1], double(q[2]) - p[2]};
+        s[0] += o[0], s[1] += o[1], s[2] += o[2];
+        ss[0] += o[0] * o[0], ss[1] += o[1] * o[1], ss[2] += o[2] * o[2];
+        ss[3] += o[0] * o[1], ss[4] += o[0] * o[2], ss[5] += o[1] * o[2];
+    }
+    const double count = found + 1.0;  // the point itself, at offset 0
+    const double m[3] = {s[0] / count, s[1] / count, s[2] / count};
+    const double cov[6] = {ss[0] - count * m[0] * m[0], ss[1] - count * m[1] * m[1], ss[2] - count * m[2] * m[2],
+                           ss[3] - count * m[0] * m[1], ss[4] - count * m[0] * m[2], ss[5] - count * m[1] * m[2]};
+    smallest_eigenvector(cov, normal);
+}
+
+}  // namespace splat

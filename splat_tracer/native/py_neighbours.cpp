@@ -1,0 +1,336 @@
+// Python binding of the neighbour search: `_core.PointIndex` (neighbours.h). Queries take
+// the rows of the indexed points to ask about (the caller walks `order()` in chunks, which
+// keeps each chunk's queries in the same part of the tree and lets it report progress and
+// cancel between chunks) and fill arrays the caller allocated. splat_tracer/core.py wraps
+// it (core.PointIndex); every input is validated here too.
+#include <cmath>
+#include <vector>
+
+#include "neighbours.h"
+#include "py_util.h"
+
+namespace splat::py {
+namespace {
+
+struct PointIndexObject {
+    PyObject_HEAD
+    PointIndex *index;
+};
+
+PointIndex &index_of(PyObject *self) { return *reinterpret_cast<PointIndexObject *>(self)->index; }
+
+// Rows per task: enough work to amortise the task counter, few enough to balance 2+ threads
+// on a chunk of 2^16 rows.
+constexpr size_t kRowsPerTask = 512;
+
+// Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL.
+template <class Task>
+bool for_tasks(size_t tasks, int threads, Task &&task) {
+    return without_gil([&] { parallel_for(tasks, threads, task, [](size_t) { return true; }); });
+}
+
+// Runs fn(i) for i in [0, m) in tasks of kRowsPerTask.
+template <class Fn>
+bool for_rows(size_t m, int threads, Fn &&fn) {
+    return for_tasks((m + kRowsPerTask - 1) / kRowsPerTask, threads, [&](size_t t) {
+        for (size_t i = t * kRowsPerTask; i < std::min(m, (t + 1) * kRowsPerTask); ++i) fn(i);
+    });
+}
+
+// Runs fn(i, d2, ids) for each row i with its point's k nearest others (squared distances,
+// input ids, nearest first), without the GIL. Rows that are a run of the tree's order (what
+// the importer asks: chunks of `order`) go a leaf at a time (PointIndex::leaf_nearest),
+// others one search each.
+template <class Fn>
+bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int k, int threads, Fn &&fn) {
+    const auto &order = index.order();
+    const size_t start = m ? index.slot(uint32_t(rows[0])) : 0;
+    bool run = start + m <= index.size();
+    for (size_t i = 0; i < m && run; ++i) run = order[start + i] == uint32_t(rows[i]);
+    if (!run)
+        return for_rows(m, threads, [&](size_t i) {
+            float d2[PointIndex::kMaxK];
+            uint32_t ids[PointIndex::kMaxK];
+            index.nearest_of(uint32_t(rows[i]), k, d2, ids);
+            fn(i, d2, ids);
+        });
+    std::vector<size_t> pieces;  // the run cut at leaf ends: each piece within one leaf
+    for (size_t s = start; s < start + m; s = std::min(index.leaf_end(s), start + m)) pieces.push_back(s);
+    pieces.push_back(start + m);
+    const size_t per_task = kRowsPerTask / PointIndex::kLeafSize;
+    return for_tasks((pieces.size() - 1 + per_task - 1) / per_task, threads, [&](size_t t) {
+        std::vector<float> d2(PointIndex::kLeafSize * size_t(k));
+        std::vector<uint32_t> ids(d2.size());
+        for (size_t p = t * per_task; p < std::min(pieces.size() - 1, (t + 1) * per_task); ++p) {
+            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), ids.data());
+            for (size_t j = 0; j < pieces[p + 1] - pieces[p]; ++j)
+                fn(pieces[p] - start + j, &d2[j * k], &ids[j * k]);
+        }
+    });
+}
+
+// rows: int32 (m,), every entry a point of the index. Sets an exception otherwise.
+bool get_rows(PyObject *obj, const PointIndex &index, View &rows) {
+    Py_ssize_t any[1] = {-1};
+    if (!get_array(obj, "rows", 'i', 1, any, false, rows)) return false;
+    const int32_t *r = rows.data<int32_t>();
+    for (Py_ssize_t i = 0; i < rows.dim(0); ++i)
+        if (r[i] < 0 || size_t(r[i]) >= index.size())
+            return PyErr_Format(PyExc_ValueError, "rows[%zd] = %d is not a point of the index (0..%zu)", i, int(r[i]),
+                                index.size() - 1),
+                   false;
+    return true;
+}
+
+// k neighbours of a point of the index (others: at most size - 1). Sets an exception otherwise.
+bool check_k(int k, size_t available, const char *name = "k") {
+    if (k < 1 || k > PointIndex::kMaxK || size_t(k) > available)
+        return PyErr_Format(PyExc_ValueError, "%s must be in 1..%zu (the points available, at most %d), got %d", name,
+                            std::min<size_t>(available, PointIndex::kMaxK), PointIndex::kMaxK, k),
+               false;
+    return true;
+}
+
+bool check_threads(int threads) {
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    return true;
+}
+
+PyObject *PointIndex_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"points", "threads", nullptr};
+    PyObject *op;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "O|i", const_cast<char **>(kwlist), &op, &threads)) return nullptr;
+    if (!check_threads(threads)) return nullptr;
+    View p;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(op, "points", 'f', 2, s3, false, p)) return nullptr;
+    PointIndex *index = nullptr;
+    if (!without_gil([&] { index = new PointIndex(p.data<float>(), size_t(p.dim(0)), threads); })) return nullptr;
+    auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
+    PyObject *self = alloc(type, 0);
+    if (!self) {
+        delete index;
+        return nullptr;
+    }
+    reinterpret_cast<PointIndexObject *>(self)->index = index;
+    return self;
+}
+
+void PointIndex_dealloc(PyObject *self) {
+    delete reinterpret_cast<PointIndexObject *>(self)->index;
+    PyTypeObject *type = Py_TYPE(self);
+    reinterpret_cast<freefunc>(PyType_GetSlot(type, Py_tp_free))(self);
+    Py_DECREF(type);
+}
+
+PyObject *PointIndex_size(PyObject *self, void *) { return PyLong_FromSize_t(index_of(self).size()); }
+
+PyObject *PointIndex_order(PyObject *self, PyObject *arg) {
+    const PointIndex &index = index_of(self);
+    View out;
+    Py_ssize_t s[1] = {Py_ssize_t(index.size())};
+    if (!get_array(arg, "out", 'i', 1, s, true, out)) return nullptr;
+    std::copy(index.order().begin(), index.order().end(), out.data<int32_t>());
+    Py_RETURN_NONE;
+}
+
+// knn(rows, k, dist, ids, threads=0): the k nearest other points of each row's point.
+PyObject *PointIndex_knn(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "k", "dist", "ids", "threads", nullptr};
+    PyObject *orows, *odist, *oids;
+    int k, threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiOO|i", const_cast<char **>(kwlist), &orows, &k, &odist, &oids,
+                                     &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, dist, ids;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
+    Py_ssize_t s[2] = {rows.dim(0), k};
+    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids)) return nullptr;
+    const int32_t *r = rows.data<int32_t>();
+    float *d = dist.data<float>();
+    uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
+    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *d2, const uint32_t *nb) {
+            for (int j = 0; j < k; ++j) d[i * k + j] = std::sqrt(d2[j]), n[i * k + j] = nb[j];
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// knn_at(positions, k, dist, ids, threads=0): the k nearest points of the index to each position.
+PyObject *PointIndex_knn_at(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"positions", "k", "dist", "ids", "threads", nullptr};
+    PyObject *opos, *odist, *oids;
+    int k, threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiOO|i", const_cast<char **>(kwlist), &opos, &k, &odist, &oids,
+                                     &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View pos, dist, ids;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!check_threads(threads) || !get_array(opos, "positions", 'f', 2, s3, false, pos) || !check_k(k, index.size()))
+        return nullptr;
+    Py_ssize_t s[2] = {pos.dim(0), k};
+    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids)) return nullptr;
+    const float *p = pos.data<float>();
+    for (Py_ssize_t i = 0; i < 3 * pos.dim(0); ++i)
+        if (!std::isfinite(p[i])) return PyErr_Format(PyExc_ValueError, "positions[%zd] is not finite", i / 3);
+    float *d = dist.data<float>();
+    uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
+    if (!for_rows(size_t(pos.dim(0)), threads, [&](size_t i) {
+            float *di = d + i * k;
+            index.nearest(p + 3 * i, PointIndex::kNone, k, di, n + i * k);
+            for (int j = 0; j < k; ++j) di[j] = std::sqrt(di[j]);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// kth(rows, k, out, threads=0): the distance to each row's k-th nearest other point.
+PyObject *PointIndex_kth(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "k", "out", "threads", nullptr};
+    PyObject *orows, *oout;
+    int k, threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|i", const_cast<char **>(kwlist), &orows, &k, &oout, &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, out;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
+    Py_ssize_t s[1] = {rows.dim(0)};
+    if (!get_array(oout, "out", 'f', 1, s, true, out)) return nullptr;
+    const int32_t *r = rows.data<int32_t>();
+    float *o = out.data<float>();
+    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads,
+                        [&](size_t i, const float *d2, const uint32_t *) { o[i] = std::sqrt(d2[k - 1]); }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): see covering_radius.
+// normals (N,3) and spacing (N,) float32 are per point of the index, by input id.
+PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "normals", "spacing", "k", "hole", "max_gap", "out", "threads", nullptr};
+    PyObject *orows, *onrm, *ospacing, *oout;
+    int k, threads = 0;
+    float hole, max_gap;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOiffO|i", const_cast<char **>(kwlist), &orows, &onrm, &ospacing,
+                                     &k, &hole, &max_gap, &oout, &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, nrm, sp, out;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
+    Py_ssize_t sn[2] = {Py_ssize_t(index.size()), 3}, ss[1] = {Py_ssize_t(index.size())}, so[1] = {rows.dim(0)};
+    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ospacing, "spacing", 'f', 1, ss, false, sp) ||
+        !get_array(oout, "out", 'f', 1, so, true, out))
+        return nullptr;
+    if (!(std::isfinite(hole) && hole > 0.f && std::isfinite(max_gap) && max_gap > 0.f))
+        return PyErr_Format(PyExc_ValueError, "hole and max_gap must be positive numbers");
+    const int32_t *r = rows.data<int32_t>();
+    const float *n = nrm.data<float>(), *s = sp.data<float>();
+    for (Py_ssize_t i = 0; i < rows.dim(0); ++i) {  // only the rows asked about are read
+        const float *ni = n + 3 * r[i];
+        const double len = std::sqrt(double(ni[0]) * ni[0] + double(ni[1]) * ni[1] + double(ni[2]) * ni[2]);
+        if (!(std::fabs(len - 1.0) < 1e-3))
+            return PyErr_Format(PyExc_ValueError, "normals[%d] must be a unit vector", int(r[i]));
+        if (!(std::isfinite(s[r[i]]) && s[r[i]] >= 0.f))
+            return PyErr_Format(PyExc_ValueError, "spacing[%d] must be finite and >= 0", int(r[i]));
+    }
+    float *o = out.data<float>();
+    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *, const uint32_t *nb) {
+            const uint32_t id = uint32_t(r[i]);
+            o[i] = covering_radius(index, id, nb, k, n + 3 * id, s[id], hole, max_gap);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, threads=0): each row's PCA
+// normal over itself and its k nearest (float64 (m,3), unoriented); graph (m, g) int32:
+// the row itself then its g - 1 nearest (g - 1 <= k); spacing (m,) float32: the distance to
+// its spacing_k-th nearest other point (spacing_k <= k).
+PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "k", "normals", "graph", "spacing_k", "spacing", "threads", nullptr};
+    PyObject *orows, *onrm, *ograph = Py_None, *ospacing = Py_None;
+    int k, spacing_k = 0, threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiOi", const_cast<char **>(kwlist), &orows, &k, &onrm, &ograph,
+                                     &spacing_k, &ospacing, &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, nrm, graph, sp;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
+    const Py_ssize_t m = rows.dim(0);
+    Py_ssize_t sn[2] = {m, 3}, sg[2] = {m, -1}, ss[1] = {m};
+    if (!get_array(onrm, "normals", 'd', 2, sn, true, nrm)) return nullptr;
+    if (ograph != Py_None) {
+        if (!get_array(ograph, "graph", 'i', 2, sg, true, graph)) return nullptr;
+        if (graph.dim(1) < 1 || graph.dim(1) > k + 1)
+            return PyErr_Format(PyExc_ValueError, "graph must have 1..k+1 = %d columns, got %zd", k + 1, graph.dim(1));
+    }
+    if (ospacing != Py_None) {
+        if (!get_array(ospacing, "spacing", 'f', 1, ss, true, sp)) return nullptr;
+        if (spacing_k < 1 || spacing_k > k)
+            return PyErr_Format(PyExc_ValueError, "spacing_k must be in 1..k = %d, got %d", k, spacing_k);
+    }
+    const int32_t *r = rows.data<int32_t>();
+    double *normals = nrm.data<double>();
+    int32_t *g = graph.held ? graph.data<int32_t>() : nullptr;
+    const Py_ssize_t gw = graph.held ? graph.dim(1) : 0;
+    float *s = sp.held ? sp.data<float>() : nullptr;
+    if (!for_neighbours(index, r, size_t(m), k, threads, [&](size_t i, const float *d2, const uint32_t *ids) {
+            pca_normal(index, uint32_t(r[i]), ids, k, normals + 3 * i);
+            if (g) {
+                g[i * gw] = r[i];
+                for (Py_ssize_t j = 1; j < gw; ++j) g[i * gw + j] = int32_t(ids[j - 1]);
+            }
+            if (s) s[i] = std::sqrt(d2[spacing_k - 1]);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+#define METHOD(name, doc) \
+    {#name, reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(PointIndex_##name)), METH_VARARGS | METH_KEYWORDS, doc}
+
+PyMethodDef PointIndex_methods[] = {
+    {"order", PointIndex_order, METH_O, "order(out): fills out (int32 (N,)) with the points' ids in the tree's order."},
+    METHOD(knn, "knn(rows, k, dist, ids, threads=0): the k nearest other points of each row's point, nearest first."),
+    METHOD(knn_at, "knn_at(positions, k, dist, ids, threads=0): the k nearest points to each position."),
+    METHOD(kth, "kth(rows, k, out, threads=0): the distance to each row's k-th nearest other point."),
+    METHOD(covering, "covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): gap-closing radii."),
+    METHOD(pca, "pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, threads=0): PCA normals."),
+    {nullptr, nullptr, 0, nullptr},
+};
+#undef METHOD
+
+PyGetSetDef PointIndex_getset[] = {
+    {"size", PointIndex_size, nullptr, "Number of points.", nullptr},
+    {nullptr, nullptr, nullptr, nullptr, nullptr},
+};
+
+PyType_Slot PointIndex_slots[] = {
+    {Py_tp_new, reinterpret_cast<void *>(PointIndex_new)},
+    {Py_tp_dealloc, reinterpret_cast<void *>(PointIndex_dealloc)},
+    {Py_tp_methods, PointIndex_methods},
+    {Py_tp_getset, PointIndex_getset},
+    {Py_tp_doc, const_cast<char *>("PointIndex(points, threads=0): a k-d tree of float32 (N,3) points for "
+                                   "k-nearest-neighbour queries (see core.PointIndex).")},
+    {0, nullptr},
+};
+
+PyType_Spec PointIndex_spec = {"splat_tracer._core.PointIndex", sizeof(PointIndexObject), 0, Py_TPFLAGS_DEFAULT,
+                               PointIndex_slots};
+
+}  // namespace
+
+int add_neighbour_types(PyObject *module) {
+    PyObject *type = PyType_FromSpec(&PointIndex_spec);
+    if (!type) return -1;
+    if (PyModule_AddObject(module, "PointIndex", type) < 0) {
+        Py_DECREF(type);
+        return -1;
+    }
+    return PyModule_AddIntConstant(module, "MAX_NEIGHBOURS", PointIndex::kMaxK);
+}
+
+}  // namespace splat::py
