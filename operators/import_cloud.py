@@ -333,12 +333,12 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
                              {"normals": 3.0, "radii": 1.0})
                 try:
                     tree = spacing.neighbour_tree(points)
-                    result, known = normals.estimate_and_orient(points, normal_k, mode, scanners, radius_k=k,
-                                                                tree=tree, progress=step("normals"))
+                    result, known, cover = normals.estimate_and_orient(points, normal_k, mode, scanners, radius_k=k,
+                                                                       tree=tree, progress=step("normals"),
+                                                                       close_gaps=hole_free)
                     hood = spacing.analyse(points, result.normals, k, progress=step("radii"), tree=tree,
-                                           known_spacing=known)
-                    radii = (spacing.covering_radii(points, result.normals, hood.spacing, tree=tree)
-                             if hole_free else hood.spacing)
+                                           known_spacing=known, close_gaps=hole_free, known_cover=cover)
+                    radii = hood.covering if hood.covering is not None else hood.spacing
                 except (ValueError, MemoryError) as e:
                     raise ValueError(f"{name}: {e}") from None
                 out.append((name, result, hood, radii))

@@ -175,17 +175,39 @@ class PointIndex:
                              k, float(hole), float(max_gap), out, self.threads)
         return out
 
-    def pca(self, rows, k: int, graph_width: int = 0, spacing_k: int = 0):
+    def radii(self, rows, spacing_k: int, normals: Optional[np.ndarray] = None, cover_k: int = 0, hole: float = 0.0,
+              max_gap: float = 0.0) -> tuple[np.ndarray, Optional[np.ndarray]]:
+        """(spacing (m,) float32, cover (m,) float32 or None) from one search: each row's
+        distance to its spacing_k-th nearest other point and, given normals ((N,3) unit),
+        its gap-closing radius among its cover_k nearest with that distance as the spacing
+        (`covering`'s rule)."""
+        rows = self._rows(rows)
+        spacing = np.empty(len(rows), np.float32)
+        cover = None
+        if normals is None:
+            self._index.radii(rows, spacing_k, spacing, threads=self.threads)
+        else:
+            cover = np.empty(len(rows), np.float32)
+            self._index.radii(rows, spacing_k, spacing, _f32(normals, "normals", (len(self), 3)), cover_k, float(hole),
+                              float(max_gap), cover, self.threads)
+        return spacing, cover
+
+    def pca(self, rows, k: int, graph_width: int = 0, spacing_k: int = 0, cover_k: int = 0, hole: float = 0.0,
+            max_gap: float = 0.0):
         """(normals float64 (m,3), graph int32 (m, graph_width) or None, spacing float32 (m,)
-        or None): each row's PCA normal over itself and its k nearest (unoriented); the
-        graph holds the row itself, then its graph_width - 1 nearest; spacing, the distance to
-        its spacing_k-th nearest other point."""
+        or None, cover float32 (m,) or None) from one search: each row's PCA normal over
+        itself and its k nearest (unoriented); the graph holds the row itself, then its
+        graph_width - 1 nearest; spacing, the distance to its spacing_k-th nearest other
+        point; cover (cover_k > 0, needs spacing_k), its gap-closing radius among its
+        cover_k nearest with its PCA normal and that spacing (`covering`'s rule)."""
         rows = self._rows(rows)
         normals = np.empty((len(rows), 3))
         graph = np.empty((len(rows), graph_width), np.int32) if graph_width else None
         spacing = np.empty(len(rows), np.float32) if spacing_k else None
-        self._index.pca(rows, k, normals, graph, spacing_k, spacing, self.threads)
-        return normals, graph, spacing
+        cover = np.empty(len(rows), np.float32) if cover_k else None
+        self._index.pca(rows, k, normals, graph, spacing_k, spacing, cover_k, float(hole), float(max_gap), cover,
+                        self.threads)
+        return normals, graph, spacing, cover
 
 
 def _window(window, width: int, height: int) -> tuple[int, int, int, int]:

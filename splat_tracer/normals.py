@@ -56,13 +56,17 @@ class Orientation:
 
 
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
-             graph=None, spacing=None) -> np.ndarray:
+             graph=None, spacing=None, cover=None) -> np.ndarray:
     """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled). graph:
     an (N, m) int32 array to fill with each point's m nearest (itself first), m <= k + 1,
     for orient() to reuse instead of searching again. spacing: (m, (N,) float32 array) to
     fill with each point's distance to its m-th nearest other point (m <= k), the splat
-    radius's spacing (spacing.analyse) without a search of its own."""
+    radius's spacing (spacing.analyse) without a search of its own; cover (needs spacing):
+    (m, (N,) float32 array) to fill with the uncapped gap-closing radii among the m <= k
+    nearest (spacing.covering_radii's rule, with the PCA normal: its sign does not matter)."""
+    from . import spacing as spacing_mod
+
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
@@ -73,37 +77,48 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     order = tree.order
     width = 0 if graph is None else graph.shape[1]
     spacing_k = 0 if spacing is None else spacing[0]
+    cover_k = 0 if cover is None else cover[0]
     for start in chunks(n, _CHUNK, progress, "estimating normals"):
         idx = order[start:start + _CHUNK]
-        out[idx], nbr, dist = tree.pca(idx, k, width, spacing_k)
+        out[idx], nbr, dist, gaps = tree.pca(idx, k, width, spacing_k, cover_k, spacing_mod.COVER_HOLE,
+                                             spacing_mod.COVER_MAX_GAP)
         if graph is not None:
             graph[idx] = nbr
         if spacing is not None:
             spacing[1][idx] = dist
+        if cover is not None:
+            cover[1][idx] = gaps
     return out
 
 
 def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PROPAGATE", scanners=None,
-                        axes=None, radius_k: int = 0, workers: int = -1, tree=None, progress=None):
-    """(Orientation, spacing or None): estimate() then orient() sharing one neighbour
-    search (the orientation's graph and, for radius_k in 1..k, each point's distance to its
-    radius_k-th nearest other point: spacing.analyse's known_spacing). axes: the file's own
-    unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
+                        axes=None, radius_k: int = 0, workers: int = -1, tree=None, progress=None,
+                        close_gaps: bool = False):
+    """(Orientation, spacing or None, cover or None): estimate() then orient() sharing one
+    neighbour search (the orientation's graph and, for radius_k in 1..k, each point's
+    distance to its radius_k-th nearest other point and, close_gaps, its uncapped
+    gap-closing radius: spacing.analyse's known_spacing and known_cover). axes: the file's
+    own unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
+    from . import spacing as spacing_mod
+
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
     estimating = axes is None
     share = 2.0 / 3.0 if estimating else 0.0
-    graph = spacing = None
+    graph = spacing = cover = None
     if estimating and k >= GRAPH_K and n > k + 1:
         graph = np.empty((n, GRAPH_K + 1), np.int32)
         if 1 <= radius_k <= k:
             spacing = (radius_k, np.empty(n, np.float32))
+            if close_gaps and 2 <= spacing_mod.COVER_K <= k:
+                cover = (spacing_mod.COVER_K, np.empty(n, np.float32))
     if estimating:
-        axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing)
+        axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing,
+                        cover=cover)
     result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
                     graph=graph)
-    return result, None if spacing is None else spacing[1]
+    return result, None if spacing is None else spacing[1], None if cover is None else cover[1]
 
 
 def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.ndarray:

@@ -194,13 +194,12 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
     needs_normals = cloud.normals is None or not cloud.oriented
     # Shares of the progress bar, roughly as the steps' times at 1M-10M points: the normals'
-    # estimation about twice its orientation; the radii as much as the estimation when they
-    # need their own neighbour search (the file has normals), a fifth of it when they reuse
-    # the estimation's.
+    # estimation about twice its orientation; the radii (spacing and gap-closing radii from
+    # one search) as much as the estimation when they need their own search (the file has
+    # normals), a fifth of it (the closed guess's sample) when they reuse the estimation's.
     estimating = cloud.normals is None
     weights = {"statistical": 1.0 if statistical_ratio > 0 else 0.0, "estimate": 2.0 if estimating else 0.0,
-               "orient": 1.0 if needs_normals else 0.0, "radii": 0.4 if estimating else 2.0,
-               "closing gaps": 1.0 if hole_free and cloud.radii is None else 0.0}
+               "orient": 1.0 if needs_normals else 0.0, "radii": 0.4 if estimating else 2.0}
     step = Steps(progress, weights)
     statistical = 0
     if statistical_ratio > 0 and len(cloud) > spacing.MIN_POINTS:
@@ -211,7 +210,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             cloud, bulk = _subset(cloud, keep), bulk[keep]
     _check_float32_safe(cloud.positions, bulk, path)
     origin, local = core.local_frame(cloud.positions, bulk)
-    estimated, oriented_by, ambiguous, tree, known_spacing = cloud.normals is None, "", 0, None, None
+    estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
+    known_spacing = known_cover = None
     if needs_normals:
         if cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
             raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
@@ -221,19 +221,17 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         tree = spacing.neighbour_tree(rel)
         oriented_by = resolve_orientation(cloud, orientation)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
-        result, known_spacing = normals_mod.estimate_and_orient(
+        result, known_spacing, known_cover = normals_mod.estimate_and_orient(
             rel, normal_k, oriented_by, scanners, cloud.normals, k if bulk.all() else 0, workers, tree,
-            scaled(progress, *step.span("estimate", "orient")))
+            scaled(progress, *step.span("estimate", "orient")), close_gaps=hole_free and cloud.radii is None)
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
     inliers = np.flatnonzero(bulk)
-    # One k-d tree of the bulk for the analysis and the gaps: the normals' when it is that.
-    radii_tree = tree if len(inliers) == len(local) else None
-    if radii_tree is None and hole_free and cloud.radii is None and len(inliers) >= spacing.MIN_POINTS:
-        radii_tree = spacing.neighbour_tree(local[inliers])
+    radii_tree = tree if len(inliers) == len(local) else None  # the normals' k-d tree when it is the bulk's
     try:
         hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
-                               tree=radii_tree, known_spacing=known_spacing)
+                               tree=radii_tree, known_spacing=known_spacing,
+                               close_gaps=hole_free and cloud.radii is None, known_cover=known_cover)
     except spacing.SpacingError as e:
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
@@ -243,9 +241,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     if cloud.radii is None:
         radii = np.empty(len(local), np.float32)
         radii[inliers] = hood.spacing
-        if hole_free:
-            radii[inliers] = spacing.covering_radii(local[inliers], cloud.normals[inliers], hood.spacing, workers,
-                                                    tree=radii_tree, progress=step("closing gaps"))
+        if hood.covering is not None:
+            radii[inliers] = hood.covering
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
             kk = min(k, len(local) - 1)

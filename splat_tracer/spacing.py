@@ -19,6 +19,7 @@ moved across the gap.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -65,6 +66,7 @@ class Neighbourhood:
     boundary: int            # points on a boundary (only when normals were given)
     closed_guess: bool       # boundary < CLOSED_MAX_BOUNDARY x sqrt(N)
     tested: int = 0          # points given the boundary test (all, or BOUNDARY_SAMPLE of a larger cloud)
+    covering: Optional[np.ndarray] = None  # (N,) float32 gap-closing radii (close_gaps), as covering_radii's
 
     def describe(self) -> str:
         about = "" if self.tested >= len(self.spacing) else f"about (from {self.tested:,} sampled) "
@@ -150,11 +152,13 @@ def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.nda
 
 
 def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
-            tree=None, known_spacing=None) -> Neighbourhood:
-    """k-NN spacing of every point and, with normals, the boundary count and closed guess.
+            tree=None, known_spacing=None, close_gaps: bool = False, known_cover=None) -> Neighbourhood:
+    """k-NN spacing of every point and, with normals, the boundary count and closed guess
+    and (close_gaps) the gap-closing radii (`covering_radii`), from the same search.
     progress: progress.ProgressFn, called between chunks (it may raise Cancelled); tree: a
-    neighbour_tree of `points` already built; known_spacing: the (N,) distances to the k-th
-    nearest other point when a search already found them (normals.estimate)."""
+    neighbour_tree of `points` already built; known_spacing, known_cover: the (N,) distances
+    to the k-th nearest other point and the uncapped gap-closing radii when a search already
+    found them (normals.estimate)."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
@@ -162,26 +166,36 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     k = int(min(k, n - 1))
     kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
     nrm = None if normals is None else np.asarray(normals, dtype=np.float64)
+    cover_k = int(min(COVER_K, n - 1)) if close_gaps and nrm is not None else 0
+    if cover_k < 2:
+        cover_k = 0
+    unit = None if not cover_k else (nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+                                     ).astype(np.float32)
     tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
     pts = tree.points  # the positions the tree holds (float32)
     order = tree.order  # the tree's order: neighbouring points are adjacent
+    searched = known_spacing is None or (cover_k and known_cover is None)
     spacing = np.empty(n, np.float32) if known_spacing is None else np.array(known_spacing, np.float32)
+    cover = None if not cover_k else (np.empty(n, np.float32) if known_cover is None
+                                      else np.array(known_cover, np.float32))
     boundary = 0
     tested = order if n <= BOUNDARY_SAMPLE else None  # the points given the boundary test
-    if known_spacing is not None and nrm is not None and tested is not None:
+    if not searched and nrm is not None and tested is not None:
         tested = None  # below: the boundary test alone, on every point
         sample = order
     else:
         sample = None
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
-    for start in chunks(n if known_spacing is None else 0, _CHUNK, report, "splat radii"):
+    for start in chunks(n if searched else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        if nrm is not None and tested is not None:  # one search for both
-            dist, nbr = tree.knn(idx, kq)
-            spacing[idx] = dist[:, k - 1]
+        # the spacing and the gap-closing radii from one search (no (n, k) arrays)
+        spacing[idx], c = tree.radii(idx, k, unit, cover_k, COVER_HOLE, COVER_MAX_GAP) if cover_k else \
+            tree.radii(idx, k)
+        if cover_k:
+            cover[idx] = c
+        if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
+            _, nbr = tree.knn(idx, kq)
             boundary += int(_boundary_mask(pts[nbr] - pts[idx, None], nrm[idx], nrm[nbr]).sum())
-        else:  # only the k-th distance (no (n, k) arrays)
-            spacing[idx] = tree.kth_distance(idx, k)
     if nrm is not None and tested is None:
         tested = sample if sample is not None else np.sort(
             np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
@@ -198,8 +212,10 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         if good.size == 0:
             raise SpacingError("all points coincide: the spacing is zero everywhere")
         spacing[degenerate] = np.median(good)
+    if cover is not None:  # a point sharing its position with k+ others: the median, like its spacing
+        cover = np.minimum(np.maximum(cover, spacing), COVER_CAP * spacing)
     closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
-    return Neighbourhood(spacing, n_degenerate, boundary, bool(closed), n if tested is None else len(tested))
+    return Neighbourhood(spacing, n_degenerate, boundary, bool(closed), n if tested is None else len(tested), cover)
 
 
 # Statistical outlier removal (as PCL's StatisticalOutlierRemoval and Open3D's

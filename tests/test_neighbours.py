@@ -133,6 +133,26 @@ def test_covering_radius_follows_the_rule():
     assert close.mean() >= 0.999, np.flatnonzero(~close)[:10]  # a decision on a threshold may differ in rounding
 
 
+def test_spacing_and_gap_closing_radii_from_one_search():
+    n = 3000
+    p = RNG.normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    pts = p.astype(np.float32)
+    index = core.PointIndex(pts)
+    for rows in (index.order, RNG.permutation(n)):
+        s, cover = index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP)
+        np.testing.assert_array_equal(s, index.kth_distance(rows, 6))
+        by_id = np.empty(n, np.float32)
+        by_id[rows] = s
+        np.testing.assert_array_equal(cover, index.covering(rows, pts, by_id, 12, spacing.COVER_HOLE,
+                                                            spacing.COVER_MAX_GAP))
+        assert index.radii(rows, 6)[1] is None
+    # what the importer gets: spacing.analyse(close_gaps=True) is covering_radii over its spacing
+    hood = spacing.analyse(pts, pts, close_gaps=True)
+    np.testing.assert_allclose(hood.covering, spacing.covering_radii(pts, pts, hood.spacing), rtol=1e-6)
+    assert (hood.covering > hood.spacing).mean() > 0.05
+
+
 def test_pca_normals_and_what_they_share():
     n = 2000
     p = RNG.normal(size=(n, 3))
@@ -140,7 +160,8 @@ def test_pca_normals_and_what_they_share():
     pts = p.astype(np.float32)
     index = core.PointIndex(pts)
     rows = index.order
-    normals, graph, dist = index.pca(rows, 16, graph_width=9, spacing_k=6)
+    normals, graph, dist, cover = index.pca(rows, 16, graph_width=9, spacing_k=6, cover_k=12,
+                                            hole=spacing.COVER_HOLE, max_gap=spacing.COVER_MAX_GAP)
     _, ids = index.knn(rows, 16)
     for i in range(0, n, 97):
         q = pts[np.r_[rows[i], ids[i]]].astype(np.float64)
@@ -150,6 +171,14 @@ def test_pca_normals_and_what_they_share():
     assert np.allclose(np.linalg.norm(normals, axis=1), 1)
     assert (graph[:, 0] == rows).all() and (graph[:, 1:] == ids[:, :8]).all()
     np.testing.assert_allclose(dist, index.kth_distance(rows, 6))
+    # the gap-closing radii from the same search, with the PCA normals and that spacing
+    by_id = np.empty((n, 3), np.float32)
+    by_id[rows] = normals
+    spacing_by_id = np.empty(n, np.float32)
+    spacing_by_id[rows] = dist
+    alone = index.covering(rows, by_id, spacing_by_id, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP)
+    np.testing.assert_allclose(cover, alone, rtol=1e-6)
+    assert (cover > dist).any()
     # on a unit sphere the normal is the radial direction
     assert np.abs((normals * p[rows]).sum(axis=1)).min() > 0.99
 
@@ -166,7 +195,7 @@ def test_pca_of_degenerate_neighbourhoods_is_a_unit_vector(shape):
         g = np.array([-1.0, 0, 1])
         pts = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
     index = core.PointIndex(pts.astype(np.float32))
-    normals, _, _ = index.pca(np.arange(len(pts)), min(16, len(pts) - 1))
+    normals, _, _, _ = index.pca(np.arange(len(pts)), min(16, len(pts) - 1))
     assert np.isfinite(normals).all()
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, rtol=1e-9)
     if shape == "line":  # perpendicular to the line
@@ -199,6 +228,12 @@ def test_bad_input_raises_instead_of_crashing():
         index.pca([0], 4, graph_width=6)
     with pytest.raises(ValueError, match="spacing_k"):
         index.pca([0], 4, spacing_k=5)
+    with pytest.raises(ValueError, match="cover_k"):
+        index.pca([0], 4, spacing_k=2, cover_k=5, hole=3, max_gap=2)
+    with pytest.raises(ValueError, match="need the spacing"):
+        index.pca([0], 4, cover_k=3, hole=3, max_gap=2)
+    with pytest.raises(ValueError, match="positive"):
+        index.radii([0], 3, good / np.linalg.norm(good, axis=1, keepdims=True), 12, 0.0, 2.0)
     with pytest.raises(ValueError, match="not finite"):
         index.knn_at([[np.inf, 0, 0]], 3)
     with pytest.raises(ValueError, match="threads"):

@@ -34,7 +34,7 @@ struct Cell {
 struct PointIndex::Best {
     int k, count = 0;
     float *d2;
-    uint32_t *slot;          // tree-order positions (turned into input ids at the end)
+    uint32_t *slot;          // the candidates' slots (tree-order positions)
     uint32_t exclude;        // a tree-order position never to return (kNone: none)
     float worst = std::numeric_limits<float>::infinity();  // the k-th distance, once k are found
 };
@@ -181,8 +181,8 @@ uint32_t PointIndex::leaf_of(size_t s) const {
     return node;
 }
 
-int PointIndex::nearest(const float q[3], uint32_t exclude, int k, float *d2, uint32_t *ids) const {
-    Best best{k, 0, d2, ids, exclude == kNone ? kNone : slot_[exclude]};
+int PointIndex::nearest(const float q[3], uint32_t exclude, int k, float *d2, uint32_t *slots) const {
+    Best best{k, 0, d2, slots, exclude};
     size_t skip_b = 0, skip_e = 0;
     if (exclude != kNone) {  // a point of the index: its own leaf first, for a tight bound
         const uint32_t leaf = leaf_of(best.exclude);
@@ -191,14 +191,12 @@ int PointIndex::nearest(const float q[3], uint32_t exclude, int k, float *d2, ui
     }
     float off[3] = {0.f, 0.f, 0.f};
     search(q, best, 0, 0, 0.f, off, skip_b, skip_e);
-    for (int i = 0; i < best.count; ++i) ids[i] = id_[ids[i]];
     return best.count;
 }
 
-int PointIndex::nearest_of(uint32_t id, int k, float *d2, uint32_t *ids) const {
-    const uint32_t s = slot_[id];
+int PointIndex::nearest_of(uint32_t s, int k, float *d2, uint32_t *slots) const {
     const float q[3] = {x_[s], y_[s], z_[s]};
-    return nearest(q, id, k, d2, ids);
+    return nearest(q, s, k, d2, slots);
 }
 
 namespace {
@@ -238,7 +236,7 @@ void PointIndex::gather(uint32_t node, int depth, const Box &cell, const Box &bo
     gather(2 * node + 2, depth + 1, right, box, r2, skip_b, skip_e, leaves, points);
 }
 
-void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *ids) const {
+void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots) const {
     const size_t m = e - b;  // <= kLeafSize: one leaf's points at most
     // The smallest subtree around the leaf with k + 1 points: every point's first candidates.
     uint32_t node = leaf_of(b);
@@ -251,7 +249,7 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *id
     for (size_t i = 0; i < m; ++i) {
         const size_t s = b + i;
         const float q[3] = {x_[s], y_[s], z_[s]};
-        best[i] = Best{k, 0, d2 + i * k, ids + i * k, uint32_t(s)};
+        best[i] = Best{k, 0, d2 + i * k, slots + i * k, uint32_t(s)};
         scan(sb, se, q, best[i]);
         r2 = std::max(r2, best[i].worst);
         for (int a = 0; a < 3; ++a) box.lo[a] = std::min(box.lo[a], q[a]), box.hi[a] = std::max(box.hi[a], q[a]);
@@ -273,7 +271,6 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *id
                 if (box_gap2(cell.lo, cell.hi, q, q) < best[i].worst)
                     scan(begin(leaf, depth_), begin(leaf + 1, depth_), q, best[i]);
         }
-        for (int j = 0; j < k; ++j) ids[i * k + j] = id_[ids[i * k + j]];
     }
 }
 
@@ -293,7 +290,7 @@ inline double pseudo_angle(double x, double y) {
 
 }  // namespace
 
-float covering_radius(const PointIndex &index, uint32_t id, const uint32_t *ids, int m, const float normal[3],
+float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
                       float spacing, float hole, float max_gap) {
     if (m < 2) return spacing;
     // Tangent frame (u, v): u = n x helper, the helper an axis far from n.
@@ -304,12 +301,12 @@ float covering_radius(const PointIndex &index, uint32_t id, const uint32_t *ids,
     for (double &c : u) c /= ul;
     const double v[3] = {n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]};
     float p[3];
-    index.position(id, p);
+    index.at(self, p);
     double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
     int order[PointIndex::kMaxK];
     for (int j = 0; j < m; ++j) {
         float q[3];
-        index.position(ids[j], q);
+        index.at(slots[j], q);
         const double o[3] = {double(q[0] - p[0]), double(q[1] - p[1]), double(q[2] - p[2])};
         x[j] = o[0] * u[0] + o[1] * u[1] + o[2] * u[2];
         y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
@@ -422,14 +419,14 @@ void smallest_eigenvector(const double a6[6], double out[3]) {
     jacobi_smallest(a6, out);
 }
 
-void pca_normal(const PointIndex &index, uint32_t id, const uint32_t *ids, int found, double normal[3]) {
+void pca_normal(const PointIndex &index, uint32_t self, const uint32_t *slots, int found, double normal[3]) {
     // About the point itself first (offsets are small: no cancellation), then the mean.
     float p[3];
-    index.position(id, p);
+    index.at(self, p);
     double s[3] = {0, 0, 0}, ss[6] = {0, 0, 0, 0, 0, 0};
     for (int j = 0; j < found; ++j) {
         float q[3];
-        index.position(ids[j], q);
+        index.at(slots[j], q);
         const double o[3] = {double(q[0]) - p[0], double(q[1]) - p[1], double(q[2]) - p[2]};
         s[0] += o[0], s[1] += o[1], s[2] += o[2];
         ss[0] += o[0] * o[0], ss[1] += o[1] * o[1], ss[2] += o[2] * o[2];

@@ -39,30 +39,27 @@ public:
     size_t size() const { return n_; }
     // Input ids in the tree's order: neighbouring points are close in this order.
     const std::vector<uint32_t> &order() const { return id_; }
-    // The position of input point `id`.
-    void position(uint32_t id, float out[3]) const {
-        const uint32_t s = slot_[id];
-        out[0] = x_[s], out[1] = y_[s], out[2] = z_[s];
-    }
-
-    // Where input point `id` is in the tree's order.
+    // Queries answer with slots, positions in the tree's order (reading a neighbour's
+    // position by input id would cost a cache miss per neighbour on a large cloud).
     uint32_t slot(uint32_t id) const { return slot_[id]; }
-    // The end of the leaf holding tree-order position s (one past its last point).
+    uint32_t id(uint32_t slot) const { return id_[slot]; }
+    void at(uint32_t slot, float out[3]) const { out[0] = x_[slot], out[1] = y_[slot], out[2] = z_[slot]; }
+    // The end of the leaf holding slot s (one past its last point).
     size_t leaf_end(size_t s) const { return begin(leaf_of(s) + 1, depth_); }
 
-    // The k nearest points to q (k <= kMaxK), nearest first, excluding input point
-    // `exclude` (kNone: none), as squared distances and input ids. Returns how many were
-    // found: min(k, points available).
-    int nearest(const float q[3], uint32_t exclude, int k, float *d2, uint32_t *ids) const;
-    // The k nearest other points of input point `id`.
-    int nearest_of(uint32_t id, int k, float *d2, uint32_t *ids) const;
-    // The k nearest other points of each of the points at tree-order positions [b, e), all
-    // in one leaf (k <= size() - 1): k squared distances and input ids per point, nearest
-    // first. The same answer as nearest_of, found for the leaf's points together: their
-    // candidates within a smallest surrounding subtree give a bound, the leaves within
-    // that bound of the points' box are gathered once, and each point scans them (only the
-    // ones nearer than its own k-th). About 4x faster than one search per point.
-    void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *ids) const;
+    // The k nearest points to q (k <= kMaxK), nearest first, excluding slot `exclude`
+    // (kNone: none), as squared distances and slots. Returns how many were found:
+    // min(k, points available).
+    int nearest(const float q[3], uint32_t exclude, int k, float *d2, uint32_t *slots) const;
+    // The k nearest other points of the point at slot s.
+    int nearest_of(uint32_t s, int k, float *d2, uint32_t *slots) const;
+    // The k nearest other points of each of the points at slots [b, e), all in one leaf
+    // (k <= size() - 1): k squared distances and slots per point, nearest first. The same
+    // answer as nearest_of, found for the leaf's points together: their candidates within
+    // a smallest surrounding subtree give a bound, the leaves within that bound of the
+    // points' box are gathered once, and each point scans the ones nearer than its own
+    // k-th candidate.
+    void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots) const;
 
 private:
     struct Best;
@@ -96,13 +93,13 @@ private:
 // neighbours among its k nearest, seen in its tangent plane (normal: unit), when it is
 // wider than `spacing` but at most hole x spacing and the angular gap between the two is
 // below max_gap (radians); else `spacing`. See spacing.py, "Gap-closing radii".
-// ids: the point's m nearest others, nearest first.
-float covering_radius(const PointIndex &index, uint32_t id, const uint32_t *ids, int m, const float normal[3],
+// self: the point's slot; slots: its m nearest others, nearest first.
+float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
                       float spacing, float hole, float max_gap);
 
-// The unit eigenvector of the smallest eigenvalue of the scatter matrix of point `id` and
-// its m nearest others ids (the PCA normal, unoriented).
-void pca_normal(const PointIndex &index, uint32_t id, const uint32_t *ids, int m, double normal[3]);
+// The unit eigenvector of the smallest eigenvalue of the scatter matrix of the point at
+// slot `self` and its m nearest others (slots): the PCA normal, unoriented.
+void pca_normal(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, double normal[3]);
 
 // The unit eigenvector of the smallest eigenvalue of a symmetric 3x3 matrix (a[0..5] =
 // xx, yy, zz, xy, xz, yz): closed form where well conditioned, Jacobi rotations otherwise.

@@ -37,8 +37,8 @@ bool for_rows(size_t m, int threads, Fn &&fn) {
     });
 }
 
-// Runs fn(i, d2, ids) for each row i with its point's k nearest others (squared distances,
-// input ids, nearest first), without the GIL. Rows that are a run of the tree's order (what
+// Runs fn(i, d2, slots) for each row i with its point's k nearest others (squared
+// distances and slots, nearest first), without the GIL. Rows that are a run of the tree's order (what
 // the importer asks: chunks of `order`) go a leaf at a time (PointIndex::leaf_nearest),
 // others one search each.
 template <class Fn>
@@ -50,9 +50,9 @@ bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int 
     if (!run)
         return for_rows(m, threads, [&](size_t i) {
             float d2[PointIndex::kMaxK];
-            uint32_t ids[PointIndex::kMaxK];
-            index.nearest_of(uint32_t(rows[i]), k, d2, ids);
-            fn(i, d2, ids);
+            uint32_t slots[PointIndex::kMaxK];
+            index.nearest_of(index.slot(uint32_t(rows[i])), k, d2, slots);
+            fn(i, d2, slots);
         });
     std::vector<size_t> pieces;  // the run cut at leaf ends: each piece within one leaf
     for (size_t s = start; s < start + m; s = std::min(index.leaf_end(s), start + m)) pieces.push_back(s);
@@ -60,11 +60,11 @@ bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int 
     const size_t per_task = kRowsPerTask / PointIndex::kLeafSize;
     return for_tasks((pieces.size() - 1 + per_task - 1) / per_task, threads, [&](size_t t) {
         std::vector<float> d2(PointIndex::kLeafSize * size_t(k));
-        std::vector<uint32_t> ids(d2.size());
+        std::vector<uint32_t> slots(d2.size());
         for (size_t p = t * per_task; p < std::min(pieces.size() - 1, (t + 1) * per_task); ++p) {
-            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), ids.data());
+            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), slots.data());
             for (size_t j = 0; j < pieces[p + 1] - pieces[p]; ++j)
-                fn(pieces[p] - start + j, &d2[j * k], &ids[j * k]);
+                fn(pieces[p] - start + j, &d2[j * k], &slots[j * k]);
         }
     });
 }
@@ -91,8 +91,28 @@ bool check_k(int k, size_t available, const char *name = "k") {
     return true;
 }
 
+// The gap-closing rule's parameters (covering_radius). Sets an exception when unusable.
+bool check_cover(int cover_k, int k, float hole, float max_gap) {
+    if (cover_k < 2 || cover_k > k)
+        return PyErr_Format(PyExc_ValueError, "cover_k must be in 2..%d, got %d", k, cover_k), false;
+    if (!(std::isfinite(hole) && hole > 0.f && std::isfinite(max_gap) && max_gap > 0.f))
+        return PyErr_Format(PyExc_ValueError, "hole and max_gap must be positive numbers"), false;
+    return true;
+}
+
 bool check_threads(int threads) {
     if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    return true;
+}
+
+// normals (N,3) by input id: the rows' must be unit vectors. Sets an exception otherwise.
+bool check_unit_normals(const float *n, const int32_t *rows, Py_ssize_t m) {
+    for (Py_ssize_t i = 0; i < m; ++i) {  // only the rows asked about are read
+        const float *ni = n + 3 * rows[i];
+        const double len = std::sqrt(double(ni[0]) * ni[0] + double(ni[1]) * ni[1] + double(ni[2]) * ni[2]);
+        if (!(std::fabs(len - 1.0) < 1e-3))
+            return PyErr_Format(PyExc_ValueError, "normals[%d] must be a unit vector", int(rows[i])), false;
+    }
     return true;
 }
 
@@ -152,7 +172,7 @@ PyObject *PointIndex_knn(PyObject *self, PyObject *args, PyObject *kwargs) {
     float *d = dist.data<float>();
     uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
     if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *d2, const uint32_t *nb) {
-            for (int j = 0; j < k; ++j) d[i * k + j] = std::sqrt(d2[j]), n[i * k + j] = nb[j];
+            for (int j = 0; j < k; ++j) d[i * k + j] = std::sqrt(d2[j]), n[i * k + j] = index.id(nb[j]);
         }))
         return nullptr;
     Py_RETURN_NONE;
@@ -180,8 +200,9 @@ PyObject *PointIndex_knn_at(PyObject *self, PyObject *args, PyObject *kwargs) {
     uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
     if (!for_rows(size_t(pos.dim(0)), threads, [&](size_t i) {
             float *di = d + i * k;
-            index.nearest(p + 3 * i, PointIndex::kNone, k, di, n + i * k);
-            for (int j = 0; j < k; ++j) di[j] = std::sqrt(di[j]);
+            uint32_t *ni = n + i * k;
+            index.nearest(p + 3 * i, PointIndex::kNone, k, di, ni);
+            for (int j = 0; j < k; ++j) di[j] = std::sqrt(di[j]), ni[j] = index.id(ni[j]);
         }))
         return nullptr;
     Py_RETURN_NONE;
@@ -224,40 +245,81 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ospacing, "spacing", 'f', 1, ss, false, sp) ||
         !get_array(oout, "out", 'f', 1, so, true, out))
         return nullptr;
-    if (!(std::isfinite(hole) && hole > 0.f && std::isfinite(max_gap) && max_gap > 0.f))
-        return PyErr_Format(PyExc_ValueError, "hole and max_gap must be positive numbers");
+    if (!check_cover(k, k, hole, max_gap)) return nullptr;
     const int32_t *r = rows.data<int32_t>();
     const float *n = nrm.data<float>(), *s = sp.data<float>();
+    if (!check_unit_normals(n, r, rows.dim(0))) return nullptr;
     for (Py_ssize_t i = 0; i < rows.dim(0); ++i) {  // only the rows asked about are read
-        const float *ni = n + 3 * r[i];
-        const double len = std::sqrt(double(ni[0]) * ni[0] + double(ni[1]) * ni[1] + double(ni[2]) * ni[2]);
-        if (!(std::fabs(len - 1.0) < 1e-3))
-            return PyErr_Format(PyExc_ValueError, "normals[%d] must be a unit vector", int(r[i]));
         if (!(std::isfinite(s[r[i]]) && s[r[i]] >= 0.f))
             return PyErr_Format(PyExc_ValueError, "spacing[%d] must be finite and >= 0", int(r[i]));
     }
     float *o = out.data<float>();
     if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *, const uint32_t *nb) {
             const uint32_t id = uint32_t(r[i]);
-            o[i] = covering_radius(index, id, nb, k, n + 3 * id, s[id], hole, max_gap);
+            o[i] = covering_radius(index, index.slot(id), nb, k, n + 3 * id, s[id], hole, max_gap);
         }))
         return nullptr;
     Py_RETURN_NONE;
 }
 
-// pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, threads=0): each row's PCA
-// normal over itself and its k nearest (float64 (m,3), unoriented); graph (m, g) int32:
-// the row itself then its g - 1 nearest (g - 1 <= k); spacing (m,) float32: the distance to
-// its spacing_k-th nearest other point (spacing_k <= k).
-PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"rows", "k", "normals", "graph", "spacing_k", "spacing", "threads", nullptr};
-    PyObject *orows, *onrm, *ograph = Py_None, *ospacing = Py_None;
-    int k, spacing_k = 0, threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiOi", const_cast<char **>(kwlist), &orows, &k, &onrm, &ograph,
-                                     &spacing_k, &ospacing, &threads))
+// radii(rows, spacing_k, spacing, normals=None, cover_k=0, hole=0, max_gap=0, cover=None,
+// threads=0): each row's distance to its spacing_k-th nearest other point and, with normals
+// ((N,3) unit, by input id) and cover, its gap-closing radius among its cover_k nearest
+// (covering_radius, with that distance as the spacing): one search for both.
+PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "spacing_k", "spacing", "normals", "cover_k", "hole", "max_gap", "cover",
+                                   "threads", nullptr};
+    PyObject *orows, *ospacing, *onrm = Py_None, *ocover = Py_None;
+    int spacing_k, cover_k = 0, threads = 0;
+    float hole = 0.f, max_gap = 0.f;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiffOi", const_cast<char **>(kwlist), &orows, &spacing_k,
+                                     &ospacing, &onrm, &cover_k, &hole, &max_gap, &ocover, &threads))
         return nullptr;
     const PointIndex &index = index_of(self);
-    View rows, nrm, graph, sp;
+    View rows, sp, nrm, cov;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(spacing_k, index.size() - 1, "spacing_k"))
+        return nullptr;
+    Py_ssize_t so[1] = {rows.dim(0)}, sn[2] = {Py_ssize_t(index.size()), 3};
+    if (!get_array(ospacing, "spacing", 'f', 1, so, true, sp)) return nullptr;
+    const bool covering = ocover != Py_None;
+    if (covering != (onrm != Py_None))
+        return PyErr_Format(PyExc_ValueError, "the gap-closing radii need both normals and cover");
+    if (covering) {
+        if (!check_k(cover_k, index.size() - 1, "cover_k") || !check_cover(cover_k, cover_k, hole, max_gap) ||
+            !get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ocover, "cover", 'f', 1, so, true, cov) ||
+            !check_unit_normals(nrm.data<float>(), rows.data<int32_t>(), rows.dim(0)))
+            return nullptr;
+    }
+    const int k = std::max(spacing_k, covering ? cover_k : 0);
+    const int32_t *r = rows.data<int32_t>();
+    const float *n = covering ? nrm.data<float>() : nullptr;
+    float *s = sp.data<float>(), *c = covering ? cov.data<float>() : nullptr;
+    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *d2, const uint32_t *nb) {
+            s[i] = std::sqrt(d2[spacing_k - 1]);
+            if (c) c[i] = covering_radius(index, index.slot(uint32_t(r[i])), nb, cover_k, n + 3 * size_t(r[i]), s[i],
+                                          hole, max_gap);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, cover_k=0, hole=0, max_gap=0,
+// cover=None, threads=0): each row's PCA normal over itself and its k nearest (float64
+// (m,3), unoriented); graph (m, g) int32: the row itself then its g - 1 nearest (g - 1 <=
+// k); spacing (m,) float32: the distance to its spacing_k-th nearest other point
+// (spacing_k <= k); cover (m,) float32: its gap-closing radius among its cover_k nearest,
+// with its PCA normal and that spacing.
+PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows",  "k",    "normals", "graph", "spacing_k", "spacing", "cover_k",
+                                   "hole", "max_gap", "cover", "threads", nullptr};
+    PyObject *orows, *onrm, *ograph = Py_None, *ospacing = Py_None, *ocover = Py_None;
+    int k, spacing_k = 0, cover_k = 0, threads = 0;
+    float hole = 0.f, max_gap = 0.f;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiOiffOi", const_cast<char **>(kwlist), &orows, &k, &onrm,
+                                     &ograph, &spacing_k, &ospacing, &cover_k, &hole, &max_gap, &ocover, &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, nrm, graph, sp, cov;
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
     const Py_ssize_t m = rows.dim(0);
     Py_ssize_t sn[2] = {m, 3}, sg[2] = {m, -1}, ss[1] = {m};
@@ -272,18 +334,29 @@ PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
         if (spacing_k < 1 || spacing_k > k)
             return PyErr_Format(PyExc_ValueError, "spacing_k must be in 1..k = %d, got %d", k, spacing_k);
     }
+    if (ocover != Py_None) {  // the gap-closing radius with the PCA normal and that spacing
+        if (!sp.held) return PyErr_Format(PyExc_ValueError, "the gap-closing radii need the spacing");
+        if (!check_cover(cover_k, k, hole, max_gap) || !get_array(ocover, "cover", 'f', 1, ss, true, cov))
+            return nullptr;
+    }
     const int32_t *r = rows.data<int32_t>();
     double *normals = nrm.data<double>();
     int32_t *g = graph.held ? graph.data<int32_t>() : nullptr;
     const Py_ssize_t gw = graph.held ? graph.dim(1) : 0;
-    float *s = sp.held ? sp.data<float>() : nullptr;
-    if (!for_neighbours(index, r, size_t(m), k, threads, [&](size_t i, const float *d2, const uint32_t *ids) {
-            pca_normal(index, uint32_t(r[i]), ids, k, normals + 3 * i);
+    float *s = sp.held ? sp.data<float>() : nullptr, *c = cov.held ? cov.data<float>() : nullptr;
+    if (!for_neighbours(index, r, size_t(m), k, threads, [&](size_t i, const float *d2, const uint32_t *slots) {
+            const uint32_t self_slot = index.slot(uint32_t(r[i]));
+            double *ni = normals + 3 * i;
+            pca_normal(index, self_slot, slots, k, ni);
             if (g) {
                 g[i * gw] = r[i];
-                for (Py_ssize_t j = 1; j < gw; ++j) g[i * gw + j] = int32_t(ids[j - 1]);
+                for (Py_ssize_t j = 1; j < gw; ++j) g[i * gw + j] = int32_t(index.id(slots[j - 1]));
             }
             if (s) s[i] = std::sqrt(d2[spacing_k - 1]);
+            if (c) {
+                const float nf[3] = {float(ni[0]), float(ni[1]), float(ni[2])};
+                c[i] = covering_radius(index, self_slot, slots, cover_k, nf, s[i], hole, max_gap);
+            }
         }))
         return nullptr;
     Py_RETURN_NONE;
@@ -298,7 +371,10 @@ PyMethodDef PointIndex_methods[] = {
     METHOD(knn_at, "knn_at(positions, k, dist, ids, threads=0): the k nearest points to each position."),
     METHOD(kth, "kth(rows, k, out, threads=0): the distance to each row's k-th nearest other point."),
     METHOD(covering, "covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): gap-closing radii."),
-    METHOD(pca, "pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, threads=0): PCA normals."),
+    METHOD(radii, "radii(rows, spacing_k, spacing, normals=None, cover_k=0, hole=0, max_gap=0, cover=None, threads=0): "
+                  "k-NN spacing and gap-closing radii from one search."),
+    METHOD(pca, "pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, cover_k=0, hole=0, max_gap=0, cover=None, "
+                "threads=0): PCA normals, and what the import needs from the same search."),
     {nullptr, nullptr, 0, nullptr},
 };
 #undef METHOD
