@@ -109,7 +109,9 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     pts = np.asarray(points, dtype=np.float64)
     if pts.size == 0:
         return np.zeros(3), np.zeros((0, 3), np.float32)
-    box = pts if bulk is None or not np.any(bulk) else pts[np.asarray(bulk, bool)]
+    mask = None if bulk is None else np.asarray(bulk, bool)
+    # a copy of the bulk only when it leaves points out (10M points: 240 MB and a second)
+    box = pts if mask is None or mask.all() or not mask.any() else pts[mask]
     origin = ((box.min(axis=0) + box.max(axis=0)) * 0.5).astype(np.float32).astype(np.float64)
     return origin, (pts - origin).astype(np.float32)
 

@@ -236,20 +236,26 @@ void PointIndex::gather(uint32_t node, int depth, const Box &cell, const Box &bo
     gather(2 * node + 2, depth + 1, right, box, r2, skip_b, skip_e, leaves, points);
 }
 
-void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots) const {
+void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots, float &guess) const {
     const size_t m = e - b;  // <= kLeafSize: one leaf's points at most
     // The smallest subtree around the leaf with k + 1 points: every point's first candidates.
     uint32_t node = leaf_of(b);
     int depth = depth_;
     while (begin(node + 1, depth) - begin(node, depth) < size_t(k) + 1) node = (node - 1) / 2, --depth;
     const size_t sb = begin(node, depth), se = begin(node + 1, depth);
+    // With a guess (the previous leaf's largest k-th distance, widened), nothing beyond it is
+    // inserted and only the leaves within it are gathered: on an evenly sampled surface the
+    // neighbours of adjacent leaves lie about as far, and the first candidates (the
+    // subtree's) bounded the gathering far more loosely. A point left with fewer than k
+    // searches again without the guess, so the answer is exact either way.
+    const float cap = guess > 0.f ? guess : std::numeric_limits<float>::infinity();
     Best best[kLeafSize];
     Box box{{x_[b], y_[b], z_[b]}, {x_[b], y_[b], z_[b]}};
     float r2 = 0.f;
     for (size_t i = 0; i < m; ++i) {
         const size_t s = b + i;
         const float q[3] = {x_[s], y_[s], z_[s]};
-        best[i] = Best{k, 0, d2 + i * k, slots + i * k, uint32_t(s)};
+        best[i] = Best{k, 0, d2 + i * k, slots + i * k, uint32_t(s), cap};
         scan(sb, se, q, best[i]);
         r2 = std::max(r2, best[i].worst);
         for (int a = 0; a < 3; ++a) box.lo[a] = std::min(box.lo[a], q[a]), box.hi[a] = std::max(box.hi[a], q[a]);
@@ -260,18 +266,27 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
     leaves.clear();
     size_t points = 0;
     gather(0, 0, bounds_, box, r2, sb, se, leaves, points);
+    float widest = 0.f;
     for (size_t i = 0; i < m; ++i) {
         const size_t s = b + i;
         const float q[3] = {x_[s], y_[s], z_[s]};
-        if (points > kMaxGathered) {
-            float off[3] = {0.f, 0.f, 0.f};
-            search(q, best[i], 0, 0, 0.f, off, sb, se);
-        } else {
+        if (points <= kMaxGathered) {
             for (const auto &[leaf, cell] : leaves)
                 if (box_gap2(cell.lo, cell.hi, q, q) < best[i].worst)
                     scan(begin(leaf, depth_), begin(leaf + 1, depth_), q, best[i]);
         }
+        if (points > kMaxGathered || best[i].count < k) {  // one search of its own, exact
+            best[i] = Best{k, 0, d2 + i * k, slots + i * k, uint32_t(s)};
+            scan(sb, se, q, best[i]);
+            float off[3] = {0.f, 0.f, 0.f};
+            search(q, best[i], 0, 0, 0.f, off, sb, se);
+        }
+        widest = std::max(widest, best[i].worst);
     }
+    // The next leaf's guess: 1.5 x this one's largest squared k-th distance (1.22 x the
+    // distance): wide enough that few points of an evenly sampled surface search again,
+    // narrow enough to gather about half the leaves the subtree's bound did.
+    guess = widest > 0.f && std::isfinite(widest) ? 1.5f * widest : 0.f;
 }
 
 // ---------------------------------------------------------------------------------------

@@ -58,8 +58,10 @@ public:
     // answer as nearest_of, found for the leaf's points together: their candidates within
     // a smallest surrounding subtree give a bound, the leaves within that bound of the
     // points' box are gathered once, and each point scans the ones nearer than its own
-    // k-th candidate.
-    void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots) const;
+    // k-th candidate. guess: a squared distance the k-th neighbours probably lie within
+    // (0: none), in; for the next leaf in the tree's order, out (the caller walking the
+    // leaves in order passes it on).
+    void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots, float &guess) const;
 
 private:
     struct Best;

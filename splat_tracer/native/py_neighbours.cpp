@@ -61,8 +61,9 @@ bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int 
     return for_tasks((pieces.size() - 1 + per_task - 1) / per_task, threads, [&](size_t t) {
         std::vector<float> d2(PointIndex::kLeafSize * size_t(k));
         std::vector<uint32_t> slots(d2.size());
+        float guess = 0.f;  // passed from leaf to leaf (PointIndex::leaf_nearest)
         for (size_t p = t * per_task; p < std::min(pieces.size() - 1, (t + 1) * per_task); ++p) {
-            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), slots.data());
+            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), slots.data(), guess);
             for (size_t j = 0; j < pieces[p + 1] - pieces[p]; ++j)
                 fn(pieces[p] - start + j, &d2[j * k], &slots[j * k]);
         }
