@@ -18,15 +18,25 @@ struct BuildPoint {
     uint32_t id;
 };
 
-// A node's cell while building: the parent's cell cut at the split (not the tight box of
-// its points: the widest side of the cell is the split axis, as in a classic k-d tree).
+// A node's cell while building: the parent's cell cut at the split.
 struct Cell {
     float lo[3], hi[3];
-    int widest() const {
-        const float e0 = hi[0] - lo[0], e1 = hi[1] - lo[1], e2 = hi[2] - lo[2];
-        return e0 >= e1 ? (e0 >= e2 ? 0 : 2) : (e1 >= e2 ? 1 : 2);
-    }
 };
+
+// The axis along which the points spread widest, from at most kSpreadSample of them (evenly
+// strided: an estimate is enough to choose an axis). Not the cell's widest side: a cell cut
+// only from its parent keeps, say, a terrain's whole height range, and splitting that
+// instead of the points' own extent left leaves long and thin, twice as many of them
+// within a query's reach at 10M points.
+constexpr size_t kSpreadSample = 256;
+int widest_spread(const BuildPoint *p, size_t count) {
+    const size_t stride = std::max<size_t>(1, count / kSpreadSample);
+    float lo[3] = {p[0].c[0], p[0].c[1], p[0].c[2]}, hi[3] = {lo[0], lo[1], lo[2]};
+    for (size_t i = stride; i < count; i += stride)
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[i].c[a]), hi[a] = std::max(hi[a], p[i].c[a]);
+    const float e0 = hi[0] - lo[0], e1 = hi[1] - lo[1], e2 = hi[2] - lo[2];
+    return e0 >= e1 ? (e0 >= e2 ? 0 : 2) : (e1 >= e2 ? 1 : 2);
+}
 
 }  // namespace
 
@@ -78,7 +88,7 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     auto split_node = [&](uint32_t node, int d, const Cell &cell, Cell &left, Cell &right) {
         const size_t b = begin(node, d), e = begin(node + 1, d);  // node + 1: the next at this depth
         const size_t mid = begin(2 * node + 2, d + 1);
-        const int a = cell.widest();
+        const int a = widest_spread(pts.data() + b, e - b);
         std::nth_element(pts.begin() + b, pts.begin() + mid, pts.begin() + e,
                          [a](const BuildPoint &p, const BuildPoint &q) { return p.c[a] < q.c[a]; });
         const float s = pts[mid].c[a];
