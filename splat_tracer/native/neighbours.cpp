@@ -347,9 +347,12 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
         const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
         if (d == 0.0) continue;
         const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
-        const double cx = (y[b] * sa - y[a] * sb) / d, cy = (x[a] * sb - x[b] * sa) / d;
-        const double r = std::sqrt(cx * cx + cy * cy);
-        if (!(r > lo && r <= hi && r > best)) continue;
+        const double nx = y[b] * sa - y[a] * sb, ny = x[a] * sb - x[b] * sa;  // the centre is (nx, ny) / d
+        // r = |(nx, ny)| / |d| compared without dividing or a square root (most circles fail
+        // here: the divisions and roots were most of this function's time).
+        const double r2d2 = nx * nx + ny * ny, d2 = d * d;
+        if (!(r2d2 > lo * lo * d2 && r2d2 <= hi * hi * d2 && r2d2 > best * best * d2)) continue;
+        const double cx = nx / d, cy = ny / d, r = std::sqrt(cx * cx + cy * cy);
         // The angular gap from a to b, counter-clockwise in [0, 2 pi) (the last pair wraps
         // round); only for the few circles that would raise the radius.
         double gap = std::atan2(d, 2.0 * (x[a] * x[b] + y[a] * y[b]));
