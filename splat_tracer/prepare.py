@@ -229,7 +229,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     inliers = np.flatnonzero(bulk)
     radii_tree = tree if len(inliers) == len(local) else None  # the normals' k-d tree when it is the bulk's
     try:
-        hood = spacing.analyse(local[inliers], cloud.normals[inliers], k, workers, progress=step("radii"),
+        whole = len(inliers) == len(local)  # no copies of a 10M-point cloud when nothing is left out
+        hood = spacing.analyse(local if whole else local[inliers], cloud.normals if whole else cloud.normals[inliers],
+                               k, workers, progress=step("radii"),
                                tree=radii_tree, known_spacing=known_spacing,
                                close_gaps=hole_free and cloud.radii is None, known_cover=known_cover)
     except spacing.SpacingError as e:

@@ -139,6 +139,11 @@ def _angular_gaps(sorted_angles: np.ndarray) -> np.ndarray:
     return np.diff(wrapped, axis=1)
 
 
+def _float64(*arrays):
+    """The boundary test's normals in float64 (the per-chunk arrays only)."""
+    return tuple(np.asarray(a, dtype=np.float64) for a in arrays)
+
+
 def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
     """offsets (n, k, 3) from each point to its neighbours; normals (n, 3) unit; the
     neighbours' normals (n, k, 3)."""
@@ -159,18 +164,20 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     neighbour_tree of `points` already built; known_spacing, known_cover: the (N,) distances
     to the k-th nearest other point and the uncapped gap-closing radii when a search already
     found them (normals.estimate)."""
-    pts = np.asarray(points, dtype=np.float64)
+    pts = np.asarray(points)  # the tree holds float32: no float64 copy of a 10M-point cloud
     n = len(pts)
     if n < MIN_POINTS:
         raise SpacingError(f"need at least {MIN_POINTS} points to estimate the spacing (or a 'radius' property)")
     k = int(min(k, n - 1))
     kq = int(min(max(k, BOUNDARY_K if normals is not None else 0), n - 1))
-    nrm = None if normals is None else np.asarray(normals, dtype=np.float64)
+    nrm = None if normals is None else np.asarray(normals)
     cover_k = int(min(COVER_K, n - 1)) if close_gaps and nrm is not None else 0
     if cover_k < 2:
         cover_k = 0
-    unit = None if not cover_k else (nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
-                                     ).astype(np.float32)
+    unit = None
+    if cover_k:
+        unit = np.asarray(nrm, dtype=np.float32)
+        unit = unit / np.maximum(np.sqrt(np.einsum("ij,ij->i", unit, unit)), 1e-30)[:, None]
     tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
     pts = tree.points  # the positions the tree holds (float32)
     order = tree.order  # the tree's order: neighbouring points are adjacent
@@ -195,7 +202,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
             cover[idx] = c
         if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
             _, nbr = tree.knn(idx, kq)
-            boundary += int(_boundary_mask(pts[nbr] - pts[idx, None], nrm[idx], nrm[nbr]).sum())
+            boundary += int(_boundary_mask(pts[nbr] - pts[idx, None], *_float64(nrm[idx], nrm[nbr])).sum())
     if nrm is not None and tested is None:
         tested = sample if sample is not None else np.sort(
             np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
@@ -203,7 +210,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "splat radii: closed surface guess"):
             idx = tested[start:start + _CHUNK]
             _, nbr = tree.knn(idx, kq)
-            hits += int(_boundary_mask(pts[nbr] - pts[idx, None], nrm[idx], nrm[nbr]).sum())
+            hits += int(_boundary_mask(pts[nbr] - pts[idx, None], *_float64(nrm[idx], nrm[nbr])).sum())
         boundary = int(round(hits * n / len(tested)))
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
