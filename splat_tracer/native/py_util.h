@@ -230,5 +230,7 @@ inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &c
 const SplatScene *as_splat_scene(PyObject *obj);
 // Adds `Mesh` and `RenderScene` to the module (py_render.cpp).
 int add_render_types(PyObject *module);
+// Adds the neighbour-graph functions (py_graph.cpp).
+int add_graph_functions(PyObject *module);
 
 }  // namespace splat::py
