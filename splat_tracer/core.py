@@ -145,7 +145,7 @@ def _indices(a, name: str, shape: tuple) -> np.ndarray:
 def spatial_order(points, threads: int = 0) -> np.ndarray:
     """(n,) int32: the indices of the (n,3) points (as float64, finite) in Morton order over
     their bounding box: a renumbering under which the graph functions below read memory
-    mostly in cache (4x faster at 10M points than a file's random order)."""
+    mostly in cache (see native/graph.h)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
     out = np.empty(len(pts), np.int32)
     _core.spatial_order(pts, out, threads=threads)
@@ -167,7 +167,8 @@ def permute_table(table, order, columns: Optional[slice] = None, threads: int = 
 
 def take_rows(array, order, threads: int = 0) -> np.ndarray:
     """array[order] for an (n,c) array (as float64) and row numbers `order`: numpy's fancy
-    indexing in parallel, fetching rows ahead (5x faster for a random order at 10M rows)."""
+    indexing in parallel, fetching rows ahead (10M rows of 3 in random order: 0.1-0.3 s
+    against numpy's 0.7-0.9 s, best of 4 on the shared machine)."""
     a = np.ascontiguousarray(array, dtype=np.float64)
     if a.ndim != 2:
         raise ValueError(f"array must have 2 dimensions, got shape {a.shape}")

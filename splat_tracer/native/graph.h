@@ -24,8 +24,10 @@ using GraphPoll = std::function<bool(double fraction)>;
 
 // The points' indices in Morton (Z-curve) order over their bounding box, 11 bits per axis,
 // ties by index: neighbours in space become neighbours in memory, so that the graph steps
-// below, given the cloud renumbered this way, mostly read memory that is already in cache
-// (4x faster at 10M points than in a file's random order). `points` n x 3, finite.
+// below, given the cloud renumbered this way, mostly read memory that is already in cache.
+// 10M terrain points in random order: weights, forest and traversal took 42.5 s, against
+// 6.3 s renumbered, plus 4.9 s to renumber (spatial_order, permute_table, take_rows), in
+// one run on the shared machine. `points` n x 3, finite.
 void spatial_order(const double *points, size_t n, int32_t *order, int threads);
 
 // The neighbour table renumbered by `order` (a permutation of 0 .. n-1): out row r (k
