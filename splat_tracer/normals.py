@@ -23,7 +23,9 @@ Orientation (the PCA axis has no sign):
   renumbered in Morton order (core.spatial_order) so that neighbours lie close in memory.
 In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
 perpendicular to the scanner's direction or to +Z: grazing views, walls in aerial data)
-takes its sign by propagation from its neighbours instead.
+takes its sign by propagation from its neighbours instead: from the anchor fewest tree
+edges away (one as many edges from two anchors takes the sign of whichever the walk reaches
+it from first; the walk's order follows the renumbering, not the file's).
 
 Points whose orientation is ambiguous are counted: those oriented through a tree edge with
 |n_i . n_parent| < AMBIGUOUS_EDGE (the sign guess from a neighbour more than 60 degrees
