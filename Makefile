@@ -64,7 +64,7 @@ SAN_LIBS  = $(shell gcc -print-file-name=libasan.so) $(shell gcc -print-file-nam
 SAN_ENV   = LD_PRELOAD="$(SAN_LIBS)" \
             ASAN_OPTIONS=detect_leaks=0:log_path=$(abspath $(SAN))/logs/asan \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(abspath $(SAN))/logs/ubsan
-SAN_TESTS = test_core.py test_robustness.py test_method.py test_properties.py test_neighbours.py \
+SAN_TESTS = test_core.py test_robustness.py test_method.py test_properties.py test_neighbours.py test_graph.py \
             $(notdir $(wildcard tests/test_render_scene.py))
 
 sanitize-tree: $(STAMP)

@@ -8,7 +8,9 @@ ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extreme
 point on them: _core.Scene(...), trace, trace_surface (method tuples, exclude ids, inside
 flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds;
 then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
-and lamp rows and settings, rendered. The contract of a native entry point: it returns,
+and lamp rows and settings, rendered; then the neighbour-graph functions (spatial_order,
+permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
+on fuzzed tables whose indices stray out of range, weights, anchors and orders. The contract of a native entry point: it returns,
 or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
 crash, and under the sanitizer build of `make fuzz` any AddressSanitizer or UBSan
 report) is a finding.
@@ -176,10 +178,55 @@ def fuzz_render_scene(fdp, splats):
 
 
 @atheris.instrument_func
+def indices(fdp, shape, n):
+    """int32 indices, mostly in 0..n-1, now and then just outside or extreme."""
+    count = int(np.prod(shape))
+    out = np.array([fdp.ConsumeIntInRange(0, max(n - 1, 0)) if fdp.ConsumeIntInRange(0, 15) else small_int(fdp)
+                    for _ in range(count)], np.int64)
+    return out.astype(np.int32).reshape(shape)
+
+
+@atheris.instrument_func
+def fuzz_graph(fdp):
+    n, k = fdp.ConsumeIntInRange(0, 30), fdp.ConsumeIntInRange(0, 5)
+    pts, nrm = array(fdp, (n, 3), np.float64), array(fdp, (n, 3), np.float64)
+    nbr = indices(fdp, (n, k), n)
+    threads = fdp.ConsumeIntInRange(0, 3)
+    order = np.empty(n, np.int32)
+    if call(_core.spatial_order, pts, order, threads) is not None:
+        assert sorted(order) == list(range(n))
+    else:
+        order = indices(fdp, (n,), n)
+    call(_core.permute_table, nbr, order, fdp.ConsumeIntInRange(-1, k), np.empty((n, fdp.ConsumeIntInRange(0, k)),
+                                                                                  np.int32), threads)
+    rows = indices(fdp, (fdp.ConsumeIntInRange(0, 10),), n)
+    call(_core.take_rows, pts, rows, np.empty((len(rows), 3)), threads)
+    weights = np.empty((n, k), np.float32)
+    if call(_core.graph_weights, pts, nrm, nbr, value(fdp), weights, threads) is None:
+        weights = array(fdp, (n, k))
+    edges, labels = np.empty((max(n - 1, 0), 2), np.int32), np.empty(n, np.int32)
+    got = call(_core.spanning_forest, nbr, weights, edges, labels, threads)
+    if got is not None:
+        m, components = got
+        assert m + components == n and ((labels >= 0) & (labels < max(components, 1))).all()
+        edges = edges[:m]
+    else:
+        edges = indices(fdp, (fdp.ConsumeIntInRange(0, 8), 2), n)
+    anchors = np.frombuffer(fdp.ConsumeBytes(n).ljust(n, b"\0"), np.uint8).copy()
+    parent, visit = np.empty(n, np.int32), np.empty(n, np.int32)
+    reached = call(_core.forest_traversal, edges, anchors, parent, visit)
+    if reached is None:
+        parent, visit, reached = indices(fdp, (n,), n), indices(fdp, (n,), n), n
+    flip = np.frombuffer(fdp.ConsumeBytes(n).ljust(n, b"\0"), np.uint8).copy()
+    call(_core.chain_flips, visit[:reached], parent, flip, np.empty(n, np.uint8))
+
+
+@atheris.instrument_func
 def TestOneInput(data: bytes) -> None:
     fdp = atheris.FuzzedDataProvider(data)
     splats = fuzz_scene(fdp)
     fuzz_render_scene(fdp, splats)
+    fuzz_graph(fdp)
 
 
 if __name__ == "__main__":

@@ -19,10 +19,14 @@ Orientation (the PCA axis has no sign):
   walk from a seed per connected component: the point farthest from the component's
   centroid, oriented away from it (outward). A flat component (its seed's normal nearly
   perpendicular to the outward direction) is turned so that its normals' sum points up
-  (+Z; +Y, +X for vertical planes).
+  (+Z; +Y, +X for vertical planes). The graph's steps are native (core.graph_weights,
+  spanning_forest by Boruvka's algorithm, forest_traversal, chain_flips), on the cloud
+  renumbered in Morton order (core.spatial_order) so that neighbours lie close in memory.
 In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
 perpendicular to the scanner's direction or to +Z: grazing views, walls in aerial data)
-takes its sign by propagation from its neighbours instead.
+takes its sign by propagation from its neighbours instead: from the anchor fewest tree
+edges away (one as many edges from two anchors takes the sign of whichever the walk reaches
+it from first; the walk's order follows the renumbering, not the file's).
 
 Points whose orientation is ambiguous are counted: those oriented through a tree edge with
 |n_i . n_parent| < AMBIGUOUS_EDGE (the sign guess from a neighbour more than 60 degrees
@@ -34,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import core
 from .progress import chunks, nothing, scaled
 from .spacing import neighbour_tree
 
@@ -121,33 +126,25 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     return result, None if spacing is None else spacing[1], None if cover is None else cover[1]
 
 
-def _chain_signs(parent: np.ndarray, rel: np.ndarray, done: np.ndarray) -> np.ndarray:
-    """Products of the relative signs along each point's path up to a point that is done
-    (whose `rel` is its absolute sign), by pointer jumping: O(N log depth), vectorised."""
-    acc, jump, done = rel.astype(np.int8).copy(), parent.copy(), done.copy()
-    while not done.all():
-        todo = np.flatnonzero(~done)
-        j = jump[todo]
-        acc_j, jump_j, done_j = acc[j], jump[j], done[j]
-        acc[todo] *= acc_j
-        jump[todo] = jump_j
-        done[todo] = done_j
-    return acc
+def _fraction(report, start: float, end: float, message: str):
+    """A native step's progress (a fraction of the step) as orient's report of `message`."""
+    return lambda fraction: report(start + (end - start) * fraction, message)
 
 
 def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", scanners=None,
            k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None) -> Orientation:
     """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
-    for estimate (the steps of the propagation are single library calls: reported between them)."""
-    from scipy.sparse import coo_matrix, csr_matrix
-    from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
-
+    for estimate. The graph's steps (weights, spanning forest, traversal) are native
+    (core.graph_weights, spanning_forest, forest_traversal), on `workers` threads."""
     if mode not in MODES:
         raise ValueError(f"unknown orientation mode {mode!r}")
     pts = np.asarray(points, dtype=np.float64)
     nrm = np.asarray(normals, dtype=np.float64)
     n = len(pts)
     k = int(min(k, n - 1))
+    unusable = ~np.isfinite(nrm).all(axis=1)
+    if unusable.any():
+        raise ValueError(f"point {np.flatnonzero(unusable)[0]}: its normal is not finite (cannot be oriented)")
     # Rules first: where they decide, they are the anchors of the propagation.
     anchor_sign = np.zeros(n, np.int8)
     if mode == "SCANNER":
@@ -167,77 +164,79 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         signs = np.where(anchor_sign < 0, -1.0, 1.0)
         return Orientation((nrm * signs[:, None]).astype(np.float32), anchor_sign == 0, mode, n)
     report = progress or nothing
+    threads = workers if workers > 0 else 0  # scipy's -1 (all cores) is the core's 0
     report(0.0, "orienting normals: neighbour graph")
     if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
-        nbr = graph[:, :k + 1]
+        table = graph
     else:
         tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
         order = tree.order  # queried in the tree's order: a leaf of points at a time
-        nbr = np.empty((n, k + 1), np.int32)
-        nbr[order, 0] = order
-        nbr[order, 1:] = tree.knn(order, k)[1]
-    j = np.ascontiguousarray(nbr[:, 1:])
-    w = np.empty((n, k))
-    # The edges' weights, each point against its k neighbours, in chunks of points in the
-    # tree's leaf order when there is a tree (neighbours' rows then lie close in memory).
-    rows = tree.order if tree is not None else np.arange(n)
-    for start in chunks(n, _CHUNK, scaled(report, 0.0, 0.4), "orienting normals: neighbour graph"):
-        idx = rows[start:start + _CHUNK]
-        ji = j[idx]
-        ni, nj = nrm[idx], nrm[ji]
-        d = pts[ji] - pts[idx, None]
-        d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
-        w[idx] = (1.0 - np.abs(np.einsum("nj,nkj->nk", ni, nj))
-                  + ACROSS_WEIGHT * 0.5 * (np.abs(np.einsum("nj,nkj->nk", ni, d)) + np.abs(np.einsum("nkj,nkj->nk", nj, d))))
-    report(0.4, "orienting normals: spanning tree")
-    w = w.ravel() + 1e-9  # csgraph treats a zero weight as no edge
-    # Row i holds point i's k edges: the CSR arrays are the neighbour table itself (no COO
-    # conversion), and the tree may overwrite them (30 % faster at 1M points, no copy).
-    graph_csr = csr_matrix((w, j.ravel(), np.arange(0, n * k + 1, k)), shape=(n, n))
-    del j, w
-    mst = minimum_spanning_tree(graph_csr, overwrite=True)
-    del graph_csr
+        table = np.empty((n, k + 1), np.int32)
+        table[order, 0] = order
+        table[order, 1:] = tree.knn(order, k)[1]
+    # The graph's steps run on the cloud renumbered in space (core.spatial_order): on a
+    # file's random order every neighbour is a cache miss (10M points: 42 s instead of 6 s,
+    # plus 5 s to renumber).
+    # `perm` maps the new numbers to the caller's; ties below are broken in the caller's.
+    # The k-d tree's order is such a renumbering already (its leaves are compact in space).
+    perm = tree.order if tree is not None and len(tree) == n else core.spatial_order(pts, threads)
+    report(0.03, "orienting normals: neighbour graph")
+    # Column 0 of a row is the point itself (or, among duplicate points, one at distance 0).
+    nbr = core.permute_table(table, perm, slice(1, k + 1), threads)
+    report(0.1, "orienting normals: neighbour graph")
+    p, m, anchor_sign = core.take_rows(pts, perm, threads), core.take_rows(nrm, perm, threads), anchor_sign[perm]
+    w = core.graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
+                           _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
+    report(0.3, "orienting normals: spanning tree")
+    forest = core.spanning_forest(nbr, w, threads, _fraction(report, 0.3, 0.8, "orienting normals: spanning tree"))
+    del nbr, w
     report(0.8, "orienting normals: propagation")
-    n_comp, labels = connected_components(mst, directed=False)
+    n_comp, labels = forest.components, forest.labels
 
     # A seed for every component the rules leave without an anchor: its point farthest from
-    # the component's centroid, oriented away from the centroid.
+    # the component's centroid (of equally far ones, the last in the caller's order),
+    # oriented away from the centroid.
     has_anchor = np.zeros(n_comp, bool)
     has_anchor[labels[anchor_sign != 0]] = True
     counts = np.bincount(labels, minlength=n_comp)
-    centroid = np.stack([np.bincount(labels, pts[:, a], n_comp) for a in range(3)], 1) / counts[:, None]
-    outward = pts - centroid[labels]
+    centroid = np.stack([np.bincount(labels, p[:, a], n_comp) for a in range(3)], 1) / counts[:, None]
+    outward = p - centroid[labels]
     dist = np.einsum("ij,ij->i", outward, outward)
-    by = np.lexsort((dist, labels))  # per component, farthest last
-    last = np.r_[labels[by][1:] != labels[by][:-1], True]
-    seeds = by[last]
+    farthest = np.zeros(n_comp)
+    np.maximum.at(farthest, labels, dist)
+    candidates = np.flatnonzero(dist == farthest[labels])
+    candidates = candidates[np.lexsort((perm[candidates], labels[candidates]))]  # per component, last index last
+    seeds = candidates[np.r_[labels[candidates][1:] != labels[candidates][:-1], True]]
     seeds = seeds[~has_anchor[labels[seeds]]]
-    cos_out = np.einsum("ij,ij->i", nrm[seeds], outward[seeds]) / np.maximum(np.sqrt(dist[seeds]), 1e-300)
+    cos_out = np.einsum("ij,ij->i", m[seeds], outward[seeds]) / np.maximum(np.sqrt(dist[seeds]), 1e-300)
     anchor_sign[seeds] = np.where(cos_out >= 0, 1, -1)
     flat = seeds[np.abs(cos_out) < AMBIGUOUS_RULE]
+    del outward, dist
 
-    # One breadth-first walk from a virtual root joined to every anchor.
-    anchors = np.flatnonzero(anchor_sign != 0)
-    tree_edges = mst.tocoo()
-    rows = np.concatenate([tree_edges.row, np.full(len(anchors), n)])
-    cols = np.concatenate([tree_edges.col, anchors])
-    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n + 1, n + 1)).tocsr()
-    _, pred = breadth_first_order(graph, n, directed=False, return_predecessors=True)
-    pred = pred[:n]
+    # One breadth-first walk from every anchor at once (as if from a virtual root joined to
+    # each), each point's sign its parent's unless their normals point apart.
     is_anchor = anchor_sign != 0
+    pred, order = core.forest_traversal(forest.edges, is_anchor,
+                                        _fraction(report, 0.85, 0.95, "orienting normals: propagation"))
+    del forest
     parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
-    cos_parent = np.einsum("ij,ij->i", nrm, nrm[parent])
-    rel = np.where(is_anchor, anchor_sign, np.where(cos_parent >= 0, 1, -1)).astype(np.int8)
-    signs = _chain_signs(parent, rel, is_anchor | (pred < 0))
-    out = nrm * signs[:, None]
+    cos_parent = np.einsum("ij,ij->i", m, m[parent])
+    flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
+    negative = core.chain_flips(order, parent, flip)
     ambiguous = ~is_anchor & (np.abs(cos_parent) < AMBIGUOUS_EDGE)
+    del pred, order, parent, cos_parent, flip
 
     # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X).
     if len(flat):
-        sums = np.stack([np.bincount(labels, out[:, a], n_comp) for a in range(3)], 1)[labels[flat]]
+        signed = np.where(negative, -1.0, 1.0)
+        sums = np.stack([np.bincount(labels, m[:, a] * signed, n_comp) for a in range(3)], 1)[labels[flat]]
         tol = 1e-9 * counts[labels[flat]]
         key = np.where(np.abs(sums[:, 2]) > tol, sums[:, 2], np.where(np.abs(sums[:, 1]) > tol, sums[:, 1], sums[:, 0]))
-        flip = np.zeros(n_comp, bool)
-        flip[labels[flat]] = key < 0
-        out[flip[labels]] *= -1
-    return Orientation(out.astype(np.float32), ambiguous, mode, int(n_comp))
+        turn = np.zeros(n_comp, bool)
+        turn[labels[flat]] = key < 0
+        negative ^= turn[labels]
+    # Back to the caller's numbering: flags scattered, the normals flipped in place there.
+    flags = np.empty(n, np.uint8)
+    flags[perm] = negative.view(np.uint8) | (ambiguous.view(np.uint8) << 1)
+    return Orientation(np.where((flags & 1)[:, None] != 0, -nrm, nrm).astype(np.float32), flags >= 2, mode,
+                       int(n_comp))

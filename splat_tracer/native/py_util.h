@@ -232,5 +232,7 @@ const SplatScene *as_splat_scene(PyObject *obj);
 int add_render_types(PyObject *module);
 // Adds `PointIndex` to the module (py_neighbours.cpp).
 int add_neighbour_types(PyObject *module);
+// Adds the neighbour-graph functions (py_graph.cpp).
+int add_graph_functions(PyObject *module);
 
 }  // namespace splat::py
