@@ -18,8 +18,9 @@ Orientation (the PCA axis has no sign):
   and flips one side. Each point's sign then agrees with its parent's in a breadth-first
   walk from a seed per connected component: the point farthest from the component's
   centroid, oriented away from it (outward). A flat component (its seed's normal nearly
-  perpendicular to the outward direction) is turned so that its normals' sum points up
-  (+Z; +Y, +X for vertical planes). The graph's steps are native (core.graph_weights,
+  perpendicular to the outward direction) or an open sheet (its oriented normals' sum at
+  least OPEN_SHEET x their count: a terrain, a facade) is turned so that its normals' sum
+  points up (+Z; +Y, +X for vertical planes). The graph's steps are native (core.graph_weights,
   spanning_forest by Boruvka's algorithm, forest_traversal, chain_flips), on the cloud
   renumbered in Morton order (core.spatial_order) so that neighbours lie close in memory.
 In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
@@ -48,6 +49,10 @@ MIN_POINTS = 3          # a plane needs three points
 AMBIGUOUS_EDGE = 0.5    # cos 60 degrees
 AMBIGUOUS_RULE = 0.2    # cos 78 degrees
 ACROSS_WEIGHT = 1.0     # the weight of |n . d| against 1 - |n_i . n_j|
+# A component whose oriented normals sum to at least this x their count is an open sheet
+# (faces up, see orient). A closed surface's sum is about 0; a hemisphere's 0.5 (where up
+# and outward agree); a terrain's or a facade's close to 1.
+OPEN_SHEET = 0.5
 MODES = ("PROPAGATE", "UP", "SCANNER")
 _CHUNK = 1 << 15
 
@@ -226,10 +231,19 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     ambiguous = ~is_anchor & (np.abs(cos_parent) < AMBIGUOUS_EDGE)
     del pred, order, parent, cos_parent, flip
 
-    # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X).
-    if len(flat):
+    # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X). So
+    # do open sheets (a terrain, a facade): their normals agree, so their sum is most of
+    # their count (a closed surface's cancel out: the integral of n dA over it is 0), and
+    # "outward" from their centroid is just the slope at the farthest corner (a hilly 10M-
+    # point terrain came out facing down).
+    if len(seeds):
         signed = np.where(negative, -1.0, 1.0)
-        sums = np.stack([np.bincount(labels, m[:, a] * signed, n_comp) for a in range(3)], 1)[labels[flat]]
+        sums = np.stack([np.bincount(labels, m[:, a] * signed, n_comp) for a in range(3)], 1)
+        seeded = labels[seeds]
+        open_sheet = np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * counts[seeded]
+        flat = np.union1d(flat, seeds[open_sheet])
+    if len(flat):
+        sums = sums[labels[flat]]
         tol = 1e-9 * counts[labels[flat]]
         key = np.where(np.abs(sums[:, 2]) > tol, sums[:, 2], np.where(np.abs(sums[:, 1]) > tol, sums[:, 1], sums[:, 0]))
         turn = np.zeros(n_comp, bool)

@@ -249,8 +249,12 @@ def scipy_orient(pts, nrm, mode="PROPAGATE"):
         acc[todo] *= acc[nxt]
         done[todo], jump[todo] = done[nxt], jump[nxt]
     out = nrm * acc[:, None]
+    # open sheets (normals.OPEN_SHEET, added with the native propagation) are flat too
+    sums = np.stack([np.bincount(labels, out[:, a], n_comp) for a in range(3)], 1)
+    open_sheet = np.linalg.norm(sums[labels[seeds]], axis=1) >= normals.OPEN_SHEET * counts[labels[seeds]]
+    flat = np.union1d(flat, seeds[open_sheet])
     if len(flat):
-        sums = np.stack([np.bincount(labels, out[:, a], n_comp) for a in range(3)], 1)[labels[flat]]
+        sums = sums[labels[flat]]
         tol = 1e-9 * counts[labels[flat]]
         key = np.where(np.abs(sums[:, 2]) > tol, sums[:, 2], np.where(np.abs(sums[:, 1]) > tol, sums[:, 1], sums[:, 0]))
         turn = np.zeros(n_comp, bool)

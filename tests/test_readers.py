@@ -327,6 +327,23 @@ def test_estimated_normals_agree_with_the_truth_and_are_consistently_oriented(na
     assert result.ambiguous.sum() < 0.01 * len(p)
 
 
+def test_propagated_normals_of_an_open_hilly_terrain_face_up():
+    """An open sheet has no outward side: its farthest corner's slope decided the sign of all
+    its normals (a 10M-point terrain came out facing down); its normals, which mostly agree,
+    now face up whatever the corner's slope."""
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        xy = rng.uniform(0, 100, (20000, 2))
+        a, b = 2 * np.pi / 17, 2 * np.pi / 23
+        z = 1.2 * np.sin(a * xy[:, 0] + seed) * np.cos(b * xy[:, 1])
+        up = np.column_stack([-1.2 * a * np.cos(a * xy[:, 0] + seed) * np.cos(b * xy[:, 1]),
+                              1.2 * b * np.sin(a * xy[:, 0] + seed) * np.sin(b * xy[:, 1]), np.ones(len(xy))])
+        p = np.column_stack([xy, z])
+        result = normals.orient(p, normals.estimate(p))
+        cos = np.einsum("ij,ij->i", result.normals, up / np.linalg.norm(up, axis=1, keepdims=True))
+        assert (cos > 0).all(), f"seed {seed}: {(cos <= 0).sum()} of {len(p)} face down"
+
+
 def test_up_and_scanner_orientation_fall_back_to_neighbours_where_the_rule_is_unclear():
     p, truth = cube_cloud(30)
     building = truth[:, 2] > -0.5  # what an aerial scan sees of a box: its roof and walls
