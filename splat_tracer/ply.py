@@ -6,6 +6,8 @@ and the problem, so that the importer can refuse it before creating anything.
 """
 from __future__ import annotations
 
+import functools
+
 import io
 import os
 import re
@@ -73,6 +75,21 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 transfer function: file colours are display (sRGB) values."""
     c = np.asarray(c, dtype=np.float32)
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+@functools.lru_cache(maxsize=2)
+def _srgb_table(scale: int) -> np.ndarray:
+    """srgb_to_linear of every integer colour 0..scale divided by scale, as the general path
+    computes it (the value divided in float64, then float32)."""
+    return srgb_to_linear((np.arange(scale + 1, dtype=np.float64) / scale).astype(np.float32))
+
+
+def linear_colours(columns, scale: int) -> np.ndarray:
+    """(N, len(columns)) float32 scene-linear colours from integer sRGB columns in
+    0..scale (255 or 65535), by table: the same values as srgb_to_linear of column / scale,
+    without the power function per point (10M points' colours: 0.75 s)."""
+    lut = _srgb_table(int(scale))
+    return np.column_stack([lut[np.asarray(c)] for c in columns])
 
 
 # Colour conventions for types that do not imply one: a float channel within 0..1 is
@@ -259,9 +276,12 @@ def read_ply(path: str) -> PointCloud:
 
     colours = None
     if {"red", "green", "blue"} <= names:
-        rgb = _unit_colours(path, v, ("red", "green", "blue"))
+        kind = {v[c].dtype for c in ("red", "green", "blue")}
+        scale = _BY_TYPE.get(kind.pop()) if len(kind) == 1 else None
+        rgb = (linear_colours([v[c] for c in ("red", "green", "blue")], int(scale)) if scale is not None
+               else srgb_to_linear(_unit_colours(path, v, ("red", "green", "blue"))))
         alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
-        colours = np.column_stack([srgb_to_linear(rgb), alpha]).astype(np.float32)
+        colours = np.column_stack([rgb, alpha]).astype(np.float32)
 
     normals = None
     if {"nx", "ny", "nz"} <= names:
@@ -315,7 +335,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
     # piles of them make the neighbour search pathological.
     usable = np.flatnonzero(keep)
-    first = spacing.first_of_duplicates(pos[usable])
+    first = spacing.first_of_duplicates(pos if len(usable) == n else pos[usable])  # no copy when all are usable
     rows = usable[first]
     merged = len(usable) - len(rows)
     first_merged = int(usable[~first][0]) if merged else -1

@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from .ply import CloudFileError, PointCloud, make_cloud, read_ply, srgb_to_linear, _unit_colours
+from .ply import CloudFileError, PointCloud, linear_colours, make_cloud, read_ply, srgb_to_linear, _unit_colours
 from .progress import Cancelled
 
 FORMATS = ("PLY", "LAS", "E57", "TEXT")
@@ -88,6 +88,10 @@ def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
 def _colour_channels(path: str, channels: dict) -> np.ndarray:
     """(N,4) scene-linear RGBA from integer colour channels: 8-bit when every value fits 0..255."""
     hi = max(int(np.max(c)) if len(c) else 0 for c in channels.values())
+    columns = [np.asarray(c) for c in channels.values()]
+    if hi <= 65535 and all(np.issubdtype(c.dtype, np.integer) and (not len(c) or c.min() >= 0) for c in columns):
+        rgb = linear_colours(columns, 255 if hi <= 255 else 65535)  # LAS: uint16 channels, by table
+        return np.column_stack([rgb, np.ones(len(rgb))]).astype(np.float32)
     if hi <= 255:
         rgb = np.column_stack([np.asarray(c, np.float64) / 255.0 for c in channels.values()])
     else:
