@@ -36,23 +36,18 @@ def inputs(n: int) -> Path:
     folder = ROOT / "build" / "orient_bench" / str(n)
     if (folder / "graph.npy").is_file():
         return folder
-    from scipy.spatial import cKDTree
-
     from import_speed import terrain
-    from splat_tracer import normals
+    from splat_tracer import core, normals
 
     pos, nrm, _ = terrain(n)
     rng = np.random.default_rng(1)
     nrm = nrm + NOISE * rng.normal(size=nrm.shape)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     nrm *= rng.choice([-1.0, 1.0], (n, 1))
-    tree = cKDTree(pos)
+    tree = core.PointIndex(pos)  # the importer's neighbour search: the table estimate() fills
     graph = np.empty((n, normals.GRAPH_K + 1), np.int32)
-    order = tree.indices
-    step = 1 << 20
-    for s in range(0, n, step):
-        idx = order[s:s + step]
-        graph[idx] = tree.query(pos[idx], k=normals.GRAPH_K + 1, workers=-1)[1]
+    graph[tree.order, 0] = tree.order
+    graph[tree.order, 1:] = tree.knn(tree.order, normals.GRAPH_K)[1]
     folder.mkdir(parents=True, exist_ok=True)
     np.save(folder / "pos.npy", pos)
     np.save(folder / "nrm.npy", nrm)
@@ -60,21 +55,13 @@ def inputs(n: int) -> Path:
     return folder
 
 
-def _status(field: str) -> int:
-    with open("/proc/self/status", encoding="ascii") as f:
-        for line in f:
-            if line.startswith(field + ":"):
-                return int(line.split()[1]) * 1024
-    raise KeyError(field)
-
-
 def run(folder: Path) -> dict:
     from splat_tracer import normals
 
+    from import_speed import _peak_since, _start_peak
+
     pos, nrm, graph = (np.load(folder / f"{name}.npy") for name in ("pos", "nrm", "graph"))
-    with open("/proc/self/clear_refs", "w", encoding="ascii") as f:
-        f.write("5")
-    base = _status("VmRSS")
+    base = _start_peak()
     steps = []
     t0 = time.perf_counter()
 
@@ -84,7 +71,7 @@ def run(folder: Path) -> dict:
 
     result = normals.orient(pos, nrm, "PROPAGATE", graph=graph, progress=progress)
     seconds = time.perf_counter() - t0
-    return {"points": len(pos), "seconds": seconds, "peak_bytes_per_point": (_status("VmHWM") - base) / len(pos),
+    return {"points": len(pos), "seconds": seconds, "peak_bytes_per_point": _peak_since(base) / len(pos),
             "upward": float((result.normals[:, 2] > 0).mean()), "ambiguous": int(result.ambiguous.sum()),
             "components": result.components, "steps": steps}
 

@@ -8,6 +8,12 @@ from splat_tracer import core, spacing
 RNG = np.random.default_rng(7)
 
 
+def sphere(n):
+    """(n,3) float32 points drawn uniformly on the unit sphere (their own normals)."""
+    p = RNG.normal(size=(n, 3))
+    return (p / np.linalg.norm(p, axis=1, keepdims=True)).astype(np.float32)
+
+
 def brute_knn(points, queries, k, exclude=None):
     """(dist, ids) of the k nearest points to each query by brute force (float64)."""
     d = np.linalg.norm(queries[:, None, :].astype(np.float64) - points[None].astype(np.float64), axis=2)
@@ -135,9 +141,7 @@ def test_covering_radius_follows_the_rule():
 
 def test_spacing_and_gap_closing_radii_from_one_search():
     n = 3000
-    p = RNG.normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    pts = p.astype(np.float32)
+    pts = sphere(n)
     index = core.PointIndex(pts)
     for rows in (index.order, RNG.permutation(n)):
         s, cover = index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP)
@@ -155,9 +159,8 @@ def test_spacing_and_gap_closing_radii_from_one_search():
 
 def test_pca_normals_and_what_they_share():
     n = 2000
-    p = RNG.normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    pts = p.astype(np.float32)
+    pts = sphere(n)
+    p = pts.astype(np.float64)
     index = core.PointIndex(pts)
     rows = index.order
     normals, graph, dist, cover = index.pca(rows, 16, graph_width=9, spacing_k=6, cover_k=12,
