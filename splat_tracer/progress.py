@@ -4,8 +4,9 @@ The work functions take `progress`: a callable (fraction in 0..1, message) calle
 chunks of work. It may raise `Cancelled` to stop the work there; the work functions create
 nothing outside their own arrays, so a cancelled import leaves nothing behind. `scaled`
 maps a step's own 0..1 onto its share of the whole; `Job` runs a function on a worker
-thread (numpy, scipy's k-d tree and the file readers release the GIL in their loops) so
-that Blender's main thread stays free to draw and to see Esc.
+thread (numpy, the core's neighbour search and graph functions, and the file readers
+release the GIL in their loops) so that Blender's main thread stays free to draw and to see
+Esc.
 """
 from __future__ import annotations
 

@@ -34,11 +34,12 @@ MATRIX_DIR = ROOT / "build" / "matrix"
 # Python matters to the add-on). 4.2.13 is the oldest claimed (blender_manifest.toml says
 # why). bpy 4.2's wheel does not constrain numpy; Blender 4.2 ships numpy 1.24.3
 # (NUMPY_VERSION in its build_files/build_environment/cmake/versions.cmake), the oldest
-# that the bundled scipy 1.15.3 must load with. bpy 4.3.0 and 4.4.0 (the only ones of those
-# series on PyPI) do not constrain numpy either, and which one those releases ship was not
-# found: they get 1.24.3, the demanding case (1.26.4 is tested with 4.5 and 5.0). bpy 4.5
-# and 5.0 require numpy>=1.26,<2.0, and 1.26.4 is the NUMPY_VERSION of those releases. bpy
-# 5.1 and 5.2 are for Python 3.13 and require numpy>=2.2,<3; a 5.x versions.cmake has 2.3.4.
+# that the add-on and the bundled readers (plyfile, laspy, pye57) must work with. bpy
+# 4.3.0 and 4.4.0 (the only ones of those series on PyPI) do not constrain numpy either,
+# and which one those releases ship was not found: they get 1.24.3, the demanding case
+# (1.26.4 is tested with 4.5 and 5.0). bpy 4.5 and 5.0 require numpy>=1.26,<2.0, and
+# 1.26.4 is the NUMPY_VERSION of those releases. bpy 5.1 and 5.2 are for Python 3.13 and
+# require numpy>=2.2,<3; a 5.x versions.cmake has 2.3.4.
 MATRIX = {
     "4.2.13": ("3.11", "bpy==4.2.13", "numpy==1.24.3"),
     "4.2": ("3.11", "bpy==4.2.23", "numpy==1.24.3"),
@@ -97,8 +98,8 @@ def bpy_python(series) -> Path:
 
 @pytest.fixture(scope="module")
 def clouds(tmp_path_factory) -> list[Path]:
-    """One sphere as PLY (normals, no radii: scipy's k-NN gives them), LAZ (no normals:
-    estimated with scipy too; laspy + lazrs) and E57 (pye57)."""
+    """One sphere as PLY (normals, no radii: the core's k-NN gives them), LAZ (no normals:
+    estimated by the core too; laspy + lazrs) and E57 (pye57)."""
     import laspy
     import pye57
 
@@ -150,8 +151,9 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
         assert f"imported {suffix}: 5000 points" in job.stdout, job.stdout
     numpy_pin = next(p for p in MATRIX[series] if p.startswith("numpy=="))
     assert f"numpy: {numpy_pin.split('==')[1]}" in job.stdout  # Blender's numpy, not another
-    for module in ("scipy", "plyfile", "laspy", "lazrs", "pye57"):
+    for module in ("plyfile", "laspy", "lazrs", "pye57"):
         assert f"bundled: {module} " in job.stdout, f"{module} was not imported from the zip's wheels"
+    assert "scipy: not imported" in job.stdout, job.stdout  # not bundled, not needed
     check_sphere_render(output, new_pass_names=tuple(map(int, series.split("."))) >= (5, 0))
     check_lit_sphere_render(tmp_path / "render_lit.exr")
     print(f"matrix: bpy {series}: installed, imported 3 formats and rendered in "

@@ -9,19 +9,21 @@ and macos-x64 (default: all four). For each platform:
    never the development build of `make build`.
 2. Stages the add-on's files (no tests, benchmarks, native sources or build files), the
    core, and the dependencies Blender does not ship as unmodified PyPI wheels for that
-   platform (scipy, lazrs and pye57 for each Python that Blender 4.2 to 5.2 use; plyfile,
-   laspy and pyquaternion, pure Python), listed in the staged manifest, whose `platforms`
-   is that one platform. A reader's wheel that PyPI lacks for a platform (pye57 on macOS
-   x64) is left out with a warning: that format is then refused there with a message. numpy is never bundled:
-   Blender has its own.
+   platform (lazrs and pye57, compiled, for each Python that Blender 4.2 to 5.2 use;
+   plyfile, laspy and pyquaternion, pure Python), listed in the staged manifest, whose
+   `platforms` is that one platform. A reader's wheel that PyPI lacks for a platform (pye57
+   on macOS x64) is left out with a warning: that format is then refused there with a
+   message. numpy is never bundled: Blender has its own. Nor is scipy: the add-on does not
+   use it (the neighbour search and the normals' spanning tree are in the core).
 3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy
    wheel), `build --split-platforms`: the platform suffix in the name and the generated
    manifest block that extension repositories read.
 
-One zip per platform rather than one for all: every platform needs its own scipy wheels
-(about 35 MB per Python version), so a single zip would be ~4x the size for everyone; and
-the Linux and macOS cores share the file name _core.abi3.so. blender_ext.py's
---split-platforms only filters wheels, never other files, so the split is made here.
+One zip per platform rather than one for all: the Linux and macOS cores share the file name
+_core.abi3.so, and each platform needs its own lazrs and pye57 wheels (pye57's Linux ones
+are ~17 MB per Python version, a few MB elsewhere), which a single zip would carry for
+everyone. blender_ext.py's --split-platforms only filters wheels, never other files, so the
+split is made here.
 """
 from __future__ import annotations
 
@@ -39,23 +41,22 @@ WHEEL_CACHE = ROOT / "build" / "wheels"
 # Wheel platform tags pip may pick for each Blender platform, and the pattern of the wheel
 # file names that fit it. Linux: Blender 4.2+ itself needs glibc 2.28, so manylinux_2_28
 # wheels load wherever Blender runs. macOS: pip takes a macosx_X_Y tag as "X.Y or older";
-# scipy's oldest arm64 wheel is for macOS 12 (Blender 4.2 runs on 11.2: see README).
+# Blender 4.2 runs on macOS 11.2, so both ask for 11.0, the core's own target (the wheels
+# bundled now: lazrs and pye57 11.0 on arm64, lazrs 10.12 on x64).
 PLATFORMS = {
     "linux-x64": (("manylinux_2_28_x86_64", "manylinux_2_27_x86_64", "manylinux_2_17_x86_64",
                    "manylinux2014_x86_64"), r".*manylinux.*_x86_64"),
     "windows-x64": (("win_amd64",), r"win_amd64"),
-    "macos-arm64": (("macosx_12_0_arm64",), r"macosx_\d+_\d+_(arm64|universal2)"),
+    "macos-arm64": (("macosx_11_0_arm64",), r"macosx_\d+_\d+_(arm64|universal2)"),
     "macos-x64": (("macosx_11_0_x86_64",), r"macosx_\d+_\d+_(x86_64|universal2)"),
 }
-# (requirement, Python versions to fetch it for). scipy: the newest that still loads with
-# the numpy of Blender 4.2 (1.24.x): 1.15.x needs numpy >= 1.23.5 (and < 2.5); 1.16 needs
-# 1.25.2 and 1.17 (the development pin in requirements.txt) 1.26.4 (1.17.1 fails to import
-# with numpy 1.24.4: no numpy.exceptions). One cp311 wheel serves Blender 4.2 to 5.0.
+# (requirement, Python versions to fetch it for): one cp311 wheel serves Blender 4.2 to
+# 5.0, a cp313 one 5.1 and 5.2.
 # The third field: whether the add-on needs it everywhere (True) or only for one reader, which
 # refuses its format with a message where the wheel is missing (False).
-WHEELS = [("scipy==1.15.3", ("3.11", "3.13"), True), ("plyfile==1.0.3", ("3.11",), True),
-          ("laspy==2.7.0", ("3.11",), False), ("lazrs==0.8.2", ("3.11", "3.13"), False),
-          ("pye57==0.4.19", ("3.11", "3.13"), False), ("pyquaternion==0.9.9", ("3.11",), False)]
+WHEELS = [("plyfile==1.0.3", ("3.11",), True), ("laspy==2.7.0", ("3.11",), False),
+          ("lazrs==0.8.2", ("3.11", "3.13"), False), ("pye57==0.4.19", ("3.11", "3.13"), False),
+          ("pyquaternion==0.9.9", ("3.11",), False)]
 PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 # The development core (make build) is never shipped: each stage gets its platform's.
