@@ -278,14 +278,18 @@ def read_ply(path: str) -> PointCloud:
     if {"red", "green", "blue"} <= names:
         kind = {v[c].dtype for c in ("red", "green", "blue")}
         scale = _BY_TYPE.get(kind.pop()) if len(kind) == 1 else None
-        rgb = (linear_colours([v[c] for c in ("red", "green", "blue")], int(scale)) if scale is not None
-               else srgb_to_linear(_unit_colours(path, v, ("red", "green", "blue"))))
-        alpha = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else np.ones(n, np.float32)
-        colours = np.column_stack([rgb, alpha]).astype(np.float32)
+        colours = np.empty((n, 4), np.float32)  # filled in place: no (N,4) temporaries
+        if scale is not None:
+            lut = _srgb_table(int(scale))
+            for i, c in enumerate(("red", "green", "blue")):
+                colours[:, i] = lut[v[c]]
+        else:
+            colours[:, :3] = srgb_to_linear(_unit_colours(path, v, ("red", "green", "blue")))
+        colours[:, 3] = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else 1.0
 
     normals = None
-    if {"nx", "ny", "nz"} <= names:
-        normals = _columns(v, ("nx", "ny", "nz"))
+    if {"nx", "ny", "nz"} <= names:  # float32 is enough for a direction (make_cloud makes it unit)
+        normals = _columns(v, ("nx", "ny", "nz"), np.float32)
     ignored = [p.name for p in ply["vertex"].properties if p.name not in _KNOWN_PROPERTIES]
     notes = [f"vertex properties ignored (not a splat's): {', '.join(ignored)}"] if ignored else []
     return make_cloud(path, pos, normals, colours, radii, drop_non_finite=True, notes=notes)
@@ -295,9 +299,9 @@ def read_ply(path: str) -> PointCloud:
 _KNOWN_PROPERTIES = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "radius"}
 
 
-def _columns(v, names) -> np.ndarray:
-    """(N, len(names)) float64 from fields of a structured array, converted in one pass."""
-    out = np.empty((len(v), len(names)))
+def _columns(v, names, dtype=np.float64) -> np.ndarray:
+    """(N, len(names)) float64 (or dtype) from fields of a structured array, converted in one pass."""
+    out = np.empty((len(v), len(names)), dtype)
     for i, name in enumerate(names):
         out[:, i] = v[name]
     return out
@@ -323,13 +327,18 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     if normals is not None:
         # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
         # point is dropped and counted, never rendered with a garbage orientation.
-        nrm = np.asarray(normals, dtype=np.float64)
-        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm))  # np.linalg.norm: 5x slower at 10M
+        # In float64 for the length (a float32 normal of 1e-30 squares to 0, of 1e30 to inf),
+        # the result in the caller's precision (float32 from files: no float64 copy).
+        nrm = np.asarray(normals)
+        if nrm.dtype != np.float32:
+            nrm = nrm.astype(np.float64)
+        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm, dtype=np.float64))  # np.linalg.norm: 5x slower at 10M
         ok = np.isfinite(length) & (length > 0)
         dropped = int((keep & ~ok).sum())
         if not (ok & keep).any():
             raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-        nrm = nrm / np.where(ok, length, 1.0)[:, None]
+        # by the reciprocal: a float32 length can overflow (5e38), its reciprocal cannot
+        nrm = nrm * (1.0 / np.where(ok, length, 1.0)).astype(nrm.dtype)[:, None]
         keep &= ok
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
