@@ -304,6 +304,13 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
 
 namespace {
 
+// The index of the lowest set bit of v != 0.
+inline int ctz64(uint64_t v) {
+    int i = 0;
+    while (!(v & 1u)) v >>= 1, ++i;  // portable (MSVC-free Zig builds have __builtin_ctzll too, but
+    return i;                        // this loop runs for the few candidate circles only)
+}
+
 // A monotonic stand-in for atan2(y, x) mapped to [0, 2 pi): in [0, 4), no trigonometry
 // (the "diamond angle"). Sorting by it orders vectors around the origin as the angle does.
 inline double pseudo_angle(double x, double y) {
@@ -340,30 +347,43 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
     }
     std::sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
     double best = spacing;
-    const double lo = spacing, hi = double(hole) * spacing;
-    for (int i = 0; i < m; ++i) {
-        const int a = order[i], b = order[(i + 1) % m];
-        // Circumcentre of (0, 0), (x_a, y_a), (x_b, y_b); collinear triples have none.
-        const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
-        if (d == 0.0) continue;
-        const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
-        const double nx = y[b] * sa - y[a] * sb, ny = x[a] * sb - x[b] * sa;  // the centre is (nx, ny) / d
-        // r = |(nx, ny)| / |d| compared without dividing or a square root (most circles fail
-        // here: the divisions and roots were most of this function's time).
-        const double r2d2 = nx * nx + ny * ny, d2 = d * d;
-        if (!(r2d2 > lo * lo * d2 && r2d2 <= hi * hi * d2 && r2d2 > best * best * d2)) continue;
-        const double cx = nx / d, cy = ny / d, r = std::sqrt(cx * cx + cy * cy);
-        // The angular gap from a to b, counter-clockwise in [0, 2 pi) (the last pair wraps
-        // round); only for the few circles that would raise the radius.
-        double gap = std::atan2(d, 2.0 * (x[a] * x[b] + y[a] * y[b]));
-        if (gap < 0.0) gap += 2.0 * M_PI;
-        if (!(gap < max_gap)) continue;
-        // Empty: no neighbour strictly inside (1e-4: the two on the circle, in rounding).
-        const double inner = r * (1.0 - 1e-4);
-        bool empty = true;
-        for (int j = 0; j < m && empty; ++j)
-            empty = !((cx - x[j]) * (cx - x[j]) + (cy - y[j]) * (cy - y[j]) < inner * inner);
-        if (empty) best = r;
+    const double lo2 = double(spacing) * spacing, hi2 = lo2 * double(hole) * hole;
+    // Pairs in blocks of 64: first which of them have a circle within the spacing band, in a
+    // loop without branches (whether one does is unpredictable: mispredictions were most of
+    // this function's time), then only those few are solved and tested.
+    for (int first = 0; first < m; first += 64) {
+        const int last = std::min(m, first + 64);
+        uint64_t band = 0;
+        for (int i = first; i < last; ++i) {
+            const int a = order[i], b = order[i + 1 < m ? i + 1 : 0];
+            // Circumcentre of (0, 0), (x_a, y_a), (x_b, y_b) is (nx, ny) / d; collinear
+            // triples (d = 0) have none. r^2 = (nx^2 + ny^2) / d^2, compared without dividing.
+            const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
+            const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
+            const double nx = y[b] * sa - y[a] * sb, ny = x[a] * sb - x[b] * sa;
+            const double r2d2 = nx * nx + ny * ny, d2 = d * d;
+            band |= uint64_t((d != 0.0) & (r2d2 > lo2 * d2) & (r2d2 <= hi2 * d2)) << (i - first);
+        }
+        for (; band; band &= band - 1) {
+            const int i = first + ctz64(band);
+            const int a = order[i], b = order[i + 1 < m ? i + 1 : 0];
+            const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
+            const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
+            const double cx = (y[b] * sa - y[a] * sb) / d, cy = (x[a] * sb - x[b] * sa) / d;
+            const double r = std::sqrt(cx * cx + cy * cy);
+            if (!(r > best)) continue;
+            // The angular gap from a to b, counter-clockwise in [0, 2 pi) (the last pair wraps
+            // round).
+            double gap = std::atan2(d, 2.0 * (x[a] * x[b] + y[a] * y[b]));
+            if (gap < 0.0) gap += 2.0 * M_PI;
+            if (!(gap < max_gap)) continue;
+            // Empty: no neighbour strictly inside (1e-4: the two on the circle, in rounding).
+            const double inner = r * (1.0 - 1e-4);
+            bool empty = true;
+            for (int j = 0; j < m && empty; ++j)
+                empty = !((cx - x[j]) * (cx - x[j]) + (cy - y[j]) * (cy - y[j]) < inner * inner);
+            if (empty) best = r;
+        }
     }
     return float(best);
 }
