@@ -197,6 +197,30 @@ struct Node {
     bool leaf() const { return p.kind == Plan::kLeaf; }
 };
 
+// A subtree's wide nodes while it is built: a Buffer of its own pages (they go back to the
+// system when freed, whichever thread allocated them: see buffer.h) that doubles when
+// full, its elements left uninitialised until written.
+class NodeArray {
+    Buffer<WideNode> buf_;
+    size_t size_ = 0;
+
+  public:
+    NodeArray() = default;
+    explicit NodeArray(size_t reserve) : buf_(reserve, true) {}
+    size_t size() const { return size_; }
+    WideNode &operator[](size_t i) { return buf_[i]; }
+    const WideNode *begin() const { return buf_.data(); }
+    const WideNode *end() const { return buf_.data() + size_; }
+    uint32_t push() {  // the index of a new, unwritten node
+        if (size_ == buf_.size()) {
+            Buffer<WideNode> bigger(std::max<size_t>(16, 2 * size_), true);
+            std::copy(begin(), end(), bigger.begin());
+            buf_ = std::move(bigger);
+        }
+        return uint32_t(size_++);
+    }
+};
+
 struct Builder {
     BuildPrim *prims;
 
@@ -401,13 +425,12 @@ struct Builder {
     // hand_off(child, node, lane) returns true is left to the caller (its lane is then
     // kNoChild until the caller links it).
     template <class HandOff>
-    void build_subtree(const Node &root, std::vector<WideNode> &out, HandOff &&hand_off) {
+    void build_subtree(const Node &root, NodeArray &out, HandOff &&hand_off) {
         struct Job {
             Node nd;
             uint32_t w;
         };
-        std::vector<Job> todo{{root, uint32_t(out.size())}};
-        out.emplace_back();
+        std::vector<Job> todo{{root, out.push()}};
         Node kids[4];
         while (!todo.empty()) {
             const Job j = todo.back();
@@ -415,8 +438,7 @@ struct Builder {
             const int n = open(j.nd, kids, 1);
             const WideNode w = wide(kids, n, [&](int k) {
                 if (hand_off(kids[k], j.w, k)) return kNoChild;
-                const uint32_t i = uint32_t(out.size());
-                out.emplace_back();
+                const uint32_t i = out.push();
                 todo.push_back({kids[k], i});
                 return i;
             });
@@ -609,8 +631,7 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
         return;
     }
     if (threads <= 1 || n <= kParallelThreshold) {
-        std::vector<WideNode> out;
-        out.reserve(nodes_expected(n));
+        NodeArray out(nodes_expected(n));
         b.build_subtree(root, out, [](const Node &, uint32_t, int) { return false; });
         nodes.allocate(out.size());
         std::copy(out.begin(), out.end(), nodes.begin());
@@ -633,7 +654,7 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
         size_t parent;  // the subtree whose array holds the wide node above (kTop: `top`)
         uint32_t w;     // that wide node, and its lane that points here
         int lane;
-        std::vector<WideNode> out;
+        NodeArray out;
         std::vector<size_t> handed;  // the subtrees this one handed off, in order
     };
     constexpr size_t kTop = ~size_t(0);
@@ -682,7 +703,7 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
                 t = &subtrees[id];
             }
             try {
-                t->out.reserve(nodes_expected(t->root.r.count()));
+                t->out = NodeArray(nodes_expected(t->root.r.count()));
                 b.build_subtree(t->root, t->out, [&](const Node &kid, uint32_t w, int lane) {
                     if (kid.r.count() <= grain) return false;
                     std::lock_guard<std::mutex> lock(mutex);
@@ -735,7 +756,7 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
                     if (w.count[l] == 0 && w.child[l] != kNoChild) dst->child[l] += shift;
                 ++dst;
             }
-            std::vector<WideNode>().swap(subtrees[i].out);  // freed as soon as copied
+            subtrees[i].out = NodeArray();  // freed as soon as copied
         },
         [](size_t) { return true; });
 }
