@@ -1,19 +1,31 @@
 // Binned SAH BVH construction (Wald 2007, "On fast construction of SAH-based bounding
-// volume hierarchies"), written in the spirit of tinybvh: one flat node array, 16 bins
-// per axis, leaves when splitting no longer pays.
+// volume hierarchies"), written in the spirit of tinybvh: 16 bins per axis, leaves when
+// splitting no longer pays; the 4-wide nodes made directly, without a binary tree.
 //
-// Two passes per node: one bins the centroids (SSE where there is SSE2), the bins then give
-// both children's boxes; one partitions the records (without a branch) and gathers both
-// children's centroid bounds on the way. Parallel in two phases: the top levels are
-// split one node at a time with the binning spread over every thread, until no subtree
-// holds more than a share of the primitives; those subtrees are then built each on one
-// thread, largest first, pulled from a shared counter (parallel_for).
+// Each binary node is planned (its records binned, SSE where there is SSE2: the bins give
+// the SAH plane and both children's boxes) and, when it is not a leaf, partitioned (without
+// a branch, both children's centroid bounds gathered on the way). A wide node takes its
+// node's two children and splits the largest (by surface area) that is not a leaf until
+// it has four -- the rule the old collapse of a binary tree applied, so the tree is the
+// same; made directly it spares writing the binary nodes and reading them back out of
+// cache (0.15-0.3 s of a 10M build).
+//
+// Parallel in two phases: the top wide nodes (on two threads only the root's) are made
+// one at a time with the binning and the partitioning of each split spread over every
+// thread; their children are then built as subtrees, each on one thread, into its own
+// array, a child of more than a grain of records handed off as a subtree of its own
+// (largest first to an idle thread). The arrays are copied into one at the end, in an
+// order that does not depend on which thread built what.
 #include "bvh.h"
 
 #include <algorithm>
-#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <queue>
 #include <system_error>
 #include <thread>
+#include <type_traits>
 #include <utility>
 
 #include "buffer.h"
@@ -32,12 +44,17 @@ constexpr int kBins = 16;  // at most; a node of n primitives uses min(kBins, n 
 constexpr float kCostTraversal = 3.0f;
 constexpr float kCostIntersect = 1.0f;
 constexpr uint32_t kMaxLeaf = 8;  // leaves never hold more, even when SAH would like it
-// Subtrees at most this large are built on one thread; larger nodes in the top phase.
+// Nodes of at most this many records are first checked against a lower bound of the SAH
+// cost of any split (Builder::plan): on the 2M torus it finds every leaf of 2-4 records, a
+// third of those of 5 and almost none above, and costs a few box areas.
+constexpr uint32_t kLeafBound = 5;
+// Trees of at most this many records are built on one thread; the least a subtree handed
+// to a thread holds (BVH::build).
 constexpr uint32_t kParallelThreshold = 1u << 15;
 // Nodes above this many primitives are binned by every thread at once (top phase).
 constexpr uint32_t kParallelBinning = 1u << 17;
 // Nodes above this many primitives are binned along their widest axis only (see
-// Builder::split; on the 2M torus: 15 % off the build, 1-3 % more nodes entered).
+// Builder::plan; on the 2M torus: 15 % off the build, 1-3 % more nodes entered).
 constexpr uint32_t kAllAxes = 256;
 
 inline F4 lo_of(const BuildPrim &p) { return F4::load(p.lo); }
@@ -66,9 +83,10 @@ AABB to_aabb(F4 lo, F4 hi) {
 
 // A node's range of records and what the builder knows of it.
 struct Range {
-    uint32_t node, begin, end;
+    uint32_t begin, end;
     F4 clo, chi;  // centroid bounds
-    int depth;
+    AABB box;     // the node's box (its parent's bins give it exactly)
+    int depth;    // in binary splits from the root
     uint32_t count() const { return end - begin; }
 };
 
@@ -101,17 +119,12 @@ struct Bins {
     void fill(const BuildPrim *p, uint32_t n, const Binner &bn, int bins, int axis) {
         used = bins;
         clear();
+        if (axis >= 0) return fill_axis(p, n, bn, axis);
         const F4 half = F4::broadcast(0.5f);
         for (uint32_t i = 0; i < n; ++i) {
             const F4 l = lo_of(p[i]), h = hi_of(p[i]);
             int32_t b[4];
             bn.of(l * half + h * half, b);
-            if (axis >= 0) {
-                cnt[axis][b[axis]]++;
-                lo[axis][b[axis]] = min4(lo[axis][b[axis]], l);
-                hi[axis][b[axis]] = max4(hi[axis][b[axis]], h);
-                continue;
-            }
             for (int a = 0; a < 3; ++a) {
                 cnt[a][b[a]]++;
                 lo[a][b[a]] = min4(lo[a][b[a]], l);
@@ -119,19 +132,97 @@ struct Bins {
             }
         }
     }
+
+    // Along one axis, in two sets of bins (even and odd records) merged at the end:
+    // neighbouring records mostly fall in the same bin, and with one set each record's
+    // min/max waited for the previous record's through memory (one set: 10 % slower
+    // builds of the 2M torus on one thread).
+    void fill_axis(const BuildPrim *p, uint32_t n, const Binner &bn, int axis) {
+        F4 l2[2][kBins], h2[2][kBins];
+        uint32_t c2[2][kBins];
+        for (int s = 0; s < 2; ++s)
+            for (int b = 0; b < used; ++b)
+                l2[s][b] = F4::broadcast(kInfinity), h2[s][b] = F4::broadcast(-kInfinity), c2[s][b] = 0;
+        auto run = [&](auto bin_of) {
+            auto add_one = [&](int s, const BuildPrim &q) {
+                const F4 l = lo_of(q), h = hi_of(q);
+                const int k = bin_of(l, h);
+                c2[s][k]++, l2[s][k] = min4(l2[s][k], l), h2[s][k] = max4(h2[s][k], h);
+            };
+            uint32_t i = 0;
+            for (; i + 1 < n; i += 2) add_one(0, p[i]), add_one(1, p[i + 1]);
+            if (i < n) add_one(0, p[i]);
+        };
+        const F4 half = F4::broadcast(0.5f);
+#ifdef SPLAT_SSE2
+        // The bin taken from its lane in a register (a fixed lane per loop) instead of the
+        // four stored and one loaded back.
+        auto lane = [&](auto axis_c) {
+            run([&](F4 l, F4 h) {
+                const __m128 x = min4(max4((l * half + h * half - bn.lo) * bn.scale, F4::broadcast(0.f)), bn.top).v;
+                constexpr int a = decltype(axis_c)::value;
+                return _mm_cvtsi128_si32(_mm_shuffle_epi32(_mm_cvttps_epi32(x), _MM_SHUFFLE(a, a, a, a)));
+            });
+        };
+        if (axis == 0) lane(std::integral_constant<int, 0>{});
+        else if (axis == 1) lane(std::integral_constant<int, 1>{});
+        else lane(std::integral_constant<int, 2>{});
+#else
+        run([&](F4 l, F4 h) {
+            int32_t b[4];
+            bn.of(l * half + h * half, b);
+            return b[axis];
+        });
+#endif
+        for (int b = 0; b < used; ++b) {
+            lo[axis][b] = min4(l2[0][b], l2[1][b]), hi[axis][b] = max4(h2[0][b], h2[1][b]);
+            cnt[axis][b] = c2[0][b] + c2[1][b];
+        }
+    }
+};
+
+// How a node is split, decided from its bins before its records are partitioned: the
+// wide node above it needs to know whether it is a leaf (and its box) before opening it.
+struct Plan {
+    enum Kind { kLeaf, kSah, kMedian } kind = kLeaf;
+    int axis = 0, bin = 0;  // SAH: records whose bin along axis is at most `bin` go left
+    Binner bn{};
+    AABB lbox, rbox;  // SAH: the children's boxes, from the bins
+};
+
+// A node of the binary tree the SAH splits describe (never stored): a range and its plan.
+struct Node {
+    Range r;
+    Plan p;
+    bool leaf() const { return p.kind == Plan::kLeaf; }
+};
+
+// A subtree's wide nodes while it is built: a Buffer of its own pages (they go back to the
+// system when freed, whichever thread allocated them: see buffer.h) that doubles when
+// full, its elements left uninitialised until written.
+class NodeArray {
+    Buffer<WideNode> buf_;
+    size_t size_ = 0;
+
+  public:
+    NodeArray() = default;
+    explicit NodeArray(size_t reserve) : buf_(reserve, true) {}
+    size_t size() const { return size_; }
+    WideNode &operator[](size_t i) { return buf_[i]; }
+    const WideNode *begin() const { return buf_.data(); }
+    const WideNode *end() const { return buf_.data() + size_; }
+    uint32_t push() {  // the index of a new, unwritten node
+        if (size_ == buf_.size()) {
+            Buffer<WideNode> bigger(std::max<size_t>(16, 2 * size_), true);
+            std::copy(begin(), end(), bigger.begin());
+            buf_ = std::move(bigger);
+        }
+        return uint32_t(size_++);
+    }
 };
 
 struct Builder {
     BuildPrim *prims;
-    BVHNode *nodes;  // room for 2n - 1, written as they are made (see BVH::build)
-    std::atomic<uint32_t> used{1};
-
-    Builder(BuildPrim *p, BVHNode *n) : prims(p), nodes(n) {}
-
-    void make_leaf(const Range &r) {
-        nodes[r.node].first = r.begin;
-        nodes[r.node].count = r.count();
-    }
 
     // job(t) for t in [0, threads): on threads of their own, this one doing job(0) and the
     // jobs of any thread the system refused.
@@ -165,15 +256,25 @@ struct Builder {
         for (int k = 1; k < threads; ++k) out.add(part[k]);
     }
 
-    // Splits r into two children (allocated here), or makes it a leaf: returns false then.
-    bool split(const Range &r, Range &left, Range &right, int threads) {
+    // Bins r and decides: a leaf, an SAH split (with both children's boxes), or a median
+    // split when SAH finds no plane (all centroids coincide) or the tree is too deep.
+    Node plan(const Range &r, int threads) {
+        Node nd{r, Plan{}};
+        Plan &p = nd.p;
         const uint32_t count = r.count();
-        BVHNode &node = nodes[r.node];
-        if (count <= 1) return make_leaf(r), false;
-        AABB lbox, rbox;
-        uint32_t mid = r.begin;
-        bool have = false;
-        F4 llo = F4::broadcast(kInfinity), lhi = F4::broadcast(-kInfinity), rlo = llo, rhi = lhi;
+        if (count <= 1) return nd;
+        if (count <= kLeafBound) {
+            // No split costs less than count records of the smallest record box: a node
+            // whose smallest box is large enough next to its own is a leaf whatever the
+            // bins say, and is not binned (the relative margin covers the float rounding
+            // of the SAH's own sums, so that the bins could never have said otherwise).
+            const float area = r.box.half_area();
+            float smallest = kInfinity;
+            for (uint32_t i = r.begin; i < r.end; ++i)
+                smallest = std::min(smallest, half_area4(lo_of(prims[i]), hi_of(prims[i])));
+            const double bound = kCostTraversal + kCostIntersect * double(count) * smallest / area * (1.0 - 1e-5);
+            if (area > 0.f && bound >= kCostIntersect * double(count)) return nd;
+        }
         if (r.depth < kSahMaxDepth) {
             // Small nodes get fewer bins: sweeping 16 mostly empty bins per axis cost more
             // than the binning itself in the lower levels of the tree (count / 2 + 3
@@ -224,54 +325,140 @@ struct Builder {
                 }
             }
             if (best_axis >= 0) {
-                const float parent_area = node.box.half_area();
+                const float parent_area = r.box.half_area();
                 const float split_cost = kCostTraversal + kCostIntersect * best_cost / parent_area;
                 const float leaf_cost = kCostIntersect * count;
-                if (split_cost >= leaf_cost && count <= kMaxLeaf) return make_leaf(r), false;
+                if (split_cost >= leaf_cost && count <= kMaxLeaf) return nd;
                 F4 alo = F4::broadcast(kInfinity), ahi = F4::broadcast(-kInfinity);
                 F4 blo = alo, bhi = ahi;
                 for (int b = 0; b < bins; ++b) {
                     if (b <= best_bin) alo = min4(alo, bs.lo[best_axis][b]), ahi = max4(ahi, bs.hi[best_axis][b]);
                     else blo = min4(blo, bs.lo[best_axis][b]), bhi = max4(bhi, bs.hi[best_axis][b]);
                 }
-                lbox = to_aabb(alo, ahi), rbox = to_aabb(blo, bhi);
-                mid = partition(r, bn, best_axis, best_bin, llo, lhi, rlo, rhi, threads);
-                have = true;
+                p.kind = Plan::kSah, p.axis = best_axis, p.bin = best_bin, p.bn = bn;
+                p.lbox = to_aabb(alo, ahi), p.rbox = to_aabb(blo, bhi);
+                return nd;
             }
         }
-        if (!have) {  // all centroids coincide, or too deep for SAH
-            if (count <= kMaxLeaf) return make_leaf(r), false;
+        if (count > kMaxLeaf) p.kind = Plan::kMedian;
+        return nd;
+    }
+
+    // Partitions a node that is not a leaf as its plan says, into its two children.
+    void split(const Node &nd, Range &left, Range &right, int threads) {
+        const Range &r = nd.r;
+        F4 llo = F4::broadcast(kInfinity), lhi = F4::broadcast(-kInfinity), rlo = llo, rhi = lhi;
+        uint32_t mid;
+        AABB lbox, rbox;
+        if (nd.p.kind == Plan::kSah) {
+            mid = partition(r, nd.p.bn, nd.p.axis, nd.p.bin, llo, lhi, rlo, rhi, threads);
+            lbox = nd.p.lbox, rbox = nd.p.rbox;
+        } else {  // median
             const AABB cb = to_aabb(r.clo, r.chi);
             const Vec3 e = cb.extent();
             const int axis = (e.x >= e.y && e.x >= e.z) ? 0 : (e.y >= e.z ? 1 : 2);
-            mid = r.begin + count / 2;
+            mid = r.begin + r.count() / 2;
             std::nth_element(prims + r.begin, prims + mid, prims + r.end,
                              [axis](const BuildPrim &a, const BuildPrim &b) {
                                  return a.lo[axis] * 0.5f + a.hi[axis] * 0.5f < b.lo[axis] * 0.5f + b.hi[axis] * 0.5f;
                              });
             F4 blo = F4::broadcast(kInfinity), bhi = F4::broadcast(-kInfinity), alo = blo, ahi = bhi;
             for (uint32_t i = r.begin; i < r.end; ++i) {
-                const BuildPrim &p = prims[i];
-                const F4 c = centroid_of(p);
-                if (i < mid) alo = min4(alo, lo_of(p)), ahi = max4(ahi, hi_of(p)), llo = min4(llo, c), lhi = max4(lhi, c);
-                else blo = min4(blo, lo_of(p)), bhi = max4(bhi, hi_of(p)), rlo = min4(rlo, c), rhi = max4(rhi, c);
+                const BuildPrim &q = prims[i];
+                const F4 c = centroid_of(q);
+                if (i < mid) alo = min4(alo, lo_of(q)), ahi = max4(ahi, hi_of(q)), llo = min4(llo, c), lhi = max4(lhi, c);
+                else blo = min4(blo, lo_of(q)), bhi = max4(bhi, hi_of(q)), rlo = min4(rlo, c), rhi = max4(rhi, c);
             }
             lbox = to_aabb(alo, ahi), rbox = to_aabb(blo, bhi);
         }
-        const uint32_t l = used.fetch_add(2);
-        node.first = l;
-        node.count = 0;
-        nodes[l].box = lbox;
-        nodes[l + 1].box = rbox;
-        left = Range{l, r.begin, mid, llo, lhi, r.depth + 1};
-        right = Range{l + 1, mid, r.end, rlo, rhi, r.depth + 1};
-        return true;
+        left = Range{r.begin, mid, llo, lhi, lbox, r.depth + 1};
+        right = Range{mid, r.end, rlo, rhi, rbox, r.depth + 1};
+    }
+
+    // The children of the wide node made from `nd` (not a leaf): its two children, then
+    // the largest (by surface area) of them that is not a leaf opened into its own two,
+    // until there are four. Each child is planned as it is made, so that whether it is a
+    // leaf is known before the choice. What a wide node holds depends only on its own
+    // records: the same tree whichever thread builds it.
+    int open(const Node &nd, Node kids[4], int threads) {
+        auto area_of = [](const Node &k) { return k.leaf() ? -1.f : k.r.box.half_area(); };
+        Range a, b;
+        split(nd, a, b, threads);
+        kids[0] = plan(a, threads), kids[1] = plan(b, threads);
+        float area[4] = {area_of(kids[0]), area_of(kids[1])};
+        int n = 2;
+        while (n < 4) {
+            int o = -1;
+            float largest = -1.f;
+            for (int k = 0; k < n; ++k)
+                if (area[k] > largest) o = k, largest = area[k];
+            if (o < 0) break;
+            split(kids[o], a, b, threads);
+            kids[o] = plan(a, threads), area[o] = area_of(kids[o]);
+            kids[n] = plan(b, threads), area[n] = area_of(kids[n]), ++n;
+        }
+        return n;
+    }
+
+    // The wide node over `kids`; inner(k) gives the index of the wide node kid k (not a
+    // leaf) becomes.
+    template <class Inner>
+    static WideNode wide(const Node *kids, int n, Inner &&inner) {
+        WideNode w;
+        for (int k = 0; k < 4; ++k) {
+            if (k >= n) {
+                for (int a = 0; a < 3; ++a) w.box[2 * a][k] = kInfinity, w.box[2 * a + 1][k] = -kInfinity;
+                w.child[k] = kNoChild, w.count[k] = 0;
+                continue;
+            }
+            const Range &r = kids[k].r;
+            for (int a = 0; a < 3; ++a) w.box[2 * a][k] = r.box.lo[a], w.box[2 * a + 1][k] = r.box.hi[a];
+            if (kids[k].leaf()) w.child[k] = r.begin, w.count[k] = r.count();
+            else w.child[k] = inner(k), w.count[k] = 0;
+        }
+        return w;
+    }
+
+    // The wide subtree of `root` (not a leaf) on this thread, depth first, into `out`
+    // (root first; child indices relative to out[0]). Siblings are made next to each
+    // other, and the last sibling's subtree is built first. A child for which
+    // hand_off(child, node, lane) returns true is left to the caller (its lane is then
+    // kNoChild until the caller links it).
+    template <class HandOff>
+    void build_subtree(const Node &root, NodeArray &out, HandOff &&hand_off) {
+        struct Job {
+            Node nd;
+            uint32_t w;
+        };
+        std::vector<Job> todo{{root, out.push()}};
+        Node kids[4];
+        while (!todo.empty()) {
+            const Job j = todo.back();
+            todo.pop_back();
+            const int n = open(j.nd, kids, 1);
+            const WideNode w = wide(kids, n, [&](int k) {
+                if (hand_off(kids[k], j.w, k)) return kNoChild;
+                const uint32_t i = out.push();
+                todo.push_back({kids[k], i});
+                return i;
+            });
+            out[j.w] = w;
+        }
     }
 
     // Records whose bin along `axis` is at most `best` first; both sides' centroid bounds
     // gathered on the way. Returns the partition point.
     uint32_t partition(uint32_t begin, uint32_t end, const Binner &bn, int axis, int best, F4 &llo, F4 &lhi, F4 &rlo,
                        F4 &rhi) {
+#ifdef SPLAT_SSE2
+        // The axis as a template argument: the bin compared in its lane, no store and
+        // reload of the four bins (the loop below is the build's hottest).
+        switch (axis) {
+            case 0: return partition_sse<0>(begin, end, bn, best, llo, lhi, rlo, rhi);
+            case 1: return partition_sse<1>(begin, end, bn, best, llo, lhi, rlo, rhi);
+            default: return partition_sse<2>(begin, end, bn, best, llo, lhi, rlo, rhi);
+        }
+#endif
         // Branchless (Lomuto, swapping every record): [begin, k) goes left, [k, i) right.
         // A two-sided (Hoare) partition branched per record and mispredicted about every
         // other time: this one took a third off a 10M build.
@@ -292,6 +479,39 @@ struct Builder {
         }
         return k;
     }
+
+#ifdef SPLAT_SSE2
+    // partition() along Axis with SSE2 masks: the same bins as Binner::of (the same
+    // operations in the same order), the same records moved, the same bounds.
+    template <int Axis>
+    uint32_t partition_sse(uint32_t begin, uint32_t end, const Binner &bn, int best, F4 &llo, F4 &lhi, F4 &rlo,
+                           F4 &rhi) {
+        BuildPrim *p = prims;
+        uint32_t k = begin;
+        const __m128 inf = _mm_set1_ps(kInfinity), ninf = _mm_set1_ps(-kInfinity), zero = _mm_setzero_ps();
+        const __m128i last_left = _mm_set1_epi32(best);
+        __m128 a = llo.v, b = lhi.v, c = rlo.v, d = rhi.v;
+        for (uint32_t i = begin; i < end; ++i) {
+            const BuildPrim q = p[i];
+            const __m128 cen = centroid_of(q).v;
+            const __m128i bins = _mm_cvttps_epi32(
+                _mm_min_ps(_mm_max_ps(_mm_mul_ps(_mm_sub_ps(cen, bn.lo.v), bn.scale.v), zero), bn.top.v));
+            // All ones where the record goes right.
+            const __m128 right = _mm_castsi128_ps(
+                _mm_shuffle_epi32(_mm_cmpgt_epi32(bins, last_left), _MM_SHUFFLE(Axis, Axis, Axis, Axis)));
+            const __m128 on_left = _mm_andnot_ps(right, cen), on_right = _mm_and_ps(right, cen);
+            a = _mm_min_ps(a, _mm_or_ps(on_left, _mm_and_ps(right, inf)));
+            b = _mm_max_ps(b, _mm_or_ps(on_left, _mm_and_ps(right, ninf)));
+            c = _mm_min_ps(c, _mm_or_ps(on_right, _mm_andnot_ps(right, inf)));
+            d = _mm_max_ps(d, _mm_or_ps(on_right, _mm_andnot_ps(right, ninf)));
+            p[i] = p[k];
+            p[k] = q;
+            k += uint32_t(1 + _mm_cvtsi128_si32(_mm_castps_si128(right)));  // -1 when right
+        }
+        llo = a, lhi = b, rlo = c, rhi = d;
+        return k;
+    }
+#endif
 
     // Nodes above kParallelBinning records: kSlices slices partitioned apart (on up to
     // `threads` threads), then the records on the wrong side of the overall partition point
@@ -323,34 +543,41 @@ struct Builder {
             llo = min4(llo, sl.llo), lhi = max4(lhi, sl.lhi), rlo = min4(rlo, sl.rlo), rhi = max4(rhi, sl.rhi);
         }
         // Right-goers before mid are the slices' right parts there, left-goers from mid on
-        // their left parts there: as many of each.
-        size_t a = 0, b = 0;
-        uint32_t i = slice[0].mid, j = 0;
-        auto next_wrong_right = [&]() -> bool {  // i: next right-goer before mid
-            for (;;) {
-                if (a == slice.size() || slice[a].mid >= mid) return false;
-                if (i < std::min(slice[a].end, mid)) return true;
-                if (++a < slice.size()) i = slice[a].mid;
-            }
+        // their left parts there: as many of each. The k-th of the one swaps with the k-th
+        // of the other, the k split among the threads (this pass alone took a seventh of
+        // the top phase on one thread while the other waited).
+        struct Span {
+            uint32_t at, len;
         };
-        auto next_wrong_left = [&]() -> bool {  // j: next left-goer from mid on
-            for (;;) {
-                if (b == slice.size()) return false;
-                const uint32_t lo = std::max(slice[b].begin, mid);
-                if (j < lo) j = lo;
-                if (j < slice[b].mid) return true;
-                ++b;
-            }
+        std::vector<Span> wrong_right, wrong_left;
+        uint64_t wrong = 0;
+        for (const Slice &sl : slice) {
+            const uint32_t e = std::min(sl.end, mid), lo = std::max(sl.begin, mid);
+            if (sl.mid < e) wrong_right.push_back({sl.mid, e - sl.mid}), wrong += e - sl.mid;
+            if (lo < sl.mid) wrong_left.push_back({lo, sl.mid - lo});
+        }
+        // The span and offset of the k-th misplaced record of a list.
+        auto locate = [](const std::vector<Span> &spans, uint64_t k, size_t &span, uint32_t &off) {
+            for (span = 0; span < spans.size() && k >= spans[span].len; ++span) k -= spans[span].len;
+            off = uint32_t(k);
         };
-        while (next_wrong_right() && next_wrong_left()) std::swap(prims[i++], prims[j++]);
+        on_threads(wrong < kParallelBinning ? 1 : workers, [&](int w) {
+            const int parts = wrong < kParallelBinning ? 1 : workers;
+            const uint64_t k0 = wrong * w / parts, k1 = wrong * (w + 1) / parts;
+            size_t x, y;
+            uint32_t ox, oy;
+            locate(wrong_right, k0, x, ox), locate(wrong_left, k0, y, oy);
+            for (uint64_t k = k0; k < k1;) {
+                const uint32_t run = uint32_t(std::min<uint64_t>(
+                    {uint64_t(wrong_right[x].len - ox), uint64_t(wrong_left[y].len - oy), k1 - k}));
+                BuildPrim *p = prims + wrong_right[x].at + ox;
+                std::swap_ranges(p, p + run, prims + wrong_left[y].at + oy);
+                k += run, ox += run, oy += run;
+                if (ox == wrong_right[x].len) ++x, ox = 0;
+                if (oy == wrong_left[y].len) ++y, oy = 0;
+            }
+        });
         return mid;
-    }
-
-    void build_subtree(const Range &r) {
-        Range left, right;
-        if (!split(r, left, right, 1)) return;
-        build_subtree(left);
-        build_subtree(right);
     }
 };
 
@@ -368,130 +595,11 @@ int depth_of(const Buffer<WideNode> &nodes) {
     return deepest;
 }
 
-// The binary tree as 4-wide nodes: each takes the children of a binary node and opens
-// the largest (by surface area) of them that is not a leaf until it holds four. What a wide
-// node holds depends only on its binary node's subtree, so subtrees can be collapsed apart.
-struct Collapse {
-    const BVHNode *bin;
-    struct Todo {
-        uint32_t b, w;  // binary node, index of the wide node made from it
-    };
-
-    // The (up to four) binary nodes that become binary node b's wide node's children.
-    int kids_of(uint32_t b, uint32_t kids[4]) const {
-        kids[0] = bin[b].first, kids[1] = bin[b].first + 1;
-        // Area of each kid that can be opened (-1: a leaf), computed once.
-        auto area_of = [&](uint32_t i) { return bin[i].leaf() ? -1.f : bin[i].box.half_area(); };
-        float area[4] = {area_of(kids[0]), area_of(kids[1])};
-        int n = 2;
-        while (n < 4) {
-            int open = -1;
-            float largest = -1.f;
-            for (int k = 0; k < n; ++k)
-                if (area[k] > largest) open = k, largest = area[k];
-            if (open < 0) break;
-            const uint32_t first = bin[kids[open]].first;
-            kids[open] = first, area[open] = area_of(first);
-            kids[n] = first + 1, area[n] = area_of(first + 1), ++n;
-        }
-        return n;
-    }
-
-    // The wide node over `kids`; alloc() gives the index of each child wide node, which is
-    // queued in `todo`.
-    template <class Alloc>
-    WideNode make(const uint32_t *kids, int n, Alloc &&alloc, std::vector<Todo> &todo) const {
-        WideNode nd;
-        for (int k = 0; k < 4; ++k) {
-            if (k >= n) {
-                for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = kInfinity, nd.box[2 * a + 1][k] = -kInfinity;
-                nd.child[k] = kNoChild, nd.count[k] = 0;
-                continue;
-            }
-            const BVHNode &c = bin[kids[k]];
-            for (int a = 0; a < 3; ++a) nd.box[2 * a][k] = c.box.lo[a], nd.box[2 * a + 1][k] = c.box.hi[a];
-            if (c.leaf()) {
-                nd.child[k] = c.first, nd.count[k] = c.count;
-            } else {
-                nd.child[k] = alloc(), nd.count[k] = 0;
-                todo.push_back({kids[k], nd.child[k]});
-            }
-        }
-        return nd;
-    }
-
-    // Everything below the entries of `todo`, depth first: store(index, node) for each.
-    template <class Store, class Alloc>
-    void drain(std::vector<Todo> &todo, Store &&store, Alloc &&alloc) const {
-        uint32_t kids[4];
-        while (!todo.empty()) {
-            const Todo t = todo.back();
-            todo.pop_back();
-            store(t.w, make(kids, kids_of(t.b, kids), alloc, todo));
-        }
-    }
-
-    // How many wide nodes lie below binary node b's own.
-    size_t count_below(uint32_t b) const {
-        std::vector<uint32_t> stack{b};
-        size_t total = 0;
-        uint32_t kids[4];
-        while (!stack.empty()) {
-            const uint32_t i = stack.back();
-            stack.pop_back();
-            for (int k = 0, n = kids_of(i, kids); k < n; ++k)
-                if (!bin[kids[k]].leaf()) ++total, stack.push_back(kids[k]);
-        }
-        return total;
-    }
-};
-
-// On one thread, depth first. On more: the top breadth first until there are subtrees
-// enough for every thread; their sizes counted on the threads; then each written on a
-// thread straight into its place in the final array. The same nodes either way.
-void collapse(const BVHNode *bin, uint32_t used, Buffer<WideNode> &out, int threads) {
-    const Collapse c{bin};
-    std::vector<WideNode> top;
-    std::vector<Collapse::Todo> todo;
-    auto store_top = [&](uint32_t w, const WideNode &nd) { top[w] = nd; };
-    auto alloc_top = [&] { return top.emplace_back(), uint32_t(top.size() - 1); };
-    top.emplace_back();
-    if (bin[0].leaf()) {
-        const uint32_t root = 0;
-        top[0] = c.make(&root, 1, alloc_top, todo);
-    } else if (threads <= 1 || used < (1u << 16)) {
-        top.reserve(used / 2 + 1);  // at most one per interior binary node: only the pages used are touched
-        todo.push_back({0u, 0u});
-        c.drain(todo, store_top, alloc_top);
-    } else {
-        todo.push_back({0u, 0u});
-        size_t head = 0;
-        uint32_t kids[4];
-        while (head < todo.size() && todo.size() - head < size_t(16 * threads)) {
-            const Collapse::Todo t = todo[head++];
-            top[t.w] = c.make(kids, c.kids_of(t.b, kids), alloc_top, todo);
-        }
-        const std::vector<Collapse::Todo> roots(todo.begin() + head, todo.end());
-        std::vector<size_t> offset(roots.size() + 1);
-        parallel_for(roots.size(), threads, [&](size_t i) { offset[i + 1] = c.count_below(roots[i].b); },
-                     [](size_t) { return true; });
-        offset[0] = top.size();
-        for (size_t i = 0; i < roots.size(); ++i) offset[i + 1] += offset[i];
-        out.allocate(offset.back());
-        std::copy(top.begin(), top.end(), out.begin());
-        parallel_for(
-            roots.size(), threads,
-            [&](size_t i) {
-                uint32_t next = uint32_t(offset[i]);
-                std::vector<Collapse::Todo> st{roots[i]};
-                c.drain(st, [&](uint32_t w, const WideNode &nd) { out[w] = nd; }, [&] { return next++; });
-            },
-            [](size_t) { return true; });
-        return;
-    }
-    out.allocate(top.size());
-    std::copy(top.begin(), top.end(), out.begin());
-}
+// Wide nodes reserved for a subtree of `count` records, so that its vector is rarely
+// copied as it grows: the SAH's leaves hold ~5 records and a wide node up to 4 children,
+// ~0.105 nodes a record on the torus; an eighth leaves a little room. Reserved but unwritten
+// pages are never touched on Linux and macOS, but Windows commits them: not more.
+size_t nodes_expected(uint32_t count) { return count / 8 + 16; }
 
 }  // namespace
 
@@ -509,39 +617,148 @@ void BVH::build(BuildPrim *prims, size_t count, int threads) {
     nodes.release();
     prim_order.clear();
     if (n == 0) return;  // no nodes at all: traversals check for that
-    // Room for the most nodes a tree of n leaves can have, left uninitialised: the pages
-    // of the part never used (about half) are then never touched. The nodes used are
-    // copied out at the end.
-    Buffer<BVHNode> room(2 * size_t(n) - 1);
     F4 lo = F4::broadcast(kInfinity), hi = F4::broadcast(-kInfinity), clo = lo, chi = hi;
     for (uint32_t i = 0; i < n; ++i) {
         const BuildPrim &p = prims[i];
         const F4 c = centroid_of(p);
         lo = min4(lo, lo_of(p)), hi = max4(hi, hi_of(p)), clo = min4(clo, c), chi = max4(chi, c);
     }
-    room.data()[0].box = to_aabb(lo, hi);
-    Builder b(prims, room.data());
-    const Range root{0, 0, n, clo, chi, 0};
-    if (threads <= 1 || n <= kParallelThreshold) {
-        b.build_subtree(root);
-    } else {
-        // Top phase: split the largest open range until none holds more than a share of
-        // the primitives that keeps every thread busy to the end.
-        const uint32_t share = std::max(kParallelThreshold, n / uint32_t(4 * threads));
-        std::vector<Range> open{root}, ready;
-        while (!open.empty()) {
-            auto big = std::max_element(open.begin(), open.end(),
-                                        [](const Range &x, const Range &y) { return x.count() < y.count(); });
-            if (big->count() <= share) break;
-            const Range r = *big;
-            open.erase(big);
-            Range left, right;
-            if (b.split(r, left, right, threads)) open.push_back(left), open.push_back(right);
-        }
-        std::sort(open.begin(), open.end(), [](const Range &x, const Range &y) { return x.count() > y.count(); });
-        parallel_for(open.size(), threads, [&](size_t i) { b.build_subtree(open[i]); }, [](size_t) { return true; });
+    Builder b{prims};
+    const Node root = b.plan(Range{0, n, clo, chi, to_aabb(lo, hi), 0}, threads);
+    if (root.leaf()) {  // one leaf: node 0 holds it as its only child
+        nodes.allocate(1);
+        nodes[0] = Builder::wide(&root, 1, [](int) { return kNoChild; });
+        return;
     }
-    collapse(room.data(), b.used.load(), nodes, threads);
+    if (threads <= 1 || n <= kParallelThreshold) {
+        NodeArray out(nodes_expected(n));
+        b.build_subtree(root, out, [](const Node &, uint32_t, int) { return false; });
+        nodes.allocate(out.size());
+        std::copy(out.begin(), out.end(), nodes.begin());
+        return;
+    }
+    // Top phase: wide nodes over more than a thread's share of the records are made here,
+    // one at a time, the binning and partitioning of each split shared by the threads (on
+    // two threads only the root's: its four children are the first subtrees).
+    const uint32_t share = std::max(kParallelThreshold, n / uint32_t(threads));
+    // Subtrees: each built on one thread into its own array; a child of more than `grain`
+    // records met on the way is handed off as a subtree of its own, which an idle thread
+    // takes (largest first). Threads stay busy to the end (at most a subtree of `grain`
+    // records, ~1/32 of the work, left on one thread), and no level is split with the
+    // threads sharing it when its nodes could go to different threads. (The old binary top
+    // split until every subtree held at most n / 4t: up to four levels of shared splits,
+    // 0.2-0.3 s of a 10M build on two threads, and subtrees of uneven sizes.)
+    const uint32_t grain = std::max(kParallelThreshold, n / uint32_t(16 * threads));
+    struct Subtree {
+        Node root;
+        size_t parent;  // the subtree whose array holds the wide node above (kTop: `top`)
+        uint32_t w;     // that wide node, and its lane that points here
+        int lane;
+        NodeArray out;
+        std::vector<size_t> handed;  // the subtrees this one handed off, in order
+    };
+    constexpr size_t kTop = ~size_t(0);
+    std::vector<WideNode> top(1);
+    std::deque<Subtree> subtrees;  // grows while the threads run: references stay valid
+    std::vector<size_t> first;     // the subtrees under `top`, in order
+    {
+        struct Job {
+            Node nd;
+            uint32_t w;
+        };
+        std::vector<Job> queue{{root, 0}};
+        Node kids[4];
+        for (size_t head = 0; head < queue.size(); ++head) {
+            const Job j = queue[head];
+            const int m = b.open(j.nd, kids, threads);
+            top[j.w] = Builder::wide(kids, m, [&](int k) {
+                if (kids[k].r.count() <= share) {
+                    first.push_back(subtrees.size());
+                    subtrees.push_back({kids[k], kTop, j.w, k, {}, {}});
+                    return kNoChild;  // linked below, once the arrays before it are sized
+                }
+                top.emplace_back();
+                queue.push_back({kids[k], uint32_t(top.size() - 1)});
+                return uint32_t(top.size() - 1);
+            });
+        }
+    }
+    std::mutex mutex;
+    std::condition_variable wake;
+    auto larger = [&](size_t x, size_t y) { return subtrees[x].root.r.count() < subtrees[y].root.r.count(); };
+    std::priority_queue<size_t, std::vector<size_t>, decltype(larger)> ready(larger, first);
+    int busy = 0;  // threads building a subtree (guarded by mutex, as are ready and subtrees)
+    bool failed = false;
+    // One per thread (parallel_for starts them; a thread the system refuses leaves its loop
+    // to the others, which find nothing left).
+    auto work = [&](size_t) {
+        for (;;) {
+            Subtree *t;
+            size_t id;
+            {
+                std::unique_lock<std::mutex> lock(mutex);
+                wake.wait(lock, [&] { return failed || !ready.empty() || busy == 0; });
+                if (failed || ready.empty()) return;
+                id = ready.top(), ready.pop(), ++busy;
+                t = &subtrees[id];
+            }
+            try {
+                t->out = NodeArray(nodes_expected(t->root.r.count()));
+                b.build_subtree(t->root, t->out, [&](const Node &kid, uint32_t w, int lane) {
+                    if (kid.r.count() <= grain) return false;
+                    std::lock_guard<std::mutex> lock(mutex);
+                    t->handed.push_back(subtrees.size());
+                    subtrees.push_back({kid, id, w, lane, {}, {}});
+                    ready.push(subtrees.size() - 1);
+                    wake.notify_one();
+                    return true;
+                });
+            } catch (...) {
+                std::lock_guard<std::mutex> lock(mutex);
+                failed = true, --busy;
+                wake.notify_all();
+                throw;  // parallel_for rethrows it once every thread has stopped
+            }
+            std::lock_guard<std::mutex> lock(mutex);
+            if (--busy == 0 && ready.empty()) wake.notify_all();
+        }
+    };
+    parallel_for(size_t(threads), threads, work, [](size_t) { return true; });
+    // One array: the top nodes, then the subtrees depth first (each after the one that
+    // handed it off, in the order handed): the same layout whichever thread built what.
+    std::vector<size_t> order, offset(subtrees.size());
+    std::vector<size_t> stack(first.rbegin(), first.rend());
+    size_t total = top.size();
+    while (!stack.empty()) {
+        const size_t i = stack.back();
+        stack.pop_back();
+        order.push_back(i), offset[i] = total, total += subtrees[i].out.size();
+        stack.insert(stack.end(), subtrees[i].handed.rbegin(), subtrees[i].handed.rend());
+    }
+    // Links: absolute in `top`; relative to the parent's first node in the subtrees' arrays
+    // (the copy below adds the parent's offset to every child index there).
+    for (size_t i = 0; i < subtrees.size(); ++i) {
+        const Subtree &t = subtrees[i];
+        if (t.parent == kTop) top[t.w].child[t.lane] = uint32_t(offset[i]);
+        else subtrees[t.parent].out[t.w].child[t.lane] = uint32_t(offset[i] - offset[t.parent]);
+    }
+    nodes.allocate(total);
+    std::copy(top.begin(), top.end(), nodes.begin());
+    parallel_for(
+        order.size(), threads,
+        [&](size_t k) {
+            const size_t i = order[k];
+            const uint32_t shift = uint32_t(offset[i]);
+            WideNode *dst = nodes.data() + offset[i];
+            for (const WideNode &w : subtrees[i].out) {
+                *dst = w;
+                for (int l = 0; l < 4; ++l)
+                    if (w.count[l] == 0 && w.child[l] != kNoChild) dst->child[l] += shift;
+                ++dst;
+            }
+            subtrees[i].out = NodeArray();  // freed as soon as copied
+        },
+        [](size_t) { return true; });
 }
 
 int BVH::depth() const { return nodes.empty() ? 0 : depth_of(nodes); }

@@ -1,6 +1,7 @@
-// Bounding volume hierarchy over primitive boxes: binned SAH build of a binary tree,
-// collapsed into 4-wide nodes whose four child boxes are tested at once (SSE where the
-// target has SSE2, the same arithmetic in plain floats elsewhere).
+// Bounding volume hierarchy over primitive boxes: 4-wide nodes, built by binned SAH splits
+// (each wide node opens binary splits until it has four children), whose four child boxes
+// are tested at once (SSE where the target has SSE2, the same arithmetic in plain floats
+// elsewhere).
 //
 // The tree only knows boxes; what a leaf holds is the caller's business (see
 // splat_scene.h, which stores its splats in the order of `prim_order`).
@@ -17,16 +18,6 @@
 #include "simd.h"
 
 namespace splat {
-
-// The binary tree the builder makes (bvh.cpp), before it is collapsed.
-struct BVHNode {
-    AABB box;
-    uint32_t first;  // interior: index of the left child (right = first + 1); leaf: first primitive
-    uint32_t count;  // 0 for an interior node, else the number of primitives in the leaf
-
-    bool leaf() const { return count != 0; }
-};
-static_assert(sizeof(BVHNode) == 32, "nodes are meant to be two per cache line");
 
 // Four children: their boxes by axis (lo x of each, then hi x, ...), and per child either
 // a node (count 0: `child` indexes the nodes) or a leaf (`count` primitives from `child`).
@@ -58,8 +49,8 @@ struct BVH {
     std::vector<uint32_t> prim_order; // leaf ranges index this; it maps to the input order
 
     // Builds over `bounds` (one box per primitive, all non-empty) on `threads` threads (0:
-    // all cores): the top levels split one at a time with the binning shared by every
-    // thread, then the subtrees, largest first, each on one thread.
+    // all cores): the top wide nodes made one at a time with the binning and partitioning
+    // shared by every thread, then the subtrees, largest first, each on one thread.
     void build(const std::vector<AABB> &bounds, int threads);
     // The same from `count` build records, which it leaves in leaf order (their ids are
     // then what prim_order would be; prim_order is left empty).
