@@ -390,3 +390,11 @@ def test_native_entry_points_refuse_bad_buffers():
         _core.forest_traversal(np.array([[0, 1]], np.int32), np.ones(4, np.uint8), both, both)
     with pytest.raises(ValueError, match="columns"):
         _core.permute_table(table, np.array([1, 0], np.int32), 1, np.empty((2, 2), np.int32))
+
+
+def test_spatial_order_of_points_spanning_the_float64_range():
+    """Found by fuzz_core under UBSan: points at +-1e308 overflow the box's extent to inf and
+    the cell's coordinate to NaN, whose conversion to an integer was undefined behaviour."""
+    pts = np.array([[-1.7e308, 0.0, 1.0], [1.7e308, 1.0, 0.0], [0.0, -1e308, 1e308], [5.0, 5.0, 5.0]])
+    order = core.spatial_order(pts)
+    assert sorted(order) == [0, 1, 2, 3]

@@ -239,5 +239,7 @@ def test_bad_input_raises_instead_of_crashing():
         index.radii([0], 3, good / np.linalg.norm(good, axis=1, keepdims=True), 12, 0.0, 2.0)
     with pytest.raises(ValueError, match="not finite"):
         index.knn_at([[np.inf, 0, 0]], 3)
+    with pytest.raises(ValueError, match="beyond 1e18"):
+        index.knn_at([[1e30, 0, 0]], 3)
     with pytest.raises(ValueError, match="threads"):
         core.PointIndex(good, threads=-1)

@@ -152,7 +152,10 @@ void spatial_order(const double *points, size_t n, int32_t *order, int threads) 
         for (size_t i = begin; i < end; ++i) {
             uint64_t code = 0;
             for (int a = 0; a < 3; ++a) {
-                const uint64_t c = std::min(uint64_t((points[3 * i + a] - lo[a]) * scale[a]), kCells - 1);
+                // Clamped before the conversion: points spanning +-1e308 overflow the
+                // difference to inf, times a zero scale is NaN (found by fuzz_core under UBSan).
+                const double t = (points[3 * i + a] - lo[a]) * scale[a];
+                const uint64_t c = t > 0.0 ? (t < double(kCells - 1) ? uint64_t(t) : kCells - 1) : 0;
                 code |= spread3(c) << a;
             }
             key[i] = (code << 31) | i;

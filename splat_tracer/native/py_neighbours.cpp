@@ -8,6 +8,7 @@
 
 #include "neighbours.h"
 #include "py_util.h"
+#include "ray.h"
 
 namespace splat::py {
 namespace {
@@ -195,8 +196,11 @@ PyObject *PointIndex_knn_at(PyObject *self, PyObject *args, PyObject *kwargs) {
     Py_ssize_t s[2] = {pos.dim(0), k};
     if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids)) return nullptr;
     const float *p = pos.data<float>();
+    // Within 1e18 like the points (a distance to a position at 1e38 overflows float: no
+    // candidate would ever be nearer than "infinitely far", and k would not be found).
     for (Py_ssize_t i = 0; i < 3 * pos.dim(0); ++i)
-        if (!std::isfinite(p[i])) return PyErr_Format(PyExc_ValueError, "positions[%zd] is not finite", i / 3);
+        if (!within_range(p[i]))
+            return PyErr_Format(PyExc_ValueError, "positions[%zd] is not finite or beyond 1e18", i / 3);
     float *d = dist.data<float>();
     uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
     if (!for_rows(size_t(pos.dim(0)), threads, [&](size_t i) {
