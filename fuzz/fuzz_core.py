@@ -10,7 +10,9 @@ flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and 
 then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
 and lamp rows and settings, rendered; then the neighbour-graph functions (spatial_order,
 permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
-on fuzzed tables whose indices stray out of range, weights, anchors and orders. The contract of a native entry point: it returns,
+on fuzzed tables whose indices stray out of range, weights, anchors and orders; then a
+_core.PointIndex and its queries (knn, kth, knn_at, covering, radii, pca) on fuzzed points,
+rows, k, normals and spacings. The contract of a native entry point: it returns,
 or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
 crash, and under the sanitizer build of `make fuzz` any AddressSanitizer or UBSan
 report) is a finding.
@@ -222,11 +224,50 @@ def fuzz_graph(fdp):
 
 
 @atheris.instrument_func
+def fuzz_neighbours(fdp):
+    """_core.PointIndex over fuzzed points (coincident ones often), and every query on fuzzed
+    rows, k, normals, spacings and outputs."""
+    n = fdp.ConsumeIntInRange(0, 40)
+    pts = array(fdp, (n, 3))
+    if fdp.ConsumeIntInRange(0, 3) == 0 and isinstance(pts, np.ndarray) and pts.ndim == 2 and len(pts) > 1:
+        pts[fdp.ConsumeIntInRange(0, len(pts) - 1):] = pts[0]  # a pile of coincident points
+    index = call(_core.PointIndex, pts, fdp.ConsumeIntInRange(0, 3))
+    if index is None:
+        return
+    size = index.size
+    order = np.empty(size, np.int32)
+    index.order(order)
+    assert sorted(order) == list(range(size))
+    m = fdp.ConsumeIntInRange(0, 12)
+    start = fdp.ConsumeIntInRange(0, size)
+    rows = order[start:start + m] if fdp.ConsumeBool() else indices(fdp, (m,), size)  # a run of the order, or not
+    k, threads = small_int(fdp) if fdp.ConsumeIntInRange(0, 7) == 0 else fdp.ConsumeIntInRange(1, 13), \
+        fdp.ConsumeIntInRange(0, 3)
+    cols = min(max(k, 0), 300)  # outputs sized for k, but never gigabytes (the core refuses k > 256 anyway)
+    shape = (len(rows), cols)
+    call(index.knn, rows, k, np.empty(shape, np.float32), np.empty(shape, np.int32), threads)
+    call(index.kth, rows, k, np.empty(len(rows), np.float32), threads)
+    q = array(fdp, (fdp.ConsumeIntInRange(0, 5), 3))
+    rq = len(q) if isinstance(q, np.ndarray) and q.ndim == 2 else 0
+    call(index.knn_at, q, k, np.empty((rq, cols), np.float32), np.empty((rq, cols), np.int32), threads)
+    normals, spacing = array(fdp, (size, 3)), array(fdp, (size,))
+    hole, gap = value(fdp), value(fdp)
+    call(index.covering, rows, normals, spacing, k, hole, gap, np.empty(len(rows), np.float32), threads)
+    call(index.radii, rows, fdp.ConsumeIntInRange(0, 8), np.empty(len(rows), np.float32), normals, k, hole, gap,
+         np.empty(len(rows), np.float32), threads)
+    width = fdp.ConsumeIntInRange(0, 14)
+    call(index.pca, rows, k, np.empty((len(rows), 3)), np.empty((len(rows), width), np.int32) if width else None,
+         fdp.ConsumeIntInRange(0, 8), np.empty(len(rows), np.float32), fdp.ConsumeIntInRange(0, 14), hole, gap,
+         np.empty(len(rows), np.float32), threads)
+
+
+@atheris.instrument_func
 def TestOneInput(data: bytes) -> None:
     fdp = atheris.FuzzedDataProvider(data)
     splats = fuzz_scene(fdp)
     fuzz_render_scene(fdp, splats)
     fuzz_graph(fdp)
+    fuzz_neighbours(fdp)
 
 
 if __name__ == "__main__":
