@@ -11,7 +11,7 @@ then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, mate
 and lamp rows and settings, rendered; then the neighbour-graph functions (spatial_order,
 permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
 on fuzzed tables whose indices stray out of range, weights, anchors and orders; then a
-_core.PointIndex and its queries (knn, kth, knn_at, covering, radii, pca) on fuzzed points,
+_core.PointIndex and its queries (knn, knn_at, covering, radii, pca) on fuzzed points,
 rows, k, normals and spacings. The contract of a native entry point: it returns,
 or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
 crash, and under the sanitizer build of `make fuzz` any AddressSanitizer or UBSan
@@ -246,7 +246,7 @@ def fuzz_neighbours(fdp):
     cols = min(max(k, 0), 300)  # outputs sized for k, but never gigabytes (the core refuses k > 256 anyway)
     shape = (len(rows), cols)
     call(index.knn, rows, k, np.empty(shape, np.float32), np.empty(shape, np.int32), threads)
-    call(index.kth, rows, k, np.empty(len(rows), np.float32), threads)
+    call(index.radii, rows, k, np.empty(len(rows), np.float32), threads=threads)
     q = array(fdp, (fdp.ConsumeIntInRange(0, 5), 3))
     rq = len(q) if isinstance(q, np.ndarray) and q.ndim == 2 else 0
     call(index.knn_at, q, k, np.empty((rq, cols), np.float32), np.empty((rq, cols), np.int32), threads)

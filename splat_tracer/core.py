@@ -158,11 +158,9 @@ class PointIndex:
         return dist, ids
 
     def kth_distance(self, rows, k: int) -> np.ndarray:
-        """(m,) float32: each row's distance to its k-th nearest other point."""
-        rows = self._rows(rows)
-        out = np.empty(len(rows), np.float32)
-        self._index.kth(rows, k, out, self.threads)
-        return out
+        """(m,) float32: each row's distance to its k-th nearest other point (`radii`
+        without the gap-closing radii)."""
+        return self.radii(rows, k)[0]
 
     def covering(self, rows, normals: np.ndarray, spacing: np.ndarray, k: int, hole: float, max_gap: float
                  ) -> np.ndarray:

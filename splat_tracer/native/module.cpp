@@ -49,7 +49,7 @@ bool check_rays(const float *origins, const float *directions, Py_ssize_t count)
 bool check_batch_args(double tmin, double tmax, int threads) {
     if (std::isnan(tmin) || std::isnan(tmax) || !(tmin < tmax))
         return PyErr_Format(PyExc_ValueError, "need tmin < tmax, both numbers"), false;
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    if (!check_threads(threads)) return false;
     return true;
 }
 
@@ -80,7 +80,7 @@ PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOiO", const_cast<char **>(kwlist), &oc, &on, &orad,
                                      &ocol, &oclosed, &threads, &oalpha))
         return nullptr;
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (!check_threads(threads)) return nullptr;
     View c, n, r, col, closed, alpha;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(oc, "centres", 'f', 2, s3, false, c)) return nullptr;

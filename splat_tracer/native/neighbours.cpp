@@ -18,11 +18,6 @@ struct BuildPoint {
     uint32_t id;
 };
 
-// A node's cell while building: the parent's cell cut at the split.
-struct Cell {
-    float lo[3], hi[3];
-};
-
 // The axis along which the points spread widest, from at most kSpreadSample of them (evenly
 // strided: an estimate is enough to choose an axis). Not the cell's widest side: a cell cut
 // only from its parent keeps, say, a terrain's whole height range, and splitting that
@@ -67,7 +62,7 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     if (n == 0) throw InputError("a point index needs at least one point");
     if (n >= size_t(kNone)) throw InputError("too many points for a point index (at most 2^32 - 2)");
     std::vector<BuildPoint> pts(n);
-    Cell root{{xyz[0], xyz[1], xyz[2]}, {xyz[0], xyz[1], xyz[2]}};
+    Box root{{xyz[0], xyz[1], xyz[2]}, {xyz[0], xyz[1], xyz[2]}};
     for (size_t i = 0; i < n; ++i) {
         const float *p = xyz + 3 * i;
         for (int a = 0; a < 3; ++a) {
@@ -78,14 +73,14 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
         }
         pts[i].id = uint32_t(i);
     }
-    std::copy(root.lo, root.lo + 3, bounds_.lo), std::copy(root.hi, root.hi + 3, bounds_.hi);
+    bounds_ = root;
     while (((uint64_t(n) + (uint64_t(1) << depth_) - 1) >> depth_) > kLeafSize) ++depth_;
     const size_t inner = (size_t(1) << depth_) - 1;
     split_.resize(inner);
     axis_.resize(inner);
 
-    // Splits node (depth d) at its middle; returns the children's cells.
-    auto split_node = [&](uint32_t node, int d, const Cell &cell, Cell &left, Cell &right) {
+    // Splits node (depth d) at its middle; returns the children's cells (the node's cut at the split).
+    auto split_node = [&](uint32_t node, int d, const Box &cell, Box &left, Box &right) {
         const size_t b = begin(node, d), e = begin(node + 1, d);  // node + 1: the next at this depth
         const size_t mid = begin(2 * node + 2, d + 1);
         const int a = widest_spread(pts.data() + b, e - b);
@@ -103,11 +98,11 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     const int workers = resolve_threads(threads);
     int top = 0;
     while (top < depth_ && (1 << top) < kSubtreeTasksPerThread * workers) ++top;
-    std::vector<Cell> cells{root}, next;
+    std::vector<Box> cells{root}, next;
     const auto always = [](size_t) { return true; };
     for (int d = 0; d < top; ++d) {
         const uint32_t first = (1u << d) - 1u;
-        next.assign(size_t(2) << d, Cell{});
+        next.assign(size_t(2) << d, Box{});
         parallel_for(size_t(1) << d, threads, [&](size_t j) {
             split_node(first + uint32_t(j), d, cells[j], next[2 * j], next[2 * j + 1]);
         }, always);
@@ -116,12 +111,12 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     if (top < depth_) {
         const uint32_t first = (1u << top) - 1u;
         parallel_for(cells.size(), threads, [&](size_t j) {
-            struct Item { uint32_t node; int d; Cell cell; };
+            struct Item { uint32_t node; int d; Box cell; };
             std::vector<Item> stack{{first + uint32_t(j), top, cells[j]}};
             while (!stack.empty()) {
                 const Item it = stack.back();
                 stack.pop_back();
-                Cell l, r;
+                Box l, r;
                 split_node(it.node, it.d, it.cell, l, r);
                 if (it.d + 1 < depth_) {
                     stack.push_back({2 * it.node + 2, it.d + 1, r});

@@ -34,15 +34,7 @@ bool run_graph(PyObject *progress, Fn &&fn) {
     std::string message;
     PyObject *error_type = nullptr;
     saved = PyEval_SaveThread();
-    try {
-        fn(poll);
-    } catch (const InputError &e) {
-        error_type = PyExc_ValueError, message = e.what();
-    } catch (const std::bad_alloc &) {
-        error_type = PyExc_MemoryError, message = "out of memory";
-    } catch (const std::exception &e) {
-        error_type = PyExc_RuntimeError, message = e.what();
-    }
+    error_type = run_native([&] { fn(poll); }, message);
     PyEval_RestoreThread(saved);
     if (callback_failed) return false;  // its exception is still set
     if (error_type) PyErr_SetString(error_type, message.c_str());
@@ -52,11 +44,6 @@ bool run_graph(PyObject *progress, Fn &&fn) {
 bool check_progress(PyObject *progress) {
     if (progress != Py_None && !PyCallable_Check(progress))
         return PyErr_Format(PyExc_TypeError, "progress must be callable or None"), false;
-    return true;
-}
-
-bool check_threads(int threads) {
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
     return true;
 }
 

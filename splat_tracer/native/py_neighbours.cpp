@@ -102,11 +102,6 @@ bool check_cover(int cover_k, int k, float hole, float max_gap) {
     return true;
 }
 
-bool check_threads(int threads) {
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
-    return true;
-}
-
 // normals (N,3) by input id: the rows' must be unit vectors. Sets an exception otherwise.
 bool check_unit_normals(const float *n, const int32_t *rows, Py_ssize_t m) {
     for (Py_ssize_t i = 0; i < m; ++i) {  // only the rows asked about are read
@@ -209,26 +204,6 @@ PyObject *PointIndex_knn_at(PyObject *self, PyObject *args, PyObject *kwargs) {
             index.nearest(p + 3 * i, PointIndex::kNone, k, di, ni);
             for (int j = 0; j < k; ++j) di[j] = std::sqrt(di[j]), ni[j] = index.id(ni[j]);
         }))
-        return nullptr;
-    Py_RETURN_NONE;
-}
-
-// kth(rows, k, out, threads=0): the distance to each row's k-th nearest other point.
-PyObject *PointIndex_kth(PyObject *self, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"rows", "k", "out", "threads", nullptr};
-    PyObject *orows, *oout;
-    int k, threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|i", const_cast<char **>(kwlist), &orows, &k, &oout, &threads))
-        return nullptr;
-    const PointIndex &index = index_of(self);
-    View rows, out;
-    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
-    Py_ssize_t s[1] = {rows.dim(0)};
-    if (!get_array(oout, "out", 'f', 1, s, true, out)) return nullptr;
-    const int32_t *r = rows.data<int32_t>();
-    float *o = out.data<float>();
-    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads,
-                        [&](size_t i, const float *d2, const uint32_t *) { o[i] = std::sqrt(d2[k - 1]); }))
         return nullptr;
     Py_RETURN_NONE;
 }
@@ -374,7 +349,6 @@ PyMethodDef PointIndex_methods[] = {
     {"order", PointIndex_order, METH_O, "order(out): fills out (int32 (N,)) with the points' ids in the tree's order."},
     METHOD(knn, "knn(rows, k, dist, ids, threads=0): the k nearest other points of each row's point, nearest first."),
     METHOD(knn_at, "knn_at(positions, k, dist, ids, threads=0): the k nearest points to each position."),
-    METHOD(kth, "kth(rows, k, out, threads=0): the distance to each row's k-th nearest other point."),
     METHOD(covering, "covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): gap-closing radii."),
     METHOD(radii, "radii(rows, spacing_k, spacing, normals=None, cover_k=0, hole=0, max_gap=0, cover=None, threads=0): "
                   "k-NN spacing and gap-closing radii from one search."),

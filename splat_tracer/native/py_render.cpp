@@ -27,7 +27,7 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOi", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
                                      &threads))
         return nullptr;
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (!check_threads(threads)) return nullptr;
     View v, t, n, m;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
@@ -111,7 +111,7 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|i", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
                                      &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads))
         return nullptr;
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)");
+    if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });

@@ -96,25 +96,41 @@ inline bool get_array(PyObject *obj, const char *name, char kind, int ndim, cons
     return true;
 }
 
-// Runs `fn` without the GIL, turning C++ exceptions into Python ones. Returns false with
-// a Python exception set when `fn` threw.
+// Runs `fn`, turning a C++ exception into the Python exception type to raise and its
+// message: InputError (the caller's bad input) ValueError, bad_alloc MemoryError, anything
+// else RuntimeError. Returns nullptr when fn returned. Touches no Python object: it may run
+// without the GIL.
+template <class F>
+PyObject *run_native(F &&fn, std::string &message) {
+    try {
+        fn();
+    } catch (const InputError &e) {
+        return message = e.what(), PyExc_ValueError;
+    } catch (const std::bad_alloc &) {
+        return message = "out of memory", PyExc_MemoryError;
+    } catch (const std::exception &e) {
+        return message = e.what(), PyExc_RuntimeError;
+    }
+    return nullptr;
+}
+
+// Runs `fn` without the GIL, turning C++ exceptions into Python ones (run_native). Returns
+// false with a Python exception set when `fn` threw.
 template <class F>
 bool without_gil(F &&fn) {
     std::string message;
     PyObject *type = nullptr;
     Py_BEGIN_ALLOW_THREADS
-    try {
-        fn();
-    } catch (const InputError &e) {
-        type = PyExc_ValueError, message = e.what();
-    } catch (const std::bad_alloc &) {
-        type = PyExc_MemoryError, message = "out of memory";
-    } catch (const std::exception &e) {
-        type = PyExc_RuntimeError, message = e.what();
-    }
+    type = run_native(fn, message);
     Py_END_ALLOW_THREADS
     if (type) PyErr_SetString(type, message.c_str());
     return type == nullptr;
+}
+
+// threads: 0 for all cores, else that many. Sets ValueError and returns false when negative.
+inline bool check_threads(int threads) {
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    return true;
 }
 
 // method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon[,
@@ -201,7 +217,7 @@ inline bool check_render_args(int width, int height, int x0, int y0, int w, int 
                false;
     if (tile_size <= 0 || tile_size > 4096)
         return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096"), false;
-    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    if (!check_threads(threads)) return false;
     if (progress != Py_None && !PyCallable_Check(progress))
         return PyErr_Format(PyExc_TypeError, "progress must be callable or None"), false;
     return true;
