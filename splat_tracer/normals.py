@@ -22,7 +22,8 @@ Orientation (the PCA axis has no sign):
   least OPEN_SHEET x their count: a terrain, a facade) is turned so that its normals' sum
   points up (+Z; +Y, +X for vertical planes). The graph's steps are native (core.graph_weights,
   spanning_forest by Boruvka's algorithm, forest_traversal, chain_flips), on the cloud
-  renumbered in Morton order (core.spatial_order) so that neighbours lie close in memory.
+  renumbered so that neighbours lie close in memory: in the import's k-d tree's order, or in
+  Morton order (core.spatial_order) when there is no tree.
 In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
 perpendicular to the scanner's direction or to +Z: grazing views, walls in aerial data)
 takes its sign by propagation from its neighbours instead: from the anchor fewest tree
@@ -40,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import core
+from . import spacing as spacing_mod
 from .progress import chunks, nothing, scaled
 from .spacing import neighbour_tree
 
@@ -75,14 +77,12 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
     radius's spacing (spacing.analyse) without a search of its own; cover (needs spacing):
     (m, (N,) float32 array) to fill with the uncapped gap-closing radii among the m <= k
     nearest (spacing.covering_radii's rule, with the PCA normal: its sign does not matter)."""
-    from . import spacing as spacing_mod
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     if n < MIN_POINTS:
         raise ValueError(f"need at least {MIN_POINTS} points to estimate normals, got {n}")
     k = int(min(max(k, 2), n - 1))
-    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+    tree = tree if tree is not None else neighbour_tree(pts, workers)
     out = np.empty((n, 3))
     order = tree.order
     width = 0 if graph is None else graph.shape[1]
@@ -109,11 +109,9 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     distance to its radius_k-th nearest other point and, close_gaps, its uncapped
     gap-closing radius: spacing.analyse's known_spacing and known_cover). axes: the file's
     own unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
-    from . import spacing as spacing_mod
-
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+    tree = tree if tree is not None else neighbour_tree(pts, workers)
     estimating = axes is None
     share = 2.0 / 3.0 if estimating else 0.0
     graph = spacing = cover = None
@@ -174,12 +172,12 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
         table = graph
     else:
-        tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+        tree = tree if tree is not None else neighbour_tree(pts, workers)
         order = tree.order  # queried in the tree's order: a leaf of points at a time
         table = np.empty((n, k + 1), np.int32)
         table[order, 0] = order
         table[order, 1:] = tree.knn(order, k)[1]
-    # The graph's steps run on the cloud renumbered in space (core.spatial_order): on a
+    # The graph's steps run on the cloud renumbered in space: on a
     # file's random order every neighbour is a cache miss (10M points: 42 s instead of 6 s,
     # plus 5 s to renumber).
     # `perm` maps the new numbers to the caller's; ties below are broken in the caller's.

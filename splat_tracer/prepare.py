@@ -218,7 +218,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
                                  f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
         rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
         step("estimate")(0.0, "neighbour tree")
-        tree = spacing.neighbour_tree(rel)
+        tree = spacing.neighbour_tree(rel, workers)
         oriented_by = resolve_orientation(cloud, orientation)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
         result, known_spacing, known_cover = normals_mod.estimate_and_orient(
@@ -248,7 +248,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
             kk = min(k, len(local) - 1)
-            dist, _ = spacing.neighbour_tree(local).knn_at(local[strays], kk + 1)  # each finds itself first
+            dist, _ = spacing.neighbour_tree(local, workers).knn_at(local[strays], kk + 1)  # each finds itself first
             radii[strays] = dist[:, kk]
         cap = np.float32(RADIUS_CAP * np.percentile(hood.spacing, RADIUS_CAP_PERCENTILE))
         clamped = radii > cap

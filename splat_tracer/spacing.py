@@ -111,16 +111,17 @@ def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     return keep
 
 
-def neighbour_tree(points: np.ndarray, threads: int = 0):
+def neighbour_tree(points: np.ndarray, workers: int = -1):
     """The compiled core's k-d tree of the points (core.PointIndex, float32), built for the
     importer's all-points queries: asked about runs of its own order (`order`), it answers
     a leaf of points at a time. Measured at 1M points on a terrain against scipy's cKDTree
     (the sliding-midpoint build the importer used before): build and a k = 6 search of every
     point in about a third of the time, and the gap-closing radii and PCA normals, computed
-    natively beside the search, 3-4x faster than numpy over the neighbour arrays."""
+    natively beside the search, 3-4x faster than numpy over the neighbour arrays. workers:
+    threads, -1 (the importer's convention, scipy's) or 0 for all cores."""
     from . import core
 
-    return core.PointIndex(points, threads)
+    return core.PointIndex(points, max(workers, 0))
 
 
 def _tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -139,9 +140,13 @@ def _angular_gaps(sorted_angles: np.ndarray) -> np.ndarray:
     return np.diff(wrapped, axis=1)
 
 
-def _float64(*arrays):
-    """The boundary test's normals in float64 (the per-chunk arrays only)."""
-    return tuple(np.asarray(a, dtype=np.float64) for a in arrays)
+def _boundary_count(tree, idx: np.ndarray, normals: np.ndarray, k: int) -> int:
+    """How many of the points `idx` of the tree are on a boundary (_boundary_mask over their
+    k nearest; the normals in float64, the chunk's only)."""
+    pts = tree.points
+    _, nbr = tree.knn(idx, k)
+    own, theirs = np.asarray(normals[idx], np.float64), np.asarray(normals[nbr], np.float64)
+    return int(_boundary_mask(pts[nbr] - pts[idx, None], own, theirs).sum())
 
 
 def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
@@ -178,8 +183,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     if cover_k:
         unit = np.asarray(nrm, dtype=np.float32)
         unit = unit / np.maximum(np.sqrt(np.einsum("ij,ij->i", unit, unit)), 1e-30)[:, None]
-    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
-    pts = tree.points  # the positions the tree holds (float32)
+    tree = tree if tree is not None else neighbour_tree(pts, workers)
     order = tree.order  # the tree's order: neighbouring points are adjacent
     searched = known_spacing is None or (cover_k and known_cover is None)
     spacing = np.empty(n, np.float32) if known_spacing is None else np.array(known_spacing, np.float32)
@@ -195,22 +199,19 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
     for start in chunks(n if searched else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        # the spacing and the gap-closing radii from one search (no (n, k) arrays)
-        spacing[idx], c = tree.radii(idx, k, unit, cover_k, COVER_HOLE, COVER_MAX_GAP) if cover_k else \
-            tree.radii(idx, k)
-        if cover_k:
+        # the spacing and the gap-closing radii (unit normals given) from one search (no (n, k) arrays)
+        spacing[idx], c = tree.radii(idx, k, unit, cover_k, COVER_HOLE, COVER_MAX_GAP)
+        if c is not None:
             cover[idx] = c
         if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
-            _, nbr = tree.knn(idx, kq)
-            boundary += int(_boundary_mask(pts[nbr] - pts[idx, None], *_float64(nrm[idx], nrm[nbr])).sum())
+            boundary += _boundary_count(tree, idx, nrm, kq)
     if nrm is not None and tested is None:
         tested = sample if sample is not None else np.sort(
             np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
         hits = 0
         for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "splat radii: closed surface guess"):
             idx = tested[start:start + _CHUNK]
-            _, nbr = tree.knn(idx, kq)
-            hits += int(_boundary_mask(pts[nbr] - pts[idx, None], *_float64(nrm[idx], nrm[nbr])).sum())
+            hits += _boundary_count(tree, idx, nrm, kq)
         boundary = int(round(hits * n / len(tested)))
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
@@ -241,7 +242,7 @@ def statistical_inliers(points: np.ndarray, ratio: float, k: int = SOR_K, worker
     k = int(min(k, n - 1))
     if k < 1:
         return np.ones(n, bool)
-    tree = tree if tree is not None else neighbour_tree(pts, 0 if workers < 0 else workers)
+    tree = tree if tree is not None else neighbour_tree(pts, workers)
     order = tree.order
     mean = np.empty(n)
     for start in chunks(n, _CHUNK, progress, "statistical outliers"):
@@ -286,7 +287,7 @@ def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray,
     k = int(min(COVER_K, len(points) - 1))
     if k < 2:
         return s.copy()
-    tree = tree if tree is not None else neighbour_tree(points, 0 if workers < 0 else workers)
+    tree = tree if tree is not None else neighbour_tree(points, workers)
     out = np.empty(len(s), np.float32)
     for start in chunks(len(s), _CHUNK, progress, "splat radii: closing gaps"):
         idx = tree.order[start:start + _CHUNK]  # the tree's (spatially coherent) order
