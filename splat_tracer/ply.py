@@ -340,8 +340,16 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
         dropped = int((keep & ~ok).sum())
         if not (ok & keep).any():
             raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-        # by the reciprocal: a float32 length can overflow (5e38), its reciprocal cannot
-        nrm = nrm * (1.0 / np.where(ok, length, 1.0)).astype(nrm.dtype)[:, None]
+        inv = 1.0 / np.where(ok, length, 1.0)  # float64: a float32 length can overflow (5e38)
+        with np.errstate(over="ignore", invalid="ignore"):  # the rows it concerns are redone below
+            unit = nrm * inv.astype(nrm.dtype)[:, None]
+        if nrm.dtype == np.float32:
+            # A normal shorter than ~3e-39 (float32 denormals) has a reciprocal beyond float32's
+            # range (inf), one longer than ~3e37 a denormal reciprocal (precision lost): those
+            # rows are scaled in float64. Both bounds keep a decade of margin inside the range.
+            wild = np.flatnonzero(ok & ((length < 1e-37) | (length > 1e37)))
+            unit[wild] = nrm[wild].astype(np.float64) * inv[wild, None]
+        nrm = unit
         keep &= ok
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and

@@ -38,6 +38,20 @@ def test_float_normals_of_any_length_and_bad_normals_dropped(tmp_path):
     np.testing.assert_allclose(cloud.colours[1], [1, 1, 1, 0], atol=1e-6)
 
 
+def test_float32_normals_near_the_ends_of_float32s_range_become_unit(tmp_path):
+    """Found by fuzz_ply: a denormal float32 normal (1e-40) has a reciprocal length of 1e40,
+    beyond float32, and came out as inf/NaN instead of unit length."""
+    n = np.array([[1e-40, 0, 0], [0, 3e-45, 0], [2e-39, 2e-39, 0], [3e38, 3e38, 3e38],
+                  [0, 0, -1e-20], [0, 0.6, 0.8]], np.float32)
+    p = np.arange(len(n) * 3, dtype=np.float64).reshape(-1, 3)
+    path = str(tmp_path / "tiny.ply")
+    ply.write_ply(path, p, n)
+    cloud = ply.read_ply(path)
+    assert len(cloud) == len(n) and cloud.dropped_normals == 0
+    expected = n.astype(np.float64) / np.linalg.norm(n.astype(np.float64), axis=1)[:, None]
+    np.testing.assert_allclose(cloud.normals, expected, atol=1e-6)
+
+
 def test_srgb_to_linear_reference_values():
     np.testing.assert_allclose(ply.srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
                                [0.0, 0.04045 / 12.92, 0.21404, 1.0], rtol=1e-4)
