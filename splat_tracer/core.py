@@ -20,6 +20,7 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from . import _core
+from .columns import bounds
 
 PARALLEL_COSINE = _core.PARALLEL_COSINE
 MAX_LAYER_HITS = _core.MAX_LAYER_HITS  # per-ray hit buffer of the ε-window query
@@ -112,8 +113,11 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     mask = None if bulk is None else np.asarray(bulk, bool)
     # a copy of the bulk only when it leaves points out (10M points: 240 MB and a second)
     box = pts if mask is None or mask.all() or not mask.any() else pts[mask]
-    origin = ((box.min(axis=0) + box.max(axis=0)) * 0.5).astype(np.float32).astype(np.float64)
-    return origin, (pts - origin).astype(np.float32)
+    lo, hi = bounds(box)
+    origin = ((lo + hi) * 0.5).astype(np.float32).astype(np.float64)
+    local = np.empty(pts.shape, np.float32)  # the difference in float64, rounded once, with no float64 temporary
+    np.subtract(pts, origin, out=local, casting="same_kind")
+    return origin, local
 
 
 class PointIndex:
@@ -167,7 +171,7 @@ class PointIndex:
         """(m,) float32 gap-closing radii (spacing.covering_radii's rule: the largest empty
         circle through the point and two angularly adjacent neighbours among its k nearest,
         in its tangent plane, when between spacing and hole x spacing and not across an
-        angular gap of max_gap radians or more). normals (N,3) unit and spacing (N,) are per
+        angular gap of max_gap radians or more). normals (N,3) (directions, any length) and spacing (N,) are per
         point of the index."""
         rows = self._rows(rows)
         out = np.empty(len(rows), np.float32)
@@ -178,7 +182,7 @@ class PointIndex:
     def radii(self, rows, spacing_k: int, normals: Optional[np.ndarray] = None, cover_k: int = 0, hole: float = 0.0,
               max_gap: float = 0.0) -> tuple[np.ndarray, Optional[np.ndarray]]:
         """(spacing (m,) float32, cover (m,) float32 or None) from one search: each row's
-        distance to its spacing_k-th nearest other point and, given normals ((N,3) unit),
+        distance to its spacing_k-th nearest other point and, given normals ((N,3), any length),
         its gap-closing radius among its cover_k nearest with that distance as the spacing
         (`covering`'s rule)."""
         rows = self._rows(rows)
@@ -191,6 +195,16 @@ class PointIndex:
             self._index.radii(rows, spacing_k, spacing, _f32(normals, "normals", (len(self), 3)), cover_k, float(hole),
                               float(max_gap), cover, self.threads)
         return spacing, cover
+
+    def widest_gaps(self, rows, normals: np.ndarray, k: int) -> np.ndarray:
+        """(m,) float32: each row's widest angle (radians) between angularly adjacent
+        neighbours among its k nearest, seen in its tangent plane, those below it unfolded
+        along their normals' tilt (spacing.py's boundary test). normals (N,3) by id, any
+        length but 0, float32 (no copy) or converted."""
+        rows = self._rows(rows)
+        out = np.empty(len(rows), np.float32)
+        self._index.widest_gaps(rows, k, _f32(normals, "normals", (len(self), 3)), out, self.threads)
+        return out
 
     def pca(self, rows, k: int, graph_width: int = 0, spacing_k: int = 0, cover_k: int = 0, hole: float = 0.0,
             max_gap: float = 0.0):

@@ -21,6 +21,7 @@ import numpy as np
 
 from . import core, export_shading, resources, shading
 from .cloud_object import COLOUR, NORMAL, RADIUS
+from .columns import finite_rows, nonzero_rows
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
 _MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
@@ -73,8 +74,8 @@ def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarra
     zero normal and radius) are left out and counted in the report, never failing the
     whole render."""
     problems = (
-        (~np.isfinite(pos).all(axis=1), "a position that is not finite"),
-        (~(np.isfinite(nrm).all(axis=1) & (np.abs(nrm).max(axis=1) > 0)), "a zero or non-finite normal"),
+        (~finite_rows(pos), "a position that is not finite"),
+        (~(finite_rows(nrm) & nonzero_rows(nrm)), "a zero or non-finite normal"),
         (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
     )
     ok = np.ones(len(pos), bool)

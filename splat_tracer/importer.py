@@ -25,6 +25,7 @@ from typing import Optional
 import numpy as np
 
 from . import normals, prepare, readers, resources, spacing
+from .columns import bounds
 from .ply import CloudFileError, PointCloud
 from .progress import ProgressFn, nothing, scaled
 
@@ -101,7 +102,7 @@ def even_subset(points: np.ndarray, budget: int, progress: Optional[ProgressFn] 
     if budget <= 0 or n <= budget:
         return np.arange(n)
     rng = np.random.default_rng(BUDGET_SEED)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = bounds(pts)
     extent = hi - lo
     # First guess: a surface through the box (its two largest sides) sampled by `budget` cells.
     sides = np.sort(extent)[1:]

@@ -17,6 +17,7 @@ from typing import Optional
 import numpy as np
 
 from . import spacing
+from .columns import finite_rows
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -269,7 +270,7 @@ def read_ply(path: str) -> PointCloud:
         return gaussians.read_gaussians(path, v, names)
 
     pos = _columns(v, ("x", "y", "z"))
-    finite = np.isfinite(pos).all(axis=1)  # rows without are dropped and counted (make_cloud)
+    finite = finite_rows(pos)  # rows without are dropped and counted (make_cloud)
 
     radii = None
     if "radius" in names:
@@ -310,6 +311,34 @@ def _columns(v, names, dtype=np.float64) -> np.ndarray:
     return out
 
 
+def unit_rows(vectors) -> tuple[np.ndarray, np.ndarray]:
+    """(unit, ok): the rows of `vectors` (N, 3) scaled to unit length, in float32 when they
+    are float32 (files' normals: no float64 copy of 10M of them), else float64; ok: the rows
+    that have a direction (every value finite, not all zero; the others are left as garbage)."""
+    v = np.asarray(vectors)
+    if v.dtype != np.float32:
+        v = v.astype(np.float64)
+    l2 = np.einsum("ij,ij->i", v, v)  # in v's precision (np.linalg.norm: 5x slower at 10M)
+    # Squares within 1e-30..1e30 are safe in float32 (normal numbers, a reciprocal in range);
+    # the rest (zero, NaN, inf, or a component beyond ~1e15 or below ~1e-15) is redone below.
+    safe = (l2 > 1e-30) & (l2 < 1e30)
+    unit = v * (1.0 / np.sqrt(np.where(safe, l2, 1.0)))[:, None].astype(v.dtype)
+    ok = safe
+    rest = np.flatnonzero(~safe)
+    if len(rest):
+        # In float64, divided by the largest component first: a normal of 1e-40 or of 1e300
+        # still has a direction, and its square neither underflows nor overflows.
+        w = v[rest].astype(np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):  # rows without a direction: garbage, not ok
+            big = np.abs(w).max(axis=1)
+            has = np.isfinite(big) & (big > 0)
+            w /= np.where(has, big, 1.0)[:, None]
+            w /= (np.sqrt(np.einsum("ij,ij->i", w, w)) + ~has)[:, None]  # + 1 where it has none: no 0 / 0
+        unit[rest] = w
+        ok[rest] = has
+    return unit, ok
+
+
 def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, radii=None, attributes=None,
                scanners=None, *, drop_non_finite: bool = False, **fields) -> PointCloud:
     """The checks and clean-up every reader shares: rows with non-finite coordinates dropped
@@ -322,7 +351,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     keep = np.ones(n, bool)
     dropped_rows = 0
     if drop_non_finite:
-        keep = np.isfinite(pos).all(axis=1)
+        keep = finite_rows(pos)
         dropped_rows = int(n - keep.sum())
         if not keep.any():
             raise CloudFileError(f"{path}: no point has finite coordinates (all {n:,} rows are NaN or infinite)")
@@ -330,26 +359,10 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     if normals is not None:
         # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
         # point is dropped and counted, never rendered with a garbage orientation.
-        # In float64 for the length (a float32 normal of 1e-30 squares to 0, of 1e30 to inf),
-        # the result in the caller's precision (float32 from files: no float64 copy).
-        nrm = np.asarray(normals)
-        if nrm.dtype != np.float32:
-            nrm = nrm.astype(np.float64)
-        length = np.sqrt(np.einsum("ij,ij->i", nrm, nrm, dtype=np.float64))  # np.linalg.norm: 5x slower at 10M
-        ok = np.isfinite(length) & (length > 0)
+        nrm, ok = unit_rows(normals)
         dropped = int((keep & ~ok).sum())
         if not (ok & keep).any():
             raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
-        inv = 1.0 / np.where(ok, length, 1.0)  # float64: a float32 length can overflow (5e38)
-        with np.errstate(over="ignore", invalid="ignore"):  # the rows it concerns are redone below
-            unit = nrm * inv.astype(nrm.dtype)[:, None]
-        if nrm.dtype == np.float32:
-            # A normal shorter than ~3e-39 (float32 denormals) has a reciprocal beyond float32's
-            # range (inf), one longer than ~3e37 a denormal reciprocal (precision lost): those
-            # rows are scaled in float64. Both bounds keep a decade of margin inside the range.
-            wild = np.flatnonzero(ok & ((length < 1e-37) | (length > 1e37)))
-            unit[wild] = nrm[wild].astype(np.float64) * inv[wild, None]
-        nrm = unit
         keep &= ok
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import core, normals as normals_mod, spacing
+from .columns import bounds, rows_outside
 from .ply import CloudFileError, PointCloud
 from .progress import Steps, scaled
 
@@ -141,12 +142,12 @@ def bulk_mask(positions: np.ndarray) -> np.ndarray:
         if not (np.isfinite(lo).all() and np.isfinite(hi).all() and np.isfinite(size) and size > 0):
             return np.ones(len(pos), bool)
         reach = OUTLIER_REACH * size
-        return ~((pos < lo - reach) | (pos > hi + reach)).any(axis=1)
+        return ~rows_outside(pos, lo - reach, hi + reach)
 
 
 def _span(positions: np.ndarray) -> tuple[float, float, float]:
     """(largest side of the bounding box, smallest coordinate, largest coordinate)."""
-    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    lo, hi = bounds(positions)
     with np.errstate(over="ignore"):  # sides of boxes near 1e308 are inf: too large anyway
         return float(np.max(hi - lo)), float(lo.min()), float(hi.max())
 

@@ -21,6 +21,7 @@ import warnings
 
 import numpy as np
 
+from .columns import finite_rows
 from .ply import CloudFileError, PointCloud, linear_colours, make_cloud, read_ply, srgb_to_linear, _unit_colours
 from .progress import Cancelled
 
@@ -353,7 +354,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
             raise CloudFileError(f"{path}: the columns need all of {' '.join(group)} (have: {' '.join(roles)})")
     col = {r: table[:, c] for c, r in enumerate(roles) if r != "_"}
     pos = np.column_stack([col["x"], col["y"], col["z"]])
-    finite = np.isfinite(pos).all(axis=1)
+    finite = finite_rows(pos)
     colours = None
     if "r" in col:
         rgb = _unit_colours(path, {"red": col["r"][finite], "green": col["g"][finite], "blue": col["b"][finite]},

@@ -36,8 +36,8 @@ MIN_POINTS = 2
 BOUNDARY_K = 24
 BOUNDARY_GAP = np.radians(160.0)
 CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sqrt(N)
-# The boundary test costs 24 neighbours and an angular sort per point, most of an import's
-# time: beyond BOUNDARY_SAMPLE points it runs on that many points drawn at random (a fixed
+# The boundary test costs a search of 24 neighbours and an angular sort per point, more
+# than the radii's own search: beyond BOUNDARY_SAMPLE points it runs on that many points drawn at random (a fixed
 # seed: the same guess every time) and the count is scaled up. The guess compares the
 # boundary fraction with 0.2/sqrt(N); an open surface's rim is 4/sqrt(N), so at 10M points
 # 200k samples expect about 250 rim hits against a limit of about 13: far apart.
@@ -124,41 +124,11 @@ def neighbour_tree(points: np.ndarray, workers: int = -1):
     return core.PointIndex(points, max(workers, 0))
 
 
-def _tangent_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(u, v): unit vectors spanning each point's tangent plane (normals (n, 3) unit), in
-    the normals' dtype."""
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]]).astype(normals.dtype)
-    u = np.cross(normals, helper)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    return u, np.cross(normals, u)
-
-
-def _angular_gaps(sorted_angles: np.ndarray) -> np.ndarray:
-    """(n, k) angles between each neighbour and the next around the point (the last one
-    to the first, across 2 pi), from angles sorted along axis 1."""
-    wrapped = np.concatenate([sorted_angles, sorted_angles[:, :1] + 2 * np.pi], axis=1)
-    return np.diff(wrapped, axis=1)
-
-
 def _boundary_count(tree, idx: np.ndarray, normals: np.ndarray, k: int) -> int:
-    """How many of the points `idx` of the tree are on a boundary (_boundary_mask over their
-    k nearest; the normals in float64, the chunk's only)."""
-    pts = tree.points
-    _, nbr = tree.knn(idx, k)
-    own, theirs = np.asarray(normals[idx], np.float64), np.asarray(normals[nbr], np.float64)
-    return int(_boundary_mask(pts[nbr] - pts[idx, None], own, theirs).sum())
-
-
-def _boundary_mask(offsets: np.ndarray, normals: np.ndarray, nbr_normals: np.ndarray) -> np.ndarray:
-    """offsets (n, k, 3) from each point to its neighbours; normals (n, 3) unit; the
-    neighbours' normals (n, k, 3)."""
-    u, v = _tangent_frame(normals)
-    depth = np.maximum(-np.einsum("nkj,nj->nk", offsets, normals), 0.0)  # below the tangent plane
-    tilt = nbr_normals - np.einsum("nkj,nj->nk", nbr_normals, normals)[..., None] * normals[:, None]
-    tilt_len = np.linalg.norm(tilt, axis=2, keepdims=True)
-    unfolded = offsets + depth[..., None] * np.divide(tilt, tilt_len, out=np.zeros_like(tilt), where=tilt_len > 1e-6)
-    ang = np.sort(np.arctan2(np.einsum("nkj,nj->nk", unfolded, v), np.einsum("nkj,nj->nk", unfolded, u)), axis=1)
-    return _angular_gaps(ang).max(axis=1) > BOUNDARY_GAP
+    """How many of the points `idx` of the tree are on a boundary: their k nearest leave an
+    angular gap wider than BOUNDARY_GAP (see the module's text; the compiled core computes
+    the angles, core.PointIndex.widest_gaps)."""
+    return int((tree.widest_gaps(idx, normals, k) > BOUNDARY_GAP).sum())
 
 
 def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
@@ -179,10 +149,8 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     cover_k = int(min(COVER_K, n - 1)) if close_gaps and nrm is not None else 0
     if cover_k < 2:
         cover_k = 0
-    unit = None
-    if cover_k:
-        unit = np.asarray(nrm, dtype=np.float32)
-        unit = unit / np.maximum(np.sqrt(np.einsum("ij,ij->i", unit, unit)), 1e-30)[:, None]
+    if nrm is not None:
+        nrm = np.asarray(nrm, np.float32)  # the core's queries take directions of any length, in float32
     tree = tree if tree is not None else neighbour_tree(pts, workers)
     order = tree.order  # the tree's order: neighbouring points are adjacent
     searched = known_spacing is None or (cover_k and known_cover is None)
@@ -199,8 +167,8 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
     for start in chunks(n if searched else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        # the spacing and the gap-closing radii (unit normals given) from one search (no (n, k) arrays)
-        spacing[idx], c = tree.radii(idx, k, unit, cover_k, COVER_HOLE, COVER_MAX_GAP)
+        # the spacing and the gap-closing radii (normals given) from one search (no (n, k) arrays)
+        spacing[idx], c = tree.radii(idx, k, nrm if cover_k else None, cover_k, COVER_HOLE, COVER_MAX_GAP)
         if c is not None:
             cover[idx] = c
         if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
@@ -281,8 +249,7 @@ def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray,
     raised to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
     tree: a neighbour_tree of `points` already built; progress: as analyse's. The rule is
     computed in the compiled core (core.PointIndex.covering)."""
-    nrm = np.asarray(normals, dtype=np.float32)
-    nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+    nrm = np.asarray(normals, dtype=np.float32)  # directions of any length (the core normalises them)
     s = np.asarray(spacing, dtype=np.float32)
     k = int(min(COVER_K, len(points) - 1))
     if k < 2:

@@ -139,6 +139,53 @@ def test_covering_radius_follows_the_rule():
     assert close.mean() >= 0.999, np.flatnonzero(~close)[:10]  # a decision on a threshold may differ in rounding
 
 
+def widest_gap_reference(offsets, normal, nbr_normals):
+    """numpy restatement of the boundary test's angle for one point (spacing.py's text):
+    offsets (k,3) to its neighbours, its normal, theirs (k,3)."""
+    normal = normal / np.linalg.norm(normal)
+    helper = np.array([1.0, 0, 0]) if abs(normal[0]) < 0.9 else np.array([0.0, 1, 0])
+    u = np.cross(normal, helper)
+    u /= np.linalg.norm(u)
+    v = np.cross(normal, u)
+    depth = np.maximum(-(offsets @ normal), 0.0)  # below the tangent plane
+    tilt = nbr_normals - (nbr_normals @ normal)[:, None] * normal
+    tilt_len = np.linalg.norm(tilt, axis=1, keepdims=True)
+    unfolded = offsets + depth[:, None] * np.where(tilt_len > 1e-6, tilt / np.maximum(tilt_len, 1e-300), 0.0)
+    ang = np.sort(np.arctan2(unfolded @ v, unfolded @ u))
+    return np.diff(np.append(ang, ang[0] + 2 * np.pi)).max()
+
+
+@pytest.mark.parametrize("shape", ["sphere", "open patch", "cube"])
+def test_widest_gaps_follow_the_boundary_rule(shape):
+    """The boundary test's angles against numpy; normals of any length (not unit) give the
+    same answer, and the closed guess comes out as the shape is."""
+    n = 4000
+    if shape == "sphere":
+        pts = sphere(n).astype(np.float64)
+        nrm = pts.copy()
+    elif shape == "open patch":
+        pts = np.column_stack([RNG.uniform(-1, 1, (n, 2)), np.zeros(n)])
+        nrm = np.tile([0, 0, 1.0], (n, 1))
+    else:  # sharp edges: neighbours on the next face are unfolded, not a boundary
+        pts = RNG.uniform(-1, 1, (n, 3))
+        axis = RNG.integers(0, 3, n)
+        pts[np.arange(n), axis] = np.sign(RNG.uniform(-1, 1, n))
+        nrm = np.zeros((n, 3))
+        nrm[np.arange(n), axis] = pts[np.arange(n), axis]
+    pts = pts.astype(np.float32)
+    index = core.PointIndex(pts)
+    k = spacing.BOUNDARY_K
+    scaled = (nrm * RNG.uniform(0.01, 100, (n, 1))).astype(np.float32)
+    for rows in (index.order, RNG.permutation(n)[:500]):
+        got = index.widest_gaps(rows, scaled, k)
+        _, ids = index.knn(rows, k)
+        want = np.array([widest_gap_reference((pts[ids[i]] - pts[r]).astype(np.float64), nrm[r], nrm[ids[i]])
+                         for i, r in enumerate(rows)])
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
+    hood = spacing.analyse(pts, nrm)
+    assert hood.closed_guess == (shape != "open patch"), hood.describe()
+
+
 def test_spacing_and_gap_closing_radii_from_one_search():
     n = 3000
     pts = sphere(n)
@@ -223,8 +270,12 @@ def test_bad_input_raises_instead_of_crashing():
     for k in (0, 100, core._core.MAX_NEIGHBOURS + 1):
         with pytest.raises(ValueError, match="k must be"):
             index.knn([0], k)
-    with pytest.raises(ValueError, match="unit"):
+    with pytest.raises(ValueError, match="direction"):
         index.covering([0], np.zeros((100, 3)), np.ones(100), 12, 3.0, 2.8)
+    nan_normals = np.tile([0, 0, 1.0], (100, 1))
+    nan_normals[57] = np.nan
+    with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):  # a neighbour's is read too
+        index.widest_gaps([0], nan_normals, 4)
     with pytest.raises(ValueError, match="spacing"):
         index.covering([0], np.tile([0, 0, 1.0], (100, 1)), np.full(100, np.nan), 12, 3.0, 2.8)
     with pytest.raises(ValueError, match="graph"):

@@ -306,6 +306,19 @@ inline int ctz64(uint64_t v) {
     return i;                        // this loop runs for the few candidate circles only)
 }
 
+// The unit normal n (of `normal`, any length but 0) and a tangent frame (u, v): u = n x
+// helper, the helper an axis far from n; v = n x u (spacing.py's _tangent_frame).
+inline void tangent_frame(const float normal[3], double n[3], double u[3], double v[3]) {
+    const double nl = std::sqrt(double(normal[0]) * normal[0] + double(normal[1]) * normal[1] +
+                                double(normal[2]) * normal[2]);
+    for (int a = 0; a < 3; ++a) n[a] = normal[a] / nl;
+    const double h[3] = {std::fabs(n[0]) < 0.9 ? 1.0 : 0.0, std::fabs(n[0]) < 0.9 ? 0.0 : 1.0, 0.0};
+    u[0] = n[1] * h[2] - n[2] * h[1], u[1] = n[2] * h[0] - n[0] * h[2], u[2] = n[0] * h[1] - n[1] * h[0];
+    const double ul = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+    for (int a = 0; a < 3; ++a) u[a] /= ul;
+    v[0] = n[1] * u[2] - n[2] * u[1], v[1] = n[2] * u[0] - n[0] * u[2], v[2] = n[0] * u[1] - n[1] * u[0];
+}
+
 // A monotonic stand-in for atan2(y, x) mapped to [0, 2 pi): in [0, 4), no trigonometry
 // (the "diamond angle"). Sorting by it orders vectors around the origin as the angle does.
 inline double pseudo_angle(double x, double y) {
@@ -320,13 +333,8 @@ inline double pseudo_angle(double x, double y) {
 float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
                       float spacing, float hole, float max_gap) {
     if (m < 2) return spacing;
-    // Tangent frame (u, v): u = n x helper, the helper an axis far from n.
-    const double n[3] = {normal[0], normal[1], normal[2]};
-    const double h[3] = {std::fabs(n[0]) < 0.9 ? 1.0 : 0.0, std::fabs(n[0]) < 0.9 ? 0.0 : 1.0, 0.0};
-    double u[3] = {n[1] * h[2] - n[2] * h[1], n[2] * h[0] - n[0] * h[2], n[0] * h[1] - n[1] * h[0]};
-    const double ul = std::sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
-    for (double &c : u) c /= ul;
-    const double v[3] = {n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]};
+    double n[3], u[3], v[3];
+    tangent_frame(normal, n, u, v);
     float p[3];
     index.at(self, p);
     double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
@@ -381,6 +389,36 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
         }
     }
     return float(best);
+}
+
+double widest_gap(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float *normals) {
+    if (m < 1) return 2.0 * M_PI;
+    double n[3], u[3], v[3];
+    tangent_frame(normals + 3 * size_t(index.id(self)), n, u, v);
+    float p[3];
+    index.at(self, p);
+    double ang[PointIndex::kMaxK];
+    for (int j = 0; j < m; ++j) {
+        float q[3];
+        index.at(slots[j], q);
+        double o[3] = {double(q[0] - p[0]), double(q[1] - p[1]), double(q[2] - p[2])};
+        const double depth = std::max(-(o[0] * n[0] + o[1] * n[1] + o[2] * n[2]), 0.0);  // below the plane
+        if (depth > 0.0) {
+            // Unfolded along the neighbour's normal's tilt from this one's: a neighbour round
+            // a fold (a sharp edge) lies beside the point, not behind it.
+            const float *nj = normals + 3 * size_t(index.id(slots[j]));
+            const double along = nj[0] * n[0] + nj[1] * n[1] + nj[2] * n[2];
+            const double t[3] = {nj[0] - along * n[0], nj[1] - along * n[1], nj[2] - along * n[2]};
+            const double tl = std::sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]);
+            if (tl > 1e-6)  // spacing.py's threshold: no tilt, no unfolding
+                for (int a = 0; a < 3; ++a) o[a] += depth * t[a] / tl;
+        }
+        ang[j] = std::atan2(o[0] * v[0] + o[1] * v[1] + o[2] * v[2], o[0] * u[0] + o[1] * u[1] + o[2] * u[2]);
+    }
+    std::sort(ang, ang + m);
+    double widest = ang[0] + 2.0 * M_PI - ang[m - 1];  // across the wrap
+    for (int j = 1; j < m; ++j) widest = std::max(widest, ang[j] - ang[j - 1]);
+    return widest;
 }
 
 namespace {

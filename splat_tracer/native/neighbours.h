@@ -92,12 +92,19 @@ private:
 // "Radius" and "Normals"); spacing.py and normals.py describe the rules.
 
 // The radius of the largest empty circle through point `id` and two angularly adjacent
-// neighbours among its k nearest, seen in its tangent plane (normal: unit), when it is
+// neighbours among its k nearest, seen in its tangent plane (normal: any length but 0), when it is
 // wider than `spacing` but at most hole x spacing and the angular gap between the two is
 // below max_gap (radians); else `spacing`. See spacing.py, "Gap-closing radii".
 // self: the point's slot; slots: its m nearest others, nearest first.
 float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
                       float spacing, float hole, float max_gap);
+
+// The widest angle (radians, in [0, 2 pi]) between angularly adjacent neighbours of the
+// point at slot `self` among its m nearest others (slots), seen in its tangent plane after
+// each neighbour below the plane is unfolded onto it along its own normal's tilt: the
+// boundary test of spacing.py ("closed surface guess"). normals: by input id, any length
+// but 0 (normal[self]'s direction is the plane's).
+double widest_gap(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float *normals);
 
 // The unit eigenvector of the smallest eigenvalue of the scatter matrix of the point at
 // slot `self` and its m nearest others (slots): the PCA normal, unoriented.

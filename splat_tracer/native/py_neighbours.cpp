@@ -102,13 +102,15 @@ bool check_cover(int cover_k, int k, float hole, float max_gap) {
     return true;
 }
 
-// normals (N,3) by input id: the rows' must be unit vectors. Sets an exception otherwise.
-bool check_unit_normals(const float *n, const int32_t *rows, Py_ssize_t m) {
-    for (Py_ssize_t i = 0; i < m; ++i) {  // only the rows asked about are read
-        const float *ni = n + 3 * rows[i];
-        const double len = std::sqrt(double(ni[0]) * ni[0] + double(ni[1]) * ni[1] + double(ni[2]) * ni[2]);
-        if (!(std::fabs(len - 1.0) < 1e-3))
-            return PyErr_Format(PyExc_ValueError, "normals[%d] must be a unit vector", int(rows[i])), false;
+// normals (N,3) by input id: those of the rows (all when rows is null) must be directions,
+// finite and not zero (any length: the queries normalise them). Sets an exception otherwise.
+bool check_normals(const float *n, const int32_t *rows, Py_ssize_t m) {
+    for (Py_ssize_t i = 0; i < m; ++i) {
+        const Py_ssize_t id = rows ? rows[i] : i;
+        const float *ni = n + 3 * id;
+        const double len2 = double(ni[0]) * ni[0] + double(ni[1]) * ni[1] + double(ni[2]) * ni[2];
+        if (!(std::isfinite(len2) && len2 > 0.0))  // a float's square never overflows a double
+            return PyErr_Format(PyExc_ValueError, "normals[%zd] must be a direction (finite, not zero)", id), false;
     }
     return true;
 }
@@ -228,7 +230,7 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (!check_cover(k, k, hole, max_gap)) return nullptr;
     const int32_t *r = rows.data<int32_t>();
     const float *n = nrm.data<float>(), *s = sp.data<float>();
-    if (!check_unit_normals(n, r, rows.dim(0))) return nullptr;
+    if (!check_normals(n, r, rows.dim(0))) return nullptr;
     for (Py_ssize_t i = 0; i < rows.dim(0); ++i) {  // only the rows asked about are read
         if (!(std::isfinite(s[r[i]]) && s[r[i]] >= 0.f))
             return PyErr_Format(PyExc_ValueError, "spacing[%d] must be finite and >= 0", int(r[i]));
@@ -244,7 +246,7 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
 
 // radii(rows, spacing_k, spacing, normals=None, cover_k=0, hole=0, max_gap=0, cover=None,
 // threads=0): each row's distance to its spacing_k-th nearest other point and, with normals
-// ((N,3) unit, by input id) and cover, its gap-closing radius among its cover_k nearest
+// ((N,3) directions, by input id) and cover, its gap-closing radius among its cover_k nearest
 // (covering_radius, with that distance as the spacing): one search for both.
 PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"rows", "spacing_k", "spacing", "normals", "cover_k", "hole", "max_gap", "cover",
@@ -267,7 +269,7 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (covering) {
         if (!check_k(cover_k, index.size() - 1, "cover_k") || !check_cover(cover_k, cover_k, hole, max_gap) ||
             !get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ocover, "cover", 'f', 1, so, true, cov) ||
-            !check_unit_normals(nrm.data<float>(), rows.data<int32_t>(), rows.dim(0)))
+            !check_normals(nrm.data<float>(), rows.data<int32_t>(), rows.dim(0)))
             return nullptr;
     }
     const int k = std::max(spacing_k, covering ? cover_k : 0);
@@ -278,6 +280,32 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
             s[i] = std::sqrt(d2[spacing_k - 1]);
             if (c) c[i] = covering_radius(index, index.slot(uint32_t(r[i])), nb, cover_k, n + 3 * size_t(r[i]), s[i],
                                           hole, max_gap);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
+// widest_gaps(rows, k, normals, out, threads=0): each row's widest_gap among its k nearest
+// others; normals (N,3) float32 by input id (its neighbours' are read too: all are checked).
+PyObject *PointIndex_widest_gaps(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"rows", "k", "normals", "out", "threads", nullptr};
+    PyObject *orows, *onrm, *oout;
+    int k, threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiOO|i", const_cast<char **>(kwlist), &orows, &k, &onrm, &oout,
+                                     &threads))
+        return nullptr;
+    const PointIndex &index = index_of(self);
+    View rows, nrm, out;
+    if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
+    Py_ssize_t sn[2] = {Py_ssize_t(index.size()), 3}, so[1] = {rows.dim(0)};
+    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(oout, "out", 'f', 1, so, true, out) ||
+        !check_normals(nrm.data<float>(), nullptr, sn[0]))
+        return nullptr;
+    const float *n = nrm.data<float>();
+    float *o = out.data<float>();
+    const int32_t *r = rows.data<int32_t>();
+    if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, const float *, const uint32_t *nb) {
+            o[i] = float(widest_gap(index, index.slot(uint32_t(r[i])), nb, k, n));
         }))
         return nullptr;
     Py_RETURN_NONE;
@@ -347,6 +375,8 @@ PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
 
 PyMethodDef PointIndex_methods[] = {
     {"order", PointIndex_order, METH_O, "order(out): fills out (int32 (N,)) with the points' ids in the tree's order."},
+    METHOD(widest_gaps, "widest_gaps(rows, k, normals, out, threads=0): the widest angle between angularly "
+                        "adjacent neighbours among each row's k nearest, in its tangent plane (the boundary test)."),
     METHOD(knn, "knn(rows, k, dist, ids, threads=0): the k nearest other points of each row's point, nearest first."),
     METHOD(knn_at, "knn_at(positions, k, dist, ids, threads=0): the k nearest points to each position."),
     METHOD(covering, "covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): gap-closing radii."),

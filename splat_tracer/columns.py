@@ -1,0 +1,41 @@
+"""Row-wise tests and column bounds of (N, 3) arrays, a column at a time.
+
+numpy reduces an (N, 3) array along either axis with an inner loop three elements long:
+at 10M float64 points `a.min(axis=0)` takes 0.29 s and `np.isfinite(a).all(axis=1)`
+0.17 s, against 0.025 s and 0.04 s for the same a column at a time. The import runs
+several such passes over every point (coordinates, normals), so they are written here once.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """(N,) bool: rows of `a` (N, C) whose every value is finite."""
+    ok = np.isfinite(a[:, 0])
+    for c in range(1, a.shape[1]):
+        ok &= np.isfinite(a[:, c])
+    return ok
+
+
+def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): each column's smallest and largest value (float64 (C,))."""
+    cols = range(a.shape[1])
+    return (np.array([a[:, c].min() for c in cols], np.float64),
+            np.array([a[:, c].max() for c in cols], np.float64))
+
+
+def rows_outside(a: np.ndarray, lo, hi) -> np.ndarray:
+    """(N,) bool: rows of `a` with a value below `lo` or above `hi` (per column)."""
+    out = (a[:, 0] < lo[0]) | (a[:, 0] > hi[0])
+    for c in range(1, a.shape[1]):
+        out |= (a[:, c] < lo[c]) | (a[:, c] > hi[c])
+    return out
+
+
+def nonzero_rows(a: np.ndarray) -> np.ndarray:
+    """(N,) bool: rows of `a` with a value other than zero (NaN counts as other)."""
+    out = a[:, 0] != 0
+    for c in range(1, a.shape[1]):
+        out |= a[:, c] != 0
+    return out
