@@ -43,6 +43,12 @@ CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sq
 # 200k samples expect about 250 rim hits against a limit of about 13: far apart.
 BOUNDARY_SAMPLE = 200_000
 BOUNDARY_SEED = 0
+# The sample is drawn as runs of this many points of the k-d tree's order (spatially
+# compact patches, 6,250 of them spread over the cloud): the core answers a run a leaf at a
+# time, 3-4x faster than as many lone points at 10M, whose searches each start from the
+# root and miss the cache. A rim crossing a patch gives it several hits at once, which
+# widens the count's spread, but 250 expected hits against a limit of 13 leave room.
+BOUNDARY_RUN = 32
 # Queries go in chunks of this many points, in the k-d tree's own (spatially coherent)
 # order: the core then answers a leaf of points at a time (core.PointIndex), the chunks
 # bound the memory of the (chunk, k) arrays, and progress and cancelling act between them.
@@ -131,6 +137,14 @@ def _boundary_count(tree, idx: np.ndarray, normals: np.ndarray, k: int) -> int:
     return int((tree.widest_gaps(idx, normals, k) > BOUNDARY_GAP).sum())
 
 
+def _sample_runs(order: np.ndarray, count: int) -> np.ndarray:
+    """`count` (a multiple of BOUNDARY_RUN, at most len(order)) entries of `order` in runs of
+    BOUNDARY_RUN, the runs drawn at random (seeded) among its aligned blocks."""
+    runs = count // BOUNDARY_RUN
+    blocks = np.random.default_rng(BOUNDARY_SEED).choice(len(order) // BOUNDARY_RUN, runs, replace=False)
+    return order[(np.sort(blocks)[:, None] * BOUNDARY_RUN + np.arange(BOUNDARY_RUN)).ravel()]
+
+
 def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int = -1, progress=None,
             tree=None, known_spacing=None, close_gaps: bool = False, known_cover=None) -> Neighbourhood:
     """k-NN spacing of every point and, with normals, the boundary count and closed guess
@@ -174,8 +188,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
             boundary += _boundary_count(tree, idx, nrm, kq)
     if nrm is not None and tested is None:
-        tested = sample if sample is not None else np.sort(
-            np.random.default_rng(BOUNDARY_SEED).choice(n, BOUNDARY_SAMPLE, replace=False))
+        tested = sample if sample is not None else _sample_runs(order, BOUNDARY_SAMPLE)
         hits = 0
         for start in chunks(len(tested), _CHUNK, scaled(progress, 0.5, 1.0), "splat radii: closed surface guess"):
             idx = tested[start:start + _CHUNK]

@@ -69,6 +69,22 @@ def test_a_chunk_of_the_order_starting_mid_leaf_gets_the_same_answer():
         np.testing.assert_array_equal(part[0], whole[0][start:stop])
 
 
+def test_rows_made_of_many_runs_of_the_order_get_the_same_answer():
+    """Runs of the tree's order (the boundary test's sample), lone rows, runs crossing leaf
+    ends and runs that continue one another, in one call: each row as if asked alone."""
+    pts = RNG.normal(size=(5000, 3)).astype(np.float32)
+    index = core.PointIndex(pts)
+    o = index.order
+    rows = np.concatenate([o[10:42], o[500:501], o[7:9], o[3000:3100], o[3100:3101], o[4999:5000], o[0:1],
+                           o[200:233], o[1000:1001], o[1002:1003], o[999:1000]])
+    dist, ids = index.knn(rows, 8)
+    for i, r in enumerate(rows):
+        d1, _ = index.knn([r], 8)
+        np.testing.assert_array_equal(dist[i], d1[0])
+    bd, _ = brute_knn(pts, pts[rows], 8, exclude=rows)
+    np.testing.assert_allclose(dist, bd, rtol=1e-5, atol=1e-6)
+
+
 def test_knn_at_any_position():
     pts = RNG.normal(size=(4000, 3)).astype(np.float32)
     index = core.PointIndex(pts, threads=1)
@@ -121,7 +137,8 @@ def covering_reference(offsets, normal, s, hole, max_gap):
     return best
 
 
-def test_covering_radius_follows_the_rule():
+@pytest.mark.parametrize("k", [12, 40])  # 40: beyond the rank count's reach, sorted another way
+def test_covering_radius_follows_the_rule(k):
     n = 3000
     p = RNG.normal(size=(n, 3))
     p /= np.linalg.norm(p, axis=1, keepdims=True)
@@ -129,12 +146,13 @@ def test_covering_radius_follows_the_rule():
     pts, nrm = p.astype(np.float32), p.astype(np.float32)
     index = core.PointIndex(pts)
     s = index.kth_distance(np.arange(n), 6)
-    k, hole, max_gap = 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP
+    hole, max_gap = spacing.COVER_HOLE, spacing.COVER_MAX_GAP
     got = index.covering(np.arange(n), nrm, s, k, hole, max_gap)
     _, ids = index.knn(np.arange(n), k)
     want = np.array([covering_reference((pts[ids[i]] - pts[i]).astype(np.float64), nrm[i].astype(np.float64),
                                         float(s[i]), hole, max_gap) for i in range(n)])
-    assert (want > s).mean() > 0.05  # the rule raised radii here: the comparison means something
+    # the rule raised radii here (fewer with more neighbours): the comparison means something
+    assert (want > s).mean() > (0.05 if k == 12 else 0.005)
     close = np.isclose(got, want, rtol=1e-5)
     assert close.mean() >= 0.999, np.flatnonzero(~close)[:10]  # a decision on a threshold may differ in rounding
 

@@ -39,34 +39,44 @@ bool for_rows(size_t m, int threads, Fn &&fn) {
 }
 
 // Runs fn(i, d2, slots) for each row i with its point's k nearest others (squared
-// distances and slots, nearest first), without the GIL. Rows that are a run of the tree's order (what
-// the importer asks: chunks of `order`) go a leaf at a time (PointIndex::leaf_nearest),
-// others one search each.
+// distances and slots, nearest first), without the GIL. Rows that follow one another in
+// the tree's order (what the importer asks: chunks of `order`, or a sample of runs of it)
+// go a leaf at a time (PointIndex::leaf_nearest), lone rows one search each.
 template <class Fn>
 bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int k, int threads, Fn &&fn) {
     const auto &order = index.order();
-    const size_t start = m ? index.slot(uint32_t(rows[0])) : 0;
-    bool run = start + m <= index.size();
-    for (size_t i = 0; i < m && run; ++i) run = order[start + i] == uint32_t(rows[i]);
-    if (!run)
-        return for_rows(m, threads, [&](size_t i) {
-            float d2[PointIndex::kMaxK];
-            uint32_t slots[PointIndex::kMaxK];
-            index.nearest_of(index.slot(uint32_t(rows[i])), k, d2, slots);
-            fn(i, d2, slots);
-        });
-    std::vector<size_t> pieces;  // the run cut at leaf ends: each piece within one leaf
-    for (size_t s = start; s < start + m; s = std::min(index.leaf_end(s), start + m)) pieces.push_back(s);
-    pieces.push_back(start + m);
-    const size_t per_task = kRowsPerTask / PointIndex::kLeafSize;
-    return for_tasks((pieces.size() - 1 + per_task - 1) / per_task, threads, [&](size_t t) {
+    struct Piece {
+        size_t row, slot, count;  // rows [row, row + count) are slots [slot, slot + count), in one leaf
+    };
+    std::vector<Piece> pieces;
+    for (size_t i = 0; i < m;) {
+        const size_t s = index.slot(uint32_t(rows[i])), end = index.leaf_end(s);
+        size_t c = 1;
+        while (i + c < m && s + c < end && order[s + c] == uint32_t(rows[i + c])) ++c;
+        pieces.push_back({i, s, c});
+        i += c;
+    }
+    // Tasks of about kRowsPerTask rows: a piece holds 1 to kLeafSize of them.
+    std::vector<size_t> task_start{0};
+    for (size_t p = 0, rows_in_task = 0; p < pieces.size(); ++p) {
+        rows_in_task += pieces[p].count;
+        if (rows_in_task >= kRowsPerTask && p + 1 < pieces.size()) task_start.push_back(p + 1), rows_in_task = 0;
+    }
+    task_start.push_back(pieces.size());
+    return for_tasks(task_start.size() - 1, threads, [&](size_t t) {
         std::vector<float> d2(PointIndex::kLeafSize * size_t(k));
         std::vector<uint32_t> slots(d2.size());
-        float guess = 0.f;  // passed from leaf to leaf (PointIndex::leaf_nearest)
-        for (size_t p = t * per_task; p < std::min(pieces.size() - 1, (t + 1) * per_task); ++p) {
-            index.leaf_nearest(pieces[p], pieces[p + 1], k, d2.data(), slots.data(), guess);
-            for (size_t j = 0; j < pieces[p + 1] - pieces[p]; ++j)
-                fn(pieces[p] - start + j, &d2[j * k], &slots[j * k]);
+        float guess = 0.f;  // passed from leaf to leaf along a run (PointIndex::leaf_nearest)
+        for (size_t p = task_start[t]; p < task_start[t + 1]; ++p) {
+            const Piece &pc = pieces[p];
+            if (p == task_start[t] || pieces[p - 1].slot + pieces[p - 1].count != pc.slot) guess = 0.f;  // a new run
+            if (pc.count == 1 && (p + 1 == pieces.size() || pc.slot + 1 != pieces[p + 1].slot) && guess == 0.f) {
+                index.nearest_of(uint32_t(pc.slot), k, d2.data(), slots.data());  // a lone row: its own search
+                fn(pc.row, d2.data(), slots.data());
+                continue;
+            }
+            index.leaf_nearest(pc.slot, pc.slot + pc.count, k, d2.data(), slots.data(), guess);
+            for (size_t j = 0; j < pc.count; ++j) fn(pc.row + j, &d2[j * k], &slots[j * k]);
         }
     });
 }
