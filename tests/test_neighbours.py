@@ -25,7 +25,8 @@ def brute_knn(points, queries, k, exclude=None):
 
 def clouds():
     """Clouds that stress a k-d tree: random, a plane (a zero-extent axis), a line, clusters
-    of coincident points, a grid full of distance ties, two points."""
+    of coincident points, a grid full of distance ties, two points, points already sorted
+    along an axis and organ-pipe ordered (inputs that defeat naive quickselect pivots)."""
     n = 1500
     yield "random", RNG.normal(size=(n, 3))
     yield "plane", np.c_[RNG.uniform(-1, 1, (n, 2)), np.zeros(n)]
@@ -37,6 +38,10 @@ def clouds():
     g = np.arange(11.0)
     yield "grid", np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
     yield "two", np.array([[0.0, 0, 0], [1, 2, 3]])
+    ramp = RNG.normal(size=(n, 3))
+    yield "sorted", ramp[np.argsort(ramp[:, 0])]
+    x = np.r_[np.arange(n // 2), np.arange(n - n // 2)[::-1]].astype(float)
+    yield "organ pipe", np.c_[x, np.zeros(n), np.sin(x)]
     yield "far", np.c_[RNG.uniform(-1, 1, (n, 2)), np.zeros(n)] + 5e5  # georeferenced scale
 
 
