@@ -19,7 +19,7 @@ import bpy
 from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
 
 from ..splat_tracer import importer, normals, ply, prepare, readers, spacing
-from ..splat_tracer.cloud_object import NORMAL, RADIUS, create_cloud_object
+from ..splat_tracer.cloud_object import NORMAL, RADIUS, create_cloud_object, mesh_positions
 from ..splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress, scaled
 
 SCANNER = "scanner_position"  # point attribute: the scanner that saw the point (object-local)
@@ -311,8 +311,7 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
             if n < normals.MIN_POINTS:
                 self.report({"ERROR"}, f"{obj.name}: {n} points, too few to estimate normals")
                 return {"CANCELLED"}
-            co = np.empty(n * 3, np.float32)
-            mesh.vertices.foreach_get("co", co)
+            co = mesh_positions(mesh).ravel()
             scanners = None
             if SCANNER in mesh.attributes:
                 scanners = np.empty(n * 3, np.float32)

@@ -23,6 +23,17 @@ NODE_GROUP_VERSION = 2
 MATERIAL_TAG = "splat_tracer_material"  # custom property marking our material
 MATERIAL_VERSION = 2  # 1: Base Color from splat_color; 2: its alpha into Alpha too
 MATERIAL_NAME = "Splat Cloud"
+# A mesh's vertex positions as its "position" attribute: foreach_get/foreach_set on it copy
+# the array at once, while MeshVertex.co goes through RNA a vertex at a time (10M vertices:
+# 0.01 s against 0.5-0.7 s).
+POSITION = "position"
+
+
+def mesh_positions(mesh: bpy.types.Mesh) -> np.ndarray:
+    """(N, 3) float32 vertex positions of a mesh."""
+    out = np.empty(len(mesh.vertices) * 3, np.float32)
+    mesh.attributes[POSITION].data.foreach_get("vector", out)
+    return out.reshape(-1, 3)
 
 
 def cloud_material() -> bpy.types.Material:
@@ -117,7 +128,7 @@ def create_cloud_object(name: str, local_positions: np.ndarray, normals: np.ndar
         mesh = bpy.data.meshes.new(name)
         n = len(local_positions)
         mesh.vertices.add(n)
-        mesh.vertices.foreach_set("co", np.ascontiguousarray(local_positions, np.float32).ravel())
+        mesh.attributes[POSITION].data.foreach_set("vector", np.ascontiguousarray(local_positions, np.float32).ravel())
         mesh.attributes.new(NORMAL, "FLOAT_VECTOR", "POINT").data.foreach_set(
             "vector", np.ascontiguousarray(normals, np.float32).ravel())
         mesh.attributes.new(RADIUS, "FLOAT", "POINT").data.foreach_set(

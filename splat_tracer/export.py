@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 
 from . import core, export_shading, resources, shading
-from .cloud_object import COLOUR, NORMAL, RADIUS
+from .cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
 from .columns import finite_rows, nonzero_rows
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -123,8 +123,7 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     """(vertices, triangles, corner normals (T,3,3), material indices) of an evaluated mesh."""
     mesh.calc_loop_triangles()
     nv, nt = len(mesh.vertices), len(mesh.loop_triangles)
-    verts = np.empty(nv * 3, np.float32)
-    mesh.vertices.foreach_get("co", verts)
+    verts = mesh_positions(mesh).ravel()
     tris = np.empty(nt * 3, np.int32)
     mesh.loop_triangles.foreach_get("vertices", tris)
     loops = np.empty(nt * 3, np.int32)
