@@ -3,9 +3,14 @@
 numpy reduces an (N, 3) array along either axis with an inner loop three elements long:
 at 10M float64 points `a.min(axis=0)` takes 0.29 s and `np.isfinite(a).all(axis=1)`
 0.17 s, against 0.025 s and 0.04 s for the same a column at a time. The import runs
-several such passes over every point (coordinates, normals), so they are written here once.
+several such passes over every point (coordinates, normals), so they are written here once,
+with `in_blocks`, which runs such row-wise work a cache-sized block of rows at a time on
+all cores.
 """
 from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -39,3 +44,24 @@ def nonzero_rows(a: np.ndarray) -> np.ndarray:
     for c in range(1, a.shape[1]):
         out |= a[:, c] != 0
     return out
+
+
+# Rows per block of in_blocks: a block of a PLY's vertex records (27-60 bytes each: up to
+# 4 MB) stays in cache while every field is taken from it, instead of the whole file being
+# read from memory once per field; 160 blocks at 10M points cost Python little.
+BLOCK_ROWS = 1 << 16
+
+
+def in_blocks(fn, n: int, threads: int = 0) -> None:
+    """Calls fn(start, stop) for consecutive blocks of BLOCK_ROWS rows covering [0, n), on
+    `threads` threads (0: all cores). numpy releases the GIL inside its loops, so the numpy
+    work of fn runs in parallel; fn must only write its own rows."""
+    starts = range(0, n, BLOCK_ROWS)
+    threads = threads or os.cpu_count() or 1
+    if threads == 1 or len(starts) <= 1:
+        for s in starts:
+            fn(s, min(n, s + BLOCK_ROWS))
+        return
+    with ThreadPoolExecutor(min(threads, len(starts))) as pool:
+        for _ in pool.map(lambda s: fn(s, min(n, s + BLOCK_ROWS)), starts):
+            pass  # re-raises the first exception of fn

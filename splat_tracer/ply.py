@@ -17,7 +17,7 @@ from typing import Optional
 import numpy as np
 
 from . import spacing
-from .columns import finite_rows
+from .columns import finite_rows, in_blocks
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -46,7 +46,7 @@ class PointCloud:
     dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
     merged_duplicates: int = 0       # rows dropped for repeating an earlier row's position
     first_duplicate_row: int = -1    # the first of those, as a row of the file
-    rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file
+    rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file; None: point i is row i
     # Per-point attributes kept on the object besides the splat's own (LAS intensity,
     # classification, return number; text intensity): name -> (N,) int32 or float32.
     attributes: dict = field(default_factory=dict)
@@ -66,8 +66,10 @@ class PointCloud:
         from dataclasses import replace
 
         take = (lambda a: None if a is None else a[keep])
+        keep = np.asarray(keep)
+        rows = take(self.rows) if self.rows is not None else (np.flatnonzero(keep) if keep.dtype == bool else keep)
         return replace(self, positions=self.positions[keep], normals=take(self.normals),
-                       colours=take(self.colours), radii=take(self.radii), rows=take(self.rows),
+                       colours=take(self.colours), radii=take(self.radii), rows=rows,
                        scanners=take(self.scanners),
                        attributes={k: v[keep] for k, v in self.attributes.items()})
 
@@ -269,7 +271,29 @@ def read_ply(path: str) -> PointCloud:
     if gaussians.is_gaussian(names):
         return gaussians.read_gaussians(path, v, names)
 
-    pos = _columns(v, ("x", "y", "z"))
+    # Coordinates (float64), normals (float32 is enough for a direction; make_cloud makes
+    # them unit) and 8/16-bit colours (by table) in one pass over the records, a block of
+    # rows at a time on all cores (10M points: 1.2 s field by field, 0.2 s this way).
+    rgb = ("red", "green", "blue")
+    pos = np.empty((n, 3))
+    normals = np.empty((n, 3), np.float32) if {"nx", "ny", "nz"} <= names else None
+    colours, scale = None, None
+    if set(rgb) <= names:
+        colours = np.empty((n, 4), np.float32)  # filled in place: no (N,4) temporaries
+        kind = {v[c].dtype for c in rgb}
+        scale = _BY_TYPE.get(kind.pop()) if len(kind) == 1 else None
+
+    def convert(b: int, e: int) -> None:
+        block = v[b:e]
+        for i, c in enumerate("xyz"):
+            pos[b:e, i] = block[c]
+        if normals is not None:
+            for i, c in enumerate(("nx", "ny", "nz")):
+                normals[b:e, i] = block[c]
+        if scale is not None:
+            linear_colours([block[c] for c in rgb], int(scale), out=colours[b:e])
+
+    in_blocks(convert, n)
     finite = finite_rows(pos)  # rows without are dropped and counted (make_cloud)
 
     radii = None
@@ -280,20 +304,10 @@ def read_ply(path: str) -> PointCloud:
             raise CloudFileError(f"{path}: {int(bad.sum())} vertices have a radius that is not a positive "
                                  f"number (first: row {np.flatnonzero(bad)[0]})")
 
-    colours = None
-    if {"red", "green", "blue"} <= names:
-        kind = {v[c].dtype for c in ("red", "green", "blue")}
-        scale = _BY_TYPE.get(kind.pop()) if len(kind) == 1 else None
-        colours = np.empty((n, 4), np.float32)  # filled in place: no (N,4) temporaries
-        if scale is not None:
-            linear_colours([v[c] for c in ("red", "green", "blue")], int(scale), out=colours)
-        else:
-            colours[:, :3] = srgb_to_linear(_unit_colours(path, v, ("red", "green", "blue")))
+    if colours is not None:
+        if scale is None:  # other types: their range decides (see _COLOUR_RANGES)
+            colours[:, :3] = srgb_to_linear(_unit_colours(path, v, rgb))
         colours[:, 3] = _unit_colours(path, v, ("alpha",))[:, 0] if "alpha" in names else 1.0
-
-    normals = None
-    if {"nx", "ny", "nz"} <= names:  # float32 is enough for a direction (make_cloud makes it unit)
-        normals = _columns(v, ("nx", "ny", "nz"), np.float32)
     ignored = [p.name for p in ply["vertex"].properties if p.name not in _KNOWN_PROPERTIES]
     notes = [f"vertex properties ignored (not a splat's): {', '.join(ignored)}"] if ignored else []
     return make_cloud(path, pos, normals, colours, radii, drop_non_finite=True, notes=notes)
@@ -303,14 +317,6 @@ def read_ply(path: str) -> PointCloud:
 _KNOWN_PROPERTIES = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "radius"}
 
 
-def _columns(v, names, dtype=np.float64) -> np.ndarray:
-    """(N, len(names)) float64 (or dtype) from fields of a structured array, converted in one pass."""
-    out = np.empty((len(v), len(names)), dtype)
-    for i, name in enumerate(names):
-        out[:, i] = v[name]
-    return out
-
-
 def unit_rows(vectors) -> tuple[np.ndarray, np.ndarray]:
     """(unit, ok): the rows of `vectors` (N, 3) scaled to unit length, in float32 when they
     are float32 (files' normals: no float64 copy of 10M of them), else float64; ok: the rows
@@ -318,6 +324,17 @@ def unit_rows(vectors) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(vectors)
     if v.dtype != np.float32:
         v = v.astype(np.float64)
+    unit, ok = np.empty(v.shape, v.dtype), np.empty(len(v), bool)
+
+    def block(b: int, e: int) -> None:
+        unit[b:e], ok[b:e] = _unit_block(v[b:e])
+
+    in_blocks(block, len(v))
+    return unit, ok
+
+
+def _unit_block(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """unit_rows of rows in float32 or float64."""
     l2 = np.einsum("ij,ij->i", v, v)  # in v's precision (np.linalg.norm: 5x slower at 10M)
     # Squares within 1e-30..1e30 are safe in float32 (normal numbers, a reciprocal in range);
     # the rest (zero, NaN, inf, or a component beyond ~1e15 or below ~1e-15) is redone below.
@@ -372,8 +389,8 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     rows = usable[first]
     merged = len(usable) - len(rows)
     first_merged = int(usable[~first][0]) if merged else -1
-    cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32), colours, radii, dropped, merged,
-                       first_merged, np.arange(n), dict(attributes or {}), scanners, dropped_rows=dropped_rows,
+    cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32, copy=False), colours, radii, dropped, merged,
+                       first_merged, None, dict(attributes or {}), scanners, dropped_rows=dropped_rows,
                        **fields)
     return cloud if len(rows) == n else cloud.subset(rows)
 

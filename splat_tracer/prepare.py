@@ -187,10 +187,11 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             f"{path}: only {len(cloud)} distinct position{'s' if len(cloud) != 1 else ''} among its {usable:,} "
             f"usable points ({cloud.merged_duplicates:,} repeat an earlier one); at least {spacing.MIN_POINTS} "
             "are needed to size the splats")
-    rows = cloud.rows if cloud.rows is not None else np.arange(len(cloud))
     bulk = bulk_mask(cloud.positions)
     outliers = int(len(bulk) - bulk.sum())
-    first_outlier = int(rows[np.argmin(bulk)]) if outliers else -1
+    first_outlier = -1
+    if outliers:  # as a row of the file
+        first_outlier = int(np.argmin(bulk) if cloud.rows is None else cloud.rows[np.argmin(bulk)])
     if outliers and drop_outliers:
         cloud, bulk = _subset(cloud, bulk), np.ones(int(bulk.sum()), bool)
     needs_normals = cloud.normals is None or not cloud.oriented
