@@ -52,6 +52,26 @@ def nonzero_rows(a: np.ndarray) -> np.ndarray:
 BLOCK_ROWS = 1 << 16
 
 
+def compress(arrays: list, keep: np.ndarray, threads: int = 0) -> list:
+    """[a[keep] for a in arrays] (None stays None; keep an (N,) bool mask), a block of rows
+    at a time on all cores: an import drops a few rows (duplicates, NaN) from 10M and copies
+    every per-point array, which numpy does on one core."""
+    n = len(keep)
+    counts = [int(np.count_nonzero(keep[s:s + BLOCK_ROWS])) for s in range(0, n, BLOCK_ROWS)]
+    at = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    out = [None if a is None else np.empty((int(at[-1]),) + a.shape[1:], a.dtype) for a in arrays]
+
+    def block(b: int, e: int) -> None:
+        i = b // BLOCK_ROWS
+        k = keep[b:e]
+        for a, o in zip(arrays, out):
+            if a is not None:
+                o[at[i]:at[i + 1]] = a[b:e][k]
+
+    in_blocks(block, n, threads)
+    return out
+
+
 def in_blocks(fn, n: int, threads: int = 0) -> None:
     """Calls fn(start, stop) for consecutive blocks of BLOCK_ROWS rows covering [0, n), on
     `threads` threads (0: all cores). numpy releases the GIL inside its loops, so the numpy

@@ -17,7 +17,7 @@ from typing import Optional
 import numpy as np
 
 from . import spacing
-from .columns import finite_rows, in_blocks
+from .columns import compress, finite_rows, in_blocks
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -65,12 +65,19 @@ class PointCloud:
         """The same cloud with only the rows `keep` (a mask or indices) of every per-point array."""
         from dataclasses import replace
 
-        take = (lambda a: None if a is None else a[keep])
         keep = np.asarray(keep)
-        rows = take(self.rows) if self.rows is not None else (np.flatnonzero(keep) if keep.dtype == bool else keep)
+        if keep.dtype == bool:  # a mask: every array copied a block at a time on all cores
+            names = list(self.attributes)
+            pos, nrm, col, rad, rows, scn, *attrs = compress(
+                [self.positions, self.normals, self.colours, self.radii, self.rows, self.scanners,
+                 *(self.attributes[k] for k in names)], keep)
+            rows = np.flatnonzero(keep) if self.rows is None else rows
+            return replace(self, positions=pos, normals=nrm, colours=col, radii=rad, rows=rows, scanners=scn,
+                           attributes=dict(zip(names, attrs)))
+        take = (lambda a: None if a is None else a[keep])
         return replace(self, positions=self.positions[keep], normals=take(self.normals),
-                       colours=take(self.colours), radii=take(self.radii), rows=rows,
-                       scanners=take(self.scanners),
+                       colours=take(self.colours), radii=take(self.radii),
+                       rows=keep if self.rows is None else self.rows[keep], scanners=take(self.scanners),
                        attributes={k: v[keep] for k, v in self.attributes.items()})
 
 
@@ -386,13 +393,14 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     # piles of them make the neighbour search pathological.
     usable = np.flatnonzero(keep)
     first = spacing.first_of_duplicates(pos if len(usable) == n else pos[usable])  # no copy when all are usable
-    rows = usable[first]
-    merged = len(usable) - len(rows)
-    first_merged = int(usable[~first][0]) if merged else -1
+    repeats = usable[~first]
+    merged = len(repeats)
+    first_merged = int(repeats[0]) if merged else -1
+    keep[repeats] = False
     cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32, copy=False), colours, radii, dropped, merged,
                        first_merged, None, dict(attributes or {}), scanners, dropped_rows=dropped_rows,
                        **fields)
-    return cloud if len(rows) == n else cloud.subset(rows)
+    return cloud if len(usable) == n and not merged else cloud.subset(keep)  # a mask: faster than indices
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from .columns import finite_rows
+from .columns import finite_rows, in_blocks
 from .ply import CloudFileError, PointCloud, linear_colours, make_cloud, read_ply, srgb_to_linear, _unit_colours
 from .progress import Cancelled
 
@@ -91,8 +91,10 @@ def _colour_channels(path: str, channels: dict) -> np.ndarray:
     hi = max(int(np.max(c)) if len(c) else 0 for c in channels.values())
     columns = [np.asarray(c) for c in channels.values()]
     if hi <= 65535 and all(np.issubdtype(c.dtype, np.integer) and (not len(c) or c.min() >= 0) for c in columns):
-        rgb = linear_colours(columns, 255 if hi <= 255 else 65535)  # LAS: uint16 channels, by table
-        return np.column_stack([rgb, np.ones(len(rgb))]).astype(np.float32)
+        out = np.empty((len(columns[0]), 4), np.float32)
+        linear_colours(columns, 255 if hi <= 255 else 65535, out=out)  # LAS: uint16 channels, by table
+        out[:, 3] = 1.0
+        return out
     if hi <= 255:
         rgb = np.column_stack([np.asarray(c, np.float64) / 255.0 for c in channels.values()])
     else:
@@ -132,17 +134,32 @@ def read_las(path: str, progress=None) -> PointCloud:
             fields = [c for c in ("red", "green", "blue") if {"red", "green", "blue"} <= dims]
             fields += [a for a in ("intensity", "classification", "return_number") if a in dims]
             # In chunks, so that a long read (LAZ decompresses at a few million points a
-            # second) reports progress and can be cancelled between them.
-            parts = {name: [] for name in ("x", "y", "z", *fields)}
+            # second) reports progress and can be cancelled between them; each chunk goes
+            # straight into arrays of the declared size (no lists of chunks joined after).
+            count = int(header.point_count)
+            pos = np.empty((count, 3))
+            column = {name: None for name in fields}
             read = 0
             for chunk in reader.chunk_iterator(_LAS_CHUNK):
                 if progress is not None:
-                    progress(read / max(header.point_count, 1), "reading")
-                for name in ("x", "y", "z"):  # scaled and offset: float64
-                    parts[name].append(np.asarray(chunk[name], np.float64))
+                    progress(read / max(count, 1), "reading")
+                m = len(chunk)
+                if read + m > count:
+                    raise CloudFileError(f"{path}: holds more points than the {count:,} its header declares")
+                raw = {name: np.asarray(chunk[name]) for name in ("X", "Y", "Z", *fields)}
                 for name in fields:
-                    parts[name].append(np.asarray(chunk[name]))
-                read += len(chunk)
+                    if column[name] is None:
+                        column[name] = np.empty(count, raw[name].dtype)
+
+                def convert(b: int, e: int, at: int = read) -> None:
+                    for i, name in enumerate(("X", "Y", "Z")):  # scaled and offset in float64
+                        np.multiply(raw[name][b:e], header.scales[i], out=pos[at + b:at + e, i])
+                        pos[at + b:at + e, i] += header.offsets[i]
+                    for name in fields:
+                        column[name][at + b:at + e] = raw[name][b:e]
+
+                in_blocks(convert, m)
+                read += m
     except (CloudFileError, Cancelled):
         raise
     except Exception as e:  # laspy raises LaspyException, ValueError, struct errors...
@@ -152,9 +169,8 @@ def read_las(path: str, progress=None) -> PointCloud:
     if read != header.point_count:
         raise CloudFileError(f"{path}: early end-of-file: the header declares {header.point_count:,} points but "
                              f"only {read:,} could be read")
-    column = {name: np.concatenate(chunks) for name, chunks in parts.items()}
-    del parts
-    pos = np.column_stack([column["x"], column["y"], column["z"]])
+    pos = pos[:read]
+    column = {name: values[:read] for name, values in column.items()}
     colours, notes = None, []
     if "red" in column:
         channels = {c: column[c] for c in ("red", "green", "blue")}
