@@ -10,7 +10,8 @@ flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and 
 then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
 and lamp rows and settings, rendered; then the neighbour-graph functions (spatial_order,
 permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
-on fuzzed tables whose indices stray out of range, weights, anchors and orders; then a
+on fuzzed tables whose indices stray out of range, weights, anchors and orders, and
+first_of_duplicates on the points (checked against a pairwise comparison); then a
 _core.PointIndex and its queries (knn, knn_at, covering, radii, pca) on fuzzed points,
 rows, k, normals and spacings. The contract of a native entry point: it returns,
 or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
@@ -199,6 +200,10 @@ def fuzz_graph(fdp):
         assert sorted(order) == list(range(n))
     else:
         order = indices(fdp, (n,), n)
+    first = np.empty(n, bool)
+    if call(lambda: _core.first_of_duplicates(pts, first, threads) or True):  # None: refused
+        for i in range(n):  # equal as numbers: -0.0 is 0.0, a row with a NaN equals none
+            assert first[i] == (not (pts[:i] == pts[i]).all(axis=1).any()), i
     call(_core.permute_table, nbr, order, fdp.ConsumeIntInRange(-1, k), np.empty((n, fdp.ConsumeIntInRange(0, k)),
                                                                                   np.int32), threads)
     rows = indices(fdp, (fdp.ConsumeIntInRange(0, 10),), n)

@@ -262,6 +262,21 @@ def spatial_order(points, threads: int = 0) -> np.ndarray:
     return out
 
 
+def first_of_duplicates(points, threads: int = 0) -> np.ndarray:
+    """(n,) bool: True for each row of the (n,3) points (as float64) whose position no
+    earlier row has. Positions are equal when their coordinates are equal as numbers: -0.0
+    equals 0.0, an infinity equals itself, and a row with a NaN coordinate equals no row
+    (it is always True). Hashing, bucketing and sorting in the compiled core (see
+    native/duplicates.h), on `threads` threads (0: all cores; the result does not depend on
+    them). 10M random float32-sourced points on two threads: 0.08 s against 1.0 s for the
+    numpy version it replaced, and 0.17 s against 11 s when they are 1M positions ten times
+    each (spacing.first_of_duplicates says why it matters)."""
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    out = np.empty(len(pts), bool)
+    _core.first_of_duplicates(pts, out, threads=threads)
+    return out
+
+
 def permute_table(table, order, columns: Optional[slice] = None, threads: int = 0) -> np.ndarray:
     """The neighbour table renumbered by `order` (a permutation): row r is row order[r] of
     `table` (its `columns`, a slice with step 1; default all), each entry replaced by that

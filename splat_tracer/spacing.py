@@ -55,12 +55,6 @@ BOUNDARY_RUN = 32
 _CHUNK = 1 << 16
 
 
-# Odd 64-bit multipliers (from splitmix64) that mix a row's three coordinates' bits into
-# one hash; equal rows have equal hashes, and unequal rows rarely do (a collision costs
-# only time: rows with equal hashes are compared exactly).
-_HASH_MULTIPLIERS = np.array([0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB], np.uint64)
-
-
 class SpacingError(ValueError):
     pass
 
@@ -82,39 +76,15 @@ class Neighbourhood:
 
 def first_of_duplicates(points: np.ndarray) -> np.ndarray:
     """(N,) bool: True for each row whose position no earlier row has (exact equality of
-    the coordinates' values; -0.0 equals 0.0). Coincident points make the k-NN query
-    pathological (every neighbour at distance 0: 200k copies of one point took 90 s), so
-    they are found first, in O(N log N): rows are sorted by a hash of their bits, and only
-    rows sharing a hash are sorted and compared by value."""
-    pts = np.asarray(points, dtype=np.float64)
-    n = len(pts)
-    keep = np.ones(n, bool)
-    if n < 2:
-        return keep
-    h = np.zeros(n, np.uint64)
-    for axis in range(3):  # a column at a time: no (N,3) temporaries
-        bits = (pts[:, axis] + 0.0).view(np.uint64)  # + 0.0 turns -0.0 into 0.0 (and copies)
-        # The high half folded into the low first: a multiplication only carries bits upward,
-        # and coordinates read from float32 have their 29 low mantissa bits zero, which left
-        # the hash 35 bits (a 10M-point float32 scan had ~1,500 false collisions, 4x slower).
-        bits ^= bits >> np.uint64(32)
-        bits *= _HASH_MULTIPLIERS[axis]  # wraps modulo 2^64
-        h ^= bits
-    del bits
-    hs = np.sort(h)  # a sort, not an argsort (twice as fast): most clouds have few or no repeats
-    same = hs[1:] == hs[:-1]
-    if not same.any():
-        return keep
-    shared = np.unique(hs[1:][same])  # the hashes more than one row has
-    del hs, same
-    at = np.minimum(np.searchsorted(shared, h), len(shared) - 1)
-    rows = np.flatnonzero(shared[at] == h)  # the rows with such a hash, in file order
-    sub = pts[rows] + 0.0
-    by_value = np.lexsort((sub[:, 2], sub[:, 1], sub[:, 0]))  # stable: earlier rows first
-    ordered = sub[by_value]
-    repeat = (ordered[1:] == ordered[:-1]).all(axis=1)
-    keep[rows[by_value[1:][repeat]]] = False
-    return keep
+    the coordinates' values; -0.0 equals 0.0; a row with a NaN coordinate equals no row, and
+    is kept). Coincident points make the k-NN query pathological (every neighbour at
+    distance 0: 200k copies of one point took 90 s), so they are found first, in the
+    compiled core (core.first_of_duplicates): rows are bucketed and sorted by a hash of
+    their coordinates, and only rows sharing a hash are compared by value, in about linear
+    time however many copies there are."""
+    from . import core
+
+    return core.first_of_duplicates(points)
 
 
 def neighbour_tree(points: np.ndarray, workers: int = -1):

@@ -1,6 +1,7 @@
 """The native neighbour-graph routines (core.spatial_order, permute_table, take_rows,
-graph_weights, spanning_forest, forest_traversal, chain_flips) against scipy and numpy, and
-normals.orient, which runs on them, against the scipy-based propagation it replaced."""
+graph_weights, spanning_forest, forest_traversal, chain_flips) against scipy and numpy,
+normals.orient, which runs on them, against the scipy-based propagation it replaced, and
+the importer's duplicate search (core.first_of_duplicates) against numpy's np.unique."""
 from __future__ import annotations
 
 import numpy as np
@@ -206,6 +207,166 @@ def test_spatial_order_permute_table_and_take_rows():
     assert list(core.spatial_order(same)) == list(range(10))  # all equal: index order
 
 
+# --- first_of_duplicates against np.unique ---------------------------------------------
+
+def unique_first(points) -> np.ndarray:
+    """first_of_duplicates restated with numpy: the first row of each set of equal rows
+    (np.unique's return_index is the first occurrence), -0.0 made 0.0 beforehand; a row with
+    a NaN equals no row."""
+    p = np.asarray(points, np.float64).reshape(-1, 3) + 0.0
+    keep = np.isnan(p).any(axis=1)
+    rows = np.flatnonzero(~keep)
+    if len(rows):
+        _, first = np.unique(p[rows], axis=0, return_index=True)
+        keep[rows[first]] = True
+    return keep
+
+
+def check_first_of_duplicates(points):
+    """The native mask on one and on two threads: both np.unique's."""
+    want = unique_first(points)
+    for threads in (1, 2):
+        got = core.first_of_duplicates(points, threads=threads)
+        assert got.dtype == bool and got.shape == want.shape
+        np.testing.assert_array_equal(got, want)
+    return want
+
+
+def sprinkle_copies(rng, p, copies):
+    """p with `copies` rows replaced by copies of other rows (before or after them)."""
+    p = p.copy()
+    to, frm = rng.integers(0, len(p), copies), rng.integers(0, len(p), copies)
+    p[to] = p[frm]
+    return p
+
+
+@pytest.mark.parametrize("n", [2, 3, 100, 5000, 300_000])
+def test_first_of_duplicates_matches_numpy_on_random_points_with_copies(n):
+    rng = np.random.default_rng(n)
+    p = sprinkle_copies(rng, rng.normal(size=(n, 3)) * 1000, max(n // 5, 1))
+    want = check_first_of_duplicates(p)
+    assert n < 100 or 0 < (~want).sum() < n // 5
+
+
+def test_first_of_duplicates_of_float32_sourced_coordinates():
+    """Coordinates read from float32 have their 29 low mantissa bits zero (the hash folds the
+    high half into the low one for them)."""
+    rng = np.random.default_rng(1)
+    p = (rng.normal(size=(200_000, 3)) * [1e3, 1e3, 10] + [5e5, 4e6, 100]).astype(np.float32).astype(np.float64)
+    check_first_of_duplicates(sprinkle_copies(rng, p, 30_000))
+    grid = np.stack(np.meshgrid(*[np.arange(40, dtype=np.float32)] * 3), axis=-1).reshape(-1, 3).astype(np.float64)
+    check_first_of_duplicates(np.concatenate([grid, grid[::7], grid[::-3]]))  # a grid and copies
+
+
+def test_rows_equal_only_through_negative_zero_are_duplicates():
+    signs = np.array([[sx, sy, sz] for sx in (1, -1) for sy in (1, -1) for sz in (1, -1)], np.float64)
+    p = np.concatenate([signs * 0.0, signs * [0.0, 1.0, 0.0], signs * [2.5, 0.0, 0.0]])
+    keep = check_first_of_duplicates(p)
+    np.testing.assert_array_equal(np.flatnonzero(keep), [0, 8, 10, 16, 20])  # y = +-1, x = +-2.5: distinct
+    rng = np.random.default_rng(2)
+    q = rng.normal(size=(50_000, 3))
+    q[rng.random(q.shape) < 0.3] = 0.0
+    q = sprinkle_copies(rng, q, 20_000)
+    q[rng.random(q.shape) < 0.5] *= -1.0  # the zeros' signs at random
+    check_first_of_duplicates(q)
+
+
+def test_many_copies_of_one_row_among_others():
+    rng = np.random.default_rng(3)
+    p = rng.normal(size=(300_000, 3))
+    p[rng.choice(len(p), 100_000, replace=False)] = p[12345]
+    keep = check_first_of_duplicates(p)
+    assert (~keep).sum() == (p == p[12345]).all(axis=1).sum() - 1
+    check_first_of_duplicates(np.full((100_000, 3), 7.0))  # nothing else
+    signs = np.where(rng.random((100_000, 3)) < 0.5, 1.0, -1.0)
+    assert core.first_of_duplicates(np.zeros((100_000, 3)) * signs).sum() == 1  # 0.0 and -0.0 mixed
+
+
+def test_rows_one_bit_apart_are_distinct():
+    """Rows that differ in the last bit of one coordinate: hashes far apart but values close."""
+    base = np.array([1.0, -2.5, 1e6])
+    rows = [base]
+    for axis in range(3):
+        up, down = base.copy(), base.copy()
+        for _ in range(3000):
+            up[axis], down[axis] = np.nextafter(up[axis], np.inf), np.nextafter(down[axis], -np.inf)
+            rows += [up.copy(), down.copy()]
+    p = np.array(rows)
+    keep = check_first_of_duplicates(np.concatenate([p, p[::-1], p[::11]]))
+    assert keep[:len(p)].all() and not keep[len(p):].any()
+
+
+# The core's row hash (native/duplicates.cpp), restated to build rows that all have one hash.
+_MULTIPLIERS = [0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB]
+
+
+def colliding_rows(rng, count: int, target: int = 0x0123456789ABCDEF) -> np.ndarray:
+    """`count` distinct finite rows whose hashes are all `target`: x and y at random, z's bits
+    solved for (the hash is invertible in each coordinate: an odd multiplier and a fold)."""
+    mask = (1 << 64) - 1
+    inverse = pow(_MULTIPLIERS[2], -1, 1 << 64)
+    out = []
+    while len(out) < count:
+        x, y = rng.normal(size=2) * 100
+        h = target
+        for v, m in ((x, _MULTIPLIERS[0]), (y, _MULTIPLIERS[1])):
+            b = int(np.float64(v + 0.0).view(np.uint64))
+            h ^= ((b ^ (b >> 32)) * m) & mask
+        folded = (h * inverse) & mask
+        z = float(np.uint64(folded ^ (folded >> 32)).view(np.float64))
+        if np.isfinite(z) and z != 0.0:
+            out.append((x, y, z))
+    return np.array(out)
+
+
+def test_rows_sharing_a_hash_are_compared_by_value():
+    rng = np.random.default_rng(5)
+    p = colliding_rows(rng, 3000)
+    assert len(np.unique(p, axis=0)) == 3000
+    q = np.concatenate([p, p[rng.integers(0, 3000, 3000)], rng.normal(size=(20_000, 3))])
+    q = q[rng.permutation(len(q))]
+    q[rng.random(len(q)) < 0.1, 0] *= -1.0  # some distinct rows more, and x = 0 never happens
+    check_first_of_duplicates(q)
+    zeros = p.copy()
+    zeros[:, 0] = 0.0  # their hashes differ now; equal only through -0.0
+    check_first_of_duplicates(np.concatenate([zeros, zeros * [-1.0, 1.0, 1.0]]))
+
+
+def test_a_pile_of_distinct_rows_with_one_hash_is_not_quadratic():
+    import time
+
+    rng = np.random.default_rng(6)
+    p = colliding_rows(rng, 20_000)
+    p = np.concatenate([p] * 10)  # 200k rows, 20k distinct, one hash
+    start = time.perf_counter()
+    keep = core.first_of_duplicates(p)
+    # Sorted by value: milliseconds; comparing each row with every earlier one of its hash
+    # would take about 2e10 comparisons. The bound only catches that.
+    assert time.perf_counter() - start < 5.0
+    assert keep[:20_000].all() and not keep[20_000:].any()
+
+
+def test_first_of_duplicates_of_non_finite_rows():
+    nan, inf = np.nan, np.inf
+    p = [[nan, 0, 0], [nan, 0, 0], [inf, 0, 0], [inf, 0, 0], [-inf, 1, 2], [0, 0, nan], [-inf, 1, 2], [0, 0, 0]]
+    np.testing.assert_array_equal(core.first_of_duplicates(p), [1, 1, 1, 0, 1, 1, 0, 1])
+    check_first_of_duplicates(p)
+    rng = np.random.default_rng(7)
+    q = sprinkle_copies(rng, rng.normal(size=(20_000, 3)), 5000)
+    q[rng.random(q.shape) < 0.05] = rng.choice([nan, inf, -inf], size=1)[0]
+    check_first_of_duplicates(q)
+
+
+def test_first_of_duplicates_of_no_and_one_row():
+    assert core.first_of_duplicates(np.empty((0, 3))).shape == (0,)
+    np.testing.assert_array_equal(core.first_of_duplicates([[1.0, 2.0, 3.0]]), [True])
+    np.testing.assert_array_equal(core.first_of_duplicates([[1.0, 2.0, 3.0]] * 2), [True, False])
+    np.testing.assert_array_equal(core.first_of_duplicates(np.arange(6.0).reshape(2, 3)), [True, True])
+    # any float dtype and layout: converted to C-contiguous float64 first
+    p = np.asfortranarray(np.array([[1, 2, 3], [1, 2, 3], [3, 2, 1]], np.float32))
+    np.testing.assert_array_equal(core.first_of_duplicates(p), [True, False, True])
+
+
 # --- normals.orient against the scipy propagation it replaced ----------------------------
 
 def scipy_orient(pts, nrm, mode="PROPAGATE"):
@@ -359,6 +520,9 @@ def test_native_steps_stop_when_progress_raises():
     (lambda: core.permute_table([[1], [0]], [1, 0], slice(0, 2, 2)), ValueError, "step 1"),
     (lambda: core.take_rows(np.zeros((2, 3)), [0, 2]), ValueError, "order entry 1: 2 is not a row"),
     (lambda: core.spatial_order([[0, 0, 0], [0, np.inf, 0]]), ValueError, "point 1"),
+    (lambda: core.first_of_duplicates(np.zeros((2, 2))), ValueError, "size 2 along axis 1"),
+    (lambda: core.first_of_duplicates(np.zeros(3)), ValueError, "2 dimension"),
+    (lambda: core.first_of_duplicates(np.zeros((2, 3)), threads=-1), ValueError, "threads"),
 ])
 def test_bad_input_is_refused(call, error, message):
     with pytest.raises(error, match=message):
@@ -390,6 +554,13 @@ def test_native_entry_points_refuse_bad_buffers():
         _core.forest_traversal(np.array([[0, 1]], np.int32), np.ones(4, np.uint8), both, both)
     with pytest.raises(ValueError, match="columns"):
         _core.permute_table(table, np.array([1, 0], np.int32), 1, np.empty((2, 2), np.int32))
+    with pytest.raises(ValueError, match="share memory"):
+        points = np.zeros((4, 3))
+        _core.first_of_duplicates(points, points.reshape(-1).view(np.uint8)[:4])
+    with pytest.raises(TypeError, match="uint8 or bool"):
+        _core.first_of_duplicates(np.zeros((4, 3)), np.empty(4, np.int32))
+    with pytest.raises(ValueError, match="size"):
+        _core.first_of_duplicates(np.zeros((4, 3)), np.empty(5, bool))
 
 
 def test_spatial_order_of_points_spanning_the_float64_range():

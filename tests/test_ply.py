@@ -304,6 +304,14 @@ def test_negative_zero_is_the_same_position():
     np.testing.assert_array_equal(keep, [True, False, True])
 
 
+def test_rows_with_nan_equal_no_row():
+    # The readers drop non-finite rows first; the duplicate search still takes them (the
+    # fuzz harness passes them), a NaN row kept as its own, an infinite one like any value.
+    keep = spacing.first_of_duplicates(np.array([[np.nan, 1.0, 2.0], [np.nan, 1.0, 2.0], [np.inf, 0.0, 0.0],
+                                                 [np.inf, 0.0, -0.0]]))
+    np.testing.assert_array_equal(keep, [True, True, True, False])
+
+
 def test_first_of_duplicates_on_many_points_is_fast():
     import time
 
@@ -312,8 +320,9 @@ def test_first_of_duplicates_on_many_points_is_fast():
     p[::7] = p[1::7]  # every 7th row repeats the next one
     start = time.perf_counter()
     keep = spacing.first_of_duplicates(p)
-    # About 0.3 s; a quadratic pass over a million rows would take hours. The bound only
-    # catches that, with room for a busy machine.
+    # About 0.015 s (0.3 s with the numpy version before the native one); a quadratic pass
+    # over a million rows would take hours. The bound only catches that, with room for a
+    # busy machine.
     assert time.perf_counter() - start < 15.0
     assert (~keep).sum() == len(p[::7]) and keep[::7].all() and not keep[1::7].any()  # the later copy goes
 

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <cstdlib>
 #include <memory>
 #include <new>
@@ -53,10 +54,27 @@ inline void release(void *p) {
     if (mapped) munmap(base, mapped);
     else std::free(base);
 }
+
+// Asks for transparent huge pages over the 2 MiB pages inside [p, p + bytes): many
+// distributions grant them only on request ("madvise"), and a buffer filled once all over
+// then takes one page fault per 2 MiB instead of 512. Writing 80 MB of fresh memory: 35 ms
+// in 4 KiB pages against 9 ms in huge ones (numpy asks the same for its large arrays). A
+// refusal (no THP in the kernel, or "never") only costs that time.
+inline void advise_huge_pages(void *p, size_t bytes) {
+#ifdef MADV_HUGEPAGE
+    constexpr uintptr_t kHuge = uintptr_t(2) << 20;
+    const uintptr_t begin = (uintptr_t(p) + kHuge - 1) & ~(kHuge - 1);
+    const uintptr_t end = (uintptr_t(p) + bytes) & ~(kHuge - 1);
+    if (end > begin) madvise(reinterpret_cast<void *>(begin), end - begin, MADV_HUGEPAGE);
+#else
+    (void)p, (void)bytes;
+#endif
+}
 #else
 // Windows' and macOS' allocators give large blocks their own pages and return them on free.
 inline void *allocate(size_t bytes, bool) { return std::malloc(bytes); }
 inline void release(void *p) { std::free(p); }
+inline void advise_huge_pages(void *, size_t) {}
 #endif
 
 }  // namespace buffer_detail
@@ -81,6 +99,8 @@ class Buffer {
         size_ = n;
     }
     void release() { data_.reset(), size_ = 0; }
+    // For a large buffer about to be written all over: see buffer_detail::advise_huge_pages.
+    void prefer_huge_pages() { buffer_detail::advise_huge_pages(data(), bytes()); }
     // Takes over the memory of another buffer of a type of the same size (its elements are
     // then whatever this type's were written there): storage reused instead of a fresh
     // allocation whose pages would all be faulted in again.

@@ -1,13 +1,15 @@
 // Python bindings of the neighbour-graph routines (graph.h) that normals.orient() uses:
 // `_core.spatial_order`, `permute_table`, `take_rows`, `graph_weights`, `spanning_forest`,
-// `forest_traversal` and `chain_flips`. The caller (splat_tracer/core.py) allocates every
-// output; every input is validated here too.
+// `forest_traversal` and `chain_flips`, and the importer's `first_of_duplicates`
+// (duplicates.h). The caller (splat_tracer/core.py) allocates every output; every input is
+// validated here too.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <initializer_list>
 #include <string>
 
+#include "duplicates.h"
 #include "graph.h"
 #include "py_util.h"
 
@@ -128,6 +130,25 @@ PyObject *take_rows_py(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
+PyObject *first_of_duplicates_py(PyObject *, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"points", "out", "threads", nullptr};
+    PyObject *op, *oout;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|i", const_cast<char **>(kwlist), &op, &oout, &threads))
+        return nullptr;
+    if (!check_threads(threads)) return nullptr;
+    View p, out;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(op, "points", 'd', 2, s3, false, p)) return nullptr;
+    Py_ssize_t sn[1] = {p.dim(0)};
+    if (!get_array(oout, "out", 'B', 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
+    if (!run_graph(Py_None, [&](const GraphPoll &) {
+            first_of_duplicates(p.data<double>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
+}
+
 PyObject *graph_weights(PyObject *, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"points", "normals", "neighbours", "across", "out", "threads", "progress", nullptr};
     PyObject *op, *on, *onbr, *oout, *progress = Py_None;
@@ -242,6 +263,9 @@ PyMethodDef graph_methods[] = {
      "out[r] = the new numbers (by order) of table[order[r], first:first + out.shape[1]]."},
     {"take_rows", keywords(take_rows_py), METH_VARARGS | METH_KEYWORDS,
      "take_rows(array, order, out, threads=0)\n--\n\nout[r] = array[order[r]] for float64 (n,c) arrays, in parallel."},
+    {"first_of_duplicates", keywords(first_of_duplicates_py), METH_VARARGS | METH_KEYWORDS,
+     "first_of_duplicates(points, out, threads=0)\n--\n\n"
+     "out[i] = 1 when no earlier row of the float64 (n,3) points has row i's position (duplicates.h)."},
     {"graph_weights", keywords(graph_weights), METH_VARARGS | METH_KEYWORDS,
      "graph_weights(points, normals, neighbours, across, out, threads=0, progress=None)\n--\n\n"
      "Weights of the neighbour table's edges (graph.h): float64 (n,3) points and normals, int32 (n,k) "
