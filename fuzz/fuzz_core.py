@@ -196,7 +196,7 @@ def fuzz_graph(fdp):
     nbr = indices(fdp, (n, k), n)
     threads = fdp.ConsumeIntInRange(0, 3)
     order = np.empty(n, np.int32)
-    if call(_core.spatial_order, pts, order, threads) is not None:
+    if call(lambda: _core.spatial_order(pts, order, threads) or True):  # None: refused (it returns None on success)
         assert sorted(order) == list(range(n))
     else:
         order = indices(fdp, (n,), n)
