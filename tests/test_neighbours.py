@@ -299,6 +299,14 @@ def test_bad_input_raises_instead_of_crashing():
     nan_normals[57] = np.nan
     with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):  # a neighbour's is read too
         index.widest_gaps([0], nan_normals, 4)
+    nan_normals[80] = 0.0  # found while the rows are worked on, on any thread: the smallest id is named
+    for rows in (index.order, np.arange(100)):
+        with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):
+            index.radii(rows, 3, nan_normals, 12, 3.0, 2.0)
+        with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):
+            index.covering(rows, nan_normals, np.ones(100), 12, 3.0, 2.0)
+    index.radii(np.delete(index.order, np.flatnonzero(np.isin(index.order, [57, 80]))), 3, nan_normals, 12, 3.0,
+                2.0)  # only the rows' own normals matter
     with pytest.raises(ValueError, match="spacing"):
         index.covering([0], np.tile([0, 0, 1.0], (100, 1)), np.full(100, np.nan), 12, 3.0, 2.8)
     with pytest.raises(ValueError, match="graph"):

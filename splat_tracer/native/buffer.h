@@ -16,6 +16,21 @@
 
 namespace splat {
 
+// Asks for the cache line at p ahead of a read at a random place (no effect where the
+// compiler has no such hint).
+inline void prefetch(const void *p) {
+#if defined(__GNUC__) || defined(__clang__)
+    __builtin_prefetch(p);
+#else
+    (void)p;
+#endif
+}
+
+// Items a random-order gather asks for ahead of the one it reads: somewhat more than the
+// cache misses a core keeps in flight (10 to 12 line-fill buffers on x86-64), so that none
+// idles.
+constexpr size_t kPrefetchAhead = 16;
+
 namespace buffer_detail {
 
 #if defined(__linux__)

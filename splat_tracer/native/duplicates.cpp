@@ -36,17 +36,6 @@ constexpr size_t kPartsPerThread = 4;
 // Below this many records (small clouds) a bucket is sorted by std::sort: four radix passes
 // over 256 counters each would cost more than they save.
 constexpr size_t kRadixFrom = 256;
-// Records ahead whose points the run scan asks for: more than the cache misses a core
-// keeps in flight (10 to 12 line-fill buffers on x86-64), so that none idles.
-constexpr size_t kPrefetchAhead = 16;
-
-inline void prefetch(const void *p) {
-#if defined(__GNUC__) || defined(__clang__)
-    __builtin_prefetch(p);
-#else
-    (void)p;
-#endif
-}
 
 // A coordinate's bits with -0.0 made +0.0 (x + 0.0 is +0.0 for x = -0.0 and x for every
 // other x, NaN included), so that equal values have equal bits (NaN aside).

@@ -26,17 +26,6 @@ constexpr size_t kTraversalPoll = size_t(1) << 20;
 // "No edge": above every real key, whose high half is a finite weight's order bits.
 constexpr uint64_t kNoEdge = ~uint64_t(0);
 
-// Rows a random-order gather asks for ahead of the one it reads: somewhat more than the
-// cache misses a core keeps in flight (10 to 12 line-fill buffers on x86-64), so that none idles.
-constexpr size_t kPrefetchAhead = 16;
-
-inline void prefetch(const void *p) {
-#if defined(__GNUC__) || defined(__clang__)
-    __builtin_prefetch(p);
-#else
-    (void)p;
-#endif
-}
 
 // Thrown on the calling thread when poll() asks to stop; the entry points return false.
 struct Stopped {};
