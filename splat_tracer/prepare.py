@@ -243,12 +243,12 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
                              ambiguous=ambiguous, normal_k=normal_k if estimated else 0,
                              statistical_outliers=statistical, statistical_ratio=statistical_ratio)
     if cloud.radii is None:
-        radii = np.empty(len(local), np.float32)
-        radii[inliers] = hood.spacing
-        if hood.covering is not None:
-            radii[inliers] = hood.covering
+        base = hood.covering if hood.covering is not None else hood.spacing
+        radii = base  # the bulk is every point (no 10M-point copy); else the strays get theirs below
         strays = np.flatnonzero(~bulk)
         if len(strays):  # their distance to their k-th nearest point, among all
+            radii = np.empty(len(local), np.float32)
+            radii[inliers] = base
             kk = min(k, len(local) - 1)
             dist, _ = spacing.neighbour_tree(local, workers).knn_at(local[strays], kk + 1)  # each finds itself first
             radii[strays] = dist[:, kk]

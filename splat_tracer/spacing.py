@@ -172,7 +172,8 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
             raise SpacingError("all points coincide: the spacing is zero everywhere")
         spacing[degenerate] = np.median(good)
     if cover is not None:  # a point sharing its position with k+ others: the median, like its spacing
-        cover = np.minimum(np.maximum(cover, spacing), COVER_CAP * spacing)
+        np.maximum(cover, spacing, out=cover)  # in place: no 10M-point temporaries
+        np.minimum(cover, COVER_CAP * spacing, out=cover)
     closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
     return Neighbourhood(spacing, n_degenerate, boundary, bool(closed), n if tested is None else len(tested), cover)
 
