@@ -12,7 +12,7 @@ and lamp rows and settings, rendered; then the neighbour-graph functions (spatia
 permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
 on fuzzed tables whose indices stray out of range, weights, anchors and orders, and
 first_of_duplicates on the points (checked against a pairwise comparison); then a
-_core.PointIndex and its queries (knn, knn_at, covering, radii, pca) on fuzzed points,
+_core.PointIndex and its queries (knn, knn_at, covering, radii, widest_gaps, pca) on fuzzed points,
 rows, k, normals and spacings. The contract of a native entry point: it returns,
 or raises ValueError, TypeError or MemoryError. Anything else (another exception, a
 crash, and under the sanitizer build of `make fuzz` any AddressSanitizer or UBSan
@@ -245,7 +245,14 @@ def fuzz_neighbours(fdp):
     assert sorted(order) == list(range(size))
     m = fdp.ConsumeIntInRange(0, 12)
     start = fdp.ConsumeIntInRange(0, size)
-    rows = order[start:start + m] if fdp.ConsumeBool() else indices(fdp, (m,), size)  # a run of the order, or not
+    pick = fdp.ConsumeIntInRange(0, 2)  # a run of the order, runs of it (a sampled boundary test), or anything
+    if pick == 0:
+        rows = order[start:start + m]
+    elif pick == 1:
+        other = fdp.ConsumeIntInRange(0, size)
+        rows = np.concatenate([order[start:start + m], order[other:other + fdp.ConsumeIntInRange(0, 12)]])
+    else:
+        rows = indices(fdp, (m,), size)
     k, threads = small_int(fdp) if fdp.ConsumeIntInRange(0, 7) == 0 else fdp.ConsumeIntInRange(1, 13), \
         fdp.ConsumeIntInRange(0, 3)
     cols = min(max(k, 0), 300)  # outputs sized for k, but never gigabytes (the core refuses k > 256 anyway)
@@ -258,6 +265,7 @@ def fuzz_neighbours(fdp):
     normals, spacing = array(fdp, (size, 3)), array(fdp, (size,))
     hole, gap = value(fdp), value(fdp)
     call(index.covering, rows, normals, spacing, k, hole, gap, np.empty(len(rows), np.float32), threads)
+    call(index.widest_gaps, rows, k, normals, np.empty(len(rows), np.float32), threads)
     call(index.radii, rows, fdp.ConsumeIntInRange(0, 8), np.empty(len(rows), np.float32), normals, k, hole, gap,
          np.empty(len(rows), np.float32), threads)
     width = fdp.ConsumeIntInRange(0, 14)
