@@ -62,7 +62,10 @@ bool check_separate(const View &out, const char *name, std::initializer_list<con
     return true;
 }
 
-PyObject *spatial_order_py(PyObject *, PyObject *args, PyObject *kwargs) {
+// (points, out, threads=0): fn(points, n, out, threads) over (N,3) float64 points into an
+// (N,) output of element kind `kind` (get_array's letters) and C type Out.
+template <class Out, class Fn>
+PyObject *per_point(PyObject *args, PyObject *kwargs, char kind, Fn &&fn) {
     static const char *kwlist[] = {"points", "out", "threads", nullptr};
     PyObject *op, *oout;
     int threads = 0;
@@ -73,12 +76,16 @@ PyObject *spatial_order_py(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(op, "points", 'd', 2, s3, false, p)) return nullptr;
     Py_ssize_t sn[1] = {p.dim(0)};
-    if (!get_array(oout, "out", 'i', 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
-    if (!run_graph(Py_None, [&](const GraphPoll &) {
-            spatial_order(p.data<double>(), size_t(p.dim(0)), out.data<int32_t>(), threads);
-        }))
+    if (!get_array(oout, "out", kind, 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
+    if (!run_graph(Py_None, [&](const GraphPoll &) { fn(p.data<double>(), size_t(p.dim(0)), out.data<Out>(), threads); }))
         return nullptr;
     Py_RETURN_NONE;
+}
+
+PyObject *spatial_order_py(PyObject *, PyObject *args, PyObject *kwargs) {
+    return per_point<int32_t>(args, kwargs, 'i', [](const double *p, size_t n, int32_t *out, int threads) {
+        spatial_order(p, n, out, threads);
+    });
 }
 
 PyObject *permute_table_py(PyObject *, PyObject *args, PyObject *kwargs) {
@@ -131,22 +138,9 @@ PyObject *take_rows_py(PyObject *, PyObject *args, PyObject *kwargs) {
 }
 
 PyObject *first_of_duplicates_py(PyObject *, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"points", "out", "threads", nullptr};
-    PyObject *op, *oout;
-    int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|i", const_cast<char **>(kwlist), &op, &oout, &threads))
-        return nullptr;
-    if (!check_threads(threads)) return nullptr;
-    View p, out;
-    Py_ssize_t s3[2] = {-1, 3};
-    if (!get_array(op, "points", 'd', 2, s3, false, p)) return nullptr;
-    Py_ssize_t sn[1] = {p.dim(0)};
-    if (!get_array(oout, "out", 'B', 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
-    if (!run_graph(Py_None, [&](const GraphPoll &) {
-            first_of_duplicates(p.data<double>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
-        }))
-        return nullptr;
-    Py_RETURN_NONE;
+    return per_point<uint8_t>(args, kwargs, 'B', [](const double *p, size_t n, uint8_t *out, int threads) {
+        first_of_duplicates(p, n, out, threads);
+    });
 }
 
 PyObject *graph_weights(PyObject *, PyObject *args, PyObject *kwargs) {
