@@ -171,6 +171,31 @@ def test_near_phase_picks_the_right_hit_at_edges(case, surface, near_centre_pick
     assert pick["FIRST"] == 0
 
 
+def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
+    """The core decides omega > pi without acos (visibility.cpp, near_phase_convex): on
+    random pairs of discs in one layer, the pick is the paper's rule computed with arccos."""
+    rng = np.random.default_rng(8)
+    method = core.Method(position="NEAR_PHASE", far_phase=False, interpolate_normals=False, epsilon=1000.0)
+    o, d = np.array([[0.0, 0.0, 5.0]]), np.array([[0.0, 0.0, -1.0]])
+    checked = 0
+    for _ in range(400):
+        c = np.c_[rng.uniform(-0.5, 0.5, (2, 2)), [0.0, rng.uniform(-0.5, 0.5)]]
+        n = np.c_[rng.uniform(-1, 1, (2, 2)), rng.uniform(0.3, 1, 2)]
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        t = (np.einsum("ij,ij->i", c - o, n)) / (n @ d[0])  # where the ray meets each disc's plane
+        j, k = np.argsort(t)
+        cj, nj, ck, nk = c[j], n[j], c[k], n[k]
+        dk = ck - cj
+        omega = np.arccos(np.dot(dk, nj) / np.linalg.norm(dk)) + np.arccos(np.dot(-dk, nk) / np.linalg.norm(dk))
+        if abs(omega - np.pi) < 1e-4:
+            continue  # a rounding apart from the threshold either way
+        res = core.Scene(c, n, [10.0, 10.0], closed=False).trace_surface(o, d, method, members=True)
+        assert sorted(res.members[0][:2]) == [0, 1]
+        assert int(res.id[0]) == (k if omega > np.pi else j), (c, n, omega)
+        checked += 1
+    assert checked > 390
+
+
 def test_omega_classifies_convex_and_concave():
     c, n = np.array(CONVEX["centres"]), np.array(CONVEX["normals"])
     # Symmetric roof and valley with faces at 90 degrees: omega = 270 and 90 degrees.

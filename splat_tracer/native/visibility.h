@@ -63,8 +63,9 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, 
                         const int32_t *exclude = nullptr, int n_exclude = 0, bool brute_force = false,
                         TraversalStats *stats = nullptr);
 
-// The omega of the near phase for two member splats j (nearer) and k: the sum of the
-// angles (c_k - c_j, n_j) and (c_j - c_k, n_k), in radians. Above pi: convex.
-float near_phase_omega(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk);
+// The near phase's test for two member splats j (nearer) and k: whether omega, the sum of
+// the angles (c_k - c_j, n_j) and (c_j - c_k, n_k), exceeds pi (convex). An angle with a
+// zero vector counts as right.
+bool near_phase_convex(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk);
 
 }  // namespace splat
