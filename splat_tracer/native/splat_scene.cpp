@@ -157,7 +157,8 @@ Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
 
 void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, TraversalStats *stats) const {
     auto offer = [&](const PackedSplat &s, const DiscHit &h) {
-        if (!q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+        // Beyond the cut first: most hits offered late in the traversal are, and need no sqrt.
+        if (h.t <= q.cut && !q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
     };
     q.cut = ray.tmax;
     q.max_radius = max_radius_;

@@ -173,11 +173,8 @@ bool near_phase_convex(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk) {
     // acos(-y) = pi - acos(y), so omega > pi exactly when x + y < 0: no acos (two per member
     // pair were a tenth of the full method's time). Both cosines share the length
     // |c_k - c_j| (positive, or both angles count as right: omega = pi, not convex), which
-    // cancels; the normals' lengths do not.
-    const Vec3 d = ck - cj;
-    const float lj = length(nj), lk = length(nk);
-    if (!(lj > 0.f && lk > 0.f)) return false;  // near_phase_omega's right angle for a zero normal
-    return dot(d, nj) * lk - dot(d, nk) * lj < 0.f;
+    // cancels, and the scene's normals are unit (SplatScene normalises them).
+    return dot(ck - cj, nj - nk) < 0.f;
 }
 
 SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool inside, const int32_t *exclude,

@@ -64,8 +64,8 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, 
                         TraversalStats *stats = nullptr);
 
 // The near phase's test for two member splats j (nearer) and k: whether omega, the sum of
-// the angles (c_k - c_j, n_j) and (c_j - c_k, n_k), exceeds pi (convex). An angle with a
-// zero vector counts as right.
+// the angles (c_k - c_j, n_j) and (c_j - c_k, n_k), exceeds pi (convex); n_j and n_k unit.
+// Coincident centres count as right angles (omega = pi: not convex).
 bool near_phase_convex(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk);
 
 }  // namespace splat
