@@ -182,11 +182,16 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     x_.resize(n), y_.resize(n), z_.resize(n);
     id_.resize(n);
     slot_.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        x_[i] = pts[i].c[0], y_[i] = pts[i].c[1], z_[i] = pts[i].c[2];
-        id_[i] = pts[i].id;
-        slot_[pts[i].id] = uint32_t(i);
-    }
+    // On the threads, in slices (the ids are distinct: the scatter into slot_ never races):
+    // one thread took a fifth of a 10M-point build for this copy.
+    constexpr size_t kSlice = size_t(1) << 16;
+    parallel_for((n + kSlice - 1) / kSlice, threads, [&](size_t t) {
+        for (size_t i = t * kSlice; i < std::min(n, (t + 1) * kSlice); ++i) {
+            x_[i] = pts[i].c[0], y_[i] = pts[i].c[1], z_[i] = pts[i].c[2];
+            id_[i] = pts[i].id;
+            slot_[pts[i].id] = uint32_t(i);
+        }
+    }, always);
 }
 
 void PointIndex::scan(size_t b, size_t e, const float q[3], Best &best) const {
