@@ -365,13 +365,6 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
 
 namespace {
 
-// The index of the lowest set bit of v != 0.
-inline int ctz64(uint64_t v) {
-    int i = 0;
-    while (!(v & 1u)) v >>= 1, ++i;  // portable (MSVC-free Zig builds have __builtin_ctzll too, but
-    return i;                        // this loop runs for the few candidate circles only)
-}
-
 // The unit normal n (of `normal`, any length but 0) and a tangent frame (u, v): u = n x
 // helper, the helper an axis far from n; v = n x u (spacing.py's _tangent_frame).
 inline void tangent_frame(const float normal[3], double n[3], double u[3], double v[3]) {
@@ -385,19 +378,25 @@ inline void tangent_frame(const float normal[3], double n[3], double u[3], doubl
     v[0] = n[1] * u[2] - n[2] * u[1], v[1] = n[2] * u[0] - n[0] * u[2], v[2] = n[0] * u[1] - n[1] * u[0];
 }
 
-// A monotonic stand-in for atan2(y, x) mapped to [0, 2 pi): in [0, 4), no trigonometry
-// (the "diamond angle"). Sorting by it orders vectors around the origin as the angle does.
+// A monotonic stand-in for atan2(y, x) mapped to [0, 2 pi): in [0, 4] (4 only by rounding
+// 3 + p up), no trigonometry (the "diamond angle"). Sorting by it orders vectors around the
+// origin as the angle does. In arithmetic rather than branches, so that a loop over
+// neighbours vectorises (and whether y < 0 is a coin toss): below = 1 gives 3 + p, below = 0
+// gives 1 - p, the same roundings; a coincident neighbour gets 0 (atan2(0, 0) = 0 as well).
 inline double pseudo_angle(double x, double y) {
-    const double l1 = std::fabs(x) + std::fabs(y);
-    if (l1 == 0.0) return 0.0;  // a coincident neighbour (atan2(0, 0) = 0 as well)
-    const double p = x / l1;
-    return y < 0.0 ? 3.0 + p : 1.0 - p;
+    const double l1 = std::fabs(x) + std::fabs(y), some = l1 != 0.0, below = y < 0.0;
+    const double p = x / (l1 + (1.0 - some));  // no 0 / 0 when coincident
+    return some * ((1.0 + 2.0 * below) + (2.0 * below - 1.0) * p);
 }
 
 }  // namespace
 
 namespace {
 constexpr int kRankSortMax = 32;
+// covering_radius's loops over neighbours go in blocks of this many (m rounded up), fixed
+// inner loops that compile to vector code without remainders: two SSE2 registers of
+// doubles, one of 32-bit integers.
+constexpr int kBlock = 4;
 }  // namespace
 
 float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
@@ -407,68 +406,113 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
     tangent_frame(normal, n, u, v);
     float p[3];
     index.at(self, p);
-    double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
-    int order[PointIndex::kMaxK];
-    for (int j = 0; j < m; ++j) {
-        float q[3];
-        index.at(slots[j], q);
-        const double o[3] = {double(q[0] - p[0]), double(q[1] - p[1]), double(q[2] - p[2])};
-        x[j] = o[0] * u[0] + o[1] * u[1] + o[2] * u[2];
-        y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
-        ang[j] = pseudo_angle(x[j], y[j]);
-    }
-    // Sorted by angle (ties by position in the list: a stable order), for up to
-    // kRankSortMax neighbours by counting each one's rank, m^2 comparisons without a branch:
-    // a comparison sort's unpredictable branches cost more at the few neighbours the import
-    // asks for (12; covering 20 % faster).
-    if (m <= kRankSortMax) {
-        for (int j = 0; j < m; ++j) {
-            int rank = 0;
-            for (int i = 0; i < m; ++i) rank += (ang[i] < ang[j]) | ((ang[i] == ang[j]) & (i < j));
-            order[rank] = j;
+    // The padding up to mb is the point itself (offset 0), which changes nothing below: it
+    // ranks after every neighbour (left out of the order) and lies on every circle, not inside.
+    const int mb = (m + kBlock - 1) / kBlock * kBlock;
+    float ox[PointIndex::kMaxK], oy[PointIndex::kMaxK], oz[PointIndex::kMaxK];
+    for (int b = 0; b < mb; b += kBlock) {
+        // Gathered into registers and stored a block at a time: the projection's vector loads
+        // then take the data from the store queue, which they cannot from several smaller
+        // stores (they wait for them to reach the cache instead).
+        float qx[kBlock], qy[kBlock], qz[kBlock];
+        for (int l = 0; l < kBlock; ++l) {
+            float q[3];
+            index.at(b + l < m ? slots[b + l] : self, q);
+            qx[l] = q[0], qy[l] = q[1], qz[l] = q[2];
         }
+        for (int l = 0; l < kBlock; ++l)  // in float, as ever
+            ox[b + l] = qx[l] - p[0], oy[b + l] = qy[l] - p[1], oz[b + l] = qz[l] - p[2];
+    }
+    double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
+    for (int b = 0; b < mb; b += kBlock)
+        for (int j = b; j < b + kBlock; ++j) {
+            const double o[3] = {ox[j], oy[j], oz[j]};
+            x[j] = o[0] * u[0] + o[1] * u[1] + o[2] * u[2];
+            y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
+            ang[j] = pseudo_angle(x[j], y[j]);
+        }
+    // next[j]: the neighbour after j counter-clockwise (the last one's is the first), by
+    // angle, ties by position in the list (a stable sort's order). No sorted copies of x and
+    // y: their scatter's scalar stores stalled the vector loads of the loops after it (a
+    // fifth of the time, with GCC).
+    int next[PointIndex::kMaxK], order[PointIndex::kMaxK + 1];
+    if (m <= kRankSortMax) {
+        // For up to kRankSortMax neighbours, by counting each one's rank, m^2 comparisons
+        // without a branch: a comparison sort's unpredictable branches cost more at the few
+        // neighbours the import asks for (12). They compare 32-bit keys, four to a register
+        // (SSE2 compares two doubles, and no 64-bit integers): the angle x 2^28 truncated, in
+        // [0, 2^30] (the padding's above), ordered as the angles are wherever keys differ.
+        int32_t key[kRankSortMax], rank[kRankSortMax];
+        for (int j = 0; j < m; ++j) key[j] = int32_t(ang[j] * 0x1p28);
+        for (int j = m; j < mb; ++j) key[j] = INT32_MAX;
+        for (int b = 0; b < mb; b += kBlock) {  // a block's ranks kept in a register
+            int32_t r[kBlock] = {};
+            for (int i = 0; i < m; ++i)
+                for (int l = 0; l < kBlock; ++l) r[l] += key[i] < key[b + l];
+            for (int l = 0; l < kBlock; ++l) rank[b + l] = r[l];
+        }
+        // Distinct keys rank 0 to m - 1, which sum to m (m - 1) / 2; equal keys (coincident
+        // neighbours, a grid's collinear ones, angles within 2^-28) share the smaller rank and
+        // sum to less. Only then are the angles themselves counted, ties broken by position.
+        int32_t sum = 0;
+        for (int j = 0; j < m; ++j) sum += rank[j];
+        if (sum != m * (m - 1) / 2)
+            for (int j = 0; j < m; ++j) {
+                rank[j] = 0;
+                for (int i = 0; i < m; ++i) rank[j] += (ang[i] < ang[j]) | ((ang[i] == ang[j]) & (i < j));
+            }
+        for (int j = 0; j < m; ++j) order[rank[j]] = j;
+        order[m] = order[0];
+        for (int j = 0; j < m; ++j) next[j] = order[rank[j] + 1];
     } else {  // the same order
         for (int j = 0; j < m; ++j) order[j] = j;
         std::stable_sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
+        order[m] = order[0];
+        for (int i = 0; i < m; ++i) next[order[i]] = order[i + 1];
+    }
+    // First which adjacent pairs have a circle within the spacing band, without branches
+    // (whether one does is unpredictable: mispredictions were most of this function's time),
+    // then only those few are solved and tested.
+    const double lo2 = double(spacing) * spacing, hi2 = lo2 * double(hole) * hole;
+    int cand[PointIndex::kMaxK], nc = 0;
+    for (int j = 0; j < m; ++j) {
+        const double xa = x[j], ya = y[j], xb = x[next[j]], yb = y[next[j]];
+        // Circumcentre of (0, 0), (x_a, y_a), (x_b, y_b) is (nx, ny) / d; collinear
+        // triples (d = 0) have none, and fail both comparisons. r^2 = (nx^2 + ny^2) / d^2,
+        // compared without dividing.
+        const double d = 2.0 * (xa * yb - ya * xb);
+        const double sa = xa * xa + ya * ya, sb = xb * xb + yb * yb;
+        const double nx = yb * sa - ya * sb, ny = xa * sb - xb * sa;
+        const double r2d2 = nx * nx + ny * ny, d2 = d * d;
+        cand[nc] = j, nc += (r2d2 > lo2 * d2) & (r2d2 <= hi2 * d2);
     }
     double best = spacing;
-    const double lo2 = double(spacing) * spacing, hi2 = lo2 * double(hole) * hole;
-    // Pairs in blocks of 64: first which of them have a circle within the spacing band, in a
-    // loop without branches (whether one does is unpredictable: mispredictions were most of
-    // this function's time), then only those few are solved and tested.
-    for (int first = 0; first < m; first += 64) {
-        const int last = std::min(m, first + 64);
-        uint64_t band = 0;
-        for (int i = first; i < last; ++i) {
-            const int a = order[i], b = order[i + 1 < m ? i + 1 : 0];
-            // Circumcentre of (0, 0), (x_a, y_a), (x_b, y_b) is (nx, ny) / d; collinear
-            // triples (d = 0) have none. r^2 = (nx^2 + ny^2) / d^2, compared without dividing.
-            const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
-            const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
-            const double nx = y[b] * sa - y[a] * sb, ny = x[a] * sb - x[b] * sa;
-            const double r2d2 = nx * nx + ny * ny, d2 = d * d;
-            band |= uint64_t((d != 0.0) & (r2d2 > lo2 * d2) & (r2d2 <= hi2 * d2)) << (i - first);
-        }
-        for (; band; band &= band - 1) {
-            const int i = first + ctz64(band);
-            const int a = order[i], b = order[i + 1 < m ? i + 1 : 0];
-            const double d = 2.0 * (x[a] * y[b] - y[a] * x[b]);
-            const double sa = x[a] * x[a] + y[a] * y[a], sb = x[b] * x[b] + y[b] * y[b];
-            const double cx = (y[b] * sa - y[a] * sb) / d, cy = (x[a] * sb - x[b] * sa) / d;
-            const double r = std::sqrt(cx * cx + cy * cy);
-            if (!(r > best)) continue;
-            // The angular gap from a to b, counter-clockwise in [0, 2 pi) (the last pair wraps
-            // round).
-            double gap = std::atan2(d, 2.0 * (x[a] * x[b] + y[a] * y[b]));
-            if (gap < 0.0) gap += 2.0 * M_PI;
-            if (!(gap < max_gap)) continue;
-            // Empty: no neighbour strictly inside (1e-4: the two on the circle, in rounding).
-            const double inner = r * (1.0 - 1e-4);
-            bool empty = true;
-            for (int j = 0; j < m && empty; ++j)
-                empty = !((cx - x[j]) * (cx - x[j]) + (cy - y[j]) * (cy - y[j]) < inner * inner);
-            if (empty) best = r;
-        }
+    for (int k = 0; k < nc; ++k) {
+        const int j = cand[k];
+        const double xa = x[j], ya = y[j], xb = x[next[j]], yb = y[next[j]];
+        const double d = 2.0 * (xa * yb - ya * xb);
+        const double sa = xa * xa + ya * ya, sb = xb * xb + yb * yb;
+        const double cx = (yb * sa - ya * sb) / d, cy = (xa * sb - xb * sa) / d;
+        const double r = std::sqrt(cx * cx + cy * cy);
+        // Empty: no neighbour strictly inside (1e-4: the two on the circle, in rounding).
+        // Every one tested, with no early exit (an unpredictable branch): the nearest squared
+        // distance to the centre, per vector lane.
+        const double inner = r * (1.0 - 1e-4), inner2 = inner * inner;
+        double nearest[kBlock];
+        for (int l = 0; l < kBlock; ++l) nearest[l] = inner2;
+        for (int b = 0; b < mb; b += kBlock)
+            for (int l = 0; l < kBlock; ++l) {
+                const double dx = cx - x[b + l], dy = cy - y[b + l], dd = dx * dx + dy * dy;
+                nearest[l] = dd < nearest[l] ? dd : nearest[l];
+            }
+        bool empty = true;
+        for (int l = 0; l < kBlock; ++l) empty &= !(nearest[l] < inner2);
+        if (!(r > best) || !empty) continue;
+        // The angular gap from a to b, counter-clockwise in [0, 2 pi): its atan2 only for the
+        // few circles that got this far (most have a neighbour inside).
+        double gap = std::atan2(d, 2.0 * (xa * xb + ya * yb));
+        if (gap < 0.0) gap += 2.0 * M_PI;
+        if (gap < max_gap) best = r;
     }
     return float(best);
 }
