@@ -391,16 +391,17 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
     # piles of them make the neighbour search pathological.
-    usable = np.flatnonzero(keep)
-    first = spacing.first_of_duplicates(pos if len(usable) == n else pos[usable])  # no copy when all are usable
-    repeats = usable[~first]
+    every = bool(keep.all())  # then no copy of the positions and no 10M-entry index array
+    usable = None if every else np.flatnonzero(keep)
+    first = spacing.first_of_duplicates(pos if every else pos[usable])
+    repeats = np.flatnonzero(~first) if every else usable[~first]
     merged = len(repeats)
     first_merged = int(repeats[0]) if merged else -1
     keep[repeats] = False
     cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32, copy=False), colours, radii, dropped, merged,
                        first_merged, None, dict(attributes or {}), scanners, dropped_rows=dropped_rows,
                        **fields)
-    return cloud if len(usable) == n and not merged else cloud.subset(keep)  # a mask: faster than indices
+    return cloud if every and not merged else cloud.subset(keep)  # a mask: faster than indices
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

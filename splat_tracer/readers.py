@@ -169,8 +169,6 @@ def read_las(path: str, progress=None) -> PointCloud:
     if read != header.point_count:
         raise CloudFileError(f"{path}: early end-of-file: the header declares {header.point_count:,} points but "
                              f"only {read:,} could be read")
-    pos = pos[:read]
-    column = {name: values[:read] for name, values in column.items()}
     colours, notes = None, []
     if "red" in column:
         channels = {c: column[c] for c in ("red", "green", "blue")}

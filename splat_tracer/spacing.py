@@ -37,8 +37,9 @@ BOUNDARY_K = 24
 BOUNDARY_GAP = np.radians(160.0)
 CLOSED_MAX_BOUNDARY = 0.2           # x sqrt(N): an open square patch has 4 x sqrt(N)
 # The boundary test costs a search of 24 neighbours and an angular sort per point, more
-# than the radii's own search: beyond BOUNDARY_SAMPLE points it runs on that many points drawn at random (a fixed
-# seed: the same guess every time) and the count is scaled up. The guess compares the
+# than the radii's own search: beyond BOUNDARY_SAMPLE points it runs on that many points
+# drawn at random (a fixed seed: the same guess every time; see BOUNDARY_RUN) and the count
+# is scaled up. The guess compares the
 # boundary fraction with 0.2/sqrt(N); an open surface's rim is 4/sqrt(N), so at 10M points
 # 200k samples expect about 250 rim hits against a limit of about 13: far apart.
 BOUNDARY_SAMPLE = 200_000

@@ -26,7 +26,6 @@ constexpr size_t kTraversalPoll = size_t(1) << 20;
 // "No edge": above every real key, whose high half is a finite weight's order bits.
 constexpr uint64_t kNoEdge = ~uint64_t(0);
 
-
 // Thrown on the calling thread when poll() asks to stop; the entry points return false.
 struct Stopped {};
 
