@@ -6,7 +6,9 @@ The Stanford bunny's 35,947 vertices with area-weighted normals and k-NN radii (
 paper's 35,945-point cloud), one ray per pixel at 640x480. Prints one table: BVH build
 time; rays per second of the plain nearest-hit trace(), of trace_surface() under each
 method preset (the ε-window query and the visibility rules; the cloud treated as closed,
-as the paper does), and of render() with the full method, on 1 thread and on all cores;
+as the paper does), and of render() with the full method, on 1 thread and on all cores --
+the rays in packets of 4x4 pixels, and for the nearest hit and the full method also one ray
+at a time;
 beside them, on the same discs, rays and threads, Embree 3's own oriented-disc primitive
 (rtcIntersect1 one ray at a time, rtcIntersect16 in 4x4 pixel packets; embree_harness.cpp,
 built against Debian's libembree-dev, installed when missing and possible -- the row is
@@ -122,6 +124,11 @@ def main(argv=None) -> int:
     cam = fit_camera(core, local, WIDTH, HEIGHT)
     origins, dirs = cam.rays(WIDTH, HEIGHT)
     n_rays = len(origins)
+    # The core's rows take the rays in 4x4 pixel tiles (core.packet_order: 16 consecutive
+    # rays make one packet), as Embree's rtcIntersect16 row does; Embree's rtcIntersect1
+    # and the harness take them row by row (it cuts its own tiles).
+    order = core.packet_order(WIDTH, HEIGHT)
+    tile_o, tile_d = np.ascontiguousarray(origins[order]), np.ascontiguousarray(dirs[order])
 
     full = core.Method.preset("FULL")
     # Every row is timed once per round and the rounds interleave the core's rows with
@@ -131,12 +138,18 @@ def main(argv=None) -> int:
     thread_counts = sorted({1, cores})
     for threads in thread_counts:
         runs.append(("core trace(), nearest hit", threads,
-                     lambda threads=threads: scene.trace(origins, dirs, normals=False, threads=threads)))
+                     lambda threads=threads: scene.trace(tile_o, tile_d, normals=False, threads=threads)))
+        runs.append(("core trace(), nearest hit, one ray at a time", threads,
+                     lambda threads=threads: scene.trace(tile_o, tile_d, normals=False, threads=threads,
+                                                         packets=False)))
         for preset in core.PRESETS:
             method = core.Method.preset(preset)
             runs.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads,
-                         lambda threads=threads, method=method: scene.trace_surface(origins, dirs, method,
+                         lambda threads=threads, method=method: scene.trace_surface(tile_o, tile_d, method,
                                                                                     threads=threads)))
+        runs.append(("core trace_surface(), full method, one ray at a time", threads,
+                     lambda threads=threads: scene.trace_surface(tile_o, tile_d, full, threads=threads,
+                                                                 packets=False)))
         runs.append(("core render(), full method, headlight shading", threads,
                      lambda threads=threads: scene.render(cam, WIDTH, HEIGHT, threads=threads, method=full)))
     embree_run, why_not = embree_runner(local, normals, radii, origins, dirs, install=not args.quick,
@@ -165,7 +178,8 @@ def main(argv=None) -> int:
         results = {t: {key: statistics.median(v) for key, v in r.items()} for t, r in embree_times.items()}
         embree_t = np.fromfile(HERE.parent / "build" / "embree" / "hits.f32", np.float32)
         embree = (results, embree_t)
-        core_t = hits.t
+        core_t = np.empty_like(hits.t)
+        core_t[order] = hits.t  # back to row order
         both_miss = np.isinf(core_t) & np.isinf(embree_t)
         with np.errstate(invalid="ignore"):  # inf - inf where both miss
             close = np.abs(embree_t - core_t) <= AGREE_RELATIVE * np.abs(core_t)
@@ -178,7 +192,8 @@ def main(argv=None) -> int:
     print(f"# Trace throughput: {name}, {len(local):,} splats, {WIDTH}x{HEIGHT} = {n_rays:,} rays, "
           f"{coverage:.1%} of pixels hit")
     print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} 4-wide nodes, "
-          f"box and disc tests in {core.simd_path()} (no -march=native, no run-time dispatch); "
+          f"box and disc tests in {core.simd_path()} (no -march=native, no run-time dispatch), rays in packets "
+          f"of {core.PACKET_RAYS} (4x4 pixels) unless the row says one at a time; "
           f"depth {stats['depth']}; median of {repeats} interleaved rounds (every row once per round)\n")
     if embree is None:
         print(f"# Embree reference skipped: {why_not}\n")
@@ -189,7 +204,7 @@ def main(argv=None) -> int:
               f"t within {AGREE_RELATIVE:g} relative)\n")
     print("| renderer | threads | time (s) | Mrays/s | vs nearest hit | x Embree rtcIntersect1 |")
     print("|---|---:|---:|---:|---:|---:|")
-    nearest = {threads: t for name, threads, t in rows if name.startswith("core trace()")}
+    nearest = {threads: t for name, threads, t in rows if name == "core trace(), nearest hit"}
     reference = {threads: t for name, threads, t in rows if name.startswith("Embree 3 rtcIntersect1,")}
     for name, threads, t in rows:
         versus = f"{t / reference[threads]:.2f}" if threads in reference else ""

@@ -371,6 +371,19 @@ def _window(window, width: int, height: int) -> tuple[int, int, int, int]:
     return x0, y0, w, h
 
 
+PACKET_RAYS = _core.PACKET_RAYS  # rays Scene.trace / trace_surface take through the tree at once
+
+
+def packet_order(width: int, height: int) -> np.ndarray:
+    """Indices that put row-major pixel rays (Camera.rays) in 4x4 tiles, left to right and
+    top to bottom (16 consecutive rays: one tile, one packet for trace() and
+    trace_surface()); the inverse permutation is np.argsort of it."""
+    if not (width > 0 and height > 0):
+        raise ValueError(f"width and height must be positive, got {width}x{height}")
+    rows, cols = np.divmod(np.arange(width * height), width)
+    return np.lexsort((cols, rows, cols // 4, rows // 4))
+
+
 class TraceResult(NamedTuple):
     t: np.ndarray       # (N,) float32 distance along the normalised direction; inf on a miss
     id: np.ndarray      # (N,) int32 splat index, -1 on a miss
@@ -506,23 +519,28 @@ class Scene:
     def bvh_stats(self) -> dict:
         return self._scene.bvh_stats()
 
-    def traversal_cost(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf) -> dict:
+    def traversal_cost(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf,
+                       packets: bool = False) -> dict:
         """Work the BVH does for these nearest-hit rays: {'nodes': nodes entered, 'discs':
-        disc tests}, summed over the rays. Tests compare costs with it instead of timings."""
+        disc tests}, summed over the rays. Tests compare costs with it instead of timings.
+        packets: as in trace() (a packet's inner node counts once for all its rays)."""
         o = _f32(origins, "origins", (-1, 3))
         d = _f32(directions, "directions", (len(o), 3))
         n = len(o)
         stats = np.zeros(2, np.int64)
         self._scene.trace(o, d, float(tmin), float(tmax), np.empty(n, np.float32), np.empty(n, np.int32),
-                          np.empty(n, np.bool_), None, 0, False, stats)
+                          np.empty(n, np.bool_), None, 0, False, stats, packets)
         return {"nodes": int(stats[0]), "discs": int(stats[1])}
 
     def trace(self, origins, directions, tmin: float = 0.0, tmax: float = np.inf, normals: bool = True,
-              threads: int = 0, brute_force: bool = False) -> TraceResult:
+              threads: int = 0, brute_force: bool = False, packets: bool = True) -> TraceResult:
         """Nearest splat hit (either facing) per ray, in the open interval (tmin, tmax).
 
         Directions need not be unit length; they are normalised and `t` is a distance.
         brute_force tests every splat: the slow reference the BVH is checked against.
+        packets: consecutive rays go through the tree 16 at a time when they are coherent
+        (camera rays of a 4x4 pixel tile: order them so); False traces each ray alone. The
+        answers are the same either way.
         """
         o = _f32(origins, "origins", (-1, 3))
         d = _f32(directions, "directions", (len(o), 3))
@@ -531,12 +549,12 @@ class Scene:
         ids = np.empty(n, np.int32)
         front = np.empty(n, np.bool_)
         nrm = np.empty((n, 3), np.float32) if normals else None
-        self._scene.trace(o, d, float(tmin), float(tmax), t, ids, front, nrm, threads, brute_force)
+        self._scene.trace(o, d, float(tmin), float(tmax), t, ids, front, nrm, threads, brute_force, None, packets)
         return TraceResult(t, ids, front, nrm)
 
     def trace_surface(self, origins, directions, method: Method = Method(), tmin: float = 0.0,
                       tmax: float = np.inf, inside=None, exclude=None, members: bool = False,
-                      threads: int = 0, brute_force: bool = False) -> SurfaceResult:
+                      threads: int = 0, brute_force: bool = False, packets: bool = True) -> SurfaceResult:
         """The surface each ray sees under `method`, with its shading normal and colour.
 
         inside: (N,) flags (or one bool) for rays travelling inside an object (refracted):
@@ -545,6 +563,7 @@ class Scene:
             (reflection, shadow, refraction) passes the `members` of the hit it starts from.
         members: also return the splats that made each surface point.
         brute_force: offer every splat to the query (the tests' reference for the BVH).
+        packets: as in trace(); the first layer query of 16 coherent rays in one traversal.
         """
         o = _f32(origins, "origins", (-1, 3))
         d = _f32(directions, "directions", (len(o), 3))
@@ -566,18 +585,20 @@ class Scene:
             if ex.ndim != 2 or len(ex) != n:
                 raise ValueError(f"exclude must have shape ({n}, M), got {ex.shape}")
         self._scene.trace_surface(o, d, float(tmin), float(tmax), method.as_tuple(), out.t, out.id, out.front,
-                                  out.normal, out.colour, out.members, inside_arr, ex, threads, brute_force)
+                                  out.normal, out.colour, out.members, inside_arr, ex, threads, brute_force,
+                                  packets)
         return out
 
     def render(self, camera: Camera, width: int, height: int, window: Optional[Sequence[int]] = None,
                background: Sequence[float] = (0.0, 0.0, 0.0, 0.0), depth: bool = True, normal: bool = True,
                threads: int = 0, progress: Optional[Callable[[int, int], bool]] = None,
-               tile_size: int = 32, method: Method = Method()) -> RenderResult:
+               tile_size: int = 32, method: Method = Method(), packets: bool = True) -> RenderResult:
         """Renders one ray per pixel centre with a headlight, the surface chosen by `method`.
 
         window: (x0, y0, w, h) sub-rectangle of the width x height image (x0, y0: column
         and row of its top-left pixel), default the whole image. progress(done, total) is
-        called from this thread every ~50 ms; returning True stops the render.
+        called from this thread every ~50 ms; returning True stops the render. packets:
+        4x4 pixels traced as one packet (False: pixel by pixel; the same image).
         """
         x0, y0, w, h = _window(window, width, height)
         rgba = np.empty((h, w, 4), np.float32)
@@ -588,7 +609,8 @@ class Scene:
             np.ascontiguousarray(camera.position, np.float64),
             np.ascontiguousarray(camera.forward, np.float64),
             int(width), int(height), (int(x0), int(y0), int(w), int(h)),
-            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method.as_tuple())
+            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method.as_tuple(),
+            packets)
         return RenderResult(rgba, dep, nrm, done)
 
 

@@ -74,6 +74,10 @@ inline int intersect_discs4(const DiscRay &r, const float *const disc[4], float 
     if (mask) _mm_storeu_ps(out_t, t), _mm_storeu_ps(out_dist2, dist2);
     return mask;
 }
+#else
+struct DiscRay {  // nothing to precompute for the plain path
+    explicit DiscRay(const Ray &) {}
+};
 #endif
 
 }  // namespace splat

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "packet.h"
 #include "parallel.h"
 #include "py_util.h"
 #include "render.h"
@@ -143,12 +144,13 @@ bool for_each_ray(PyObject *self, int threads, Py_ssize_t count, size_t chunk, P
 
 PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
-                                   "out_front", "out_normal", "threads", "brute_force", "out_stats", nullptr};
+                                   "out_front", "out_normal", "threads", "brute_force", "out_stats", "packets",
+                                   nullptr};
     PyObject *oo, *od, *ot, *oid, *ofr, *onrm = Py_None, *ostats = Py_None;
     double tmin, tmax;
-    int threads = 0, brute = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|OipO", const_cast<char **>(kwlist), &oo, &od, &tmin,
-                                     &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute, &ostats))
+    int threads = 0, brute = 0, packets = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOO|OipOp", const_cast<char **>(kwlist), &oo, &od, &tmin,
+                                     &tmax, &ot, &oid, &ofr, &onrm, &threads, &brute, &ostats, &packets))
         return nullptr;
     View stats_view;
     Py_ssize_t s2[1] = {2};
@@ -174,15 +176,27 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     // Rays per task: small enough to balance the threads, large enough to amortise a task.
     constexpr size_t kChunk = 1024;
     std::atomic<uint64_t> total_nodes{0}, total_discs{0};
-    if (!for_each_ray(self, threads, count, kChunk, [&](size_t i) {
-            const Ray ray = make_ray(po, pd, i, tmin, tmax);
+    // Consecutive rays in packets of kPacketRays (traced together when coherent: packet.h).
+    const size_t group = brute || !packets ? 1 : size_t(kPacketRays);
+    if (!for_each_ray(self, threads, (count + Py_ssize_t(group) - 1) / Py_ssize_t(group), kChunk / group,
+                      [&](size_t g) {
+            const size_t first = g * group, n = std::min(group, size_t(count) - first);
+            Ray rays[kPacketRays];
+            Hit hits[kPacketRays];
+            for (size_t k = 0; k < n; ++k) rays[k] = make_ray(po, pd, first + k, tmin, tmax);
             TraversalStats st;
-            const Hit h = brute ? scene.intersect_brute_force(ray) : scene.intersect(ray, &st);
+            if (brute) hits[0] = scene.intersect_brute_force(rays[0]);
+            else if (n == 1) hits[0] = scene.intersect(rays[0], &st);
+            else scene.intersect_packet(rays, int(n), hits, &st);
             if (stats_view.held) total_nodes += st.nodes, total_discs += st.discs;
-            pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
-            if (pn) {
-                const Vec3 n = h.valid() ? scene.normal(h.id) : Vec3();
-                pn[3 * i] = n.x, pn[3 * i + 1] = n.y, pn[3 * i + 2] = n.z;
+            for (size_t k = 0; k < n; ++k) {
+                const size_t i = first + k;
+                const Hit &h = hits[k];
+                pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+                if (pn) {
+                    const Vec3 nv = h.valid() ? scene.normal(h.id) : Vec3();
+                    pn[3 * i] = nv.x, pn[3 * i + 1] = nv.y, pn[3 * i + 2] = nv.z;
+                }
             }
         }))
         return nullptr;
@@ -196,12 +210,13 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
 PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "method", "out_t", "out_id",
                                    "out_front", "out_normal", "out_colour", "out_members", "inside", "exclude",
-                                   "threads", "brute_force", nullptr};
+                                   "threads", "brute_force", "packets", nullptr};
     PyObject *oo, *od, *ometh, *ot, *oid, *ofr, *onrm, *ocol, *omem = Py_None, *oin = Py_None, *oex = Py_None;
     double tmin, tmax;
-    int threads = 0, brute = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOOOOO|OOOip", const_cast<char **>(kwlist), &oo, &od, &tmin,
-                                     &tmax, &ometh, &ot, &oid, &ofr, &onrm, &ocol, &omem, &oin, &oex, &threads, &brute))
+    int threads = 0, brute = 0, packets = 1;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOddOOOOOO|OOOipp", const_cast<char **>(kwlist), &oo, &od, &tmin,
+                                     &tmax, &ometh, &ot, &oid, &ofr, &onrm, &ocol, &omem, &oin, &oex, &threads, &brute,
+                                     &packets))
         return nullptr;
     if (!check_batch_args(tmin, tmax, threads)) return nullptr;
     Method method;
@@ -241,15 +256,32 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     uint8_t *pfr = fr.data<uint8_t>();
     // Fewer rays per task than trace(): a layer query costs more and varies more per ray.
     constexpr size_t kChunk = 512;
-    if (!for_each_ray(self, threads, count, kChunk, [&](size_t i) {
-            const Ray ray = make_ray(po, pd, i, tmin, tmax);
-            const SurfaceHit h = find_surface(scene, ray, method, pin && pin[i], pex ? pex + i * n_ex : nullptr, n_ex,
-                                              brute);
-            pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
-            for (int k = 0; k < 3; ++k) pn[3 * i + k] = h.normal[k], pc[3 * i + k] = h.colour[k];
-            if (pm) {
-                int32_t *row = pm + i * kMaxLayerHits;
-                for (int k = 0; k < kMaxLayerHits; ++k) row[k] = k < h.n_members ? h.members[k] : -1;
+    // Consecutive rays in packets, as in trace().
+    const size_t group = brute || !packets ? 1 : size_t(kPacketRays);
+    if (!for_each_ray(self, threads, (count + Py_ssize_t(group) - 1) / Py_ssize_t(group), kChunk / group,
+                      [&](size_t g) {
+            const size_t first = g * group, n = std::min(group, size_t(count) - first);
+            Ray rays[kPacketRays];
+            bool inside[kPacketRays];
+            const int32_t *excl[kPacketRays];
+            SurfaceHit hits[kPacketRays];
+            for (size_t k = 0; k < n; ++k) {
+                const size_t i = first + k;
+                rays[k] = make_ray(po, pd, i, tmin, tmax);
+                inside[k] = pin && pin[i];
+                excl[k] = pex ? pex + i * n_ex : nullptr;
+            }
+            if (n == 1) hits[0] = find_surface(scene, rays[0], method, inside[0], excl[0], n_ex, brute);
+            else find_surfaces(scene, rays, int(n), method, inside, excl, n_ex, hits);
+            for (size_t k = 0; k < n; ++k) {
+                const size_t i = first + k;
+                const SurfaceHit &h = hits[k];
+                pt[i] = h.t, pid[i] = h.id, pfr[i] = h.front ? 1 : 0;
+                for (int c = 0; c < 3; ++c) pn[3 * i + c] = h.normal[c], pc[3 * i + c] = h.colour[c];
+                if (pm) {
+                    int32_t *row = pm + i * kMaxLayerHits;
+                    for (int c = 0; c < kMaxLayerHits; ++c) row[c] = c < h.n_members ? h.members[c] : -1;
+                }
             }
         }))
         return nullptr;
@@ -259,14 +291,15 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
 PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window",
                                    "background", "out_rgba", "out_depth", "out_normal", "threads",
-                                   "progress", "tile_size", "method", nullptr};
+                                   "progress", "tile_size", "method", "packets", nullptr};
     PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None,
              *ometh = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = 32;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = 32, packets = 1;
     float bg[4];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOiO", const_cast<char **>(kwlist), &om,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOiOp", const_cast<char **>(kwlist), &om,
                                      &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
-                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh))
+                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh,
+                                     &packets))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     Camera cam;
@@ -288,6 +321,7 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!parse_method(ometh, settings.method)) return nullptr;
     std::copy(bg, bg + 4, settings.background);
     settings.tile_size = tile_size;
+    settings.packets = packets != 0;
     Renderer renderer(scene_of(self), cam, target, settings);
     const size_t tiles = renderer.tile_count();
 
@@ -321,12 +355,12 @@ PyMethodDef Scene_methods[] = {
      "brute_force=False)\n--\n\nNearest hit per ray, written into the out_ arrays (see core.py)."},
     {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_render)), METH_VARARGS | METH_KEYWORDS,
      "render(local_from_ndc, position, forward, width, height, window, background, out_rgba, "
-     "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32)\n--\n\n"
+     "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32, method=None, packets=True)\n--\n\n"
      "Renders a window of an image; returns False when progress() asked to stop."},
     {"trace_surface", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace_surface)),
      METH_VARARGS | METH_KEYWORDS,
      "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
-     "out_members=None, inside=None, exclude=None, threads=0, brute_force=False)\n--\n\n"
+     "out_members=None, inside=None, exclude=None, threads=0, brute_force=False, packets=True)\n--\n\n"
      "The surface each ray sees under the visibility method (see core.py)."},
     {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
     {nullptr, nullptr, 0, nullptr},
@@ -386,6 +420,7 @@ int module_exec(PyObject *module) {
     }
     if (PyModule_AddObject(module, "PARALLEL_COSINE", PyFloat_FromDouble(kParallelCosine)) < 0) return -1;
     if (PyModule_AddIntConstant(module, "MAX_LAYER_HITS", kMaxLayerHits) < 0) return -1;
+    if (PyModule_AddIntConstant(module, "PACKET_RAYS", kPacketRays) < 0) return -1;
     if (add_neighbour_types(module) < 0) return -1;
     if (add_graph_functions(module) < 0) return -1;
     return add_render_types(module);

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "packet.h"
+
 namespace splat {
 
 size_t Renderer::tile_count() const {
@@ -14,16 +16,33 @@ void Renderer::render_tile(size_t tile) const {
     const int ts = settings_.tile_size;
     const int tiles_x = (target_.w + ts - 1) / ts;
     const int tx = int(tile % tiles_x) * ts, ty = int(tile / tiles_x) * ts;
-    for (int row = ty; row < std::min(ty + ts, target_.h); ++row)
-        for (int col = tx; col < std::min(tx + ts, target_.w); ++col) shade_pixel(col, row);
+    const int x1 = std::min(tx + ts, target_.w), y1 = std::min(ty + ts, target_.h);
+    // In blocks of 4x4 pixels: one ray packet each (packet.h).
+    constexpr int kBlock = 4;
+    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
+    for (int by = ty; by < y1; by += kBlock)
+        for (int bx = tx; bx < x1; bx += kBlock) {
+            Ray rays[kPacketRays];
+            int cols[kPacketRays], rows[kPacketRays], n = 0;
+            for (int row = by; row < std::min(by + kBlock, y1); ++row)
+                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) {
+                    cols[n] = col, rows[n] = row;
+                    rays[n] = camera_.ray(target_.x0 + col + 0.5, target_.y0 + row + 0.5, target_.width,
+                                          target_.height);
+                }
+            const bool inside[kPacketRays] = {};
+            SurfaceHit hits[kPacketRays];
+            if (settings_.packets) find_surfaces(scene_, rays, n, settings_.method, inside, nullptr, 0, hits);
+            else
+                for (int k = 0; k < n; ++k) hits[k] = find_surface(scene_, rays[k], settings_.method);
+            for (int k = 0; k < n; ++k) shade_pixel(cols[k], rows[k], rays[k], hits[k]);
+        }
 }
 
 // Simple shading until lights and materials arrive: a headlight (a light at the eye),
 // so radiance = base colour x |cos| between the ray and the splat normal.
-void Renderer::shade_pixel(int col, int row) const {
+void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &hit) const {
     const size_t p = size_t(row) * target_.w + col;
-    const Ray ray = camera_.ray(target_.x0 + col + 0.5, target_.y0 + row + 0.5, target_.width, target_.height);
-    const SurfaceHit hit = find_surface(scene_, ray, settings_.method);
     float *rgba = target_.rgba + 4 * p;
     if (!hit.valid()) {
         std::copy(settings_.background, settings_.background + 4, rgba);

@@ -26,6 +26,7 @@ struct RenderSettings {
     float background_depth = 1e10f;             // Cycles writes 1e10 in Z where nothing is hit
     int tile_size = 32;
     Method method;  // which surface each pixel shows (visibility.h)
+    bool packets = true;  // 4x4 pixels traced as one ray packet (packet.h); the same image
 };
 
 class Renderer {
@@ -38,7 +39,7 @@ class Renderer {
     void render_tile(size_t tile) const;
 
   private:
-    void shade_pixel(int col, int row) const;
+    void shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &hit) const;
 
     const SplatScene &scene_;
     const Camera &camera_;

@@ -47,6 +47,18 @@ inline F4 select_gt(F4 x, F4 y, F4 a, F4 b) {
 inline F4 select_lt(F4 x, F4 y, F4 a, F4 b) { return select_gt(y, x, a, b); }
 // Bit i set where lane i of a <= lane i of b.
 inline int mask_le(F4 a, F4 b) { return _mm_movemask_ps(_mm_cmple_ps(a.v, b.v)); }
+// Lane i of a where bit i of `bits` (0..15) is set, else of b.
+inline F4 select_bits(int bits, F4 a, F4 b) {
+    const __m128i lanes = _mm_set_epi32(8, 4, 2, 1);
+    const __m128 m = _mm_castsi128_ps(
+        _mm_cmpeq_epi32(_mm_and_si128(_mm_set1_epi32(bits), lanes), lanes));
+    return _mm_or_ps(_mm_and_ps(m, a.v), _mm_andnot_ps(m, b.v));
+}
+// The largest lane (no NaN lanes).
+inline float hmax4(F4 a) {
+    const __m128 b = _mm_max_ps(a.v, _mm_movehl_ps(a.v, a.v));
+    return _mm_cvtss_f32(_mm_max_ss(b, _mm_shuffle_ps(b, b, 1)));
+}
 // Lanes truncated towards zero (the caller clamps them into int range first).
 inline void truncate4(F4 a, int32_t out[4]) { _mm_storeu_si128(reinterpret_cast<__m128i *>(out), _mm_cvttps_epi32(a.v)); }
 #else
@@ -87,6 +99,16 @@ inline int mask_le(F4 a, F4 b) {
 }
 inline void truncate4(F4 a, int32_t out[4]) {
     for (int i = 0; i < 4; ++i) out[i] = int32_t(a.v[i]);
+}
+inline F4 select_bits(int bits, F4 a, F4 b) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = (bits >> i & 1) ? a.v[i] : b.v[i];
+    return r;
+}
+inline float hmax4(F4 a) {
+    float m = a.v[0];
+    for (int i = 1; i < 4; ++i) m = a.v[i] > m ? a.v[i] : m;
+    return m;
 }
 #endif
 

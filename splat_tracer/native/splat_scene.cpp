@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "packet.h"
 #include "parallel.h"
 
 namespace splat {
@@ -99,49 +100,111 @@ size_t SplatScene::memory_bytes() const {
            bvh_.memory_bytes();
 }
 
+// The discs of leaf [first, first + count) tested against `ray`; `visit(splat, hit)` for
+// each hit. Returns the discs tested.
+template <class Visit>
+uint32_t SplatScene::test_leaf(const Ray &ray, const DiscRay &disc_ray, uint32_t first, uint32_t count,
+                               Visit &&visit) const {
+    uint32_t k = first;
+    const uint32_t end = first + count;
+#ifdef SPLAT_SSE2
+    // Four discs at a time (the same arithmetic as intersect_disc), in leaf order; the last
+    // group takes the leaf's last four discs, skipping those already seen.
+    if (count >= 4) {
+        for (;;) {
+            const uint32_t base = std::min(k, end - 4);
+            const float *d[4];
+            for (int j = 0; j < 4; ++j) d[j] = &splats_[base + j].c.x;
+            float t[4], dist2[4];
+            int mask = intersect_discs4(disc_ray, d, t, dist2) & (0xf << (k - base));
+            while (mask) {
+                const int j = __builtin_ctz(unsigned(mask));
+                mask &= mask - 1;
+                const PackedSplat &s = splats_[base + j];
+                visit(s, DiscHit{t[j], dist2[j], dot(ray.d, s.n) < 0.f});
+            }
+            k = base + 4;
+            if (k >= end) break;
+        }
+    }
+#else
+    (void)disc_ray;
+#endif
+    for (; k < end; ++k) {
+        const PackedSplat &s = splats_[k];
+        DiscHit h;
+        if (intersect_disc(ray, s.c, s.n, s.r, &h)) visit(s, h);
+    }
+    return count;
+}
+
 // Every splat query is the shared BVH traversal with a visitor per disc hit.
 template <class Visit>
 void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats) const {
     uint64_t discs = 0;
-#ifdef SPLAT_SSE2
     const DiscRay disc_ray(ray);
-#endif
     traverse_bvh(
         bvh_, ray, limit,
         [&](uint32_t first, uint32_t count) {
-            discs += count;
-            uint32_t k = first;
-            const uint32_t end = first + count;
-#ifdef SPLAT_SSE2
-            // Four discs at a time (the same arithmetic as intersect_disc), in leaf order;
-            // the last group takes the leaf's last four discs, skipping those already seen.
-            if (count >= 4) {
-                for (;;) {
-                    const uint32_t base = std::min(k, end - 4);
-                    const float *d[4];
-                    for (int j = 0; j < 4; ++j) d[j] = &splats_[base + j].c.x;
-                    float t[4], dist2[4];
-                    int mask = intersect_discs4(disc_ray, d, t, dist2) & (0xf << (k - base));
-                    while (mask) {
-                        const int j = __builtin_ctz(unsigned(mask));
-                        mask &= mask - 1;
-                        const PackedSplat &s = splats_[base + j];
-                        visit(s, DiscHit{t[j], dist2[j], dot(ray.d, s.n) < 0.f});
-                    }
-                    k = base + 4;
-                    if (k >= end) break;
-                }
-            }
-#endif
-            for (; k < end; ++k) {
-                const PackedSplat &s = splats_[k];
-                DiscHit h;
-                if (intersect_disc(ray, s.c, s.n, s.r, &h)) visit(s, h);
-            }
+            discs += test_leaf(ray, disc_ray, first, count, visit);
             return false;
         },
         stats ? &stats->nodes : nullptr);
     if (stats) stats->discs += discs;
+}
+
+// The same for a packet of coherent rays (packet.h): `visit(i, splat, hit, limit)` for ray
+// i, which may lower limit (the ray's pruning distance).
+template <class Visit>
+void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const {
+    uint64_t discs = 0;
+    alignas(16) unsigned char store[kPacketRays * sizeof(DiscRay)];
+    DiscRay *disc_rays = reinterpret_cast<DiscRay *>(store);
+    for (int i = 0; i < n; ++i) new (&disc_rays[i]) DiscRay(rays[i]);
+    splat::traverse_packet(
+        bvh_, rays, n,
+        [&](int i, uint32_t first, uint32_t count, float &limit) {
+            discs += test_leaf(rays[i], disc_rays[i], first, count,
+                               [&](const PackedSplat &s, const DiscHit &h) { visit(i, s, h, limit); });
+        },
+        stats ? &stats->nodes : nullptr);
+    if (stats) stats->discs += discs;
+}
+
+bool SplatScene::coherent(const Ray *rays, int n) const {
+    return packet_coherent(rays, n, length(bounds_.extent()));
+}
+
+void SplatScene::intersect_packet(const Ray *rays, int n, Hit *out, TraversalStats *stats) const {
+    if (!coherent(rays, n)) {
+        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], stats);
+        return;
+    }
+    for (int i = 0; i < n; ++i) out[i] = Hit();
+    traverse_packet(
+        rays, n,
+        [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
+            if (closer(h.t, s.id, out[i])) out[i].t = limit = h.t, out[i].id = s.id, out[i].front = h.front;
+        },
+        stats);
+}
+
+void SplatScene::gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, TraversalStats *stats) const {
+    if (!coherent(rays, n)) {
+        for (int i = 0; i < n; ++i) gather_layer(rays[i], qs[i], false, stats);
+        return;
+    }
+    for (int i = 0; i < n; ++i) qs[i].cut = rays[i].tmax, qs[i].max_radius = max_radius_;
+    traverse_packet(
+        rays, n,
+        [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
+            LayerQuery &q = qs[i];
+            if (h.t <= q.cut && !q.excluded(s.id)) {
+                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+                limit = q.cut;
+            }
+        },
+        stats);
 }
 
 Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {

@@ -67,9 +67,20 @@ class SplatScene {
     // brute_force offers every splat to the query instead: the tests' reference.
     void gather_layer(const Ray &ray, LayerQuery &q, bool brute_force = false, TraversalStats *stats = nullptr) const;
 
+    // intersect() and gather_layer() for n <= kPacketRays rays at once (packet.h): the same
+    // answers, found in one traversal when the rays are coherent (a tile of camera rays),
+    // else ray by ray. The queries' inputs (facing, epsilon, exclusions) are set by the caller.
+    void intersect_packet(const Ray *rays, int n, Hit *out, TraversalStats *stats = nullptr) const;
+    void gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, TraversalStats *stats = nullptr) const;
+
   private:
     template <class Visit>
     void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
+    template <class Visit>
+    void traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const;
+    template <class Visit>
+    uint32_t test_leaf(const Ray &ray, const DiscRay &disc_ray, uint32_t first, uint32_t count, Visit &&visit) const;
+    bool coherent(const Ray *rays, int n) const;
 
     Buffer<PackedSplat> splats_;  // BVH order
     Buffer<uint32_t> slot_;       // input id -> index in splats_

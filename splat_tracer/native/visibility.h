@@ -63,6 +63,13 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, 
                         const int32_t *exclude = nullptr, int n_exclude = 0, bool brute_force = false,
                         TraversalStats *stats = nullptr);
 
+// find_surface() for n <= kPacketRays rays at once, ray i with inside[i] and exclude[i]
+// (n_exclude ids each; exclude may be null): the first layer query of every ray in one
+// packet traversal (packet.h; ray by ray when the rays are not coherent), the rest ray by
+// ray. The same answers as find_surface().
+void find_surfaces(const SplatScene &scene, const Ray *rays, int n, const Method &method, const bool *inside,
+                   const int32_t *const *exclude, int n_exclude, SurfaceHit *out, TraversalStats *stats = nullptr);
+
 // The near phase's test for two member splats j (nearer) and k: whether omega, the sum of
 // the angles (c_k - c_j, n_j) and (c_j - c_k, n_k), exceeds pi (convex); n_j and n_k unit.
 // Coincident centres count as right angles (omega = pi: not convex).

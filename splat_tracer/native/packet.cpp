@@ -1,0 +1,49 @@
+#include "packet.h"
+
+#include <cmath>
+
+namespace splat {
+
+bool packet_coherent(const Ray *rays, int n, float scene_size) {
+    if (n <= 1) return false;
+    // Cone of directions: every direction within ~4 degrees of their mean. A 4x4 tile of a
+    // 50-degree view spans 4 x 50 / 160 = 1.25 degrees even at 160 pixels across; beyond a
+    // few degrees the packet's bounds grow faster than its rays can share nodes.
+    constexpr float kMinCosine = 0.9975f;  // cos 4 degrees
+    Vec3 mean, lo = rays[0].o, hi = rays[0].o;
+    for (int i = 0; i < n; ++i) mean = mean + rays[i].d, lo = vmin(lo, rays[i].o), hi = vmax(hi, rays[i].o);
+    const float len = length(mean);
+    if (!(len > 0.f)) return false;
+    mean = mean * (1.f / len);
+    for (int i = 0; i < n; ++i)
+        if (!(dot(rays[i].d, mean) >= kMinCosine)) return false;
+    // Origins: a camera's rays share theirs (perspective) or spread over the tile's own
+    // footprint (orthographic); a tenth of the scene is a 4x4 tile of a view 40 pixels
+    // across, about as wide as the 4-degree cone is at the scene's distance. Rays from
+    // points scattered over the scene would make the packet's box of origins the scene.
+    constexpr float kOriginSpread = 0.1f;
+    return length(hi - lo) <= kOriginSpread * scene_size;
+}
+
+PacketBounds::PacketBounds(const Ray *rays, int n) {
+    tmin = kInfinity;
+    for (int i = 0; i < n; ++i) tmin = fmin2(tmin, rays[i].tmin);
+    for (int k = 0; k < 3; ++k) {
+        // The same inverse the single-ray test uses (WideRay: 1.f / d).
+        float olo = kInfinity, ohi = -kInfinity, ilo = kInfinity, ihi = -kInfinity;
+        for (int i = 0; i < n; ++i) {
+            const float inv = 1.f / rays[i].d[k];
+            olo = fmin2(olo, rays[i].o[k]), ohi = fmax2(ohi, rays[i].o[k]);
+            ilo = fmin2(ilo, inv), ihi = fmax2(ihi, inv);
+        }
+        const bool finite = std::isfinite(ilo) && std::isfinite(ihi);
+        bool parallel = true;
+        for (int i = 0; i < n; ++i) parallel &= rays[i].d[k] == 0.f;
+        axis[k] = parallel ? kParallel : finite && (ilo > 0.f || ihi < 0.f) ? kSlabs : kUntested;
+        near_side[k] = ilo > 0.f ? 0 : 1;
+        o_lo[k] = F4::broadcast(olo), o_hi[k] = F4::broadcast(ohi);
+        inv_lo[k] = F4::broadcast(ilo), inv_hi[k] = F4::broadcast(ihi);
+    }
+}
+
+}  // namespace splat

@@ -1,0 +1,168 @@
+// Ray packets: up to 16 coherent rays (the camera rays of a 4x4 pixel tile) traced through
+// the BVH together. Inner nodes are tested once for the whole packet, against the bounds of
+// its origins and inverse directions (interval arithmetic: Reshetov, Soupikov & Hurley 2005,
+// "Multi-level ray tracing algorithm"; Wald et al. 2006's frustum tests for the same role);
+// a node holding leaves is then tested ray by ray with the single-ray slab test, and each
+// leaf is visited only by the rays that enter its box -- so every ray meets exactly the
+// discs it would meet alone, and the queries built on this one give the single-ray answers.
+//
+// Why the packet test never drops a box a ray of the packet enters: along an axis whose
+// inverse directions share a sign and are finite, each ray's entry distance fl(fl(near - o)
+// x inv) is monotonic in o and in inv under round-to-nearest, so the smallest of its four
+// values at the corners of [o_lo, o_hi] x [inv_lo, inv_hi] is a lower bound for every ray's
+// computed entry (the largest one an upper bound for every exit), and the same widening
+// keeps the order. An axis every ray runs parallel to (d = 0: inv = +-inf) bounds the
+// boxes by the rays' range of origins on it (a ray there never leaves its coordinate); an
+// axis where only some rays run parallel, or the signs differ, is not tested (only looser).
+#pragma once
+
+#include <cstdint>
+#include <new>
+
+#include "bvh.h"
+
+namespace splat {
+
+constexpr int kPacketRays = 16;
+static_assert(kPacketRays <= 32, "a packet's rays are the bits of a uint32_t");
+
+// Whether rays are coherent enough for a packet to pay: directions within a narrow cone
+// and origins close together (relative to `scene_size`, the diagonal of the scene's
+// bounds). A 4x4 tile of camera rays is well inside both, even at 160x120; scattered rays
+// would make the packet's bounds cover much of the scene, and are traced one by one.
+bool packet_coherent(const Ray *rays, int n, float scene_size);
+
+// The bounds of a packet's rays, broadcast for the four lanes of a wide node.
+struct PacketBounds {
+    F4 o_lo[3], o_hi[3], inv_lo[3], inv_hi[3];
+    int near_side[3];  // 0: the boxes' lo planes are entered first (inverse directions > 0)
+    enum Axis { kUntested, kSlabs, kParallel };
+    Axis axis[3];      // kSlabs: finite inverse directions of one sign; kParallel: all d = 0
+    float tmin;        // the smallest of the rays' tmin
+    explicit PacketBounds(const Ray *rays, int n);
+};
+
+// The conservative slab test of the four children of `nd` against the packet (see the
+// header comment): a mask of the children some ray may enter within (tmin, tmax), and a
+// lower bound of every ray's entry distance into each.
+inline int intersect_wide_packet(const WideNode &nd, const PacketBounds &p, float tmax, float entry[4]) {
+    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
+    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
+    const F4 zero = F4::broadcast(0.f);
+    F4 t0 = F4::broadcast(p.tmin), t1 = F4::broadcast(tmax);
+    for (int k = 0; k < 3; ++k) {
+        if (p.axis[k] == PacketBounds::kParallel) {  // boxes beside every ray's coordinate
+            const F4 lo = F4::load(nd.box[2 * k]), hi = F4::load(nd.box[2 * k + 1]), inf = F4::broadcast(kInfinity);
+            t0 = select_gt(lo, p.o_hi[k], inf, select_lt(hi, p.o_lo[k], inf, t0));
+            t1 = select_gt(lo, p.o_hi[k], zero - inf, select_lt(hi, p.o_lo[k], zero - inf, t1));
+            continue;
+        }
+        if (p.axis[k] != PacketBounds::kSlabs) continue;
+        const F4 near = F4::load(nd.box[2 * k + p.near_side[k]]), far = F4::load(nd.box[2 * k + 1 - p.near_side[k]]);
+        const F4 a = near - p.o_lo[k], b = near - p.o_hi[k];
+        F4 tn = min4(min4(a * p.inv_lo[k], a * p.inv_hi[k]), min4(b * p.inv_lo[k], b * p.inv_hi[k]));
+        const F4 c = far - p.o_lo[k], e = far - p.o_hi[k];
+        F4 tf = max4(max4(c * p.inv_lo[k], c * p.inv_hi[k]), max4(e * p.inv_lo[k], e * p.inv_hi[k]));
+        tn = tn * select_gt(tn, zero, shrink, grow);
+        tf = tf * select_gt(tf, zero, grow, shrink);
+        t0 = max4(t0, tn);
+        t1 = min4(t1, tf);
+    }
+    t0.store(entry);
+    return mask_le(t0, t1);
+}
+
+// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(i, first, count, limit)` is
+// called for each leaf ray i enters within (tmin, limit), where limit starts at the ray's
+// tmax and the leaf may lower it as it learns (nearest hit so far, the layer query's cut).
+// Leaves are met nearer first by the packet's bounds, not by each ray's own order, so the
+// queries on top must not depend on the order of their hits (the nearest hit and the layer
+// query do not). `node_count` counts the inner nodes the packet entered (once for all its
+// rays) and the leaves each ray entered.
+template <class Leaf>
+void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64_t *node_count) {
+    if (bvh.nodes.empty() || n <= 0) return;
+    const PacketBounds bounds(rays, n);
+    alignas(16) unsigned char wr_store[kPacketRays * sizeof(WideRay)];
+    WideRay *wr = reinterpret_cast<WideRay *>(wr_store);
+    alignas(16) float limit[kPacketRays];
+    for (int i = 0; i < kPacketRays; ++i) limit[i] = i < n ? rays[i].tmax : -kInfinity;
+    for (int i = 0; i < n; ++i) new (&wr[i]) WideRay(rays[i]);
+    // The farthest any of `mask`'s rays may still need: the pruning bound of a node they share.
+    auto reach = [&](uint32_t mask) {
+        F4 r = F4::broadcast(-kInfinity);
+        for (int j = 0; j < n; j += 4)
+            r = max4(r, select_bits(int(mask >> j & 15), F4::load(limit + j), F4::broadcast(-kInfinity)));
+        return hmax4(r);
+    };
+    const WideNode *nodes = bvh.nodes.data();
+    struct Pending {
+        uint32_t child, count;  // as in WideNode
+        float entry;            // lower bound of the rays' entries
+        uint32_t rays;          // the rays that may enter it
+    } stack[3 * kStackSize];
+    int sp = 0;
+    uint64_t visited = 0;
+    Pending cur{0, 0, 0.f, n >= 32 ? ~0u : (1u << n) - 1u};
+    for (;;) {
+        if (cur.count) {
+            for (uint32_t m = cur.rays; m; m &= m - 1) {
+                const int i = __builtin_ctz(m);
+                if (cur.entry > limit[i]) continue;  // its limit moved in front
+                ++visited;
+                leaf(i, cur.child, cur.count, limit[i]);
+            }
+        } else {
+            ++visited;
+            const WideNode &nd = nodes[cur.child];
+            float t[4];
+            int mask = intersect_wide_packet(nd, bounds, reach(cur.rays), t);
+            uint32_t child_rays[4] = {cur.rays, cur.rays, cur.rays, cur.rays};
+            int leaves = 0;
+            for (int k = 0; k < 4; ++k) {
+                if (nd.child[k] == kNoChild) mask &= ~(1 << k);
+                leaves |= (nd.count[k] != 0) << k;
+            }
+            if (mask & leaves) {
+                // Leaves among the children: each ray's own slab test decides which it
+                // enters (and narrows the inner children's rays on the way).
+                child_rays[0] = child_rays[1] = child_rays[2] = child_rays[3] = 0;
+                float ti[4];
+                for (uint32_t m = cur.rays; m; m &= m - 1) {
+                    const int i = __builtin_ctz(m);
+                    int hit = intersect_wide(nd, wr[i], rays[i].tmin, limit[i], ti) & mask;
+                    for (; hit; hit &= hit - 1) child_rays[__builtin_ctz(hit)] |= 1u << i;
+                }
+                for (int k = 0; k < 4; ++k)
+                    if (!child_rays[k]) mask &= ~(1 << k);
+            }
+            if (mask) {
+                Pending hit[4];
+                int h = 0;
+                for (int k = 0; k < 4; ++k) {
+                    if (!(mask >> k & 1)) continue;
+                    const Pending p{nd.child[k], nd.count[k], t[k], child_rays[k]};
+                    int j = h++;
+                    while (j > 0 && hit[j - 1].entry > p.entry) hit[j] = hit[j - 1], --j;
+                    hit[j] = p;
+                }
+                for (int j = h - 1; j > 0; --j) stack[sp++] = hit[j];
+                cur = hit[0];
+                continue;
+            }
+        }
+        for (;;) {
+            if (sp == 0) {
+                if (node_count) *node_count += visited;
+                return;
+            }
+            --sp;
+            if (stack[sp].entry <= reach(stack[sp].rays)) {
+                cur = stack[sp];
+                break;
+            }
+        }
+    }
+}
+
+}  // namespace splat
