@@ -74,6 +74,60 @@ inline int intersect_discs4(const DiscRay &r, const float *const disc[4], float 
     if (mask) _mm_storeu_ps(out_t, t), _mm_storeu_ps(out_dist2, dist2);
     return mask;
 }
+
+// A packet's rays by component (lane i: ray i), for intersect_disc_rays().
+struct PacketRays {
+    alignas(16) float o[3][16], d[3][16], tmin[16], tmax[16];
+    PacketRays(const Ray *rays, int n) {
+        for (int i = 0; i < 16; ++i) {
+            const bool used = i < n;
+            for (int k = 0; k < 3; ++k) o[k][i] = used ? rays[i].o[k] : 0.f, d[k][i] = used ? rays[i].d[k] : 0.f;
+            // Unused lanes: an empty interval (no t is > +inf), never a hit.
+            tmin[i] = used ? rays[i].tmin : kInfinity, tmax[i] = used ? rays[i].tmax : -kInfinity;
+        }
+    }
+};
+
+// intersect_disc() of each disc s[0..count) against the rays of `mask` (bits of lanes of
+// `r`), four rays at a time with the same operations in the same order as the scalar test:
+// the same hits with the same t and dist2. hit(i, k, DiscHit) for ray i and disc k, disc
+// by disc, rays in ascending order.
+template <class OnHit>
+inline void intersect_disc_rays(const PacketRays &r, uint32_t mask, const float *s0, uint32_t count,
+                                OnHit &&hit) {
+    const __m128 parallel = _mm_set1_ps(kParallelCosine), sign = _mm_set1_ps(-0.f);
+    for (uint32_t k = 0; k < count; ++k) {
+        const float *s = s0 + 8 * k;  // a PackedSplat: c.x, c.y, c.z, r, n.x, n.y, n.z, id
+        const __m128 cx = _mm_set1_ps(s[0]), cy = _mm_set1_ps(s[1]), cz = _mm_set1_ps(s[2]);
+        const __m128 nx = _mm_set1_ps(s[4]), ny = _mm_set1_ps(s[5]), nz = _mm_set1_ps(s[6]);
+        const __m128 r2 = _mm_set1_ps(s[3] * s[3]);
+        for (uint32_t g = 0; g < 16; g += 4) {
+            const int lanes = int(mask >> g & 15);
+            if (!lanes) continue;
+            const __m128 dx = _mm_load_ps(r.d[0] + g), dy = _mm_load_ps(r.d[1] + g), dz = _mm_load_ps(r.d[2] + g);
+            const __m128 dn = _mm_add_ps(_mm_add_ps(_mm_mul_ps(dx, nx), _mm_mul_ps(dy, ny)), _mm_mul_ps(dz, nz));
+            __m128 ok = _mm_cmpnlt_ps(_mm_andnot_ps(sign, dn), parallel);
+            const __m128 ocx = _mm_sub_ps(cx, _mm_load_ps(r.o[0] + g)), ocy = _mm_sub_ps(cy, _mm_load_ps(r.o[1] + g)),
+                         ocz = _mm_sub_ps(cz, _mm_load_ps(r.o[2] + g));
+            const __m128 t = _mm_div_ps(
+                _mm_add_ps(_mm_add_ps(_mm_mul_ps(ocx, nx), _mm_mul_ps(ocy, ny)), _mm_mul_ps(ocz, nz)), dn);
+            ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmpgt_ps(t, _mm_load_ps(r.tmin + g)),
+                                           _mm_cmplt_ps(t, _mm_load_ps(r.tmax + g))));
+            const __m128 px = _mm_sub_ps(_mm_mul_ps(dx, t), ocx), py = _mm_sub_ps(_mm_mul_ps(dy, t), ocy),
+                         pz = _mm_sub_ps(_mm_mul_ps(dz, t), ocz);
+            const __m128 dist2 = _mm_add_ps(_mm_add_ps(_mm_mul_ps(px, px), _mm_mul_ps(py, py)), _mm_mul_ps(pz, pz));
+            ok = _mm_and_ps(ok, _mm_cmpngt_ps(dist2, r2));
+            int m = _mm_movemask_ps(ok) & lanes;
+            if (!m) continue;
+            alignas(16) float tt[4], dd[4], nn[4];
+            _mm_store_ps(tt, t), _mm_store_ps(dd, dist2), _mm_store_ps(nn, dn);
+            for (; m; m &= m - 1) {
+                const int j = __builtin_ctz(unsigned(m));
+                hit(int(g) + j, k, DiscHit{tt[j], dd[j], nn[j] < 0.f});
+            }
+        }
+    }
+}
 #else
 struct DiscRay {  // nothing to precompute for the plain path
     explicit DiscRay(const Ray &) {}

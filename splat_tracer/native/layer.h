@@ -26,7 +26,7 @@ namespace splat {
 // Hits kept per ray. A layer of overlapping splats holds ~5-15 (about pi (r/D)^2 discs
 // cover a point for radius r and spacing D, times the slant of the view); when the buffer
 // is full the farthest hit is dropped and `overflow` is set, so a layer is then made of
-// its nearest kMaxLayerHits discs. Rays cost this much stack each: 32 x 16 bytes.
+// its nearest kMaxLayerHits discs. Rays cost this much stack each: 32 x 24 bytes.
 constexpr int kMaxLayerHits = 32;
 
 struct LayerHit {
@@ -34,6 +34,7 @@ struct LayerHit {
     float dist;    // from the hit point to the disc centre
     float radius;  // of the disc
     int32_t id;
+    uint32_t slot;  // where the splat is stored (SplatScene::splat): no lookup by id
     bool front;
 };
 

@@ -59,8 +59,8 @@ Ray make_ray(const float *origins, const float *directions, size_t i, double tmi
     ray.o = Vec3(origins[3 * i], origins[3 * i + 1], origins[3 * i + 2]);
     // Normalised in double: any finite non-zero float direction (1e-30 or 1e30 long) works.
     const double dx = directions[3 * i], dy = directions[3 * i + 1], dz = directions[3 * i + 2];
-    const double len = std::sqrt(dx * dx + dy * dy + dz * dz);
-    ray.d = Vec3(float(dx / len), float(dy / len), float(dz / len));
+    const double inv = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);  // one division, not three
+    ray.d = Vec3(float(dx * inv), float(dy * inv), float(dz * inv));
     ray.tmin = float(tmin), ray.tmax = float(tmax);
     return ray;
 }

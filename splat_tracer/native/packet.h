@@ -72,9 +72,10 @@ inline int intersect_wide_packet(const WideNode &nd, const PacketBounds &p, floa
     return mask_le(t0, t1);
 }
 
-// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(i, first, count, limit)` is
-// called for each leaf ray i enters within (tmin, limit), where limit starts at the ray's
-// tmax and the leaf may lower it as it learns (nearest hit so far, the layer query's cut).
+// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(rays, first, count, limit)`
+// is called for each leaf with the mask of the rays that enter it, ray i within (tmin,
+// limit[i]), where limit[i] starts at the ray's tmax and the leaf may lower it as it learns
+// (nearest hit so far, the layer query's cut).
 // Leaves are met nearer first by the packet's bounds, not by each ray's own order, so the
 // queries on top must not depend on the order of their hits (the nearest hit and the layer
 // query do not). `node_count` counts the inner nodes the packet entered (once for all its
@@ -85,7 +86,7 @@ void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64
     const PacketBounds bounds(rays, n);
     alignas(16) unsigned char wr_store[kPacketRays * sizeof(WideRay)];
     WideRay *wr = reinterpret_cast<WideRay *>(wr_store);
-    alignas(16) float limit[kPacketRays];
+    alignas(16) float limit[kPacketRays];  // lanes past n: -inf, never entered
     for (int i = 0; i < kPacketRays; ++i) limit[i] = i < n ? rays[i].tmax : -kInfinity;
     for (int i = 0; i < n; ++i) new (&wr[i]) WideRay(rays[i]);
     // The farthest any of `mask`'s rays may still need: the pruning bound of a node they share.
@@ -106,11 +107,14 @@ void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64
     Pending cur{0, 0, 0.f, n >= 32 ? ~0u : (1u << n) - 1u};
     for (;;) {
         if (cur.count) {
-            for (uint32_t m = cur.rays; m; m &= m - 1) {
-                const int i = __builtin_ctz(m);
-                if (cur.entry > limit[i]) continue;  // its limit moved in front
-                ++visited;
-                leaf(i, cur.child, cur.count, limit[i]);
+            // The rays whose limit has not moved in front of the leaf since it was pushed.
+            uint32_t live = 0;
+            for (int j = 0; j < n; j += 4)
+                live |= uint32_t(mask_le(F4::broadcast(cur.entry), F4::load(limit + j))) << j;
+            live &= cur.rays;
+            if (live) {
+                visited += uint64_t(__builtin_popcount(live));
+                leaf(live, cur.child, cur.count, limit);
             }
         } else {
             ++visited;

@@ -37,7 +37,7 @@ struct Hit {
 // Strict ordering of hits along a ray. Equal distances are broken by the smaller splat
 // id, so that every traversal order (BVH or brute force) picks the same "nearest" hit.
 inline bool closer(float t, int32_t id, const Hit &best) {
-    return t < best.t || (t == best.t && id < best.id);
+    return (t < best.t) | ((t == best.t) & (id < best.id));  // & and |: no branches
 }
 
 }  // namespace splat

@@ -158,14 +158,30 @@ void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, Tra
 template <class Visit>
 void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const {
     uint64_t discs = 0;
+#ifdef SPLAT_SSE2
+    const PacketRays soa(rays, n);
+#else
     alignas(16) unsigned char store[kPacketRays * sizeof(DiscRay)];
     DiscRay *disc_rays = reinterpret_cast<DiscRay *>(store);
     for (int i = 0; i < n; ++i) new (&disc_rays[i]) DiscRay(rays[i]);
+#endif
     splat::traverse_packet(
         bvh_, rays, n,
-        [&](int i, uint32_t first, uint32_t count, float &limit) {
-            discs += test_leaf(rays[i], disc_rays[i], first, count,
-                               [&](const PackedSplat &s, const DiscHit &h) { visit(i, s, h, limit); });
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit) {
+            discs += uint64_t(count) * uint64_t(__builtin_popcount(mask));
+#ifdef SPLAT_SSE2
+            // Disc by disc against the packet's rays four at a time (the lanes are rays):
+            // no transposes, and each disc is loaded once for all its rays.
+            intersect_disc_rays(soa, mask, &splats_[first].c.x, count, [&](int i, uint32_t k, const DiscHit &h) {
+                visit(i, splats_[first + k], h, limit[i]);
+            });
+#else
+            for (uint32_t m = mask; m; m &= m - 1) {
+                const int i = __builtin_ctz(m);
+                test_leaf(rays[i], disc_rays[i], first, count,
+                          [&](const PackedSplat &s, const DiscHit &h) { visit(i, s, h, limit[i]); });
+            }
+#endif
         },
         stats ? &stats->nodes : nullptr);
     if (stats) stats->discs += discs;
@@ -184,7 +200,11 @@ void SplatScene::intersect_packet(const Ray *rays, int n, Hit *out, TraversalSta
     traverse_packet(
         rays, n,
         [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
-            if (closer(h.t, s.id, out[i])) out[i].t = limit = h.t, out[i].id = s.id, out[i].front = h.front;
+            // Without a branch (which hit of a leaf is nearer is a coin toss for the predictor).
+            Hit &b = out[i];
+            const bool c = closer(h.t, s.id, b);
+            b.t = c ? h.t : b.t, b.id = c ? s.id : b.id, b.front = c ? h.front : b.front;
+            limit = b.t;
         },
         stats);
 }
@@ -200,7 +220,7 @@ void SplatScene::gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, Tra
         [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
             LayerQuery &q = qs[i];
             if (h.t <= q.cut && !q.excluded(s.id)) {
-                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
                 limit = q.cut;
             }
         },
@@ -221,7 +241,7 @@ Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
 void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, TraversalStats *stats) const {
     auto offer = [&](const PackedSplat &s, const DiscHit &h) {
         // Beyond the cut first: most hits offered late in the traversal are, and need no sqrt.
-        if (h.t <= q.cut && !q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, h.front});
+        if (h.t <= q.cut && !q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
     };
     q.cut = ray.tmax;
     q.max_radius = max_radius_;

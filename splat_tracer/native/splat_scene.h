@@ -22,6 +22,8 @@ struct PackedSplat {
     Vec3 n;
     int32_t id;  // index in the input arrays
 };
+static_assert(sizeof(PackedSplat) == 32 && offsetof(PackedSplat, r) == 12 && offsetof(PackedSplat, n) == 16,
+              "the disc tests read a splat as 8 floats: c.x, c.y, c.z, r, n.x, n.y, n.z, id");
 
 // Raised for input that cannot be a splat scene; the bindings turn it into ValueError.
 struct InputError : std::runtime_error {
@@ -45,6 +47,7 @@ class SplatScene {
 
     // Attributes by input id. Centres, normals and radii are stored once, in leaf order
     // (the packed splats); slot_ maps an input id to its place there.
+    const PackedSplat &splat(uint32_t slot) const { return splats_[slot]; }  // by place (LayerHit::slot)
     Vec3 centre(int32_t id) const { return splats_[slot_[id]].c; }
     Vec3 normal(int32_t id) const { return splats_[slot_[id]].n; }
     float radius(int32_t id) const { return splats_[slot_[id]].r; }
