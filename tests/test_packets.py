@@ -13,6 +13,20 @@ from splat_tracer import core, spacing
 W, H = 96, 72  # not multiples of 16 rays per row: packets straddle rows and the last is short
 
 
+@pytest.fixture(autouse=True, params=["AVX2", "SSE2"])
+def simd(request):
+    """Every test on both packet kernels: AVX2 (chosen at run time where the CPU has it)
+    and the SSE2 baseline every x86-64 build runs elsewhere."""
+    want = request.param == "AVX2"
+    before = core._core._use_avx2(want)
+    try:
+        if want and "AVX2" not in core.simd_path():
+            pytest.skip("this CPU has no AVX2")
+        yield request.param
+    finally:
+        core._core._use_avx2(before)
+
+
 @pytest.fixture(scope="module")
 def scene():
     """A rough sphere with radii varying 6x (layers of several depths, a nearer first hit

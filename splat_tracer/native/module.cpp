@@ -388,10 +388,16 @@ PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(reso
 // Which code path the box and disc tests were compiled for (simd.h): what the benchmarks print.
 PyObject *simd_path(PyObject *, PyObject *) {
 #ifdef SPLAT_SSE2
-    return PyUnicode_FromString("SSE2");
+    return PyUnicode_FromString(simd_avx2() ? "SSE2, packet kernels in AVX2" : "SSE2");
 #else
     return PyUnicode_FromString("plain floats");
 #endif
+}
+
+PyObject *use_avx2_seam(PyObject *, PyObject *arg) {
+    const int on = PyObject_IsTrue(arg);
+    if (on < 0) return nullptr;
+    return PyBool_FromLong(use_avx2(on != 0));
 }
 
 PyObject *set_thread_budget(PyObject *, PyObject *arg) {
@@ -404,7 +410,12 @@ PyObject *set_thread_budget(PyObject *, PyObject *arg) {
 
 PyMethodDef module_methods[] = {
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
-    {"simd_path", simd_path, METH_NOARGS, "The instruction set the BVH's box and disc tests use: 'SSE2' or 'plain floats'."},
+    {"simd_path", simd_path, METH_NOARGS,
+     "The instruction sets the BVH's box and disc tests use: 'SSE2', 'SSE2, packet kernels in AVX2' (chosen at "
+     "run time) or 'plain floats'."},
+    {"_use_avx2", use_avx2_seam, METH_O,
+     "Test seam: whether the packet kernels may use AVX2 (only where the CPU has it); returns the previous "
+     "setting."},
     {"_set_thread_budget", set_thread_budget, METH_O,
      "Test seam: the core may start this many more threads, then thread creation fails as if the system "
      "refused it (-1: no limit)."},

@@ -20,11 +20,10 @@
 #include <new>
 
 #include "bvh.h"
+#include "disc.h"
 
 namespace splat {
 
-constexpr int kPacketRays = 16;
-static_assert(kPacketRays <= 32, "a packet's rays are the bits of a uint32_t");
 
 // Whether rays are coherent enough for a packet to pay: directions within a narrow cone
 // and origins close together (relative to `scene_size`, the diagonal of the scene's
@@ -72,10 +71,77 @@ inline int intersect_wide_packet(const WideNode &nd, const PacketBounds &p, floa
     return mask_le(t0, t1);
 }
 
-// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(rays, first, count, limit)`
-// is called for each leaf with the mask of the rays that enter it, ray i within (tmin,
-// limit[i]), where limit[i] starts at the ray's tmax and the leaf may lower it as it learns
-// (nearest hit so far, the layer query's cut).
+// intersect_wide() of every ray of `rays` (a mask of soa's lanes) with the children of
+// `children` (a mask of nd's): child_rays[k] = the rays entering child k within (tmin,
+// limit). Child by child, four rays at a time, with the same arithmetic lane by lane as
+// intersect_wide(): the same entries, the same misses.
+inline void enter_children(const WideNode &nd, const PacketRays &soa, const float *limit, uint32_t rays,
+                           int children, uint32_t child_rays[4]) {
+    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
+    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
+    const F4 zero = F4::broadcast(0.f);
+    for (int k = 0; k < 4; ++k) {
+        child_rays[k] = 0;
+        if (!(children >> k & 1)) continue;
+        for (int g = 0; g < kPacketRays; g += 4) {
+            const int lanes = int(rays >> g & 15);
+            if (!lanes) continue;
+            F4 t0 = F4::load(soa.tmin + g), t1 = F4::load(limit + g);
+            for (int a = 0; a < 3; ++a) {
+                const F4 o = F4::load(soa.o[a] + g), inv = F4::load(soa.inv_d[a] + g);
+                const F4 x = (F4::broadcast(nd.box[2 * a][k]) - o) * inv;
+                const F4 y = (F4::broadcast(nd.box[2 * a + 1][k]) - o) * inv;
+                F4 tn = select_gt(x, y, y, x), tf = select_gt(x, y, x, y);
+                tn = tn * select_gt(tn, zero, shrink, grow);
+                tf = tf * select_gt(tf, zero, grow, shrink);
+                t0 = select_gt(tn, t0, tn, t0);
+                t1 = select_lt(tf, t1, tf, t1);
+            }
+            child_rays[k] |= uint32_t(mask_le(t0, t1) & lanes) << g;
+        }
+    }
+}
+
+#ifdef SPLAT_AVX2_KERNELS
+// x > y ? a : b per lane (false for NaN: b), as select_gt.
+__attribute__((target("avx2"))) inline __m256 sel_gt(__m256 x, __m256 y, __m256 a, __m256 b) {
+    return _mm256_blendv_ps(b, a, _mm256_cmp_ps(x, y, _CMP_GT_OQ));
+}
+
+// enter_children() eight rays at a time (AVX2, chosen at run time).
+__attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &nd, const PacketRays &soa,
+                                                                 const float *limit, uint32_t rays, int children,
+                                                                 uint32_t child_rays[4]) {
+    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
+    const __m256 shrink = _mm256_set1_ps(1.f - kGamma3x2), grow = _mm256_set1_ps(1.f + kGamma3x2);
+    const __m256 zero = _mm256_setzero_ps();
+    for (int k = 0; k < 4; ++k) {
+        child_rays[k] = 0;
+        if (!(children >> k & 1)) continue;
+        for (int g = 0; g < kPacketRays; g += 8) {
+            const int lanes = int(rays >> g & 255);
+            if (!lanes) continue;
+            __m256 t0 = _mm256_load_ps(soa.tmin + g), t1 = _mm256_loadu_ps(limit + g);
+            for (int a = 0; a < 3; ++a) {
+                const __m256 o = _mm256_load_ps(soa.o[a] + g), inv = _mm256_load_ps(soa.inv_d[a] + g);
+                const __m256 x = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(nd.box[2 * a][k]), o), inv);
+                const __m256 y = _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(nd.box[2 * a + 1][k]), o), inv);
+                __m256 tn = sel_gt(x, y, y, x), tf = sel_gt(x, y, x, y);
+                tn = _mm256_mul_ps(tn, sel_gt(tn, zero, shrink, grow));
+                tf = _mm256_mul_ps(tf, sel_gt(tf, zero, grow, shrink));
+                t0 = sel_gt(tn, t0, tn, t0);
+                t1 = sel_gt(t1, tf, tf, t1);  // tf < t1 ? tf : t1
+            }
+            child_rays[k] |= uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(t0, t1, _CMP_LE_OQ)) & lanes) << g;
+        }
+    }
+}
+#endif
+
+// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(rays, first, count, limit,
+// soa)` is called for each leaf with the mask of the rays that enter it, ray i within
+// (tmin, limit[i]), where limit[i] starts at the ray's tmax and the leaf may lower it as it
+// learns (nearest hit so far, the layer query's cut); soa holds the rays by component.
 // Leaves are met nearer first by the packet's bounds, not by each ray's own order, so the
 // queries on top must not depend on the order of their hits (the nearest hit and the layer
 // query do not). `node_count` counts the inner nodes the packet entered (once for all its
@@ -84,11 +150,12 @@ template <class Leaf>
 void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64_t *node_count) {
     if (bvh.nodes.empty() || n <= 0) return;
     const PacketBounds bounds(rays, n);
-    alignas(16) unsigned char wr_store[kPacketRays * sizeof(WideRay)];
-    WideRay *wr = reinterpret_cast<WideRay *>(wr_store);
+    const PacketRays soa(rays, n);
+#ifdef SPLAT_AVX2_KERNELS
+    const bool avx2 = simd_avx2();
+#endif
     alignas(16) float limit[kPacketRays];  // lanes past n: -inf, never entered
     for (int i = 0; i < kPacketRays; ++i) limit[i] = i < n ? rays[i].tmax : -kInfinity;
-    for (int i = 0; i < n; ++i) new (&wr[i]) WideRay(rays[i]);
     // The farthest any of `mask`'s rays may still need: the pruning bound of a node they share.
     auto reach = [&](uint32_t mask) {
         F4 r = F4::broadcast(-kInfinity);
@@ -114,7 +181,7 @@ void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64
             live &= cur.rays;
             if (live) {
                 visited += uint64_t(__builtin_popcount(live));
-                leaf(live, cur.child, cur.count, limit);
+                leaf(live, cur.child, cur.count, limit, soa);
             }
         } else {
             ++visited;
@@ -130,13 +197,11 @@ void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64
             if (mask & leaves) {
                 // Leaves among the children: each ray's own slab test decides which it
                 // enters (and narrows the inner children's rays on the way).
-                child_rays[0] = child_rays[1] = child_rays[2] = child_rays[3] = 0;
-                float ti[4];
-                for (uint32_t m = cur.rays; m; m &= m - 1) {
-                    const int i = __builtin_ctz(m);
-                    int hit = intersect_wide(nd, wr[i], rays[i].tmin, limit[i], ti) & mask;
-                    for (; hit; hit &= hit - 1) child_rays[__builtin_ctz(hit)] |= 1u << i;
-                }
+#ifdef SPLAT_AVX2_KERNELS
+                if (avx2) enter_children_avx2(nd, soa, limit, cur.rays, mask, child_rays);
+                else
+#endif
+                    enter_children(nd, soa, limit, cur.rays, mask, child_rays);
                 for (int k = 0; k < 4; ++k)
                     if (!child_rays[k]) mask &= ~(1 << k);
             }

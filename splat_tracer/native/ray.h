@@ -34,6 +34,28 @@ struct Hit {
     bool valid() const { return id >= 0; }
 };
 
+// Rays traced together as a packet (packet.h: a 4x4 pixel tile), at most.
+constexpr int kPacketRays = 16;
+static_assert(kPacketRays <= 32, "a packet's rays are the bits of a uint32_t");
+
+// A packet's rays by component (lane i: ray i), for the tests that take a box or a disc
+// against several rays at once. inv_d is 1 / d, as the single-ray box test computes it.
+struct PacketRays {
+    alignas(32) float o[3][kPacketRays], d[3][kPacketRays], inv_d[3][kPacketRays];
+    alignas(32) float tmin[kPacketRays], tmax[kPacketRays];
+    PacketRays(const Ray *rays, int n) {
+        for (int i = 0; i < kPacketRays; ++i) {
+            const bool used = i < n;
+            for (int k = 0; k < 3; ++k) {
+                o[k][i] = used ? rays[i].o[k] : 0.f, d[k][i] = used ? rays[i].d[k] : 1.f;
+                inv_d[k][i] = 1.f / d[k][i];
+            }
+            // Unused lanes: an empty interval (no t is > +inf), never a hit.
+            tmin[i] = used ? rays[i].tmin : kInfinity, tmax[i] = used ? rays[i].tmax : -kInfinity;
+        }
+    }
+};
+
 // Strict ordering of hits along a ray. Equal distances are broken by the smaller splat
 // id, so that every traversal order (BVH or brute force) picks the same "nearest" hit.
 inline bool closer(float t, int32_t id, const Hit &best) {

@@ -112,4 +112,10 @@ inline float hmax4(F4 a) {
 }
 #endif
 
+// Whether the packet kernels run their AVX2 versions (disc.h): decided once at load time
+// from the CPU (with the OS saving its registers), unless the environment variable
+// SPLAT_SIMD=SSE2 asks for the baseline; use_avx2() switches it (a test seam, between renders).
+bool simd_avx2();
+bool use_avx2(bool on);  // returns the previous setting; on = true only where the CPU has AVX2
+
 }  // namespace splat

@@ -158,24 +158,29 @@ void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, Tra
 template <class Visit>
 void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const {
     uint64_t discs = 0;
-#ifdef SPLAT_SSE2
-    const PacketRays soa(rays, n);
-#else
+#ifdef SPLAT_AVX2_KERNELS
+    const bool avx2 = simd_avx2();
+#endif
+#ifndef SPLAT_SSE2
     alignas(16) unsigned char store[kPacketRays * sizeof(DiscRay)];
     DiscRay *disc_rays = reinterpret_cast<DiscRay *>(store);
     for (int i = 0; i < n; ++i) new (&disc_rays[i]) DiscRay(rays[i]);
 #endif
     splat::traverse_packet(
         bvh_, rays, n,
-        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit) {
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit, const PacketRays &soa) {
             discs += uint64_t(count) * uint64_t(__builtin_popcount(mask));
 #ifdef SPLAT_SSE2
-            // Disc by disc against the packet's rays four at a time (the lanes are rays):
-            // no transposes, and each disc is loaded once for all its rays.
-            intersect_disc_rays(soa, mask, &splats_[first].c.x, count, [&](int i, uint32_t k, const DiscHit &h) {
-                visit(i, splats_[first + k], h, limit[i]);
-            });
+            // Disc by disc against the packet's rays four (or eight) at a time, the lanes
+            // being rays: no transposes, and each disc is loaded once for all its rays.
+            auto on_hit = [&](int i, uint32_t k, const DiscHit &h) { visit(i, splats_[first + k], h, limit[i]); };
+#ifdef SPLAT_AVX2_KERNELS
+            if (avx2) intersect_disc_rays_avx2(soa, mask, &splats_[first].c.x, count, on_hit);
+            else
+#endif
+                intersect_disc_rays(soa, mask, &splats_[first].c.x, count, on_hit);
 #else
+            (void)soa;
             for (uint32_t m = mask; m; m &= m - 1) {
                 const int i = __builtin_ctz(m);
                 test_leaf(rays[i], disc_rays[i], first, count,
