@@ -25,20 +25,19 @@ bool packet_coherent(const Ray *rays, int n, float scene_size) {
     return length(hi - lo) <= kOriginSpread * scene_size;
 }
 
-PacketBounds::PacketBounds(const Ray *rays, int n) {
+PacketBounds::PacketBounds(const PacketRays &r, int n) {
     tmin = kInfinity;
-    for (int i = 0; i < n; ++i) tmin = fmin2(tmin, rays[i].tmin);
+    for (int i = 0; i < n; ++i) tmin = fmin2(tmin, r.tmin[i]);
     for (int k = 0; k < 3; ++k) {
-        // The same inverse the single-ray test uses (WideRay: 1.f / d).
+        // The same inverses the single-ray test uses (1.f / d).
         float olo = kInfinity, ohi = -kInfinity, ilo = kInfinity, ihi = -kInfinity;
+        bool parallel = true;
         for (int i = 0; i < n; ++i) {
-            const float inv = 1.f / rays[i].d[k];
-            olo = fmin2(olo, rays[i].o[k]), ohi = fmax2(ohi, rays[i].o[k]);
-            ilo = fmin2(ilo, inv), ihi = fmax2(ihi, inv);
+            olo = fmin2(olo, r.o[k][i]), ohi = fmax2(ohi, r.o[k][i]);
+            ilo = fmin2(ilo, r.inv_d[k][i]), ihi = fmax2(ihi, r.inv_d[k][i]);
+            parallel &= r.d[k][i] == 0.f;
         }
         const bool finite = std::isfinite(ilo) && std::isfinite(ihi);
-        bool parallel = true;
-        for (int i = 0; i < n; ++i) parallel &= rays[i].d[k] == 0.f;
         axis[k] = parallel ? kParallel : finite && (ilo > 0.f || ihi < 0.f) ? kSlabs : kUntested;
         near_side[k] = ilo > 0.f ? 0 : 1;
         o_lo[k] = F4::broadcast(olo), o_hi[k] = F4::broadcast(ohi);

@@ -38,7 +38,7 @@ struct PacketBounds {
     enum Axis { kUntested, kSlabs, kParallel };
     Axis axis[3];      // kSlabs: finite inverse directions of one sign; kParallel: all d = 0
     float tmin;        // the smallest of the rays' tmin
-    explicit PacketBounds(const Ray *rays, int n);
+    PacketBounds(const PacketRays &rays, int n);  // of lanes 0..n-1
 };
 
 // The conservative slab test of the four children of `nd` against the packet (see the
@@ -149,8 +149,8 @@ __attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &
 template <class Leaf>
 void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64_t *node_count) {
     if (bvh.nodes.empty() || n <= 0) return;
-    const PacketBounds bounds(rays, n);
     const PacketRays soa(rays, n);
+    const PacketBounds bounds(soa, n);
 #ifdef SPLAT_AVX2_KERNELS
     const bool avx2 = simd_avx2();
 #endif
