@@ -734,9 +734,12 @@ class RenderScene:
     def render(self, camera: Camera, width: int, height: int, settings: RenderSettings = RenderSettings(),
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
-               progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32) -> FrameResult:
+               progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
+               packets: bool = True) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
-        image (x0, y0, w, h; default all). progress(done, total) as for Scene.render."""
+        image (x0, y0, w, h; default all). progress(done, total) as for Scene.render.
+        packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
+        ray; the same image)."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -759,5 +762,5 @@ class RenderScene:
             np.ascontiguousarray(camera.forward, np.float64), int(width), int(height),
             (int(x0), int(y0), int(w), int(h)), settings.pack(), method.as_tuple(), self.world.radiance(),
             bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
-            tile_size=tile_size, **optional)
+            tile_size=tile_size, packets=packets, **optional)
         return FrameResult(buffers, bool(done), counters)

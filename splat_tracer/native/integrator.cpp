@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "packet.h"
+
 namespace splat {
 
 // Paths deeper than this are cut whatever the settings say: each level is a stack frame of
@@ -134,9 +136,18 @@ void Integrator::render_tile(size_t tile) const {
     const int ts = settings_.tile_size;
     const int tiles_x = int((int64_t(film_.w) + ts - 1) / ts);
     const int tx = int(tile % size_t(tiles_x)) * ts, ty = int(tile / size_t(tiles_x)) * ts;
+    const int x1 = std::min(tx + ts, film_.w), y1 = std::min(ty + ts, film_.h);
     Tally tally;
-    for (int row = ty; row < std::min(ty + ts, film_.h); ++row)
-        for (int col = tx; col < std::min(tx + ts, film_.w); ++col) shade_pixel(col, row, tally);
+    // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
+    constexpr int kBlock = 4;
+    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
+    for (int by = ty; by < y1; by += kBlock)
+        for (int bx = tx; bx < x1; bx += kBlock) {
+            int cols[kPacketRays], rows[kPacketRays], n = 0;
+            for (int row = by; row < std::min(by + kBlock, y1); ++row)
+                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) cols[n] = col, rows[n] = row;
+            shade_block(cols, rows, n, tally);
+        }
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
     counters_.transparent += tally.transparent;
@@ -146,48 +157,64 @@ void Integrator::render_tile(size_t tile) const {
     counters_.interpolations += s.interpolations;
 }
 
-void Integrator::shade_pixel(int col, int row, Tally &tally) const {
-    const size_t p = size_t(row) * size_t(film_.w) + size_t(col);
-    const int px = film_.x0 + col, py = film_.y0 + row;
-    const uint32_t pixel_id = uint32_t(py) * uint32_t(film_.width) + uint32_t(px);
-    const int n = settings_.samples;
-    Vec3 sum, diffcol, emit, shadow;
-    float alpha = 0;
-    Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
-    for (int s = 0; s < n; ++s) {
+// Every sample of n pixels (cols[k], rows[k]): sample by sample, the n camera rays' first
+// hits in one packet query (settings.packets), then each pixel's path.
+void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally) const {
+    const int samples = settings_.samples;
+    struct Pixel {
+        Vec3 sum, diffcol, emit, shadow;
+        float alpha = 0;
+        Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
+    } acc[kPacketRays];
+    for (int s = 0; s < samples; ++s) {
         float ux, uy;
         r2_point(uint32_t(s), &ux, &uy);
-        const double fx = n > 1 ? filter_.offset(ux) : 0.0, fy = n > 1 ? filter_.offset(uy) : 0.0;
-        Ray ray = camera_.ray(px + 0.5 + fx, py + 0.5 + fy, film_.width, film_.height);
-        Sampler rng(pixel_id, uint32_t(s), settings_.seed);
-        Primary prim;
-        ++tally.camera;
-        const Vec3 c = radiance(ray, PathState(), rng, &prim, tally);
-        sum = sum + c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
-        alpha += prim.alpha;
-        diffcol = diffcol + prim.diffcol, emit = emit + prim.emit;
-        const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
-        shadow = shadow + Vec3(lit, lit, lit);
-        if (s == 0) centre = prim, centre.t = prim.hit ? float(camera_.planar_depth(ray, prim.t)) : 0.f;
+        const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
+        Ray rays[kPacketRays];
+        for (int k = 0; k < n; ++k)
+            rays[k] = camera_.ray(film_.x0 + cols[k] + 0.5 + fx, film_.y0 + rows[k] + 0.5 + fy, film_.width,
+                                  film_.height);
+        SurfacePoint hits[kPacketRays];
+        if (settings_.packets) scene_.intersect_camera(rays, n, settings_.method, hits, &tally.stats);
+        for (int k = 0; k < n; ++k) {
+            const uint32_t pixel_id =
+                uint32_t(film_.y0 + rows[k]) * uint32_t(film_.width) + uint32_t(film_.x0 + cols[k]);
+            Sampler rng(pixel_id, uint32_t(s), settings_.seed);
+            Primary prim;
+            ++tally.camera;
+            const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
+            Pixel &a = acc[k];
+            a.sum = a.sum + c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
+            a.alpha += prim.alpha;
+            a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
+            const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
+            a.shadow = a.shadow + Vec3(lit, lit, lit);
+            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.planar_depth(rays[k], prim.t)) : 0.f;
+        }
     }
-    const float inv = 1.f / float(n);
-    if (film_.combined) {
-        float *o = film_.combined + 4 * p;
-        o[0] = sum.x * inv, o[1] = sum.y * inv, o[2] = sum.z * inv, o[3] = alpha * inv;
+    const float inv = 1.f / float(samples);
+    for (int k = 0; k < n; ++k) {
+        const Pixel &a = acc[k];
+        const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
+        if (film_.combined) {
+            float *o = film_.combined + 4 * p;
+            o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+        }
+        auto put3 = [&](float *buf, Vec3 v) {
+            if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
+        };
+        put3(film_.diffcol, a.diffcol * inv);
+        put3(film_.emit, a.emit * inv);
+        put3(film_.shadow, a.shadow * inv);
+        put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
+        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : settings_.background_depth;
+        if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
+        if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
     }
-    auto put3 = [&](float *buf, Vec3 v) {
-        if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
-    };
-    put3(film_.diffcol, diffcol * inv);
-    put3(film_.emit, emit * inv);
-    put3(film_.shadow, shadow * inv);
-    put3(film_.normal, centre.hit ? centre.normal : Vec3());
-    if (film_.depth) film_.depth[p] = centre.hit ? centre.t : settings_.background_depth;
-    if (film_.index) film_.index[p] = centre.hit ? centre.index : 0.f;
-    if (film_.splat_count) film_.splat_count[p] = float(centre.splats);
 }
 
-Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally) const {
+Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+                          const SurfacePoint *first) const {
     const IntegratorSettings &cfg = settings_;
     SurfacePoint sp, passed;  // `passed`: the last surface passed through, which st.from points into
     Material mat;
@@ -196,7 +223,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // Surfaces with alpha < 1 are passed through stochastically (transparent bounces).
     Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
     for (;;) {
-        sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
+        if (first) sp = *first, first = nullptr;  // the camera packet's answer for this ray
+        else sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
         if (st.specular && !cfg.headlight)
             for (const Light &light : scene_.lights())
                 if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);

@@ -32,6 +32,7 @@ struct IntegratorSettings {
     int ao_samples = 1;
     int tile_size = 32;
     float background_depth = 1e10f;  // what Cycles writes in Z where nothing is hit
+    bool packets = true;  // camera rays of 4x4 pixels as one packet (packet.h); the same image
 };
 
 // Output buffers of the rendered window (w x h, top row first); any may be null (not wanted,
@@ -63,13 +64,15 @@ class Integrator {
     struct Primary;     // what the passes want from the camera ray's first hit
     struct Lobes;       // a material's lobes at one point
 
-    Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally) const;
+    // `first`: the ray's first hit, already found (the camera packet's), else null.
+    Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+                  const SurfacePoint *first = nullptr) const;
     // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                       const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
-    void shade_pixel(int col, int row, Tally &tally) const;
+    void shade_block(const int *cols, const int *rows, int n, Tally &tally) const;
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
 
     const RenderScene &scene_;

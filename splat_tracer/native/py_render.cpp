@@ -201,16 +201,17 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window", "settings",
                                    "method", "world", "film_transparent", "combined", "depth", "normal", "diffcol",
                                    "emit", "shadow", "index", "splat_count", "threads", "progress", "tile_size",
-                                   nullptr};
+                                   "packets", nullptr};
     PyObject *om, *opos, *ofwd, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = 32, transparent = 0;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = 32, transparent = 0, packets = 1;
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)OO(fff)pO|OOOOOOOiOi", const_cast<char **>(kwlist),
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
                                      &om, &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &osettings, &ometh,
                                      &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
-                                     &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size))
+                                     &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
+                                     &packets))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -237,6 +238,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     cfg.world = Vec3(world[0], world[1], world[2]);
     cfg.film_transparent = transparent != 0;
     cfg.tile_size = tile_size;
+    cfg.packets = packets != 0;
 
     Camera cam;
     if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
@@ -289,7 +291,7 @@ PyMethodDef RenderScene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_ndc, position, forward, width, height, window, settings, method, world, film_transparent, "
      "combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
-     "threads=0, progress=None, tile_size=32)\n--\n\nRenders a window; returns (completed, counters)."},
+     "threads=0, progress=None, tile_size=32, packets=True)\n--\n\nRenders a window; returns (completed, counters)."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -1,6 +1,9 @@
 #include "render_scene.h"
 
 #include <cmath>
+#include <new>
+
+#include "packet.h"
 
 namespace splat {
 
@@ -86,73 +89,164 @@ void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t
         stats ? &stats->nodes : nullptr);
 }
 
+// Which of two surfaces at one distance a ray sees: the instance with the smaller index, so
+// that the answer does not depend on the order the instances are visited in (the packet
+// query visits them in another order than a ray alone).
+inline bool nearer(float t, int index, const SurfacePoint &best) {
+    return t < best.t || (t == best.t && index < best.instance);
+}
+
+// A mesh hit `h` of instance `index` (ray in object space, `s` its distance scale) becomes
+// `best` when nearer.
+void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const {
+    if (!h.valid() || !nearer(h.t / s, index, best)) return;
+    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+    best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
+    const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
+    const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+    best.ng = ng, best.ns = ns;
+    // The point is the triangle's own (barycentric interpolation, then the instance
+    // transform), not ray.o + t d: that one carries the rounding of t and of the ray's
+    // origin -- about an ulp of the camera's distance, not of p -- and a shadow ray from a
+    // point that fell below the surface met the neighbouring triangle (black pixels on a UV
+    // sphere near its pole).
+    const Vec3 po = inst.mesh->point(h);
+    best.p = inst.to_world.point(po);
+    // Start secondary rays off the surface by the interpolation's error bound carried into
+    // the scene frame, plus the transform's own rounding (gamma(3) (|M| |po| +
+    // |translation|), per axis).
+    const Vec3 obj_err = inst.mesh->point_error(h);
+    const Affine &M = inst.to_world;
+    const Vec3 abs_po = vabs(po);
+    auto abs_row = [&](int r, Vec3 v) {
+        return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y + std::fabs(M.m[4 * r + 2]) * v.z;
+    };
+    constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
+    float err = 0.f;
+    for (int r = 0; r < 3; ++r)
+        err = std::fmax(err, abs_row(r, obj_err) + kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
+    best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
+    const int slot = inst.mesh->material(h.tri);
+    best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
+}
+
+// A splat surface `h` of instance `index` met by `ray` (scene frame) becomes `best` when nearer.
+void RenderScene::take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
+                                 SurfacePoint &best) const {
+    if (!h.valid() || !nearer(h.t / s, index, best)) return;
+    best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
+    best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
+    best.ns = normalize(inst.to_object.transposed_vector(h.normal));
+    best.p = ray.o + ray.d * best.t;
+    best.offset = 0;  // splat rays leave by excluding the members instead
+    best.radius = inst.splats->radius(h.id) / s;
+    best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
+    best.point_alpha = h.alpha;
+    best.material = inst.material_offset;
+    best.n_members = h.n_members;
+    for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
+}
+
+// How far a mesh query needs to look behind the nearest surface so far (scene distance
+// `limit`, object scale `s`): a little past it, so that a hit at the same distance -- which
+// the smaller instance index may win -- is still found whatever the rounding of limit x s.
+inline float mesh_reach(float limit, float s) {
+    constexpr float kSlack = 1.f + 8 * 5.9604645e-8f;  // 8 half-ulps
+    return limit * s * kSlack;
+}
+
 SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
                                     bool camera_ray, TraversalStats *stats) const {
     SurfacePoint best;
     float limit = ray.tmax;
     for_each_instance(ray, limit, ray_kind, from, stats,
                       [&](int index, const Instance &inst, Ray &local, float s, bool self) {
-            if (inst.mesh) {
-                local.tmax = std::fmin(local.tmax, limit * s);
-                const MeshHit h = inst.mesh->intersect(local, self ? from.triangle : -1, stats);
-                if (!h.valid() || !(h.t / s < best.t)) return false;
-                best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
-                best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
-                const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
-                const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
-                best.ng = ng, best.ns = ns;
-                // The point is the triangle's own (barycentric interpolation, then the
-                // instance transform), not ray.o + t d: that one carries the rounding of
-                // t and of the ray's origin -- about an ulp of the camera's distance, not
-                // of p -- and a shadow ray from a point that fell below the surface met
-                // the neighbouring triangle (black pixels on a UV sphere near its pole).
-                const Vec3 po = inst.mesh->point(h);
-                best.p = inst.to_world.point(po);
-                // Start secondary rays off the surface by the interpolation's error bound
-                // carried into the scene frame, plus the transform's own rounding
-                // (gamma(3) (|M| |po| + |translation|), per axis).
-                const Vec3 obj_err = inst.mesh->point_error(h);
-                const Affine &M = inst.to_world;
-                const Vec3 abs_po = vabs(po);
-                auto abs_row = [&](int r, Vec3 v) {
-                    return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y +
-                           std::fabs(M.m[4 * r + 2]) * v.z;
-                };
-                constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
-                float err = 0.f;
-                for (int r = 0; r < 3; ++r)
-                    err = std::fmax(err, abs_row(r, obj_err) +
-                                             kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
-                best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
-                const int slot = inst.mesh->material(h.tri);
-                best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
-                limit = best.t;
-            } else {
-                // The far phase of a closed cloud needs the hit after the layer, which may
-                // lie beyond the nearest surface so far: only then is the full ray kept.
-                const bool needs_exit = method.far_phase && inst.splats->any_closed();
-                if (!needs_exit) local.tmax = std::fmin(local.tmax, limit * s);
-                const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
-                const SurfaceHit h =
-                    find_surface(*inst.splats, local, method, inside, self ? from.members : nullptr,
-                                 self ? from.n_members : 0, false, stats);
-                if (!h.valid() || !(h.t / s < best.t)) return false;
-                best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
-                best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
-                best.ns = normalize(inst.to_object.transposed_vector(h.normal));
-                best.p = ray.o + ray.d * best.t;
-                best.offset = 0;  // splat rays leave by excluding the members instead
-                best.radius = inst.splats->radius(h.id) / s;
-                best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
-                best.point_alpha = h.alpha;
-                best.material = inst.material_offset;
-                best.n_members = h.n_members;
-                for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
-                limit = best.t;
-            }
-            return false;
-            });
+                          if (inst.mesh) {
+                              local.tmax = std::fmin(local.tmax, mesh_reach(limit, s));
+                              take_mesh_hit(index, inst, inst.mesh->intersect(local, self ? from.triangle : -1, stats),
+                                            s, best);
+                          } else {
+                              // The whole ray, not cut at the nearest surface so far: the layer's
+                              // window may reach past it (its members, and the far phase's exit),
+                              // and what the ray sees must not depend on the instances' order.
+                              const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
+                              take_splat_hit(index, inst, ray,
+                                             find_surface(*inst.splats, local, method, inside,
+                                                          self ? from.members : nullptr, self ? from.n_members : 0,
+                                                          false, stats),
+                                             s, best);
+                          }
+                          limit = best.t;
+                          return false;
+                      });
     return best;
+}
+
+void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
+                                   TraversalStats *stats) const {
+    for (int i = 0; i < n; ++i) new (&out[i]) SurfacePoint;
+    // The camera-visible instances each ray enters (its own box test, through the top-level
+    // tree as a packet), then each instance's rays together.
+    struct Entered {
+        int index;
+        uint32_t rays;
+    };
+    Entered entered[64];
+    int n_entered = 0;
+    bool overflow = false;
+    traverse_packet(
+        top_, rays, n,
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *, const PacketRays &) {
+            for (uint32_t k = first; k < first + count; ++k) {
+                const int index = int(top_.prim_order[k]);
+                if (!(instances_[index].visibility & kVisCamera)) continue;
+                int e = 0;
+                while (e < n_entered && entered[e].index != index) ++e;
+                if (e == n_entered) {
+                    if (n_entered == 64) {
+                        overflow = true;
+                        continue;
+                    }
+                    entered[n_entered++] = Entered{index, 0};
+                }
+                entered[e].rays |= mask;
+            }
+        },
+        stats ? &stats->nodes : nullptr);
+    if (overflow) {  // a packet crossing more than 64 instances' boxes: ray by ray
+        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), true, stats);
+        return;
+    }
+    for (int e = 0; e < n_entered; ++e) {
+        const int index = entered[e].index;
+        const Instance &inst = instances_[index];
+        Ray local[kPacketRays];
+        float scale[kPacketRays];
+        int ray_of[kPacketRays], m = 0;
+        for (uint32_t bits = entered[e].rays; bits; bits &= bits - 1) {
+            const int i = __builtin_ctz(bits);
+            // Behind the ray's nearest surface so far (instances come roughly front to back):
+            // skipped, as the ray alone skips it.
+            const Vec3 inv(1.f / rays[i].d.x, 1.f / rays[i].d.y, 1.f / rays[i].d.z);
+            if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, out[i].t) == kInfinity) continue;
+            ray_of[m] = i;
+            local[m] = to_object(inst, rays[i], &scale[m]);
+            ++m;
+        }
+        if (inst.mesh) {
+            for (int j = 0; j < m; ++j) {
+                SurfacePoint &best = out[ray_of[j]];
+                local[j].tmax = std::fmin(local[j].tmax, mesh_reach(best.t, scale[j]));
+                take_mesh_hit(index, inst, inst.mesh->intersect(local[j], -1, stats), scale[j], best);
+            }
+        } else {
+            bool inside[kPacketRays];
+            for (int j = 0; j < m; ++j) inside[j] = inst.camera_inside;
+            SurfaceHit hits[kPacketRays];
+            find_surfaces(*inst.splats, local, m, method, inside, nullptr, 0, hits, stats);
+            for (int j = 0; j < m; ++j) take_splat_hit(index, inst, rays[ray_of[j]], hits[j], scale[j], out[ray_of[j]]);
+        }
+    }
 }
 
 bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {

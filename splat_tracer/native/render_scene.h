@@ -102,6 +102,10 @@ class RenderScene {
     // The nearest surface along the ray among the instances visible to `ray_kind`.
     SurfacePoint intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
                            bool camera_ray, TraversalStats *stats) const;
+    // intersect() for n <= kPacketRays camera rays (a 4x4 pixel block): the same answers,
+    // each instance's rays traced together as a packet (packet.h).
+    void intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
+                          TraversalStats *stats) const;
     // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
@@ -109,6 +113,9 @@ class RenderScene {
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
+    void take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const;
+    void take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
+                        SurfacePoint &best) const;
     // The ray in an instance's object space: unit direction, distances scaled by `scale`.
     static Ray to_object(const Instance &inst, const Ray &ray, float *scale);
 
