@@ -6,8 +6,9 @@ The input bytes are decoded (atheris.FuzzedDataProvider) into float32 splat arra
 ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extremes
 (sometimes with a wrong dtype or shape), and then into calls of every native entry
 point on them: _core.Scene(...), trace, trace_surface (method tuples, exclude ids, inside
-flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds;
-then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
+flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds,
+coherent rays (fans and parallel bundles) traced in packets and one by one, which must
+agree exactly; then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
 and lamp rows and settings, rendered; then the neighbour-graph functions (spatial_order,
 permute_table, take_rows, graph_weights, spanning_forest, forest_traversal, chain_flips)
 on fuzzed tables whose indices stray out of range, weights, anchors and orders, and
@@ -137,7 +138,42 @@ def fuzz_scene(fdp):
         call(scene.render, m, pos, fwd, width, height, win, (value(fdp), 0.0, 0.0, 1.0),
              np.empty((h, w, 4), np.float32), np.empty((h, w), np.float32), np.empty((h, w, 3), np.float32),
              fdp.ConsumeIntInRange(0, 3), None, small_int(fdp), method(fdp))
+    fuzz_packets(fdp, scene, n)
     return scene
+
+
+def fuzz_packets(fdp, scene, n):
+    """Coherent rays (a fuzzed origin and direction, spread by a fuzzed angle or, parallel,
+    over a fuzzed patch of origins): packets must give exactly the answers of single rays."""
+    k = fdp.ConsumeIntInRange(1, 40)
+    o0, d0 = array(fdp, (1, 3)), array(fdp, (1, 3))
+    spread = (0.0, 1e-7, 1e-4, 0.01, 0.1)[fdp.ConsumeIntInRange(0, 4)]
+    offsets = array(fdp, (k, 3)) * np.float32(spread) if fdp.ConsumeBool() else np.zeros((k, 3), np.float32)
+    with np.errstate(all="ignore"):
+        i = np.arange(k)
+        jitter = np.column_stack([i % 4, i // 4 % 4, np.zeros(k)]).astype(np.float32) * np.float32(spread)
+        if fdp.ConsumeBool():
+            o, d = np.repeat(o0, k, 0), (d0 + jitter + offsets).astype(np.float32)  # a fan from one point
+        else:
+            o, d = (o0 + jitter + offsets).astype(np.float32), np.repeat(d0, k, 0)  # parallel rays
+    tmin, tmax = value(fdp), value(fdp)
+    meth = method(fdp)
+    outs = []
+    for packets in (True, False):
+        out = (np.empty(k, np.float32), np.empty(k, np.int32), np.empty(k, np.uint8))
+        sout = (np.empty(k, np.float32), np.empty(k, np.int32), np.empty(k, np.uint8),
+                np.empty((k, 3), np.float32), np.empty((k, 3), np.float32), np.empty((k, MAX_LAYER_HITS), np.int32))
+        a = call(scene.trace, o, d, tmin, tmax, *out, None, 1, False, None, packets)
+        b = call(scene.trace_surface, o, d, tmin, tmax, meth, *sout, None, None, 1, False, packets)
+        outs.append((a is not None, out, b is not None, sout))
+    (a1, out1, b1, s1), (a2, out2, b2, s2) = outs
+    assert a1 == a2 and b1 == b2
+    if a1:
+        for x, y in zip(out1, out2):
+            assert np.array_equal(x, y), "packets changed a nearest hit"
+    if b1:
+        for x, y in zip(s1, s2):
+            assert np.array_equal(x, y, equal_nan=True), "packets changed a surface"
 
 
 @atheris.instrument_func
