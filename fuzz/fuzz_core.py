@@ -146,9 +146,11 @@ def fuzz_packets(fdp, scene, n):
     """Coherent rays (a fuzzed origin and direction, spread by a fuzzed angle or, parallel,
     over a fuzzed patch of origins): packets must give exactly the answers of single rays."""
     k = fdp.ConsumeIntInRange(1, 40)
-    o0, d0 = array(fdp, (1, 3)), array(fdp, (1, 3))
+    def vectors(count):  # well-formed arrays (array() may give wrong shapes or dtypes on purpose)
+        return np.array([[value(fdp) for _ in range(3)] for _ in range(count)], np.float32).reshape(count, 3)
+    o0, d0 = vectors(1), vectors(1)
     spread = (0.0, 1e-7, 1e-4, 0.01, 0.1)[fdp.ConsumeIntInRange(0, 4)]
-    offsets = array(fdp, (k, 3)) * np.float32(spread) if fdp.ConsumeBool() else np.zeros((k, 3), np.float32)
+    offsets = vectors(k) * np.float32(spread) if fdp.ConsumeBool() else np.zeros((k, 3), np.float32)
     with np.errstate(all="ignore"):
         i = np.arange(k)
         jitter = np.column_stack([i % 4, i // 4 % 4, np.zeros(k)]).astype(np.float32) * np.float32(spread)
