@@ -192,7 +192,7 @@ def main(argv=None) -> int:
     print(f"# Trace throughput: {name}, {len(local):,} splats, {WIDTH}x{HEIGHT} = {n_rays:,} rays, "
           f"{coverage:.1%} of pixels hit")
     print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} 4-wide nodes, "
-          f"box and disc tests in {core.simd_path()} (no -march=native, no run-time dispatch), rays in packets "
+          f"box and disc tests in {core.simd_path()} (no -march=native; AVX2 chosen at run time where the CPU has it), rays in packets "
           f"of {core.PACKET_RAYS} (4x4 pixels) unless the row says one at a time; "
           f"depth {stats['depth']}; median of {repeats} interleaved rounds (every row once per round)\n")
     if embree is None:

@@ -38,9 +38,10 @@ bool check_rays(const float *origins, const float *directions, Py_ssize_t count)
         const float *a = origins + 3 * i, *b = directions + 3 * i;
         if (!(within_range(a[0]) && within_range(a[1]) && within_range(a[2])))
             return PyErr_Format(PyExc_ValueError, "ray %zd: origin is not finite or beyond 1e18", i), false;
-        // Length in double: a float direction of length 1e20 squares to inf in float.
+        // Non-zero: any non-zero finite float component gives a length make_ray can divide
+        // by (it squares in double, where even 1e-45 squared is far from underflowing).
         if (!(std::isfinite(b[0]) && std::isfinite(b[1]) && std::isfinite(b[2])) ||
-            !(double(b[0]) * b[0] + double(b[1]) * b[1] + double(b[2]) * b[2] > 0.0))
+            !(b[0] != 0.f || b[1] != 0.f || b[2] != 0.f))
             return PyErr_Format(PyExc_ValueError, "ray %zd: direction must be finite and non-zero", i), false;
     }
     return true;

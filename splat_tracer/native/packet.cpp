@@ -12,11 +12,11 @@ bool packet_coherent(const Ray *rays, int n, float scene_size) {
     constexpr float kMinCosine = 0.9975f;  // cos 4 degrees
     Vec3 mean, lo = rays[0].o, hi = rays[0].o;
     for (int i = 0; i < n; ++i) mean = mean + rays[i].d, lo = vmin(lo, rays[i].o), hi = vmax(hi, rays[i].o);
-    const float len = length(mean);
-    if (!(len > 0.f)) return false;
-    mean = mean * (1.f / len);
-    for (int i = 0; i < n; ++i)
-        if (!(dot(rays[i].d, mean) >= kMinCosine)) return false;
+    // d . mean >= cos x |mean| for every ray, without normalising the mean (no branch per ray).
+    const float bound = kMinCosine * length(mean);
+    bool inside = bound > 0.f;
+    for (int i = 0; i < n; ++i) inside &= dot(rays[i].d, mean) >= bound;
+    if (!inside) return false;
     // Origins: a camera's rays share theirs (perspective) or spread over the tile's own
     // footprint (orthographic); a tenth of the scene is a 4x4 tile of a view 40 pixels
     // across, about as wide as the 4-degree cone is at the scene's distance. Rays from
