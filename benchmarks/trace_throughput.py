@@ -8,7 +8,7 @@ time; rays per second of the plain nearest-hit trace(), of trace_surface() under
 method preset (the ε-window query and the visibility rules; the cloud treated as closed,
 as the paper does), and of render() with the full method, on 1 thread and on all cores --
 the rays in packets of 4x4 pixels, and for the nearest hit and the full method also one ray
-at a time;
+at a time and (where the CPU runs the AVX2 kernels) with the SSE2 ones;
 beside them, on the same discs, rays and threads, Embree 3's own oriented-disc primitive
 (rtcIntersect1 one ray at a time, rtcIntersect16 in 4x4 pixel packets; embree_harness.cpp,
 built against Debian's libembree-dev, installed when missing and possible -- the row is
@@ -48,6 +48,15 @@ def load_cloud():
     if bunny.is_file():
         return "stanford bunny (vertices)", *vertex_cloud(*read_obj(bunny))
     return "sphere stand-in (no ../shared)", *area_samples(*icosphere(5), 35947)
+
+
+def sse2(fn):
+    """fn() with the packet kernels held to SSE2 (where the CPU would run AVX2)."""
+    before = core._core._use_avx2(False)
+    try:
+        return fn()
+    finally:
+        core._core._use_avx2(before)
 
 
 def timed(fn, repeats):
@@ -147,6 +156,13 @@ def main(argv=None) -> int:
             runs.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads,
                          lambda threads=threads, method=method: scene.trace_surface(tile_o, tile_d, method,
                                                                                     threads=threads)))
+        if "AVX2" in core.simd_path():  # the baseline every other x86-64 CPU runs
+            runs.append(("core trace(), nearest hit, SSE2 kernels", threads,
+                         lambda threads=threads: sse2(lambda: scene.trace(tile_o, tile_d, normals=False,
+                                                                          threads=threads))))
+            runs.append(("core trace_surface(), full method, SSE2 kernels", threads,
+                         lambda threads=threads: sse2(lambda: scene.trace_surface(tile_o, tile_d, full,
+                                                                                  threads=threads))))
         runs.append(("core trace_surface(), full method, one ray at a time", threads,
                      lambda threads=threads: scene.trace_surface(tile_o, tile_d, full, threads=threads,
                                                                  packets=False)))
