@@ -121,6 +121,24 @@ inline int intersect_wide(const WideNode &nd, const WideRay &r, float tmin, floa
     return mask_le(t0, t1);
 }
 
+// The entered children of a wide node (`mask`; make(k) gives child k's stack entry, with
+// its `entry` distance) sorted by entry, at most four by insertion: the nearest becomes
+// `cur`, the others are pushed farthest first. Shared by the single-ray and packet traversals.
+template <class Pending, class Make>
+inline void descend(int mask, Make &&make, Pending &cur, Pending *stack, int &sp) {
+    Pending hit[4];
+    int n = 0;
+    for (int k = 0; k < 4; ++k) {
+        if (!(mask >> k & 1)) continue;
+        const Pending p = make(k);
+        int j = n++;
+        while (j > 0 && hit[j - 1].entry > p.entry) hit[j] = hit[j - 1], --j;
+        hit[j] = p;
+    }
+    for (int j = n - 1; j > 0; --j) stack[sp++] = hit[j];
+    cur = hit[0];
+}
+
 // Front-to-back traversal shared by every query of every tree: `leaf(first, count)` is called
 // for each leaf the ray enters within (tmin, min(tmax, limit)), nearer child first; it returns
 // true to stop at once (occlusion queries). The leaf may lower `limit` as it learns (nearest
@@ -157,19 +175,7 @@ void traverse_bvh(const BVH &bvh, const Ray &ray, const float &limit, Leaf &&lea
             for (int k = 0; k < 4; ++k)
                 if (nd.child[k] == kNoChild) mask &= ~(1 << k);
             if (mask) {
-                // Entered children sorted by entry (at most four: insertion), the nearer
-                // visited first, the others pushed farthest first.
-                Pending hit[4];
-                int n = 0;
-                for (int k = 0; k < 4; ++k) {
-                    if (!(mask >> k & 1)) continue;
-                    const Pending p{nd.child[k], nd.count[k], t[k]};
-                    int j = n++;
-                    while (j > 0 && hit[j - 1].entry > p.entry) hit[j] = hit[j - 1], --j;
-                    hit[j] = p;
-                }
-                for (int j = n - 1; j > 0; --j) stack[sp++] = hit[j];
-                cur = hit[0];
+                descend(mask, [&](int k) { return Pending{nd.child[k], nd.count[k], t[k]}; }, cur, stack, sp);
                 continue;
             }
         }

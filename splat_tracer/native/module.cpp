@@ -143,6 +143,15 @@ bool for_each_ray(PyObject *self, int threads, Py_ssize_t count, size_t chunk, P
     });
 }
 
+// Consecutive rays in groups of kPacketRays (a packet, traced together when coherent:
+// packet.h), or one by one when `packets` is false: per_group(first, n) on the threads.
+template <class PerGroup>
+bool for_each_group(PyObject *self, int threads, Py_ssize_t count, size_t chunk, bool packets, PerGroup &&per_group) {
+    const size_t group = packets ? size_t(kPacketRays) : 1;
+    return for_each_ray(self, threads, (count + Py_ssize_t(group) - 1) / Py_ssize_t(group), chunk / group,
+                        [&](size_t g) { per_group(g * group, std::min(group, size_t(count) - g * group)); });
+}
+
 PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
                                    "out_front", "out_normal", "threads", "brute_force", "out_stats", "packets",
@@ -177,11 +186,7 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     // Rays per task: small enough to balance the threads, large enough to amortise a task.
     constexpr size_t kChunk = 1024;
     std::atomic<uint64_t> total_nodes{0}, total_discs{0};
-    // Consecutive rays in packets of kPacketRays (traced together when coherent: packet.h).
-    const size_t group = brute || !packets ? 1 : size_t(kPacketRays);
-    if (!for_each_ray(self, threads, (count + Py_ssize_t(group) - 1) / Py_ssize_t(group), kChunk / group,
-                      [&](size_t g) {
-            const size_t first = g * group, n = std::min(group, size_t(count) - first);
+    if (!for_each_group(self, threads, count, kChunk, packets && !brute, [&](size_t first, size_t n) {
             Ray rays[kPacketRays];
             Hit hits[kPacketRays];
             for (size_t k = 0; k < n; ++k) rays[k] = make_ray(po, pd, first + k, tmin, tmax);
@@ -257,11 +262,7 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     uint8_t *pfr = fr.data<uint8_t>();
     // Fewer rays per task than trace(): a layer query costs more and varies more per ray.
     constexpr size_t kChunk = 512;
-    // Consecutive rays in packets, as in trace().
-    const size_t group = brute || !packets ? 1 : size_t(kPacketRays);
-    if (!for_each_ray(self, threads, (count + Py_ssize_t(group) - 1) / Py_ssize_t(group), kChunk / group,
-                      [&](size_t g) {
-            const size_t first = g * group, n = std::min(group, size_t(count) - first);
+    if (!for_each_group(self, threads, count, kChunk, packets && !brute, [&](size_t first, size_t n) {
             Ray rays[kPacketRays];
             bool inside[kPacketRays];
             const int32_t *excl[kPacketRays];

@@ -206,17 +206,8 @@ void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64
                     if (!child_rays[k]) mask &= ~(1 << k);
             }
             if (mask) {
-                Pending hit[4];
-                int h = 0;
-                for (int k = 0; k < 4; ++k) {
-                    if (!(mask >> k & 1)) continue;
-                    const Pending p{nd.child[k], nd.count[k], t[k], child_rays[k]};
-                    int j = h++;
-                    while (j > 0 && hit[j - 1].entry > p.entry) hit[j] = hit[j - 1], --j;
-                    hit[j] = p;
-                }
-                for (int j = h - 1; j > 0; --j) stack[sp++] = hit[j];
-                cur = hit[0];
+                descend(mask, [&](int k) { return Pending{nd.child[k], nd.count[k], t[k], child_rays[k]}; }, cur,
+                        stack, sp);
                 continue;
             }
         }
