@@ -29,7 +29,7 @@ namespace splat {
 // and origins close together (relative to `scene_size`, the diagonal of the scene's
 // bounds). A 4x4 tile of camera rays is well inside both, even at 160x120; scattered rays
 // would make the packet's bounds cover much of the scene, and are traced one by one.
-bool packet_coherent(const Ray *rays, int n, float scene_size);
+bool packet_coherent(const PacketRays &rays, int n, float scene_size);
 
 // The bounds of a packet's rays, broadcast for the four lanes of a wide node.
 struct PacketBounds {
@@ -138,8 +138,8 @@ __attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &
 }
 #endif
 
-// traverse_bvh() for a packet of n <= kPacketRays rays: `leaf(rays, first, count, limit,
-// soa)` is called for each leaf with the mask of the rays that enter it, ray i within
+// traverse_bvh() for a packet of n <= kPacketRays rays (`soa`, by component): `leaf(rays,
+// first, count, limit, soa)` is called for each leaf with the mask of the rays that enter it, ray i within
 // (tmin, limit[i]), where limit[i] starts at the ray's tmax and the leaf may lower it as it
 // learns (nearest hit so far, the layer query's cut); soa holds the rays by component.
 // Leaves are met nearer first by the packet's bounds, not by each ray's own order, so the
@@ -147,15 +147,14 @@ __attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &
 // query do not). `node_count` counts the inner nodes the packet entered (once for all its
 // rays) and the leaves each ray entered.
 template <class Leaf>
-void traverse_packet(const BVH &bvh, const Ray *rays, int n, Leaf &&leaf, uint64_t *node_count) {
+void traverse_packet(const BVH &bvh, const PacketRays &soa, int n, Leaf &&leaf, uint64_t *node_count) {
     if (bvh.nodes.empty() || n <= 0) return;
-    const PacketRays soa(rays, n);
     const PacketBounds bounds(soa, n);
 #ifdef SPLAT_AVX2_KERNELS
     const bool avx2 = simd_avx2();
 #endif
     alignas(16) float limit[kPacketRays];  // lanes past n: -inf, never entered
-    for (int i = 0; i < kPacketRays; ++i) limit[i] = i < n ? rays[i].tmax : -kInfinity;
+    for (int i = 0; i < kPacketRays; ++i) limit[i] = soa.tmax[i];  // -inf in unused lanes
     // The farthest any of `mask`'s rays may still need: the pruning bound of a node they share.
     auto reach = [&](uint32_t mask) {
         F4 r = F4::broadcast(-kInfinity);

@@ -200,7 +200,7 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
     int n_entered = 0;
     bool overflow = false;
     traverse_packet(
-        top_, rays, n,
+        top_, PacketRays(rays, n), n,
         [&](uint32_t mask, uint32_t first, uint32_t count, float *, const PacketRays &) {
             for (uint32_t k = first; k < first + count; ++k) {
                 const int index = int(top_.prim_order[k]);

@@ -156,19 +156,22 @@ void SplatScene::traverse(const Ray &ray, const float &limit, Visit &&visit, Tra
 // The same for a packet of coherent rays (packet.h): `visit(i, splat, hit, limit)` for ray
 // i, which may lower limit (the ray's pruning distance).
 template <class Visit>
-void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const {
+void SplatScene::traverse_packet(const Ray *rays, const PacketRays &soa, int n, Visit &&visit,
+                                 TraversalStats *stats) const {
     uint64_t discs = 0;
 #ifdef SPLAT_AVX2_KERNELS
     const bool avx2 = simd_avx2();
 #endif
-#ifndef SPLAT_SSE2
+#ifdef SPLAT_SSE2
+    (void)rays;  // the kernels read the packet by component
+#else
     alignas(16) unsigned char store[kPacketRays * sizeof(DiscRay)];
     DiscRay *disc_rays = reinterpret_cast<DiscRay *>(store);
     for (int i = 0; i < n; ++i) new (&disc_rays[i]) DiscRay(rays[i]);
 #endif
     splat::traverse_packet(
-        bvh_, rays, n,
-        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit, const PacketRays &soa) {
+        bvh_, soa, n,
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit, const PacketRays &) {
             discs += uint64_t(count) * uint64_t(__builtin_popcount(mask));
 #ifdef SPLAT_SSE2
             // Disc by disc against the packet's rays four (or eight) at a time, the lanes
@@ -180,7 +183,6 @@ void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, Traversa
 #endif
                 intersect_disc_rays(soa, mask, &splats_[first].c.x, count, on_hit);
 #else
-            (void)soa;
             for (uint32_t m = mask; m; m &= m - 1) {
                 const int i = __builtin_ctz(m);
                 test_leaf(rays[i], disc_rays[i], first, count,
@@ -192,18 +194,15 @@ void SplatScene::traverse_packet(const Ray *rays, int n, Visit &&visit, Traversa
     if (stats) stats->discs += discs;
 }
 
-bool SplatScene::coherent(const Ray *rays, int n) const {
-    return packet_coherent(rays, n, length(bounds_.extent()));
-}
-
 void SplatScene::intersect_packet(const Ray *rays, int n, Hit *out, TraversalStats *stats) const {
-    if (!coherent(rays, n)) {
+    const PacketRays soa(rays, n);
+    if (!packet_coherent(soa, n, length(bounds_.extent()))) {
         for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], stats);
         return;
     }
     for (int i = 0; i < n; ++i) out[i] = Hit();
     traverse_packet(
-        rays, n,
+        rays, soa, n,
         [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
             // Without a branch (which hit of a leaf is nearer is a coin toss for the predictor).
             Hit &b = out[i];
@@ -215,13 +214,14 @@ void SplatScene::intersect_packet(const Ray *rays, int n, Hit *out, TraversalSta
 }
 
 void SplatScene::gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, TraversalStats *stats) const {
-    if (!coherent(rays, n)) {
+    const PacketRays soa(rays, n);
+    if (!packet_coherent(soa, n, length(bounds_.extent()))) {
         for (int i = 0; i < n; ++i) gather_layer(rays[i], qs[i], false, stats);
         return;
     }
     for (int i = 0; i < n; ++i) qs[i].cut = rays[i].tmax, qs[i].max_radius = max_radius_;
     traverse_packet(
-        rays, n,
+        rays, soa, n,
         [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
             LayerQuery &q = qs[i];
             if (h.t <= q.cut && !q.excluded(s.id)) {

@@ -80,10 +80,9 @@ class SplatScene {
     template <class Visit>
     void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
     template <class Visit>
-    void traverse_packet(const Ray *rays, int n, Visit &&visit, TraversalStats *stats) const;
+    void traverse_packet(const Ray *rays, const PacketRays &soa, int n, Visit &&visit, TraversalStats *stats) const;
     template <class Visit>
     uint32_t test_leaf(const Ray &ray, const DiscRay &disc_ray, uint32_t first, uint32_t count, Visit &&visit) const;
-    bool coherent(const Ray *rays, int n) const;
 
     Buffer<PackedSplat> splats_;  // BVH order
     Buffer<uint32_t> slot_;       // input id -> index in splats_
