@@ -154,10 +154,12 @@ void RenderScene::take_splat_hit(int index, const Instance &inst, const Ray &ray
 
 // How far a mesh query needs to look behind the nearest surface so far (scene distance
 // `limit`, object scale `s`): a little past it, so that a hit at the same distance -- which
-// the smaller instance index may win -- is still found whatever the rounding of limit x s.
+// the smaller instance index may win -- is still found whatever the rounding of limit x s
+// and of t / s (fl(t / s) <= limit allows t up to limit x s x (1 + 2^-24); 8 half-ulps of
+// slack, taken on the magnitude so that it also points away for a negative limit).
 inline float mesh_reach(float limit, float s) {
-    constexpr float kSlack = 1.f + 8 * 5.9604645e-8f;  // 8 half-ulps
-    return limit * s * kSlack;
+    const float r = limit * s;
+    return r + std::fabs(r) * (8 * 5.9604645e-8f);
 }
 
 SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
@@ -181,7 +183,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                                                           false, stats),
                                              s, best);
                           }
-                          limit = best.t;
+                          limit = std::fmin(best.t, ray.tmax);  // as the packet query bounds it
                           return false;
                       });
     return best;
@@ -233,7 +235,8 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
             // Behind the ray's nearest surface so far (instances come roughly front to back):
             // skipped, as the ray alone skips it.
             const Vec3 inv(1.f / rays[i].d.x, 1.f / rays[i].d.y, 1.f / rays[i].d.z);
-            if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, out[i].t) == kInfinity) continue;
+            const float limit = std::fmin(out[i].t, rays[i].tmax);  // as intersect() bounds it
+            if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, limit) == kInfinity) continue;
             ray_of[m] = i;
             local[m] = to_object(inst, rays[i], &scale[m]);
             ++m;
@@ -241,7 +244,8 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
         if (inst.mesh) {
             for (int j = 0; j < m; ++j) {
                 SurfacePoint &best = out[ray_of[j]];
-                local[j].tmax = std::fmin(local[j].tmax, mesh_reach(best.t, scale[j]));
+                const float limit = std::fmin(best.t, rays[ray_of[j]].tmax);
+                local[j].tmax = std::fmin(local[j].tmax, mesh_reach(limit, scale[j]));
                 take_mesh_hit(index, inst, inst.mesh->intersect(local[j], -1, stats), scale[j], best);
             }
         } else {

@@ -226,7 +226,7 @@ void SplatScene::gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, Tra
             LayerQuery &q = qs[i];
             if (h.t <= q.cut && !q.excluded(s.id)) {
                 q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
-                limit = q.cut;
+                limit = fmin2(q.cut, rays[i].tmax);  // the cut may lie past tmax: never look there
             }
         },
         stats);
