@@ -14,6 +14,7 @@ subtracts a float64 origin first (see `local_frame`).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, NamedTuple, Optional, Sequence
 
@@ -380,8 +381,9 @@ def packet_order(width: int, height: int) -> np.ndarray:
     trace_surface()); the inverse permutation is np.argsort of it."""
     if not (width > 0 and height > 0):
         raise ValueError(f"width and height must be positive, got {width}x{height}")
+    side = math.isqrt(PACKET_RAYS)  # the core's blocks: 4x4
     rows, cols = np.divmod(np.arange(width * height), width)
-    return np.lexsort((cols, rows, cols // 4, rows // 4))
+    return np.lexsort((cols, rows, cols // side, rows // side))
 
 
 class TraceResult(NamedTuple):

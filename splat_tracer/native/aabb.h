@@ -41,14 +41,19 @@ inline AABB disc_bounds(Vec3 c, Vec3 n, float r) {
     return b;
 }
 
+// Float's unit roundoff (half an ulp of 1), pbrt's u.
+constexpr float kUnitRoundoff = 5.9604645e-8f;
+// The slab tests' widening, 2 gamma(3) (below): every box test of the core (this one, the
+// wide node's, a packet's) scales its entries and exits by 1 -+ this.
+constexpr float kSlabWiden = 2.f * (3.f * kUnitRoundoff) / (1.f - 3.f * kUnitRoundoff);
+
 // Slab test. `inv_d` is 1/d per axis (may be +-inf). Returns the entry distance, or
 // +inf when the box is missed within (tmin, tmax). Entry and exit distances are widened
 // by 2*gamma(3) of their magnitude (pbrt-v4, "Robust ray-bounds intersections") so that
 // float rounding never rejects a box that the ray truly touches, nor reports an entry
 // later than a hit inside it (the BVH prunes on that entry distance).
 inline float intersect_box(const AABB &b, Vec3 o, Vec3 inv_d, float tmin, float tmax) {
-    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
-    constexpr float kShrink = 1.f - kGamma3x2, kGrow = 1.f + kGamma3x2;
+    constexpr float kShrink = 1.f - kSlabWiden, kGrow = 1.f + kSlabWiden;
     float t0 = tmin, t1 = tmax;
     for (int k = 0; k < 3; ++k) {
         float tn = (b.lo[k] - o[k]) * inv_d[k];

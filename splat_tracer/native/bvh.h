@@ -100,23 +100,26 @@ struct WideRay {
     }
 };
 
-inline int intersect_wide(const WideNode &nd, const WideRay &r, float tmin, float tmax, float entry[4]) {
-    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
-    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
+// One axis of intersect_box()'s slab test, four lanes at a time: the slab [lo, hi] against
+// origin o and inverse direction inv narrows (t0, t1). Shared by the wide node's test (lanes
+// are children) and a packet's (lanes are rays), so both are the same arithmetic.
+inline void slab_axis(F4 lo, F4 hi, F4 o, F4 inv, F4 &t0, F4 &t1) {
     const F4 zero = F4::broadcast(0.f);
+    const F4 shrink = F4::broadcast(1.f - kSlabWiden), grow = F4::broadcast(1.f + kSlabWiden);
+    const F4 a = (lo - o) * inv, b = (hi - o) * inv;
+    // tn = min(a, b), tf = max(a, b) as the scalar swap makes them (a NaN stays where it
+    // was: in tn when a is NaN, ...), then widened by scaling.
+    F4 tn = select_gt(a, b, b, a), tf = select_gt(a, b, a, b);
+    tn = tn * select_gt(tn, zero, shrink, grow);
+    tf = tf * select_gt(tf, zero, grow, shrink);
+    // t0 = tn > t0 ? tn : t0: a NaN distance leaves t0 and t1 as they were.
+    t0 = select_gt(tn, t0, tn, t0);
+    t1 = select_lt(tf, t1, tf, t1);
+}
+
+inline int intersect_wide(const WideNode &nd, const WideRay &r, float tmin, float tmax, float entry[4]) {
     F4 t0 = F4::broadcast(tmin), t1 = F4::broadcast(tmax);
-    for (int k = 0; k < 3; ++k) {
-        const F4 a = (F4::load(nd.box[2 * k]) - r.o[k]) * r.inv_d[k];
-        const F4 b = (F4::load(nd.box[2 * k + 1]) - r.o[k]) * r.inv_d[k];
-        // tn = min(a, b), tf = max(a, b) as the scalar swap makes them (a NaN stays where
-        // it was: in tn when a is NaN, ...), then widened by scaling.
-        F4 tn = select_gt(a, b, b, a), tf = select_gt(a, b, a, b);
-        tn = tn * select_gt(tn, zero, shrink, grow);
-        tf = tf * select_gt(tf, zero, grow, shrink);
-        // t0 = tn > t0 ? tn : t0: a NaN distance leaves t0 and t1 as they were.
-        t0 = select_gt(tn, t0, tn, t0);
-        t1 = select_lt(tf, t1, tf, t1);
-    }
+    for (int k = 0; k < 3; ++k) slab_axis(F4::load(nd.box[2 * k]), F4::load(nd.box[2 * k + 1]), r.o[k], r.inv_d[k], t0, t1);
     t0.store(entry);
     return mask_le(t0, t1);
 }

@@ -136,18 +136,10 @@ void Integrator::render_tile(size_t tile) const {
     const int ts = settings_.tile_size;
     const int tiles_x = int((int64_t(film_.w) + ts - 1) / ts);
     const int tx = int(tile % size_t(tiles_x)) * ts, ty = int(tile / size_t(tiles_x)) * ts;
-    const int x1 = std::min(tx + ts, film_.w), y1 = std::min(ty + ts, film_.h);
     Tally tally;
     // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
-    constexpr int kBlock = 4;
-    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
-    for (int by = ty; by < y1; by += kBlock)
-        for (int bx = tx; bx < x1; bx += kBlock) {
-            int cols[kPacketRays], rows[kPacketRays], n = 0;
-            for (int row = by; row < std::min(by + kBlock, y1); ++row)
-                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) cols[n] = col, rows[n] = row;
-            shade_block(cols, rows, n, tally);
-        }
+    for_each_block(tx, ty, std::min(tx + ts, film_.w), std::min(ty + ts, film_.h),
+                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally); });
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
     counters_.transparent += tally.transparent;

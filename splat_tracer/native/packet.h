@@ -16,20 +16,35 @@
 // axis where only some rays run parallel, or the signs differ, is not tested (only looser).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
-#include <new>
 
 #include "bvh.h"
 #include "disc.h"
 
 namespace splat {
 
-
 // Whether rays are coherent enough for a packet to pay: directions within a narrow cone
 // and origins close together (relative to `scene_size`, the diagonal of the scene's
 // bounds). A 4x4 tile of camera rays is well inside both, even at 160x120; scattered rays
 // would make the packet's bounds cover much of the scene, and are traced one by one.
 bool packet_coherent(const PacketRays &rays, int n, float scene_size);
+
+// The pixels of the rectangle [x0, x1) x [y0, y1) in blocks of 4x4, rows of blocks from
+// the top (cut short at its edges): block(cols, rows, n) with each of the block's n pixels'
+// column and row, row by row -- one camera-ray packet each.
+template <class Block>
+void for_each_block(int x0, int y0, int x1, int y1, Block &&block) {
+    constexpr int kBlock = 4;
+    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
+    for (int by = y0; by < y1; by += kBlock)
+        for (int bx = x0; bx < x1; bx += kBlock) {
+            int cols[kPacketRays], rows[kPacketRays], n = 0;
+            for (int row = by; row < std::min(by + kBlock, y1); ++row)
+                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) cols[n] = col, rows[n] = row;
+            block(cols, rows, n);
+        }
+}
 
 // The bounds of a packet's rays, broadcast for the four lanes of a wide node.
 struct PacketBounds {
@@ -45,8 +60,7 @@ struct PacketBounds {
 // header comment): a mask of the children some ray may enter within (tmin, tmax), and a
 // lower bound of every ray's entry distance into each.
 inline int intersect_wide_packet(const WideNode &nd, const PacketBounds &p, float tmax, float entry[4]) {
-    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
-    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
+    const F4 shrink = F4::broadcast(1.f - kSlabWiden), grow = F4::broadcast(1.f + kSlabWiden);
     const F4 zero = F4::broadcast(0.f);
     F4 t0 = F4::broadcast(p.tmin), t1 = F4::broadcast(tmax);
     for (int k = 0; k < 3; ++k) {
@@ -77,9 +91,6 @@ inline int intersect_wide_packet(const WideNode &nd, const PacketBounds &p, floa
 // intersect_wide(): the same entries, the same misses.
 inline void enter_children(const WideNode &nd, const PacketRays &soa, const float *limit, uint32_t rays,
                            int children, uint32_t child_rays[4]) {
-    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
-    const F4 shrink = F4::broadcast(1.f - kGamma3x2), grow = F4::broadcast(1.f + kGamma3x2);
-    const F4 zero = F4::broadcast(0.f);
     for (int k = 0; k < 4; ++k) {
         child_rays[k] = 0;
         if (!(children >> k & 1)) continue;
@@ -87,16 +98,9 @@ inline void enter_children(const WideNode &nd, const PacketRays &soa, const floa
             const int lanes = int(rays >> g & 15);
             if (!lanes) continue;
             F4 t0 = F4::load(soa.tmin + g), t1 = F4::load(limit + g);
-            for (int a = 0; a < 3; ++a) {
-                const F4 o = F4::load(soa.o[a] + g), inv = F4::load(soa.inv_d[a] + g);
-                const F4 x = (F4::broadcast(nd.box[2 * a][k]) - o) * inv;
-                const F4 y = (F4::broadcast(nd.box[2 * a + 1][k]) - o) * inv;
-                F4 tn = select_gt(x, y, y, x), tf = select_gt(x, y, x, y);
-                tn = tn * select_gt(tn, zero, shrink, grow);
-                tf = tf * select_gt(tf, zero, grow, shrink);
-                t0 = select_gt(tn, t0, tn, t0);
-                t1 = select_lt(tf, t1, tf, t1);
-            }
+            for (int a = 0; a < 3; ++a)
+                slab_axis(F4::broadcast(nd.box[2 * a][k]), F4::broadcast(nd.box[2 * a + 1][k]), F4::load(soa.o[a] + g),
+                          F4::load(soa.inv_d[a] + g), t0, t1);
             child_rays[k] |= uint32_t(mask_le(t0, t1) & lanes) << g;
         }
     }
@@ -108,12 +112,12 @@ __attribute__((target("avx2"))) inline __m256 sel_gt(__m256 x, __m256 y, __m256 
     return _mm256_blendv_ps(b, a, _mm256_cmp_ps(x, y, _CMP_GT_OQ));
 }
 
-// enter_children() eight rays at a time (AVX2, chosen at run time).
+// enter_children() eight rays at a time (AVX2, chosen at run time): slab_axis() written out
+// in AVX2 intrinsics (they only inline into functions carrying the target attribute).
 __attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &nd, const PacketRays &soa,
                                                                  const float *limit, uint32_t rays, int children,
                                                                  uint32_t child_rays[4]) {
-    constexpr float kGamma3x2 = 2.f * (3.f * 5.9604645e-8f) / (1.f - 3.f * 5.9604645e-8f);
-    const __m256 shrink = _mm256_set1_ps(1.f - kGamma3x2), grow = _mm256_set1_ps(1.f + kGamma3x2);
+    const __m256 shrink = _mm256_set1_ps(1.f - kSlabWiden), grow = _mm256_set1_ps(1.f + kSlabWiden);
     const __m256 zero = _mm256_setzero_ps();
     for (int k = 0; k < 4; ++k) {
         child_rays[k] = 0;
@@ -139,9 +143,9 @@ __attribute__((target("avx2"))) inline void enter_children_avx2(const WideNode &
 #endif
 
 // traverse_bvh() for a packet of n <= kPacketRays rays (`soa`, by component): `leaf(rays,
-// first, count, limit, soa)` is called for each leaf with the mask of the rays that enter it, ray i within
-// (tmin, limit[i]), where limit[i] starts at the ray's tmax and the leaf may lower it as it
-// learns (nearest hit so far, the layer query's cut); soa holds the rays by component.
+// first, count, limit)` is called for each leaf with the mask of the rays that enter it,
+// ray i within (tmin, limit[i]), where limit[i] starts at the ray's tmax and the leaf may
+// lower it as it learns (nearest hit so far, the layer query's cut).
 // Leaves are met nearer first by the packet's bounds, not by each ray's own order, so the
 // queries on top must not depend on the order of their hits (the nearest hit and the layer
 // query do not). `node_count` counts the inner nodes the packet entered (once for all its
@@ -180,7 +184,7 @@ void traverse_packet(const BVH &bvh, const PacketRays &soa, int n, Leaf &&leaf, 
             live &= cur.rays;
             if (live) {
                 visited += uint64_t(__builtin_popcount(live));
-                leaf(live, cur.child, cur.count, limit, soa);
+                leaf(live, cur.child, cur.count, limit);
             }
         } else {
             ++visited;

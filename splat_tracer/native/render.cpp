@@ -16,27 +16,20 @@ void Renderer::render_tile(size_t tile) const {
     const int ts = settings_.tile_size;
     const int tiles_x = (target_.w + ts - 1) / ts;
     const int tx = int(tile % tiles_x) * ts, ty = int(tile / tiles_x) * ts;
-    const int x1 = std::min(tx + ts, target_.w), y1 = std::min(ty + ts, target_.h);
     // In blocks of 4x4 pixels: one ray packet each (packet.h).
-    constexpr int kBlock = 4;
-    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
-    for (int by = ty; by < y1; by += kBlock)
-        for (int bx = tx; bx < x1; bx += kBlock) {
-            Ray rays[kPacketRays];
-            int cols[kPacketRays], rows[kPacketRays], n = 0;
-            for (int row = by; row < std::min(by + kBlock, y1); ++row)
-                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) {
-                    cols[n] = col, rows[n] = row;
-                    rays[n] = camera_.ray(target_.x0 + col + 0.5, target_.y0 + row + 0.5, target_.width,
-                                          target_.height);
-                }
-            const bool inside[kPacketRays] = {};
-            SurfaceHit hits[kPacketRays];
-            if (settings_.packets) find_surfaces(scene_, rays, n, settings_.method, inside, nullptr, 0, hits);
-            else
-                for (int k = 0; k < n; ++k) hits[k] = find_surface(scene_, rays[k], settings_.method);
-            for (int k = 0; k < n; ++k) shade_pixel(cols[k], rows[k], rays[k], hits[k]);
-        }
+    for_each_block(tx, ty, std::min(tx + ts, target_.w), std::min(ty + ts, target_.h),
+                   [&](const int *cols, const int *rows, int n) {
+                       Ray rays[kPacketRays];
+                       for (int k = 0; k < n; ++k)
+                           rays[k] = camera_.ray(target_.x0 + cols[k] + 0.5, target_.y0 + rows[k] + 0.5,
+                                                 target_.width, target_.height);
+                       const bool inside[kPacketRays] = {};
+                       SurfaceHit hits[kPacketRays];
+                       if (settings_.packets) find_surfaces(scene_, rays, n, settings_.method, inside, nullptr, 0, hits);
+                       else
+                           for (int k = 0; k < n; ++k) hits[k] = find_surface(scene_, rays[k], settings_.method);
+                       for (int k = 0; k < n; ++k) shade_pixel(cols[k], rows[k], rays[k], hits[k]);
+                   });
 }
 
 // Simple shading until lights and materials arrive: a headlight (a light at the eye),

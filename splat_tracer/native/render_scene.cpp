@@ -159,7 +159,7 @@ void RenderScene::take_splat_hit(int index, const Instance &inst, const Ray &ray
 // slack, taken on the magnitude so that it also points away for a negative limit).
 inline float mesh_reach(float limit, float s) {
     const float r = limit * s;
-    return r + std::fabs(r) * (8 * 5.9604645e-8f);
+    return r + std::fabs(r) * (8 * kUnitRoundoff);
 }
 
 SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
@@ -198,19 +198,21 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
         int index;
         uint32_t rays;
     };
-    Entered entered[64];
+    constexpr int kMaxEntered = 64;  // instances one packet meets; more go ray by ray
+    Entered entered[kMaxEntered];
     int n_entered = 0;
     bool overflow = false;
+    const PacketRays soa(rays, n);
     traverse_packet(
-        top_, PacketRays(rays, n), n,
-        [&](uint32_t mask, uint32_t first, uint32_t count, float *, const PacketRays &) {
+        top_, soa, n,
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *) {
             for (uint32_t k = first; k < first + count; ++k) {
                 const int index = int(top_.prim_order[k]);
                 if (!(instances_[index].visibility & kVisCamera)) continue;
                 int e = 0;
                 while (e < n_entered && entered[e].index != index) ++e;
                 if (e == n_entered) {
-                    if (n_entered == 64) {
+                    if (n_entered == kMaxEntered) {
                         overflow = true;
                         continue;
                     }
@@ -220,7 +222,7 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
             }
         },
         stats ? &stats->nodes : nullptr);
-    if (overflow) {  // a packet crossing more than 64 instances' boxes: ray by ray
+    if (overflow) {  // a packet crossing more than kMaxEntered instances' boxes: ray by ray
         for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), true, stats);
         return;
     }
@@ -234,7 +236,7 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
             const int i = __builtin_ctz(bits);
             // Behind the ray's nearest surface so far (instances come roughly front to back):
             // skipped, as the ray alone skips it.
-            const Vec3 inv(1.f / rays[i].d.x, 1.f / rays[i].d.y, 1.f / rays[i].d.z);
+            const Vec3 inv(soa.inv_d[0][i], soa.inv_d[1][i], soa.inv_d[2][i]);
             const float limit = std::fmin(out[i].t, rays[i].tmax);  // as intersect() bounds it
             if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, limit) == kInfinity) continue;
             ray_of[m] = i;

@@ -171,7 +171,7 @@ void SplatScene::traverse_packet(const Ray *rays, const PacketRays &soa, int n, 
 #endif
     splat::traverse_packet(
         bvh_, soa, n,
-        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit, const PacketRays &) {
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *limit) {
             discs += uint64_t(count) * uint64_t(__builtin_popcount(mask));
 #ifdef SPLAT_SSE2
             // Disc by disc against the packet's rays four (or eight) at a time, the lanes
@@ -219,15 +219,12 @@ void SplatScene::gather_layer_packet(const Ray *rays, int n, LayerQuery *qs, Tra
         for (int i = 0; i < n; ++i) gather_layer(rays[i], qs[i], false, stats);
         return;
     }
-    for (int i = 0; i < n; ++i) qs[i].cut = rays[i].tmax, qs[i].max_radius = max_radius_;
+    for (int i = 0; i < n; ++i) begin_layer(rays[i], qs[i]);
     traverse_packet(
         rays, soa, n,
         [&](int i, const PackedSplat &s, const DiscHit &h, float &limit) {
-            LayerQuery &q = qs[i];
-            if (h.t <= q.cut && !q.excluded(s.id)) {
-                q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
-                limit = fmin2(q.cut, rays[i].tmax);  // the cut may lie past tmax: never look there
-            }
+            offer(qs[i], s, h);
+            limit = fmin2(qs[i].cut, rays[i].tmax);  // the cut may lie past tmax: never look there
         },
         stats);
 }
@@ -243,21 +240,27 @@ Hit SplatScene::intersect(const Ray &ray, TraversalStats *stats) const {
     return best;
 }
 
-void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, TraversalStats *stats) const {
-    auto offer = [&](const PackedSplat &s, const DiscHit &h) {
-        // Beyond the cut first: most hits offered late in the traversal are, and need no sqrt.
-        if (h.t <= q.cut && !q.excluded(s.id)) q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
-    };
+void SplatScene::begin_layer(const Ray &ray, LayerQuery &q) const {
     q.cut = ray.tmax;
     q.max_radius = max_radius_;
+}
+
+void SplatScene::offer(LayerQuery &q, const PackedSplat &s, const DiscHit &h) const {
+    // Beyond the cut first: most hits offered late in the traversal are, and need no sqrt.
+    if (h.t <= q.cut && !q.excluded(s.id))
+        q.add(LayerHit{h.t, std::sqrt(h.dist2), s.r, s.id, uint32_t(&s - splats_.data()), h.front});
+}
+
+void SplatScene::gather_layer(const Ray &ray, LayerQuery &q, bool brute_force, TraversalStats *stats) const {
+    begin_layer(ray, q);
     if (brute_force) {
         for (const PackedSplat &s : splats_) {
             DiscHit h;
-            if (intersect_disc(ray, s.c, s.n, s.r, &h)) offer(s, h);
+            if (intersect_disc(ray, s.c, s.n, s.r, &h)) offer(q, s, h);
         }
         return;
     }
-    traverse(ray, q.cut, offer, stats);
+    traverse(ray, q.cut, [&](const PackedSplat &s, const DiscHit &h) { offer(q, s, h); }, stats);
 }
 
 Hit SplatScene::intersect_brute_force(const Ray &ray) const {

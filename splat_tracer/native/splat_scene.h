@@ -81,6 +81,10 @@ class SplatScene {
     void traverse(const Ray &ray, const float &limit, Visit &&visit, TraversalStats *stats = nullptr) const;
     template <class Visit>
     void traverse_packet(const Ray *rays, const PacketRays &soa, int n, Visit &&visit, TraversalStats *stats) const;
+    // A layer query's start on this scene, and a disc hit offered to it (gather_layer's and
+    // the packets' one rule).
+    void begin_layer(const Ray &ray, LayerQuery &q) const;
+    void offer(LayerQuery &q, const PackedSplat &s, const DiscHit &h) const;
     template <class Visit>
     uint32_t test_leaf(const Ray &ray, const DiscRay &disc_ray, uint32_t first, uint32_t count, Visit &&visit) const;
 

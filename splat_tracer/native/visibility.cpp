@@ -183,10 +183,16 @@ bool near_phase_convex(Vec3 cj, Vec3 nj, Vec3 ck, Vec3 nk) {
 
 namespace {
 
-// Makes q a fresh query of this ray: its inputs set, no hits (built in place: a copy of
-// the hit buffer, 700 bytes, cost 4 % of a packet's work).
 static_assert(std::is_trivially_destructible<LayerQuery>::value && std::is_trivially_destructible<SurfaceHit>::value,
               "queries and surface hits are rebuilt in place");
+
+// Whether find_surface() answers a ray with its plain nearest hit (no layer to gather).
+bool nearest_hit_suffices(const Method &m, bool inside, int n_exclude) {
+    return m.is_general() && !inside && n_exclude == 0;
+}
+
+// Makes q a fresh query of this ray: its inputs set, no hits (built in place: a copy of
+// the hit buffer, 700 bytes, cost 4 % of a packet's work).
 void begin_query(LayerQuery &q, const Method &m, bool inside, const int32_t *exclude, int n_exclude) {
     new (&q) LayerQuery;
     q.layer_front = !inside;
@@ -241,7 +247,7 @@ void resolve_surface(const SplatScene &scene, Ray ray, const Method &m, bool ins
 
 SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &m, bool inside, const int32_t *exclude,
                         int n_exclude, bool brute_force, TraversalStats *stats) {
-    if (m.is_general() && !inside && n_exclude == 0)
+    if (nearest_hit_suffices(m, inside, n_exclude))
         return single_splat(scene, brute_force ? scene.intersect_brute_force(ray) : scene.intersect(ray, stats));
     LayerQuery q;
     begin_query(q, m, inside, exclude, n_exclude);
@@ -256,7 +262,7 @@ void find_surfaces(const SplatScene &scene, const Ray *rays, int n, const Method
     // Which rays find_surface() would answer with a plain nearest hit: all or none of them,
     // else (a general-method batch mixing inside rays in) ray by ray.
     int plain = 0;
-    for (int i = 0; i < n; ++i) plain += m.is_general() && !inside[i] && n_exclude == 0;
+    for (int i = 0; i < n; ++i) plain += nearest_hit_suffices(m, inside[i], n_exclude);
     if (plain == n) {
         Hit hits[kPacketRays];
         scene.intersect_packet(rays, n, hits, stats);
