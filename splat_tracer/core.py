@@ -20,7 +20,7 @@ from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from . import _core
+from . import _core, matrices
 from .columns import bounds
 
 PARALLEL_COSINE = _core.PARALLEL_COSINE
@@ -431,7 +431,7 @@ class Camera:
         w_c = np.asarray(world_from_camera, dtype=np.float64).reshape(4, 4)
         local_from_world = np.eye(4)
         local_from_world[:3, 3] = -np.asarray(origin, dtype=np.float64)
-        local_from_ndc = local_from_world @ w_c @ np.linalg.inv(proj)
+        local_from_ndc = local_from_world @ w_c @ matrices.inverse(proj)
         forward = -w_c[:3, 2] / np.linalg.norm(w_c[:3, 2])
         return cls(np.ascontiguousarray(local_from_ndc), w_c[:3, 3] - np.asarray(origin, np.float64), forward)
 
@@ -480,7 +480,7 @@ class Camera:
         j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
         ndc = np.stack([2 * j / width - 1, 1 - 2 * i / height], axis=-1).reshape(-1, 2)
         def unproject(z):
-            p = np.column_stack([ndc, np.full(len(ndc), z), np.ones(len(ndc))]) @ self.local_from_ndc.T
+            p = matrices.transform_rows(np.column_stack([ndc, np.full(len(ndc), z), np.ones(len(ndc))]), self.local_from_ndc)
             return p[:, :3] / p[:, 3:]
         a, b = unproject(-1.0), unproject(1.0)
         d = b - a
@@ -704,7 +704,7 @@ class RenderScene:
             m = np.asarray(inst.matrix, np.float64).reshape(4, 4)
             if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-300:
                 raise ValueError("instance matrix must be finite and invertible")
-            inv = np.linalg.inv(m)
+            inv = matrices.inverse(m)
             unknown = set(inst.visibility) - set(RAY_VISIBILITY)
             if unknown:
                 raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import matrices
+
 # ΔE breakpoints and the ramp's colour at each (display sRGB). Chosen to be read at a
 # glance: black = identical; dark blue = below the ~1 of a just-visible patch difference;
 # blue = a just-noticeable difference (2.3); cyan, green, yellow = clearly visible,
@@ -56,7 +58,10 @@ def standard_display(rgba_linear: np.ndarray, exposure: float = 0.0, gamma: floa
 
 def lab(display_rgb: np.ndarray) -> np.ndarray:
     """CIELAB (L*, a*, b*) of display sRGB values in 0..1."""
-    xyz = srgb_decode(display_rgb) @ _XYZ_FROM_RGB.T / _WHITE
+    rgb = srgb_decode(display_rgb)
+    # A row transform without BLAS (matrices.py: a threaded product leaves OpenBLAS' threads
+    # spinning while the viewport renders).
+    xyz = matrices.transform_rows(rgb.reshape(-1, 3), _XYZ_FROM_RGB).reshape(rgb.shape) / _WHITE
     delta = 6 / 29
     f = np.where(xyz > delta ** 3, np.cbrt(xyz), xyz / (3 * delta ** 2) + 4 / 29)
     return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1)

@@ -24,7 +24,7 @@ from typing import Optional
 
 import numpy as np
 
-from . import normals, prepare, readers, resources, spacing
+from . import matrices, normals, prepare, readers, resources, spacing
 from .columns import bounds
 from .ply import CloudFileError, PointCloud
 from .progress import ProgressFn, nothing, scaled
@@ -75,11 +75,11 @@ def transform(cloud: PointCloud, axes=None, scale: float = 1.0) -> PointCloud:
         raise ValueError("the axis conversion must be orthonormal (a rotation or a reflection)")
     if np.allclose(m, np.round(m), atol=1e-6):
         m = np.round(m)  # a signed permutation (every axis_conversion): exact in float64
-    pos = cloud.positions @ m.T
+    pos = matrices.transform_rows(cloud.positions, m)
     if scale != 1.0:
         pos *= scale
-    turn = (lambda a: None if a is None else (a @ m.T).astype(a.dtype))  # noqa: E731
-    scanners = None if cloud.scanners is None else (cloud.scanners @ m.T) * scale
+    turn = (lambda a: None if a is None else matrices.transform_rows(a, m).astype(a.dtype))  # noqa: E731
+    scanners = None if cloud.scanners is None else matrices.transform_rows(cloud.scanners, m) * scale
     radii = None if cloud.radii is None else (cloud.radii * np.float32(scale)).astype(np.float32)
     return replace(cloud, positions=pos, normals=turn(cloud.normals), scanners=scanners, radii=radii)
 

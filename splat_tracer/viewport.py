@@ -20,7 +20,7 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import ab, core, shading
+from . import ab, core, matrices, shading
 
 # --------------------------------------------------------------------------------------
 # The view
@@ -40,12 +40,12 @@ def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> core
     (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
     way: Blender folds the camera's lens, sensor fit, shift, the view's zoom and its offset
     into window_matrix. `origin`: the scene's local-frame origin (float64 world position)."""
-    return core.Camera.from_view_projection(_matrix(window_matrix), np.linalg.inv(_matrix(view_matrix)), origin)
+    return core.Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin)
 
 
 def view_position(view_matrix) -> np.ndarray:
     """The world position of the view (its eye; for an orthographic view, its centre)."""
-    return np.linalg.inv(_matrix(view_matrix))[:3, 3]
+    return matrices.inverse(_matrix(view_matrix))[:3, 3]
 
 
 def region_rect(perspective_matrix, world_points, width: int, height: int) -> tuple[float, float, float, float]:
