@@ -90,6 +90,63 @@ def test_rows_made_of_many_runs_of_the_order_get_the_same_answer():
     np.testing.assert_allclose(dist, bd, rtol=1e-5, atol=1e-6)
 
 
+def exact_clouds():
+    """Clouds full of exact distance ties and coincident points, for the leaf queries."""
+    n = 4000
+    c = RNG.normal(size=(n, 3))
+    c[: n // 8] = c[0]  # duplicates: a few hundred copies of two points
+    c[n // 8: n // 5] = c[1]
+    yield "duplicates", c
+    g = np.arange(16.0)
+    yield "grid (ties)", np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    yield "rounded (ties and duplicates)", RNG.uniform(0, 1, (n, 3)).round(2)
+    yield "plane", np.c_[RNG.uniform(-1, 1, (n, 2)), np.zeros(n)]
+    aniso = np.concatenate([RNG.normal(size=(n // 2, 3)) * [10, 1, 0.01],
+                            RNG.normal(size=(n // 2, 3)) * [0.01, 5, 1] + 30])
+    aniso[-1] = [1e4, 1e4, 1e4]  # an isolated outlier
+    yield "anisotropic clusters and an outlier", aniso
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+@pytest.mark.parametrize("name, points", list(exact_clouds()), ids=[c[0] for c in exact_clouds()])
+def test_leaf_queries_match_brute_force_exactly(name, points, threads):
+    """Walking the tree's order (a leaf of points against its gathered candidates at once,
+    the k nearest chosen by rank among those within a bound) gives exactly the brute
+    force's float32 distances, computed as the core does ((dx^2 + dy^2) + dz^2); the ids are
+    at those distances and, below the k-th distance, the same set; among points tied at the
+    k-th distance, any of them. The same answer on one thread and two, and for a run of the
+    order starting mid-leaf."""
+    pts = points.astype(np.float32)
+    n = len(pts)
+    index = core.PointIndex(pts, threads=threads)
+    other = core.PointIndex(pts, threads=3 - threads)
+    nrm = RNG.normal(size=(n, 3)).astype(np.float32)
+    for k in (6, 12, 24):
+        rows = index.order
+        dist, ids = index.knn(rows, k)
+        np.testing.assert_array_equal(dist, other.knn(rows, k)[0])
+        np.testing.assert_array_equal(ids, other.knn(rows, k)[1])
+        part = index.knn(rows[37:2500], k)
+        np.testing.assert_array_equal(part[0], dist[37:2500])
+        spacing_k, cover = index.radii(rows, k, nrm, min(k, 12), spacing.COVER_HOLE, spacing.COVER_MAX_GAP)
+        np.testing.assert_array_equal(spacing_k, dist[:, -1])
+        np.testing.assert_array_equal(cover, other.radii(rows, k, nrm, min(k, 12), spacing.COVER_HOLE,
+                                                         spacing.COVER_MAX_GAP)[1])
+        for b in range(0, n, 500):
+            r = rows[b:b + 500]
+            dx, dy, dz = (pts[None, :, a] - pts[r, None, a] for a in range(3))
+            d2 = dx * dx + dy * dy + dz * dz  # float32, in the core's order
+            d2[np.arange(len(r)), r] = np.inf  # not itself
+            want = np.sort(d2, axis=1)[:, :k]
+            np.testing.assert_array_equal(dist[b:b + 500], np.sqrt(want))
+            got = np.take_along_axis(d2, ids[b:b + 500], axis=1)
+            np.testing.assert_array_equal(got, want)  # each id at its distance (so never itself)
+            for i in range(len(r)):
+                kth = want[i, -1]
+                assert len(set(ids[b + i])) == k
+                assert set(np.flatnonzero(d2[i] < kth)) == set(ids[b + i][got[i] < kth])
+
+
 def test_knn_at_any_position():
     pts = RNG.normal(size=(4000, 3)).astype(np.float32)
     index = core.PointIndex(pts, threads=1)

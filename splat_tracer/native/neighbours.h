@@ -57,10 +57,14 @@ public:
     // (k <= size() - 1): k squared distances and slots per point, nearest first. The same
     // answer as nearest_of, found for the leaf's points together: their candidates within
     // a smallest surrounding subtree give a bound, the leaves within that bound of the
-    // points' box are gathered once, and each point scans the ones nearer than its own
-    // k-th candidate. guess: a squared distance the k-th neighbours probably lie within
-    // (0: none), in; for the next leaf in the tree's order, out (the caller walking the
-    // leaves in order passes it on).
+    // points' box are gathered and copied by axis once, and each point computes its
+    // distances to all of them, four at a time, and ranks those within a bound (the previous
+    // point's k-th distance, widened; else the exact one) without sorted insertion. Among
+    // equal distances the candidate visited first by a one-point scan of the subtree and
+    // then of the gathered leaves in tree order comes first (the answer the sequential
+    // version gave, to the bit). guess: a squared distance the k-th neighbours probably lie
+    // within (0: none), in; for the next leaf in the tree's order, out (the caller walking
+    // the leaves in order passes it on).
     void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots, float &guess) const;
 
 private:
