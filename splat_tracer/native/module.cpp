@@ -266,14 +266,16 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
             Ray rays[kPacketRays];
             bool inside[kPacketRays];
             const int32_t *excl[kPacketRays];
-            SurfaceHit hits[kPacketRays];
+            // Storage only: find_surface(s) build every hit (a default-built array was built twice).
+            alignas(SurfaceHit) unsigned char storage[kPacketRays * sizeof(SurfaceHit)];
+            SurfaceHit *hits = reinterpret_cast<SurfaceHit *>(storage);
             for (size_t k = 0; k < n; ++k) {
                 const size_t i = first + k;
                 rays[k] = make_ray(po, pd, i, tmin, tmax);
                 inside[k] = pin && pin[i];
                 excl[k] = pex ? pex + i * n_ex : nullptr;
             }
-            if (n == 1) hits[0] = find_surface(scene, rays[0], method, inside[0], excl[0], n_ex, brute);
+            if (n == 1) new (&hits[0]) SurfaceHit(find_surface(scene, rays[0], method, inside[0], excl[0], n_ex, brute));
             else find_surfaces(scene, rays, int(n), method, inside, excl, n_ex, hits);
             for (size_t k = 0; k < n; ++k) {
                 const size_t i = first + k;

@@ -266,20 +266,30 @@ void find_surfaces(const SplatScene &scene, const Ray *rays, int n, const Method
     if (plain == n) {
         Hit hits[kPacketRays];
         scene.intersect_packet(rays, n, hits, stats);
-        for (int i = 0; i < n; ++i) out[i] = single_splat(scene, hits[i]);
+        for (int i = 0; i < n; ++i) new (&out[i]) SurfaceHit(single_splat(scene, hits[i]));
         return;
     }
     if (plain > 0) {
         for (int i = 0; i < n; ++i)
-            out[i] = find_surface(scene, rays[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude, false, stats);
+            new (&out[i]) SurfaceHit(
+                find_surface(scene, rays[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude, false, stats));
         return;
     }
-    LayerQuery qs[kPacketRays];
+    // Storage only: begin_query() builds each query in place (a default-built array was
+    // built twice, a tenth of a miss's cost).
+    alignas(LayerQuery) unsigned char storage[kPacketRays * sizeof(LayerQuery)];
+    LayerQuery *qs = reinterpret_cast<LayerQuery *>(storage);
     for (int i = 0; i < n; ++i) begin_query(qs[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude);
     scene.gather_layer_packet(rays, n, qs, stats);
-    for (int i = 0; i < n; ++i)
+    for (int i = 0; i < n; ++i) {
+        if (qs[i].count == 0) {  // nothing on the ray (most camera rays of a scan): a miss, as resolve_surface says
+            new (&out[i]) SurfaceHit;
+            if (stats) ++stats->layer_queries;
+            continue;
+        }
         resolve_surface(scene, rays[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude, false, stats, qs[i],
                         out[i]);
+    }
 }
 
 }  // namespace splat

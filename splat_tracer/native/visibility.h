@@ -66,7 +66,8 @@ SurfaceHit find_surface(const SplatScene &scene, Ray ray, const Method &method, 
 // find_surface() for n <= kPacketRays rays at once, ray i with inside[i] and exclude[i]
 // (n_exclude ids each; exclude may be null): the first layer query of every ray in one
 // packet traversal (packet.h; ray by ray when the rays are not coherent), the rest ray by
-// ray. The same answers as find_surface().
+// ray. The same answers as find_surface(). out[i] is built in place (it may be storage
+// without objects yet).
 void find_surfaces(const SplatScene &scene, const Ray *rays, int n, const Method &method, const bool *inside,
                    const int32_t *const *exclude, int n_exclude, SurfaceHit *out, TraversalStats *stats = nullptr);
 
