@@ -207,6 +207,7 @@ void resolve_surface(const SplatScene &scene, Ray ray, const Method &m, bool ins
                      int n_exclude, bool brute_force, TraversalStats *stats, LayerQuery &q, SurfaceHit &out) {
     new (&out) SurfaceHit;  // no hit (its member list left unwritten)
     if (stats) ++stats->layer_queries;
+    if (q.count == 0) return;  // nothing on the ray (most camera rays of a scan): a miss
     bool fresh = true;  // q is this attempt's query
     for (int attempt = 0; attempt < m.max_layers; ++attempt, fresh = false) {
         if (!fresh) {
@@ -281,15 +282,9 @@ void find_surfaces(const SplatScene &scene, const Ray *rays, int n, const Method
     LayerQuery *qs = reinterpret_cast<LayerQuery *>(storage);
     for (int i = 0; i < n; ++i) begin_query(qs[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude);
     scene.gather_layer_packet(rays, n, qs, stats);
-    for (int i = 0; i < n; ++i) {
-        if (qs[i].count == 0) {  // nothing on the ray (most camera rays of a scan): a miss, as resolve_surface says
-            new (&out[i]) SurfaceHit;
-            if (stats) ++stats->layer_queries;
-            continue;
-        }
+    for (int i = 0; i < n; ++i)
         resolve_surface(scene, rays[i], m, inside[i], exclude ? exclude[i] : nullptr, n_exclude, false, stats, qs[i],
                         out[i]);
-    }
 }
 
 }  // namespace splat
