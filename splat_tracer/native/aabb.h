@@ -43,9 +43,11 @@ inline AABB disc_bounds(Vec3 c, Vec3 n, float r) {
 
 // Float's unit roundoff (half an ulp of 1), pbrt's u.
 constexpr float kUnitRoundoff = 5.9604645e-8f;
+// pbrt's gamma(n) = n u / (1 - n u): the relative error bound of n rounded float operations.
+constexpr float rounding_gamma(int n) { return float(n) * kUnitRoundoff / (1.f - float(n) * kUnitRoundoff); }
 // The slab tests' widening, 2 gamma(3) (below): every box test of the core (this one, the
 // wide node's, a packet's) scales its entries and exits by 1 -+ this.
-constexpr float kSlabWiden = 2.f * (3.f * kUnitRoundoff) / (1.f - 3.f * kUnitRoundoff);
+constexpr float kSlabWiden = 2.f * rounding_gamma(3);
 
 // Slab test. `inv_d` is 1/d per axis (may be +-inf). Returns the entry distance, or
 // +inf when the box is missed within (tmin, tmax). Entry and exit distances are widened

@@ -127,7 +127,7 @@ Vec3 TriangleMesh::point(const MeshHit &h) const {
 
 Vec3 TriangleMesh::point_error(const MeshHit &h) const {
     // gamma(7) (|b0 v0| + |b1 v1| + |b2 v2|), pbrt-v4's bound for this interpolation.
-    constexpr float kGamma7 = 7.f * 5.9604645e-8f / (1.f - 7.f * 5.9604645e-8f);
+    constexpr float kGamma7 = rounding_gamma(7);
     const float b0 = 1.f - h.b1 - h.b2;
     const Vec3 a = vabs(v0_[h.tri] * b0) + vabs(v1_[h.tri] * h.b1) + vabs(v2_[h.tri] * h.b2);
     return a * kGamma7;

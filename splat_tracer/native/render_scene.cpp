@@ -126,7 +126,7 @@ void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &
     auto abs_row = [&](int r, Vec3 v) {
         return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y + std::fabs(M.m[4 * r + 2]) * v.z;
     };
-    constexpr float kGamma3 = 3.f * 5.9604645e-8f / (1.f - 3.f * 5.9604645e-8f);
+    constexpr float kGamma3 = rounding_gamma(3);
     float err = 0.f;
     for (int r = 0; r < 3; ++r)
         err = std::fmax(err, abs_row(r, obj_err) + kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
