@@ -181,20 +181,27 @@ class PointIndex:
         return out
 
     def radii(self, rows, spacing_k: int, normals: Optional[np.ndarray] = None, cover_k: int = 0, hole: float = 0.0,
-              max_gap: float = 0.0) -> tuple[np.ndarray, Optional[np.ndarray]]:
+              max_gap: float = 0.0, out=None) -> tuple[np.ndarray, Optional[np.ndarray]]:
         """(spacing (m,) float32, cover (m,) float32 or None) from one search: each row's
         distance to its spacing_k-th nearest other point and, given normals ((N,3), any length),
         its gap-closing radius among its cover_k nearest with that distance as the spacing
-        (`covering`'s rule)."""
+        (`covering`'s rule). out: (spacing, cover) float32 arrays (N,) (cover None without
+        normals) to write each row's values into at the row's own place (rows: distinct),
+        instead of new (m,) arrays; they are returned."""
         rows = self._rows(rows)
-        spacing = np.empty(len(rows), np.float32)
-        cover = None
-        if normals is None:
-            self._index.radii(rows, spacing_k, spacing, threads=self.threads)
+        by_row = out is not None
+        if by_row:
+            spacing, cover = out
+            if (cover is None) != (normals is None):
+                raise ValueError("out needs a cover array exactly when normals are given")
         else:
-            cover = np.empty(len(rows), np.float32)
+            spacing = np.empty(len(rows), np.float32)
+            cover = None if normals is None else np.empty(len(rows), np.float32)
+        if normals is None:
+            self._index.radii(rows, spacing_k, spacing, threads=self.threads, by_row=by_row)
+        else:
             self._index.radii(rows, spacing_k, spacing, _f32(normals, "normals", (len(self), 3)), cover_k, float(hole),
-                              float(max_gap), cover, self.threads)
+                              float(max_gap), cover, self.threads, by_row)
         return spacing, cover
 
     def widest_gaps(self, rows, normals: np.ndarray, k: int) -> np.ndarray:

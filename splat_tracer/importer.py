@@ -210,7 +210,12 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
     except ValueError as e:
         raise CloudFileError(f"{path}: {e}") from None
     cloud = apply_budget(cloud, options.max_points, scaled(progress, 0.2, 0.25))
-    prepared = prepare.prepare(cloud, path, options.k, options.drop_outliers, options.workers, options.normal_k,
+    # Handed over, not kept here: prepare lets go of the float64 positions once it has the
+    # float32 offsets (a called Python function owns its arguments in CPython 3.11+, the
+    # caller's frame keeps no reference to a value it did not name).
+    handed = [cloud]
+    del cloud
+    prepared = prepare.prepare(handed.pop(), path, options.k, options.drop_outliers, options.workers, options.normal_k,
                                options.orientation, options.statistical_ratio, scaled(progress, 0.25, 1.0),
                                options.hole_free)
     report(1.0, f"prepared {len(prepared.local):,} splats")

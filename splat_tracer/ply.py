@@ -39,7 +39,9 @@ class CloudFileError(ValueError):
 
 @dataclass
 class PointCloud:
-    positions: np.ndarray            # (N,3) float64, file coordinates
+    # (N,3) float64, file coordinates; None in a prepared cloud (prepare.PreparedCloud: its
+    # origin and float32 offsets hold them, and 10M float64 positions are 240 MB)
+    positions: Optional[np.ndarray]
     normals: Optional[np.ndarray]    # (N,3) float32, unit length; None: the file has none (estimated on import)
     colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
     radii: Optional[np.ndarray]      # (N,) float32 from the file, or None
@@ -59,7 +61,8 @@ class PointCloud:
     notes: list = field(default_factory=list)  # what the reader changed or ignored, one sentence each
 
     def __len__(self) -> int:
-        return len(self.positions)
+        # a prepared cloud has normals (estimated when the file had none) but no positions
+        return len(self.positions if self.positions is not None else self.normals)
 
     def subset(self, keep: np.ndarray) -> "PointCloud":
         """The same cloud with only the rows `keep` (a mask or indices) of every per-point array."""
@@ -324,17 +327,19 @@ def read_ply(path: str) -> PointCloud:
 _KNOWN_PROPERTIES = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "radius"}
 
 
-def unit_rows(vectors) -> tuple[np.ndarray, np.ndarray]:
+def unit_rows(vectors, in_place: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(unit, ok): the rows of `vectors` (N, 3) scaled to unit length, in float32 when they
     are float32 (files' normals: no float64 copy of 10M of them), else float64; ok: the rows
-    that have a direction (every value finite, not all zero; the others are left as garbage)."""
+    that have a direction (every value finite, not all zero; the others are left as garbage).
+    in_place: float32 vectors are overwritten with the result (no second array of 10M normals)."""
     v = np.asarray(vectors)
     if v.dtype != np.float32:
         v = v.astype(np.float64)
-    unit, ok = np.empty(v.shape, v.dtype), np.empty(len(v), bool)
+    in_place = in_place and v.dtype == np.float32 and v.flags.c_contiguous and v.flags.writeable
+    unit, ok = v if in_place else np.empty(v.shape, v.dtype), np.empty(len(v), bool)
 
     def block(b: int, e: int) -> None:
-        unit[b:e], ok[b:e] = _unit_block(v[b:e])
+        unit[b:e], ok[b:e] = _unit_block(v[b:e])  # computed whole before it is stored: in place is safe
 
     in_blocks(block, len(v))
     return unit, ok
@@ -369,7 +374,8 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     and counted (drop_non_finite; else the caller has refused them), normals made unit and
     rows with a zero or non-finite normal dropped and counted, exact duplicate positions
     merged into their first row. `fields` are PointCloud's other fields (format, orientation,
-    oriented, notes). Raises CloudFileError naming `path` when nothing usable is left."""
+    oriented, notes). Raises CloudFileError naming `path` when nothing usable is left.
+    float32 normals are made unit in place: the readers hand over arrays of their own."""
     pos = np.asarray(positions, dtype=np.float64)
     n = len(pos)
     keep = np.ones(n, bool)
@@ -383,7 +389,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     if normals is not None:
         # A zero or non-finite normal is an error of that point alone (docs/ALGORITHM.md): the
         # point is dropped and counted, never rendered with a garbage orientation.
-        nrm, ok = unit_rows(normals)
+        nrm, ok = unit_rows(normals, in_place=True)
         dropped = int((keep & ~ok).sum())
         if not (ok & keep).any():
             raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")

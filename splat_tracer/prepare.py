@@ -212,13 +212,17 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             cloud, bulk = _subset(cloud, keep), bulk[keep]
     _check_float32_safe(cloud.positions, bulk, path)
     origin, local = core.local_frame(cloud.positions, bulk)
+    if needs_normals and cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
+        raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
+                             f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
+    rel = cloud.positions - origin if needs_normals else None  # float64 offsets: the estimation's precision is the file's
+    # The float64 positions are not needed any more (origin + local hold them): without them
+    # the k-d tree's memory comes from their pages instead of fresh ones (when the caller
+    # handed the cloud over, as importer.load does; 10M points: 240 MB).
+    cloud = replace(cloud, positions=None)
     estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
     known_spacing = known_cover = None
     if needs_normals:
-        if cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
-            raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
-                                 f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
-        rel = cloud.positions - origin  # float64 offsets: the estimation's precision is the file's
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel, workers)
         oriented_by = resolve_orientation(cloud, orientation)

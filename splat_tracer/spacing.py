@@ -152,10 +152,9 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     report = scaled(progress, 0.0, 0.5 if tested is None and nrm is not None else 1.0)
     for start in chunks(n if searched else 0, _CHUNK, report, "splat radii"):
         idx = order[start:start + _CHUNK]
-        # the spacing and the gap-closing radii (normals given) from one search (no (n, k) arrays)
-        spacing[idx], c = tree.radii(idx, k, nrm if cover_k else None, cover_k, COVER_HOLE, COVER_MAX_GAP)
-        if c is not None:
-            cover[idx] = c
+        # the spacing and the gap-closing radii (normals given) from one search (no (n, k)
+        # arrays), written by the core at each point's own row (no scatter here)
+        tree.radii(idx, k, nrm if cover_k else None, cover_k, COVER_HOLE, COVER_MAX_GAP, out=(spacing, cover))
         if nrm is not None and tested is not None:  # a small cloud: every point's boundary test too
             boundary += _boundary_count(tree, idx, nrm, kq)
     if nrm is not None and tested is None:

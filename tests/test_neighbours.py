@@ -278,6 +278,20 @@ def test_spacing_and_gap_closing_radii_from_one_search():
         np.testing.assert_array_equal(cover, index.covering(rows, pts, by_id, 12, spacing.COVER_HOLE,
                                                             spacing.COVER_MAX_GAP))
         assert index.radii(rows, 6)[1] is None
+        # written at each row's own place (what the importer asks, chunk by chunk): the same values
+        out = (np.full(n, -1, np.float32), np.full(n, -1, np.float32))
+        for chunk in np.array_split(rows, 7):
+            assert index.radii(chunk, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP, out=out) is not None
+        np.testing.assert_array_equal(out[0], by_id)
+        np.testing.assert_array_equal(out[1][rows], cover)
+        only = np.full(n, -1, np.float32)
+        index.radii(rows[:100], 6, out=(only, None))
+        np.testing.assert_array_equal(only[rows[:100]], s[:100])
+        assert (np.delete(only, rows[:100]) == -1).all()  # nothing else written
+        with pytest.raises(ValueError, match="size"):
+            index.radii(rows, 6, out=(np.empty(n - 1, np.float32), None))
+        with pytest.raises(ValueError, match="cover"):
+            index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP, out=(out[0], None))
     # what the importer gets: spacing.analyse(close_gaps=True) is covering_radii over its spacing
     hood = spacing.analyse(pts, pts, close_gaps=True)
     np.testing.assert_allclose(hood.covering, spacing.covering_radii(pts, pts, hood.spacing), rtol=1e-6)

@@ -21,6 +21,8 @@
 #include <utility>
 #include <vector>
 
+#include "buffer.h"
+
 namespace splat {
 
 class PointIndex {
@@ -38,7 +40,7 @@ public:
 
     size_t size() const { return n_; }
     // Input ids in the tree's order: neighbouring points are close in this order.
-    const std::vector<uint32_t> &order() const { return id_; }
+    const Buffer<uint32_t> &order() const { return id_; }
     // Queries answer with slots, positions in the tree's order (reading a neighbour's
     // position by input id would cost a cache miss per neighbour on a large cloud).
     uint32_t slot(uint32_t id) const { return slot_[id]; }
@@ -85,9 +87,9 @@ private:
     size_t n_ = 0;
     int depth_ = 0;                 // leaves are the nodes at this depth
     Box bounds_{};                  // the root's cell: the points' bounding box
-    std::vector<float> x_, y_, z_;  // points in tree order, by axis
-    std::vector<uint32_t> id_;      // tree order -> input id
-    std::vector<uint32_t> slot_;    // input id -> tree order
+    Buffer<float> x_, y_, z_;  // points in tree order, by axis
+    Buffer<uint32_t> id_;      // tree order -> input id
+    Buffer<uint32_t> slot_;    // input id -> tree order
     std::vector<float> split_;      // inner nodes in heap order (children 2i+1, 2i+2)
     std::vector<uint8_t> axis_;
 };
