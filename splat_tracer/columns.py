@@ -24,10 +24,21 @@ def finite_rows(a: np.ndarray) -> np.ndarray:
 
 
 def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi): each column's smallest and largest value (float64 (C,))."""
-    cols = range(a.shape[1])
-    return (np.array([a[:, c].min() for c in cols], np.float64),
-            np.array([a[:, c].max() for c in cols], np.float64))
+    """(lo, hi): each column's smallest and largest value (float64 (C,)); NaN where a column
+    holds one. A block of rows at a time on all cores (in_blocks)."""
+    cols = a.shape[1]
+    starts = range(0, len(a), BLOCK_ROWS)
+    lo, hi = np.empty((len(starts), cols)), np.empty((len(starts), cols))
+
+    def block(b: int, e: int) -> None:
+        i = b // BLOCK_ROWS
+        for c in range(cols):
+            lo[i, c], hi[i, c] = a[b:e, c].min(), a[b:e, c].max()
+
+    if len(a) == 0:  # as numpy: no minimum of nothing
+        raise ValueError("bounds of an empty array")
+    in_blocks(block, len(a))
+    return lo.min(axis=0), hi.max(axis=0)
 
 
 def rows_outside(a: np.ndarray, lo, hi) -> np.ndarray:

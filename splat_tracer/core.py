@@ -21,7 +21,7 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from . import _core, matrices
-from .columns import bounds
+from .columns import bounds, in_blocks
 
 PARALLEL_COSINE = _core.PARALLEL_COSINE
 MAX_LAYER_HITS = _core.MAX_LAYER_HITS  # per-ray hit buffer of the ε-window query
@@ -116,8 +116,12 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     box = pts if mask is None or mask.all() or not mask.any() else pts[mask]
     lo, hi = bounds(box)
     origin = ((lo + hi) * 0.5).astype(np.float32).astype(np.float64)
-    local = np.empty(pts.shape, np.float32)  # the difference in float64, rounded once, with no float64 temporary
-    np.subtract(pts, origin, out=local, casting="same_kind")
+    local = np.empty(pts.shape, np.float32)
+
+    def block(b: int, e: int) -> None:  # the difference in float64, rounded once, with no float64 temporary
+        np.subtract(pts[b:e], origin, out=local[b:e], casting="same_kind")
+
+    in_blocks(block, len(pts))
     return origin, local
 
 

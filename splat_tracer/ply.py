@@ -304,12 +304,12 @@ def read_ply(path: str) -> PointCloud:
             linear_colours([block[c] for c in rgb], int(scale), out=colours[b:e])
 
     in_blocks(convert, n)
-    finite = finite_rows(pos)  # rows without are dropped and counted (make_cloud)
 
     radii = None
     if "radius" in names:
         radii = v["radius"].astype(np.float32)
-        bad = ~(np.isfinite(radii) & (radii > 0)) & finite
+        # rows without finite coordinates are dropped and counted (make_cloud): their radius does not matter
+        bad = ~(np.isfinite(radii) & (radii > 0)) & finite_rows(pos)
         if bad.any():
             raise CloudFileError(f"{path}: {int(bad.sum())} vertices have a radius that is not a positive "
                                  f"number (first: row {np.flatnonzero(bad)[0]})")

@@ -368,8 +368,11 @@ def test_bad_input_raises_instead_of_crashing():
         index.covering([0], np.zeros((100, 3)), np.ones(100), 12, 3.0, 2.8)
     nan_normals = np.tile([0, 0, 1.0], (100, 1))
     nan_normals[57] = np.nan
+    row = next(r for r in range(100) if 57 in index.knn([r], 4)[1][0] and r != 57)
     with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):  # a neighbour's is read too
-        index.widest_gaps([0], nan_normals, 4)
+        index.widest_gaps([row], nan_normals, 4)
+    far = next(r for r in range(100) if r != 57 and 57 not in index.knn([r], 4)[1][0])
+    assert index.widest_gaps([far], nan_normals, 4).shape == (1,)  # only the normals read are checked
     nan_normals[80] = 0.0  # found while the rows are worked on, on any thread: the smallest id is named
     for rows in (index.order, np.arange(100)):
         with pytest.raises(ValueError, match=r"normals\[57\] must be a direction"):

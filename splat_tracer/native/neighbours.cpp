@@ -630,6 +630,43 @@ constexpr int kRankSortMax = 32;
 // inner loops that compile to vector code without remainders: two SSE2 registers of
 // doubles, one of 32-bit integers.
 constexpr int kBlock = 4;
+
+// order[0..m): the neighbours j by their angles ang[j] (pseudo_angle's, in [0, 4]), ties by
+// position in the list (a stable sort's order); order[m] = order[0] (the turn closes).
+void angular_order(const double *ang, int m, int *order) {
+    if (m <= kRankSortMax) {
+        // For up to kRankSortMax neighbours, by counting each one's rank, m^2 comparisons
+        // without a branch: a comparison sort's unpredictable branches cost more at the few
+        // neighbours the import asks for (12, 24). They compare 32-bit keys, four to a register
+        // (SSE2 compares two doubles, and no 64-bit integers): the angle x 2^28 truncated, in
+        // [0, 2^30] (the padding's above), ordered as the angles are wherever keys differ.
+        const int mb = (m + kBlock - 1) / kBlock * kBlock;
+        int32_t key[kRankSortMax], rank[kRankSortMax];
+        for (int j = 0; j < m; ++j) key[j] = int32_t(ang[j] * 0x1p28);
+        for (int j = m; j < mb; ++j) key[j] = INT32_MAX;
+        for (int b = 0; b < mb; b += kBlock) {  // a block's ranks kept in a register
+            int32_t r[kBlock] = {};
+            for (int i = 0; i < m; ++i)
+                for (int l = 0; l < kBlock; ++l) r[l] += key[i] < key[b + l];
+            for (int l = 0; l < kBlock; ++l) rank[b + l] = r[l];
+        }
+        // Distinct keys rank 0 to m - 1, which sum to m (m - 1) / 2; equal keys (coincident
+        // neighbours, a grid's collinear ones, angles within 2^-28) share the smaller rank and
+        // sum to less. Only then are the angles themselves counted, ties broken by position.
+        int32_t sum = 0;
+        for (int j = 0; j < m; ++j) sum += rank[j];
+        if (sum != m * (m - 1) / 2)
+            for (int j = 0; j < m; ++j) {
+                rank[j] = 0;
+                for (int i = 0; i < m; ++i) rank[j] += (ang[i] < ang[j]) | ((ang[i] == ang[j]) & (i < j));
+            }
+        for (int j = 0; j < m; ++j) order[rank[j]] = j;
+    } else {  // the same order
+        for (int j = 0; j < m; ++j) order[j] = j;
+        std::stable_sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
+    }
+    order[m] = order[0];
+}
 }  // namespace
 
 float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *slots, int m, const float normal[3],
@@ -664,45 +701,12 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
             y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
             ang[j] = pseudo_angle(x[j], y[j]);
         }
-    // next[j]: the neighbour after j counter-clockwise (the last one's is the first), by
-    // angle, ties by position in the list (a stable sort's order). No sorted copies of x and
-    // y: their scatter's scalar stores stalled the vector loads of the loops after it (a
-    // fifth of the time, with GCC).
+    // next[j]: the neighbour after j counter-clockwise (the last one's is the first). No
+    // sorted copies of x and y: their scatter's scalar stores stalled the vector loads of
+    // the loops after it (a fifth of the time, with GCC).
     int next[PointIndex::kMaxK], order[PointIndex::kMaxK + 1];
-    if (m <= kRankSortMax) {
-        // For up to kRankSortMax neighbours, by counting each one's rank, m^2 comparisons
-        // without a branch: a comparison sort's unpredictable branches cost more at the few
-        // neighbours the import asks for (12). They compare 32-bit keys, four to a register
-        // (SSE2 compares two doubles, and no 64-bit integers): the angle x 2^28 truncated, in
-        // [0, 2^30] (the padding's above), ordered as the angles are wherever keys differ.
-        int32_t key[kRankSortMax], rank[kRankSortMax];
-        for (int j = 0; j < m; ++j) key[j] = int32_t(ang[j] * 0x1p28);
-        for (int j = m; j < mb; ++j) key[j] = INT32_MAX;
-        for (int b = 0; b < mb; b += kBlock) {  // a block's ranks kept in a register
-            int32_t r[kBlock] = {};
-            for (int i = 0; i < m; ++i)
-                for (int l = 0; l < kBlock; ++l) r[l] += key[i] < key[b + l];
-            for (int l = 0; l < kBlock; ++l) rank[b + l] = r[l];
-        }
-        // Distinct keys rank 0 to m - 1, which sum to m (m - 1) / 2; equal keys (coincident
-        // neighbours, a grid's collinear ones, angles within 2^-28) share the smaller rank and
-        // sum to less. Only then are the angles themselves counted, ties broken by position.
-        int32_t sum = 0;
-        for (int j = 0; j < m; ++j) sum += rank[j];
-        if (sum != m * (m - 1) / 2)
-            for (int j = 0; j < m; ++j) {
-                rank[j] = 0;
-                for (int i = 0; i < m; ++i) rank[j] += (ang[i] < ang[j]) | ((ang[i] == ang[j]) & (i < j));
-            }
-        for (int j = 0; j < m; ++j) order[rank[j]] = j;
-        order[m] = order[0];
-        for (int j = 0; j < m; ++j) next[j] = order[rank[j] + 1];
-    } else {  // the same order
-        for (int j = 0; j < m; ++j) order[j] = j;
-        std::stable_sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
-        order[m] = order[0];
-        for (int i = 0; i < m; ++i) next[order[i]] = order[i + 1];
-    }
+    angular_order(ang, m, order);
+    for (int i = 0; i < m; ++i) next[order[i]] = order[i + 1];
     // First which adjacent pairs have a circle within the spacing band, without branches
     // (whether one does is unpredictable: mispredictions were most of this function's time),
     // then only those few are solved and tested.
@@ -756,7 +760,7 @@ double widest_gap(const PointIndex &index, uint32_t self, const uint32_t *slots,
     tangent_frame(normals + 3 * size_t(index.id(self)), n, u, v);
     float p[3];
     index.at(self, p);
-    double ang[PointIndex::kMaxK];
+    double x[PointIndex::kMaxK], y[PointIndex::kMaxK], ang[PointIndex::kMaxK];
     for (int j = 0; j < m; ++j) {
         float q[3];
         index.at(slots[j], q);
@@ -772,11 +776,32 @@ double widest_gap(const PointIndex &index, uint32_t self, const uint32_t *slots,
             if (tl > 1e-6)  // spacing.py's threshold: no tilt, no unfolding
                 for (int a = 0; a < 3; ++a) o[a] += depth * t[a] / tl;
         }
-        ang[j] = std::atan2(o[0] * v[0] + o[1] * v[1] + o[2] * v[2], o[0] * u[0] + o[1] * u[1] + o[2] * u[2]);
+        x[j] = o[0] * u[0] + o[1] * u[1] + o[2] * u[2], y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
+        if (x[j] == 0.0 && y[j] == 0.0) x[j] = 1.0;  // no direction: angle 0, as atan2(0, 0) gives
+        ang[j] = pseudo_angle(x[j], y[j]);
     }
-    std::sort(ang, ang + m);
-    double widest = ang[0] + 2.0 * M_PI - ang[m - 1];  // across the wrap
-    for (int j = 1; j < m; ++j) widest = std::max(widest, ang[j] - ang[j - 1]);
+    // In angular order (the pseudo-angle orders as the angle does), the gap from each
+    // neighbour to the next counter-clockwise, compared by the pseudo-angle of the vector
+    // (a.b, a x b), which grows with the gap over [0, 2 pi); one atan2 for the widest alone
+    // (an atan2 per neighbour and the sort of their angles were most of the test's time).
+    // The pseudo-angles' difference (4 a turn, exactly 2 a half turn) says which side of the
+    // wrap a gap near 0 or 2 pi is on, where the cross product's sign is a rounding's.
+    int order[PointIndex::kMaxK + 1];
+    angular_order(ang, m, order);
+    double widest_key = -1.0, dot = 0.0, cross = 0.0;
+    for (int i = 0; i < m; ++i) {
+        const int a = order[i], b = order[i + 1];
+        const double turn = i + 1 < m ? ang[b] - ang[a] : ang[b] + 4.0 - ang[a];
+        const double d = x[a] * x[b] + y[a] * y[b];
+        double c = x[a] * y[b] - y[a] * x[b];
+        if (turn <= 1.0) c = std::max(c, 0.0);  // a gap below a right angle
+        // nearly a whole turn (one neighbour, or all on one ray) when the cross product says none
+        if (turn >= 3.0 && d > 0.0 && c >= 0.0) return 2.0 * M_PI;
+        const double key = pseudo_angle(d, c);
+        if (key > widest_key) widest_key = key, dot = d, cross = c;
+    }
+    double widest = std::atan2(cross, dot);
+    if (widest < 0.0) widest += 2.0 * M_PI;
     return widest;
 }
 

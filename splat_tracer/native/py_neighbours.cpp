@@ -144,13 +144,6 @@ bool bad_normal(Py_ssize_t id) {
     return PyErr_Format(PyExc_ValueError, "normals[%zd] must be a direction (finite, not zero)", id), false;
 }
 
-// normals (N,3) by input id: every one must be a direction. Sets an exception otherwise.
-bool check_normals(const float *n, Py_ssize_t count) {
-    for (Py_ssize_t id = 0; id < count; ++id)
-        if (!is_direction(n + 3 * id)) return bad_normal(id);
-    return true;
-}
-
 // The smallest input id whose normal is not a direction, noted by the rows' workers as they
 // read the normals: checking the rows' normals before the work would read each at random,
 // a cache miss apiece (a tenth of a 10M-point cloud's radii).
@@ -363,7 +356,7 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
 }
 
 // widest_gaps(rows, k, normals, out, threads=0): each row's widest_gap among its k nearest
-// others; normals (N,3) float32 by input id (its neighbours' are read too: all are checked).
+// others; normals (N,3) float32 by input id (its neighbours' are read too, and checked).
 PyObject *PointIndex_widest_gaps(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"rows", "k", "normals", "out", "threads", nullptr};
     PyObject *orows, *onrm, *oout;
@@ -375,15 +368,22 @@ PyObject *PointIndex_widest_gaps(PyObject *self, PyObject *args, PyObject *kwarg
     View rows, nrm, out;
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
     Py_ssize_t sn[2] = {Py_ssize_t(index.size()), 3}, so[1] = {rows.dim(0)};
-    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(oout, "out", 'f', 1, so, true, out) ||
-        !check_normals(nrm.data<float>(), sn[0]))
+    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(oout, "out", 'f', 1, so, true, out))
         return nullptr;
     const float *n = nrm.data<float>();
     float *o = out.data<float>();
     const int32_t *r = rows.data<int32_t>();
+    // The normals read (the row's and its neighbours') are checked as they are read, not all
+    // N first: the importer asks about a few thousand rows of a 10M-point cloud at a time.
+    BadNormals bad;
     if (!for_neighbours(index, r, size_t(rows.dim(0)), k, threads, [&](size_t i, uint32_t self, const float *, const uint32_t *nb) {
-            o[i] = float(widest_gap(index, self, nb, k, n));
-        }, n))
+            bool usable = bad.usable(n + 3 * size_t(r[i]), r[i]);
+            for (int j = 0; j < k; ++j) {
+                const uint32_t id = index.id(nb[j]);
+                usable &= bad.usable(n + 3 * size_t(id), id);
+            }
+            o[i] = usable ? float(widest_gap(index, self, nb, k, n)) : 0.f;
+        }, n) || !bad.check())
         return nullptr;
     Py_RETURN_NONE;
 }
