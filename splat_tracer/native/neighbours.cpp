@@ -632,8 +632,9 @@ constexpr int kRankSortMax = 32;
 constexpr int kBlock = 4;
 
 // order[0..m): the neighbours j by their angles ang[j] (pseudo_angle's, in [0, 4]), ties by
-// position in the list (a stable sort's order); order[m] = order[0] (the turn closes).
-void angular_order(const double *ang, int m, int *order) {
+// position in the list (a stable sort's order); order[m] = order[0] (the turn closes); and
+// rank[j]: j's place in that order.
+void angular_order(const double *ang, int m, int *order, int32_t *rank) {
     if (m <= kRankSortMax) {
         // For up to kRankSortMax neighbours, by counting each one's rank, m^2 comparisons
         // without a branch: a comparison sort's unpredictable branches cost more at the few
@@ -641,14 +642,14 @@ void angular_order(const double *ang, int m, int *order) {
         // (SSE2 compares two doubles, and no 64-bit integers): the angle x 2^28 truncated, in
         // [0, 2^30] (the padding's above), ordered as the angles are wherever keys differ.
         const int mb = (m + kBlock - 1) / kBlock * kBlock;
-        int32_t key[kRankSortMax], rank[kRankSortMax];
+        int32_t key[kRankSortMax];
         for (int j = 0; j < m; ++j) key[j] = int32_t(ang[j] * 0x1p28);
         for (int j = m; j < mb; ++j) key[j] = INT32_MAX;
         for (int b = 0; b < mb; b += kBlock) {  // a block's ranks kept in a register
             int32_t r[kBlock] = {};
             for (int i = 0; i < m; ++i)
                 for (int l = 0; l < kBlock; ++l) r[l] += key[i] < key[b + l];
-            for (int l = 0; l < kBlock; ++l) rank[b + l] = r[l];
+            for (int l = 0; l < kBlock && b + l < m; ++l) rank[b + l] = r[l];
         }
         // Distinct keys rank 0 to m - 1, which sum to m (m - 1) / 2; equal keys (coincident
         // neighbours, a grid's collinear ones, angles within 2^-28) share the smaller rank and
@@ -664,6 +665,7 @@ void angular_order(const double *ang, int m, int *order) {
     } else {  // the same order
         for (int j = 0; j < m; ++j) order[j] = j;
         std::stable_sort(order, order + m, [&](int a, int b) { return ang[a] < ang[b]; });
+        for (int i = 0; i < m; ++i) rank[order[i]] = i;
     }
     order[m] = order[0];
 }
@@ -705,8 +707,9 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
     // sorted copies of x and y: their scatter's scalar stores stalled the vector loads of
     // the loops after it (a fifth of the time, with GCC).
     int next[PointIndex::kMaxK], order[PointIndex::kMaxK + 1];
-    angular_order(ang, m, order);
-    for (int i = 0; i < m; ++i) next[order[i]] = order[i + 1];
+    int32_t rank[PointIndex::kMaxK];
+    angular_order(ang, m, order, rank);
+    for (int j = 0; j < m; ++j) next[j] = order[rank[j] + 1];  // gathered: stored in order, as the loops read it
     // First which adjacent pairs have a circle within the spacing band, without branches
     // (whether one does is unpredictable: mispredictions were most of this function's time),
     // then only those few are solved and tested.
@@ -787,7 +790,8 @@ double widest_gap(const PointIndex &index, uint32_t self, const uint32_t *slots,
     // The pseudo-angles' difference (4 a turn, exactly 2 a half turn) says which side of the
     // wrap a gap near 0 or 2 pi is on, where the cross product's sign is a rounding's.
     int order[PointIndex::kMaxK + 1];
-    angular_order(ang, m, order);
+    int32_t rank[PointIndex::kMaxK];
+    angular_order(ang, m, order, rank);
     double widest_key = -1.0, dot = 0.0, cross = 0.0;
     for (int i = 0; i < m; ++i) {
         const int a = order[i], b = order[i + 1];
