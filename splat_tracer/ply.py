@@ -64,8 +64,10 @@ class PointCloud:
         # a prepared cloud has normals (estimated when the file had none) but no positions
         return len(self.positions if self.positions is not None else self.normals)
 
-    def subset(self, keep: np.ndarray) -> "PointCloud":
-        """The same cloud with only the rows `keep` (a mask or indices) of every per-point array."""
+    def subset(self, keep: np.ndarray, in_place: bool = False) -> "PointCloud":
+        """The same cloud with only the rows `keep` (a mask or indices) of every per-point array.
+        in_place (a mask): the kept rows are moved to the front of this cloud's own arrays,
+        which the result views (a reader's new cloud: no fresh memory; this one is then garbage)."""
         from dataclasses import replace
 
         keep = np.asarray(keep)
@@ -73,7 +75,7 @@ class PointCloud:
             names = list(self.attributes)
             pos, nrm, col, rad, rows, scn, *attrs = compress(
                 [self.positions, self.normals, self.colours, self.radii, self.rows, self.scanners,
-                 *(self.attributes[k] for k in names)], keep)
+                 *(self.attributes[k] for k in names)], keep, in_place=in_place)
             rows = np.flatnonzero(keep) if self.rows is None else rows
             return replace(self, positions=pos, normals=nrm, colours=col, radii=rad, rows=rows, scanners=scn,
                            attributes=dict(zip(names, attrs)))
@@ -407,7 +409,9 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32, copy=False), colours, radii, dropped, merged,
                        first_merged, None, dict(attributes or {}), scanners, dropped_rows=dropped_rows,
                        **fields)
-    return cloud if every and not merged else cloud.subset(keep)  # a mask: faster than indices
+    # a mask: faster than indices; in place: the arrays are the reader's own and this
+    # function's (normals made unit above), and the cloud before the subset is not returned
+    return cloud if every and not merged else cloud.subset(keep, in_place=True)
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

@@ -29,10 +29,11 @@ from .progress import Steps, scaled
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
 BULK_PERCENTILES = (1.0, 99.0)
-# Larger clouds take the percentiles from this many points drawn at random (fixed seed): a
-# percentile of 1M samples is within about 0.01 % of the points of the true one, and the
-# outlier rule (OUTLIER_REACH bulk sizes away) does not notice; at 10M points the full
-# percentiles cost a second.
+# Larger clouds take the percentiles from this many points drawn at random (fixed seed,
+# with replacement: drawing without it permutes all N indices, 80 MB of fresh memory at 10M
+# points): a percentile of 1M samples is within about 0.01 % of the points of the true one,
+# and the outlier rule (OUTLIER_REACH bulk sizes away) does not notice; at 10M points the
+# full percentiles cost a second.
 BULK_SAMPLE = 1_000_000
 # How many bulk sizes outside the bulk's box a point must lie to be an outlier. Genuine
 # sparse parts of a scan (a terrestrial scanner's far returns, a driveway leaving a
@@ -133,7 +134,7 @@ def bulk_mask(positions: np.ndarray) -> np.ndarray:
     with np.errstate(over="ignore", invalid="ignore"):  # coordinates near 1e308: no bulk, no outliers
         sample = pos
         if len(pos) > BULK_SAMPLE:  # percentiles of a seeded sample: the same box, to 1e-3 of the bulk's size
-            sample = pos[np.random.default_rng(0).choice(len(pos), BULK_SAMPLE, replace=False)]
+            sample = pos[np.random.default_rng(0).integers(0, len(pos), BULK_SAMPLE)]
         lo, hi = np.percentile(sample, BULK_PERCENTILES, axis=0)
         size = float(np.max(hi - lo))
         # Percentiles of coordinates near +-1.8e308 can overflow to +-inf or NaN on some axis
@@ -232,10 +233,10 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             scaled(progress, *step.span("estimate", "orient")), close_gaps=hole_free and cloud.radii is None)
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
-    inliers = np.flatnonzero(bulk)
-    radii_tree = tree if len(inliers) == len(local) else None  # the normals' k-d tree when it is the bulk's
+    whole = bool(bulk.all())  # no copies of a 10M-point cloud (nor an index of it) when nothing is left out
+    inliers = None if whole else np.flatnonzero(bulk)
+    radii_tree = tree if whole else None  # the normals' k-d tree when it is the bulk's
     try:
-        whole = len(inliers) == len(local)  # no copies of a 10M-point cloud when nothing is left out
         hood = spacing.analyse(local if whole else local[inliers], cloud.normals if whole else cloud.normals[inliers],
                                k, workers, progress=step("radii"),
                                tree=radii_tree, known_spacing=known_spacing,
@@ -249,8 +250,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     if cloud.radii is None:
         base = hood.covering if hood.covering is not None else hood.spacing
         radii = base  # the bulk is every point (no 10M-point copy); else the strays get theirs below
-        strays = np.flatnonzero(~bulk)
-        if len(strays):  # their distance to their k-th nearest point, among all
+        if not whole:  # the strays: their distance to their k-th nearest point, among all
+            strays = np.flatnonzero(~bulk)
             radii = np.empty(len(local), np.float32)
             radii[inliers] = base
             kk = min(k, len(local) - 1)

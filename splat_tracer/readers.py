@@ -28,7 +28,11 @@ from .progress import Cancelled
 FORMATS = ("PLY", "LAS", "E57", "TEXT")
 EXTENSIONS = (".ply", ".las", ".laz", ".e57", ".xyz", ".pts", ".txt", ".csv")
 _SNIFF_BYTES = 4096
-_LAS_CHUNK = 1 << 20  # LAS/LAZ points read at a time (about 0.1-0.5 s each)
+# LAS/LAZ points read at a time (about 0.05-0.25 s each). laspy reads a chunk's records into
+# a new buffer (36 MB per 2^20 points of format 7): beyond glibc's largest mmap threshold
+# (32 MB) each one is fresh pages from the system, faulted in again (10M points: 0.3-0.6 s);
+# smaller ones are reused from the heap.
+_LAS_CHUNK = 1 << 19
 _TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 file text in another encoding
 
 
@@ -92,8 +96,13 @@ def _colour_channels(path: str, channels: dict) -> np.ndarray:
     columns = [np.asarray(c) for c in channels.values()]
     if hi <= 65535 and all(np.issubdtype(c.dtype, np.integer) and (not len(c) or c.min() >= 0) for c in columns):
         out = np.empty((len(columns[0]), 4), np.float32)
-        linear_colours(columns, 255 if hi <= 255 else 65535, out=out)  # LAS: uint16 channels, by table
-        out[:, 3] = 1.0
+        scale = 255 if hi <= 255 else 65535
+
+        def block(b: int, e: int) -> None:  # LAS: uint16 channels, by table, on all cores
+            linear_colours([c[b:e] for c in columns], scale, out=out[b:e])
+            out[b:e, 3] = 1.0
+
+        in_blocks(block, len(out))
         return out
     if hi <= 255:
         rgb = np.column_stack([np.asarray(c, np.float64) / 255.0 for c in channels.values()])
@@ -131,7 +140,8 @@ def read_las(path: str, progress=None) -> PointCloud:
                 raise CloudFileError(f"{path}: is compressed (LAZ) and no LAZ backend is installed (the lazrs "
                                      "package decompresses it)")
             dims = set(header.point_format.dimension_names)
-            fields = [c for c in ("red", "green", "blue") if {"red", "green", "blue"} <= dims]
+            rgb = ("red", "green", "blue")
+            fields = [c for c in rgb if set(rgb) <= dims]
             fields += [a for a in ("intensity", "classification", "return_number") if a in dims]
             # In chunks, so that a long read (LAZ decompresses at a few million points a
             # second) reports progress and can be cancelled between them; each chunk goes
@@ -148,8 +158,8 @@ def read_las(path: str, progress=None) -> PointCloud:
                     raise CloudFileError(f"{path}: holds more points than the {count:,} its header declares")
                 raw = {name: np.asarray(chunk[name]) for name in ("X", "Y", "Z", *fields)}
                 for name in fields:
-                    if column[name] is None:
-                        column[name] = np.empty(count, raw[name].dtype)
+                    if column[name] is None:  # attributes are kept as int32 (Blender's INT): converted here
+                        column[name] = np.empty(count, raw[name].dtype if name in rgb else np.int32)
 
                 def convert(b: int, e: int, at: int = read) -> None:
                     for i, name in enumerate(("X", "Y", "Z")):  # scaled and offset in float64
@@ -176,8 +186,7 @@ def read_las(path: str, progress=None) -> PointCloud:
             colours = _colour_channels(path, channels)
         else:
             notes.append("its colour fields are all zero: imported without colours")
-    attributes = {name: column[name].astype(np.int32) for name in ("intensity", "classification", "return_number")
-                  if name in column}
+    attributes = {name: column[name] for name in ("intensity", "classification", "return_number") if name in column}
     return make_cloud(path, pos, None, colours, None, attributes, drop_non_finite=True,
                       format="LAZ" if compressed else "LAS", orientation="UP", notes=notes)
 

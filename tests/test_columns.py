@@ -35,6 +35,26 @@ def test_compress_is_boolean_indexing_in_blocks(threads):
             np.testing.assert_array_equal(o, a[keep])
 
 
+@pytest.mark.parametrize("drop", [0.0, 1e-4, 0.3, 1.0])
+def test_compress_in_place_moves_the_kept_rows_to_the_front(drop):
+    n = 3 * columns.BLOCK_ROWS + 123
+    keep = RNG.random(n) >= drop
+    keep[columns.BLOCK_ROWS + 5] = False  # a row dropped past the first block: the later ones move
+    arrays = [RNG.normal(size=(n, 3)), None, RNG.integers(0, 9, n).astype(np.int32), RNG.random((n, 4), np.float32)]
+    want = [None if a is None else a[keep] for a in arrays]
+    mine = [None if a is None else a.copy() for a in arrays]
+    out = columns.compress(mine, keep, in_place=True)
+    for a, w, o in zip(mine, want, out):
+        assert (o is None) == (w is None)
+        if a is not None:
+            np.testing.assert_array_equal(o, w)
+            assert len(o) == 0 or np.shares_memory(o, a)  # no new array
+    # an array that cannot be written (a broadcast) is copied: all of them are then
+    fixed = np.broadcast_to(np.float64(7), (n,))
+    out = columns.compress([mine[0][:n].copy(), fixed], keep, in_place=True)
+    assert not np.shares_memory(out[1], fixed) and (out[1] == 7).all() and len(out[1]) == keep.sum()
+
+
 def test_in_blocks_covers_every_row_once_and_passes_errors_on():
     n = 5 * columns.BLOCK_ROWS + 7
     seen = np.zeros(n, np.int32)
