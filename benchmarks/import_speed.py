@@ -192,7 +192,9 @@ def run_case(case: str, path: str) -> dict:
                 cloud = readers.read_cloud(path)
                 cloud = replace(cloud, normals=np.tile(np.float32([0, 0, 1]), (len(cloud), 1)), oriented=True)
                 stages(0.2, "read ")
-                prep = prepare.prepare(cloud, path, progress=stages)
+                handed = [cloud]  # handed over as importer.load does: prepare lets go of the float64 positions
+                del cloud
+                prep = prepare.prepare(handed.pop(), path, progress=stages)
             t_load = time.perf_counter() - t0
             ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
             out["seconds"] = time.perf_counter() - t0

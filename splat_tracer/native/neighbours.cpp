@@ -157,7 +157,7 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
             root.lo[a] = std::min(root.lo[a], slice_box[t].lo[a]), root.hi[a] = std::max(root.hi[a], slice_box[t].hi[a]);
     }
     bounds_ = root;
-    while (((uint64_t(n) + (uint64_t(1) << depth_) - 1) >> depth_) > kLeafSize) ++depth_;
+    while (double(n) > kLeafAverage * std::ldexp(1.0, depth_)) ++depth_;  // ceil(n / 2^depth) <= 23 <= kLeafSize
     const size_t inner = (size_t(1) << depth_) - 1;
     split_.resize(inner);
     axis_.resize(inner);

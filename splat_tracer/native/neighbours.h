@@ -6,7 +6,7 @@
 // each inner node splits its range at the middle by the median along the widest side of
 // its cell, so the tree is balanced whatever the density (a terrestrial scan's near and far
 // returns alike) and needs no child pointers: a node is 5 bytes (split value and axis).
-// Leaves hold kLeafSize / 2 to kLeafSize points.
+// Leaves hold about 11 to 23 points (kLeafAverage).
 //
 // Queries are for the indexed points themselves (the import asks about every point) or for
 // other positions. A point's query starts in its own leaf, which gives a tight bound before
@@ -29,9 +29,14 @@ class PointIndex {
 public:
     // A query returns at most this many neighbours (the import asks for 6 to 24).
     static constexpr int kMaxK = 256;
-    // Points per leaf, at most. 16 measured fastest for k = 6..24 at 1M points (8: more
-    // nodes visited; 32: more distances computed than the bound needs).
-    static constexpr size_t kLeafSize = 16;
+    // Points per leaf: the tree has 2^depth leaves, the fewest with at most kLeafAverage
+    // points each on average, so a leaf holds from about kLeafAverage / 2 to kLeafAverage
+    // (at most kLeafSize) points, 16 in the middle (in log scale). 16 measured fastest for
+    // k = 6..24 at 1M points (8: more nodes visited; 32: more distances computed than the
+    // bound needs); at 10M points an upper bound of 16 left 9.5 a leaf, 7 % slower radii
+    // than 19.
+    static constexpr double kLeafAverage = 22.627416997969522;  // 16 sqrt(2)
+    static constexpr size_t kLeafSize = 24;
     static constexpr uint32_t kNone = 0xffffffffu;
 
     // xyz: n points, 3 floats each, finite and within 1e18 (InputError otherwise); at most
