@@ -50,7 +50,7 @@ def rows_outside(a: np.ndarray, lo, hi) -> np.ndarray:
     out = np.empty(len(a), bool)
 
     def block(b: int, e: int) -> None:
-        rows = a[b:e]
+        rows = np.asarray(a[b:e], np.float64)  # compared in float64 (numpy 1.x would round lo and hi to float32)
         out[b:e] = (rows[:, 0] < lo[0]) | (rows[:, 0] > hi[0])
         for c in range(1, a.shape[1]):
             out[b:e] |= (rows[:, c] < lo[c]) | (rows[:, c] > hi[c])

@@ -39,8 +39,9 @@ class CloudFileError(ValueError):
 
 @dataclass
 class PointCloud:
-    # (N,3) float64, file coordinates; None in a prepared cloud (prepare.PreparedCloud: its
-    # origin and float32 offsets hold them, and 10M float64 positions are 240 MB)
+    # (N,3) file coordinates: float64, or float32 as a file's float32 coordinates are (float64
+    # holds them exactly, so every use gives the same answer; 120 MB less at 10M points);
+    # None in a prepared cloud (prepare.PreparedCloud: its origin and float32 offsets hold them)
     positions: Optional[np.ndarray]
     normals: Optional[np.ndarray]    # (N,3) float32, unit length; None: the file has none (estimated on import)
     colours: Optional[np.ndarray]    # (N,4) float32 scene-linear RGBA, or None
@@ -283,11 +284,13 @@ def read_ply(path: str) -> PointCloud:
     if gaussians.is_gaussian(names):
         return gaussians.read_gaussians(path, v, names)
 
-    # Coordinates (float64), normals (float32 is enough for a direction; make_cloud makes
-    # them unit) and 8/16-bit colours (by table) in one pass over the records, a block of
-    # rows at a time on all cores (10M points: 1.2 s field by field, 0.2 s this way).
+    # Coordinates (float32 when the file's are, else float64), normals (float32 is enough for
+    # a direction; make_cloud makes them unit) and 8/16-bit colours (by table) in one pass
+    # over the records, a block of rows at a time on all cores (10M points: 1.2 s field by
+    # field, 0.2 s this way).
     rgb = ("red", "green", "blue")
-    pos = np.empty((n, 3))
+    single = all(v[c].dtype == np.float32 for c in "xyz")
+    pos = np.empty((n, 3), np.float32 if single else np.float64)
     normals = np.empty((n, 3), np.float32) if {"nx", "ny", "nz"} <= names else None
     colours, scale = None, None
     if set(rgb) <= names:
@@ -378,7 +381,9 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     merged into their first row. `fields` are PointCloud's other fields (format, orientation,
     oriented, notes). Raises CloudFileError naming `path` when nothing usable is left.
     float32 normals are made unit in place: the readers hand over arrays of their own."""
-    pos = np.asarray(positions, dtype=np.float64)
+    pos = np.asarray(positions)
+    if pos.dtype != np.float32:  # float32 coordinates stay so (see PointCloud.positions)
+        pos = pos.astype(np.float64, copy=False)
     n = len(pos)
     keep = np.ones(n, bool)
     dropped_rows = 0

@@ -130,12 +130,12 @@ def resolve_orientation(cloud: PointCloud, orientation: str = "AUTO") -> str:
 
 def bulk_mask(positions: np.ndarray) -> np.ndarray:
     """(N,) bool: True for the points that are not outliers (see the module's text)."""
-    pos = np.asarray(positions, dtype=np.float64)
+    pos = np.asarray(positions)  # float64, or a float32 file's coordinates (compared in float64 below)
     with np.errstate(over="ignore", invalid="ignore"):  # coordinates near 1e308: no bulk, no outliers
         sample = pos
         if len(pos) > BULK_SAMPLE:  # percentiles of a seeded sample: the same box, to 1e-3 of the bulk's size
             sample = pos[np.random.default_rng(0).integers(0, len(pos), BULK_SAMPLE)]
-        lo, hi = np.percentile(sample, BULK_PERCENTILES, axis=0)
+        lo, hi = np.percentile(np.asarray(sample, np.float64), BULK_PERCENTILES, axis=0)
         size = float(np.max(hi - lo))
         # Percentiles of coordinates near +-1.8e308 can overflow to +-inf or NaN on some axis
         # while another axis gives a finite size: then every point "lay outside" the bulk and

@@ -253,9 +253,14 @@ def test_first_of_duplicates_of_float32_sourced_coordinates():
     high half into the low one for them)."""
     rng = np.random.default_rng(1)
     p = (rng.normal(size=(200_000, 3)) * [1e3, 1e3, 10] + [5e5, 4e6, 100]).astype(np.float32).astype(np.float64)
-    check_first_of_duplicates(sprinkle_copies(rng, p, 30_000))
+    p = sprinkle_copies(rng, p, 30_000)
+    want = check_first_of_duplicates(p)
+    # the float32 values themselves (a float32 file's coordinates, not widened): the same answer
+    np.testing.assert_array_equal(check_first_of_duplicates(p.astype(np.float32)), want)
     grid = np.stack(np.meshgrid(*[np.arange(40, dtype=np.float32)] * 3), axis=-1).reshape(-1, 3).astype(np.float64)
     check_first_of_duplicates(np.concatenate([grid, grid[::7], grid[::-3]]))  # a grid and copies
+    odd = np.array([[0.0, -0.0, 1], [-0.0, 0.0, 1], [np.nan, 0, 1], [np.nan, 0, 1], [np.inf, 2, 3], [np.inf, 2, 3]])
+    np.testing.assert_array_equal(check_first_of_duplicates(odd.astype(np.float32)), [1, 0, 1, 1, 1, 0])
 
 
 def test_rows_equal_only_through_negative_zero_are_duplicates():

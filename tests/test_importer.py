@@ -26,6 +26,35 @@ def _write(path, p, n=None, **kw):
     return str(path)
 
 
+def test_float32_coordinates_import_as_their_float64_values(tmp_path):
+    """A file's float32 coordinates are kept as float32 until the origin is taken (no
+    float64 copy of them): the import is the same as the same values written as float64,
+    georeferenced, with duplicates, a NaN row and an outlier."""
+    from plyfile import PlyData, PlyElement
+
+    p, n = fibonacci_sphere(4000, centre=(0.0, 0.0, 0.0))
+    p = (p * 20 + [431234.5, 5412345.25, 312.75]).astype(np.float32)
+    p[100:120] = p[:20]  # exact duplicates
+    p[7] = np.nan
+    p[3999] = p[0] * 1e3  # far away: an outlier (kept)
+    paths = []
+    for dtype in ("f4", "f8"):
+        rows = np.empty(len(p), [("x", dtype), ("y", dtype), ("z", dtype), ("nx", "f4"), ("ny", "f4"), ("nz", "f4")])
+        for i, c in enumerate("xyz"):
+            rows[c], rows["n" + c] = p[:, i], n[:, i]
+        paths.append(str(tmp_path / f"{dtype}.ply"))
+        PlyData([PlyElement.describe(rows, "vertex")]).write(paths[-1])
+    assert readers.read_cloud(paths[0]).positions.dtype == np.float32
+    assert readers.read_cloud(paths[1]).positions.dtype == np.float64
+    a, b = (importer.load(path) for path in paths)
+    assert a.outliers == b.outliers == 1 and a.cloud.merged_duplicates == b.cloud.merged_duplicates == 19  # row 107 copies row 7, now NaN
+    np.testing.assert_array_equal(a.origin, b.origin)
+    np.testing.assert_array_equal(a.local, b.local)
+    np.testing.assert_array_equal(a.radii, b.radii)
+    np.testing.assert_array_equal(a.cloud.rows, b.cloud.rows)
+    assert a.hood.describe() == b.hood.describe()
+
+
 # --- axes and scale ----------------------------------------------------------------------
 
 def test_axes_and_scale_turn_normals_and_keep_the_georeference_exact(tmp_path):

@@ -46,10 +46,13 @@ inline uint64_t coordinate_bits(double v) {
     return b;
 }
 
-inline uint64_t row_hash(const double *p) {
+// Coord: double, or float (each value converted to double, exactly: the same hash as the
+// same points in float64).
+template <class Coord>
+inline uint64_t row_hash(const Coord *p) {
     uint64_t h = 0;
     for (int a = 0; a < 3; ++a) {
-        uint64_t b = coordinate_bits(p[a]);
+        uint64_t b = coordinate_bits(double(p[a]));
         // The high half folded into the low first: a multiplication only carries bits
         // upward, and coordinates read from float32 have their 29 low mantissa bits zero,
         // which would leave the hash 35 bits (a 10M-point float32 scan then had ~1,500
@@ -60,7 +63,8 @@ inline uint64_t row_hash(const double *p) {
     return h;
 }
 
-inline bool same_position(const double *p, const double *q) { return p[0] == q[0] && p[1] == q[1] && p[2] == q[2]; }
+template <class Coord>
+inline bool same_position(const Coord *p, const Coord *q) { return p[0] == q[0] && p[1] == q[1] && p[2] == q[2]; }
 
 // A record is one 64-bit word: 32 bits of its row's hash above the row number, so that
 // sorting records sorts them by hash and then by row.
@@ -99,8 +103,9 @@ uint64_t *sort_records(uint64_t *records, uint64_t *scratch, size_t m) {
 // The `len` rows (ascending) of a run of records with one hash: each row equal to an earlier
 // one of them is not first. Usually they are all copies of the first row; otherwise (a
 // collision) they are sorted by position, then by row.
-void resolve_run(const uint64_t *run, size_t len, const double *points, uint8_t *first) {
-    const double *p0 = points + 3 * row_of(run[0]);
+template <class Coord>
+void resolve_run(const uint64_t *run, size_t len, const Coord *points, uint8_t *first) {
+    const Coord *p0 = points + 3 * row_of(run[0]);
     size_t k = 1;
     while (k < len && same_position(points + 3 * row_of(run[k]), p0)) ++k;
     if (k == len) {
@@ -115,9 +120,10 @@ void resolve_run(const uint64_t *run, size_t len, const double *points, uint8_t 
     entries.reserve(len);
     for (size_t j = 0; j < len; ++j) {
         const size_t row = row_of(run[j]);
-        const double *p = points + 3 * row;
+        const Coord *p = points + 3 * row;
         if (std::isnan(p[0]) || std::isnan(p[1]) || std::isnan(p[2])) continue;  // equal to no row
-        entries.push_back({{coordinate_bits(p[0]), coordinate_bits(p[1]), coordinate_bits(p[2])}, row});
+        entries.push_back({{coordinate_bits(double(p[0])), coordinate_bits(double(p[1])), coordinate_bits(double(p[2]))},
+                           row});
     }
     // Any total order does: equal positions (equal bits, now that -0.0 is +0.0 and NaN is
     // out) end up together, the earliest row first.
@@ -129,7 +135,8 @@ void resolve_run(const uint64_t *run, size_t len, const double *points, uint8_t 
 }
 
 // Marks the rows of one bucket's sorted records: each run of equal hashes is resolved.
-void resolve_bucket(const uint64_t *sorted, size_t m, const double *points, uint8_t *first) {
+template <class Coord>
+void resolve_bucket(const uint64_t *sorted, size_t m, const Coord *points, uint8_t *first) {
     auto in_run = [&](size_t i) {
         const uint64_t h = hash_of(sorted[i]);
         return (i > 0 && hash_of(sorted[i - 1]) == h) || (i + 1 < m && hash_of(sorted[i + 1]) == h);
@@ -150,9 +157,8 @@ void resolve_bucket(const uint64_t *sorted, size_t m, const double *points, uint
     }
 }
 
-}  // namespace
-
-void first_of_duplicates(const double *points, size_t n, uint8_t *first, int threads) {
+template <class Coord>
+void first_of_duplicates_of(const Coord *points, size_t n, uint8_t *first, int threads) {
     if (n > UINT32_MAX) throw InputError("at most 4294967295 points (32-bit row numbers)");
     if (n < 2) {
         if (n == 1) first[0] = 1;
@@ -215,6 +221,16 @@ void first_of_duplicates(const double *points, size_t n, uint8_t *first, int thr
         const uint64_t *sorted = sort_records(records.data() + begin, scratch.data(), m);
         resolve_bucket(sorted, m, points, first);
     });
+}
+
+}  // namespace
+
+void first_of_duplicates(const double *points, size_t n, uint8_t *first, int threads) {
+    first_of_duplicates_of(points, n, first, threads);
+}
+
+void first_of_duplicates(const float *points, size_t n, uint8_t *first, int threads) {
+    first_of_duplicates_of(points, n, first, threads);
 }
 
 }  // namespace splat

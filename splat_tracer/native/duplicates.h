@@ -20,5 +20,8 @@ namespace splat {
 // hashes are compared by value. Linear time unless hashes collide; a pathological pile of
 // distinct rows with one hash is sorted by value, O(n log n).
 void first_of_duplicates(const double *points, size_t n, uint8_t *first, int threads);
+// The same for float32 points (a float32 file's coordinates, not widened first): the same
+// answer as for the same points in float64.
+void first_of_duplicates(const float *points, size_t n, uint8_t *first, int threads);
 
 }  // namespace splat

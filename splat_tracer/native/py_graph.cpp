@@ -137,10 +137,31 @@ PyObject *take_rows_py(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
+// first_of_duplicates(points, out, threads=0): points (N,3) float64 or float32.
 PyObject *first_of_duplicates_py(PyObject *, PyObject *args, PyObject *kwargs) {
-    return per_point<uint8_t>(args, kwargs, 'B', [](const double *p, size_t n, uint8_t *out, int threads) {
-        first_of_duplicates(p, n, out, threads);
-    });
+    static const char *kwlist[] = {"points", "out", "threads", nullptr};
+    PyObject *op, *oout;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|i", const_cast<char **>(kwlist), &op, &oout, &threads))
+        return nullptr;
+    if (!check_threads(threads)) return nullptr;
+    View p, out;
+    Py_ssize_t s3[2] = {-1, 3};
+    // float32 when it is (no widened copy of a float32 file's coordinates), else float64
+    const bool single = [&] {
+        View probe;
+        if (!get_array(op, "points", 'f', 2, s3, false, probe)) return PyErr_Clear(), false;
+        return true;
+    }();
+    if (!get_array(op, "points", single ? 'f' : 'd', 2, s3, false, p)) return nullptr;
+    Py_ssize_t sn[1] = {p.dim(0)};
+    if (!get_array(oout, "out", 'B', 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
+    if (!run_graph(Py_None, [&](const GraphPoll &) {
+            if (single) first_of_duplicates(p.data<float>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
+            else first_of_duplicates(p.data<double>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
+        }))
+        return nullptr;
+    Py_RETURN_NONE;
 }
 
 PyObject *graph_weights(PyObject *, PyObject *args, PyObject *kwargs) {
@@ -259,7 +280,7 @@ PyMethodDef graph_methods[] = {
      "take_rows(array, order, out, threads=0)\n--\n\nout[r] = array[order[r]] for float64 (n,c) arrays, in parallel."},
     {"first_of_duplicates", keywords(first_of_duplicates_py), METH_VARARGS | METH_KEYWORDS,
      "first_of_duplicates(points, out, threads=0)\n--\n\n"
-     "out[i] = 1 when no earlier row of the float64 (n,3) points has row i's position (duplicates.h)."},
+     "out[i] = 1 when no earlier row of the float64 or float32 (n,3) points has row i's position (duplicates.h)."},
     {"graph_weights", keywords(graph_weights), METH_VARARGS | METH_KEYWORDS,
      "graph_weights(points, normals, neighbours, across, out, threads=0, progress=None)\n--\n\n"
      "Weights of the neighbour table's edges (graph.h): float64 (n,3) points and normals, int32 (n,k) "
