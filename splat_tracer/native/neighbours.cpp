@@ -16,10 +16,7 @@ namespace splat {
 
 namespace {
 
-struct BuildPoint {
-    float c[3];
-    uint32_t id;
-};
+using BuildPoint = IndexedPoint;
 
 // The axis along which the points spread widest, from at most kSpreadSample of them (evenly
 // strided: an estimate is enough to choose an axis). Not the cell's widest side: a cell cut
@@ -126,8 +123,9 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
     // were, on one thread); their pages are first touched by the threads that fill them.
     constexpr size_t kSlice = size_t(1) << 16;
     const size_t slices = (n + kSlice - 1) / kSlice;
-    Buffer<BuildPoint> pts(n);
-    pts.prefer_huge_pages();
+    pts_.allocate(n);
+    pts_.prefer_huge_pages();
+    Buffer<BuildPoint> &pts = pts_;  // built in place: the tree keeps its points so
     std::vector<Box> slice_box(slices);
     std::vector<size_t> slice_bad(slices, n);
     parallel_for(slices, threads, [&](size_t t) {
@@ -206,23 +204,18 @@ PointIndex::PointIndex(const float *xyz, size_t n, int threads) : n_(n) {
             }
         }, always);
     }
-    for (Buffer<float> *axis : {&x_, &y_, &z_}) axis->allocate(n), axis->prefer_huge_pages();
-    id_.allocate(n), slot_.allocate(n);
-    id_.prefer_huge_pages(), slot_.prefer_huge_pages();
-    // On the threads, in slices (the ids are distinct: the scatter into slot_ never races):
-    // one thread took a fifth of a 10M-point build for this copy.
+    slot_.allocate(n);
+    slot_.prefer_huge_pages();
+    // The points stay where the build left them (the tree's order); only the inverse order
+    // is written, on the threads, in slices (the ids are distinct: the scatter never races).
+    // A copy of the points by axis took a fifth of a 10M-point build, and 160 MB more.
     parallel_for(slices, threads, [&](size_t t) {
-        for (size_t i = t * kSlice; i < std::min(n, (t + 1) * kSlice); ++i) {
-            x_[i] = pts[i].c[0], y_[i] = pts[i].c[1], z_[i] = pts[i].c[2];
-            id_[i] = pts[i].id;
-            slot_[pts[i].id] = uint32_t(i);
-        }
+        for (size_t i = t * kSlice; i < std::min(n, (t + 1) * kSlice); ++i) slot_[pts[i].id] = uint32_t(i);
     }, always);
 }
 
 void PointIndex::scan(size_t b, size_t e, const float q[3], Best &best) const {
-    // Distances a leaf's worth at a time, in a loop the compiler vectorises (the
-    // coordinates are stored by axis), then the few candidates nearer than the k-th.
+    // Distances a leaf's worth at a time, then the few candidates nearer than the k-th.
     float d[kLeafSize];
     const int k = best.k;
     int count = best.count;
@@ -230,9 +223,9 @@ void PointIndex::scan(size_t b, size_t e, const float q[3], Best &best) const {
     uint32_t *slot = best.slot;
     for (; b < e; b += kLeafSize) {
         const size_t m = std::min(kLeafSize, e - b);
-        const float *x = &x_[b], *y = &y_[b], *z = &z_[b];
+        const IndexedPoint *p = &pts_[b];
         for (size_t i = 0; i < m; ++i) {
-            const float dx = x[i] - q[0], dy = y[i] - q[1], dz = z[i] - q[2];
+            const float dx = p[i].c[0] - q[0], dy = p[i].c[1] - q[1], dz = p[i].c[2] - q[2];
             d[i] = dx * dx + dy * dy + dz * dz;
         }
         if (best.exclude != kNone && best.exclude - b < m) d[best.exclude - b] = std::numeric_limits<float>::infinity();
@@ -292,7 +285,7 @@ int PointIndex::nearest(const float q[3], uint32_t exclude, int k, float *d2, ui
 }
 
 int PointIndex::nearest_of(uint32_t s, int k, float *d2, uint32_t *slots) const {
-    const float q[3] = {x_[s], y_[s], z_[s]};
+    const float q[3] = {pts_[s].c[0], pts_[s].c[1], pts_[s].c[2]};
     return nearest(q, s, k, d2, slots);
 }
 
@@ -346,15 +339,14 @@ struct Candidates {
     size_t count = 0;
 
     void clear() { count = 0; }
-    void append(const float *px, const float *py, const float *pz, size_t b, size_t e) {
+    void append(const IndexedPoint *p, size_t b, size_t e) {
         const size_t n = count + (e - b);
         if (x.size() < n + kLanes) {
             const size_t grown = std::max(2 * x.size(), n + kLanes);
             x.resize(grown), y.resize(grown), z.resize(grown), slot.resize(grown);
         }
-        std::copy(px + b, px + e, &x[count]), std::copy(py + b, py + e, &y[count]);
-        std::copy(pz + b, pz + e, &z[count]);
-        for (size_t s = b; s < e; ++s) slot[count++] = uint32_t(s);
+        for (size_t s = b; s < e; ++s, ++count)
+            x[count] = p[s].c[0], y[count] = p[s].c[1], z[count] = p[s].c[2], slot[count] = uint32_t(s);
     }
     // count rounded up to whole vectors, the padding points at infinity: no query's
     // distance to them (+inf) is below any bound.
@@ -514,7 +506,7 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
     thread_local std::vector<float> dist;
     thread_local std::vector<uint32_t> within;
     cand.clear();
-    cand.append(x_.data(), y_.data(), z_.data(), sb, se);
+    cand.append(pts_.data(), sb, se);
     const size_t sub = cand.padded();
     if (dist.size() < sub) dist.resize(sub), within.resize(sub + Candidates::kLanes);
     // Each point's k-th nearest within the subtree, or the cap if nearer: a bound on its
@@ -523,11 +515,11 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
     // gathering: whether k are within it is a count; the k-th themselves only otherwise.
     thread_local std::vector<float> sub_dist;  // the points' distances to the subtree, a row each
     if (sub_dist.size() < m * sub) sub_dist.resize(m * sub);
-    Box box{{x_[b], y_[b], z_[b]}, {x_[b], y_[b], z_[b]}};
+    Box box{{pts_[b].c[0], pts_[b].c[1], pts_[b].c[2]}, {pts_[b].c[0], pts_[b].c[1], pts_[b].c[2]}};
     bool all_within = true;
     for (size_t i = 0; i < m; ++i) {
         const size_t s = b + i;
-        const float q[3] = {x_[s], y_[s], z_[s]};
+        const float q[3] = {pts_[s].c[0], pts_[s].c[1], pts_[s].c[2]};
         float *row = &sub_dist[i * sub];
         distances(cand, sub, q, row);
         row[s - sb] = inf;  // not itself
@@ -551,8 +543,7 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
     const bool gathered = points <= kMaxGathered;
     size_t n = sub;
     if (gathered) {
-        for (const auto &leaf : leaves) cand.append(x_.data(), y_.data(), z_.data(), begin(leaf.first, depth_),
-                                                    begin(leaf.first + 1, depth_));
+        for (const auto &leaf : leaves) cand.append(pts_.data(), begin(leaf.first, depth_), begin(leaf.first + 1, depth_));
         n = cand.padded();
         if (dist.size() < n) dist.resize(n), within.resize(n + Candidates::kLanes);
     }
@@ -563,7 +554,7 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
         uint32_t *si = slots + i * k;
         size_t found = 0;
         if (gathered) {
-            const float q[3] = {x_[s], y_[s], z_[s]};
+            const float q[3] = {pts_[s].c[0], pts_[s].c[1], pts_[s].c[2]};
             distances(cand, n, q, dist.data());
             dist[s - sb] = inf;
             // The k nearest are the k smallest (ties: the earlier candidate first) of those
@@ -579,7 +570,7 @@ void PointIndex::leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *sl
         }
         if (found < size_t(k)) {  // one search of its own, exact
             Best best{k, 0, di, si, uint32_t(s)};
-            const float q[3] = {x_[s], y_[s], z_[s]};
+            const float q[3] = {pts_[s].c[0], pts_[s].c[1], pts_[s].c[2]};
             scan(sb, se, q, best);
             float off[3] = {0.f, 0.f, 0.f};
             search(q, best, 0, 0, 0.f, off, sb, se);

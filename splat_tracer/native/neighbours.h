@@ -25,6 +25,13 @@
 
 namespace splat {
 
+// A point of a PointIndex: its coordinates and input id, together (16 bytes): the tree is
+// built by moving these, and kept in them (a point's coordinates are read together).
+struct IndexedPoint {
+    float c[3];
+    uint32_t id;
+};
+
 class PointIndex {
 public:
     // A query returns at most this many neighbours (the import asks for 6 to 24).
@@ -44,13 +51,12 @@ public:
     PointIndex(const float *xyz, size_t n, int threads);
 
     size_t size() const { return n_; }
-    // Input ids in the tree's order: neighbouring points are close in this order.
-    const Buffer<uint32_t> &order() const { return id_; }
     // Queries answer with slots, positions in the tree's order (reading a neighbour's
-    // position by input id would cost a cache miss per neighbour on a large cloud).
+    // position by input id would cost a cache miss per neighbour on a large cloud);
+    // id(slot) for slots 0, 1, ... is the tree's order: neighbouring points are close in it.
     uint32_t slot(uint32_t id) const { return slot_[id]; }
-    uint32_t id(uint32_t slot) const { return id_[slot]; }
-    void at(uint32_t slot, float out[3]) const { out[0] = x_[slot], out[1] = y_[slot], out[2] = z_[slot]; }
+    uint32_t id(uint32_t slot) const { return pts_[slot].id; }
+    void at(uint32_t slot, float out[3]) const { out[0] = pts_[slot].c[0], out[1] = pts_[slot].c[1], out[2] = pts_[slot].c[2]; }
     // The end of the leaf holding slot s (one past its last point).
     size_t leaf_end(size_t s) const { return begin(leaf_of(s) + 1, depth_); }
 
@@ -92,9 +98,8 @@ private:
     size_t n_ = 0;
     int depth_ = 0;                 // leaves are the nodes at this depth
     Box bounds_{};                  // the root's cell: the points' bounding box
-    Buffer<float> x_, y_, z_;  // points in tree order, by axis
-    Buffer<uint32_t> id_;      // tree order -> input id
-    Buffer<uint32_t> slot_;    // input id -> tree order
+    Buffer<IndexedPoint> pts_;  // points in tree order (their ids: tree order -> input id)
+    Buffer<uint32_t> slot_;     // input id -> tree order
     std::vector<float> split_;      // inner nodes in heap order (children 2i+1, 2i+2)
     std::vector<uint8_t> axis_;
 };

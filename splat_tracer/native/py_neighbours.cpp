@@ -1,5 +1,5 @@
 // Python binding of the neighbour search: `_core.PointIndex` (neighbours.h). Queries take
-// the rows of the indexed points to ask about (the caller walks `order()` in chunks, which
+// the rows of the indexed points to ask about (the caller walks the tree's order in chunks, which
 // keeps each chunk's queries in the same part of the tree and lets it report progress and
 // cancel between chunks) and fill arrays the caller allocated. splat_tracer/core.py wraps
 // it (core.PointIndex); every input is validated here too.
@@ -50,7 +50,6 @@ bool for_rows(size_t m, int threads, Fn &&fn) {
 template <class Fn>
 bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int k, int threads, Fn &&fn,
                     const float *by_id = nullptr) {
-    const auto &order = index.order();
     struct Piece {
         size_t row, slot, count;  // rows [row, row + count) are slots [slot, slot + count), in one leaf
     };
@@ -61,7 +60,7 @@ bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int 
     // alone, before the threads start).
     const size_t first = m ? index.slot(uint32_t(rows[0])) : 0;
     bool one_run = first + m <= index.size();
-    for (size_t i = 0; one_run && i < m; ++i) one_run = order[first + i] == uint32_t(rows[i]);
+    for (size_t i = 0; one_run && i < m; ++i) one_run = index.id(uint32_t(first + i)) == uint32_t(rows[i]);
     if (one_run) {
         for (size_t s = first; s < first + m;) {
             const size_t end = std::min(index.leaf_end(s), first + m);
@@ -72,7 +71,7 @@ bool for_neighbours(const PointIndex &index, const int32_t *rows, size_t m, int 
     for (size_t i = 0; !one_run && i < m;) {
         const size_t s = index.slot(uint32_t(rows[i])), end = index.leaf_end(s);
         size_t c = 1;
-        while (i + c < m && s + c < end && order[s + c] == uint32_t(rows[i + c])) ++c;
+        while (i + c < m && s + c < end && index.id(uint32_t(s + c)) == uint32_t(rows[i + c])) ++c;
         pieces.push_back({i, s, c});
         i += c;
     }
@@ -196,7 +195,8 @@ PyObject *PointIndex_order(PyObject *self, PyObject *arg) {
     View out;
     Py_ssize_t s[1] = {Py_ssize_t(index.size())};
     if (!get_array(arg, "out", 'i', 1, s, true, out)) return nullptr;
-    std::copy(index.order().begin(), index.order().end(), out.data<int32_t>());
+    int32_t *o = out.data<int32_t>();
+    for (size_t s = 0; s < index.size(); ++s) o[s] = int32_t(index.id(uint32_t(s)));
     Py_RETURN_NONE;
 }
 
