@@ -196,11 +196,11 @@ def run_case(case: str, path: str) -> dict:
                 del cloud
                 prep = prepare.prepare(handed.pop(), path, progress=stages)
             t_load = time.perf_counter() - t0
-            ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6))
+            out["points"] = len(prep.local)
+            ext.create_objects(bpy.context, [(path, prep)], lambda p: p.notes(6), consume=True)  # as the operator
             out["seconds"] = time.perf_counter() - t0
             out["stages"] = stages.durations(t_load)
             out["stages"]["blender object"] = out["seconds"] - t_load
-            out["points"] = len(prep.local)
         elif case == "ours_normals":
             from plyfile import PlyData
 

@@ -128,10 +128,13 @@ class _Work:
             self._status(context, None)
 
 
-def create_objects(context, loaded, notes_for, progress=None) -> list:
+def create_objects(context, loaded, notes_for, progress=None, consume: bool = False) -> list:
     """One object per (path, PreparedCloud). On any exception (a cancel through `progress`
     included) everything it created is removed -- objects, meshes, and the shared node group
-    and material when this call made them -- and the exception re-raised."""
+    and material when this call made them -- and the exception re-raised. consume: each
+    prepared cloud's per-point arrays are let go of (set to None) as Blender takes its copy
+    of them, so that Blender's copies reuse their memory (the import operator: the prepared
+    clouds are not used afterwards, and on an error they are dropped)."""
     before = {id_type: {x.as_pointer() for x in getattr(bpy.data, id_type)}
               for id_type in ("objects", "meshes", "node_groups", "materials")}
     created = []
@@ -143,9 +146,23 @@ def create_objects(context, loaded, notes_for, progress=None) -> list:
             attributes = dict(prep.cloud.attributes)
             if prep.cloud.scanners is not None:
                 attributes[SCANNER] = prep.cloud.scanners - prep.origin
+
+            def release(what: str, prep=prep, attributes=attributes) -> None:
+                if what == "positions":
+                    prep.local = None
+                elif what == "radii":
+                    prep.radii = None
+                elif what in ("normals", "colours"):
+                    setattr(prep.cloud, what, None)
+                else:
+                    attributes.pop(what, None)
+                    prep.cloud.attributes.pop(what, None)
+                    if what == SCANNER:
+                        prep.cloud.scanners = None
+
             obj = create_cloud_object(name, prep.local, prep.cloud.normals, prep.radii, prep.cloud.colours,
                                       location=tuple(prep.origin), collection=context.collection,
-                                      attributes=attributes)
+                                      attributes=attributes, release=release if consume else None)
             created.append(obj)
             obj["splat_tracer_source"] = path
             obj["splat_tracer_format"] = prep.cloud.format
@@ -258,7 +275,8 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
         return self.run(context)
 
     def finish(self, context, loaded) -> set:
-        created = create_objects(context, loaded, lambda prep: prep.notes(self.neighbours))
+        total = sum(len(prep.local) for _, prep in loaded)
+        created = create_objects(context, loaded, lambda prep: prep.notes(self.neighbours), consume=True)
         for path, prep in loaded:
             for note in prep.notes(self.neighbours):
                 self.report({"WARNING"}, f"{path}: {note}")
@@ -268,7 +286,6 @@ class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
             obj.select_set(True)
         if created:
             context.view_layer.objects.active = created[-1]
-        total = sum(len(prep.local) for _, prep in loaded)
         self.report({"INFO"}, f"Imported {total:,} splats from {len(created)} file(s)")
         return {"FINISHED"}
 

@@ -10,6 +10,8 @@ colours too.
 """
 from __future__ import annotations
 
+from typing import Callable, Optional
+
 import bpy
 import numpy as np
 
@@ -120,24 +122,38 @@ def _add_attribute(mesh, name: str, values: np.ndarray) -> None:
 
 def create_cloud_object(name: str, local_positions: np.ndarray, normals: np.ndarray, radii: np.ndarray,
                         colours=None, location=(0.0, 0.0, 0.0), collection=None,
-                        attributes=None) -> bpy.types.Object:
+                        attributes=None, release: Optional[Callable[[str], None]] = None) -> bpy.types.Object:
     """Creates and links the object; on any failure removes what it created and re-raises.
-    attributes: further point attributes, name -> (N,) int/float or (N,3) float array."""
+    attributes: further point attributes, name -> (N,) int/float or (N,3) float array.
+    release: called with "positions", "normals", "radii", "colours" or an attribute's name
+    once that array is in Blender, for the caller to let go of its own reference: Blender's
+    next copies then take the memory it freed (10M points: 440 MB or more of fresh pages
+    otherwise, first touched one 4 KiB page at a time)."""
     mesh = obj = None
+    done = release or (lambda what: None)
     try:
         mesh = bpy.data.meshes.new(name)
         n = len(local_positions)
         mesh.vertices.add(n)
         mesh.attributes[POSITION].data.foreach_set("vector", np.ascontiguousarray(local_positions, np.float32).ravel())
+        local_positions = None
+        done("positions")
         mesh.attributes.new(NORMAL, "FLOAT_VECTOR", "POINT").data.foreach_set(
             "vector", np.ascontiguousarray(normals, np.float32).ravel())
+        normals = None
+        done("normals")
         mesh.attributes.new(RADIUS, "FLOAT", "POINT").data.foreach_set(
             "value", np.ascontiguousarray(radii, np.float32))
+        radii = None
+        done("radii")
         if colours is not None:
             mesh.attributes.new(COLOUR, "FLOAT_COLOR", "POINT").data.foreach_set(
                 "color", np.ascontiguousarray(colours, np.float32).ravel())
-        for attr_name, values in (attributes or {}).items():
-            _add_attribute(mesh, attr_name, values)
+            colours = None
+            done("colours")
+        for attr_name in list(attributes or {}):
+            _add_attribute(mesh, attr_name, attributes[attr_name])
+            done(attr_name)
         mesh.update()
         obj = bpy.data.objects.new(name, mesh)
         obj.location = location

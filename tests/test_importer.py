@@ -393,6 +393,31 @@ def test_a_cancel_while_creating_objects_leaves_nothing(blender, empty_scene, tm
     assert len(created) == 2 and _counts(bpy) == (before[0] + 2, before[1] + 2, before[2] + 1, before[3] + 1)
 
 
+def test_objects_made_consuming_the_prepared_clouds_are_the_same(blender, empty_scene, tmp_path):
+    """create_objects(consume=True), as the import operator calls it, lets go of each array
+    as Blender takes its copy; the objects are the same as without."""
+    from blender_helpers import extension_module
+
+    bpy = blender
+    ops = extension_module("operators.import_cloud")
+    ext_importer = extension_module("splat_tracer.importer")
+    p, n = fibonacci_sphere(2000, centre=(0.0, 0.0, 0.0))
+    path = _write(tmp_path / "c.ply", p + [4e5, 5e6, 20.0], n, colours=RNG.random((2000, 3)))
+    kept, consumed = ext_importer.load_many([path]), ext_importer.load_many([path])
+    a, = ops.create_objects(bpy.context, kept, lambda prep: [])
+    b, = ops.create_objects(bpy.context, consumed, lambda prep: [], consume=True)
+    prep = consumed[0][1]
+    assert prep.local is None and prep.radii is None and prep.cloud.normals is None and prep.cloud.colours is None
+    assert kept[0][1].local is not None  # not consumed unless asked
+    for name, field, width in (("position", "vector", 3), ("splat_normal", "vector", 3), ("splat_radius", "value", 1),
+                               ("splat_color", "color", 4)):
+        got = [np.empty(2000 * width, np.float32) for _ in range(2)]
+        for obj, out in zip((a, b), got):
+            obj.data.attributes[name].data.foreach_get(field, out)
+        np.testing.assert_array_equal(got[0], got[1])
+    assert tuple(a.location) == tuple(b.location)
+
+
 def test_background_import_prints_progress_and_estimate_normals_still_works(blender, empty_scene, tmp_path, capfd):
     bpy = blender
     path = _bare_sphere(tmp_path, 3000)
