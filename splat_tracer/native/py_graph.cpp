@@ -63,8 +63,9 @@ bool check_separate(const View &out, const char *name, std::initializer_list<con
 }
 
 // (points, out, threads=0): fn(points, n, out, threads) over (N,3) float64 points into an
-// (N,) output of element kind `kind` (get_array's letters) and C type Out.
-template <class Out, class Fn>
+// (N,) output of element kind `kind` (get_array's letters) and C type Out. kFloat32Too: float32
+// points are passed as they are (fn takes either pointer type).
+template <class Out, bool kFloat32Too = false, class Fn>
 PyObject *per_point(PyObject *args, PyObject *kwargs, char kind, Fn &&fn) {
     static const char *kwlist[] = {"points", "out", "threads", nullptr};
     PyObject *op, *oout;
@@ -74,10 +75,19 @@ PyObject *per_point(PyObject *args, PyObject *kwargs, char kind, Fn &&fn) {
     if (!check_threads(threads)) return nullptr;
     View p, out;
     Py_ssize_t s3[2] = {-1, 3};
-    if (!get_array(op, "points", 'd', 2, s3, false, p)) return nullptr;
+    const bool single = kFloat32Too && [&] {
+        View probe;
+        return get_array(op, "points", 'f', 2, s3, false, probe) || (PyErr_Clear(), false);
+    }();
+    if (!get_array(op, "points", single ? 'f' : 'd', 2, s3, false, p)) return nullptr;
     Py_ssize_t sn[1] = {p.dim(0)};
     if (!get_array(oout, "out", kind, 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
-    if (!run_graph(Py_None, [&](const GraphPoll &) { fn(p.data<double>(), size_t(p.dim(0)), out.data<Out>(), threads); }))
+    if (!run_graph(Py_None, [&](const GraphPoll &) {
+            if constexpr (kFloat32Too) {
+                if (single) return fn(p.data<float>(), size_t(p.dim(0)), out.data<Out>(), threads);
+            }
+            fn(p.data<double>(), size_t(p.dim(0)), out.data<Out>(), threads);
+        }))
         return nullptr;
     Py_RETURN_NONE;
 }
@@ -139,29 +149,9 @@ PyObject *take_rows_py(PyObject *, PyObject *args, PyObject *kwargs) {
 
 // first_of_duplicates(points, out, threads=0): points (N,3) float64 or float32.
 PyObject *first_of_duplicates_py(PyObject *, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"points", "out", "threads", nullptr};
-    PyObject *op, *oout;
-    int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|i", const_cast<char **>(kwlist), &op, &oout, &threads))
-        return nullptr;
-    if (!check_threads(threads)) return nullptr;
-    View p, out;
-    Py_ssize_t s3[2] = {-1, 3};
-    // float32 when it is (no widened copy of a float32 file's coordinates), else float64
-    const bool single = [&] {
-        View probe;
-        if (!get_array(op, "points", 'f', 2, s3, false, probe)) return PyErr_Clear(), false;
-        return true;
-    }();
-    if (!get_array(op, "points", single ? 'f' : 'd', 2, s3, false, p)) return nullptr;
-    Py_ssize_t sn[1] = {p.dim(0)};
-    if (!get_array(oout, "out", 'B', 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
-    if (!run_graph(Py_None, [&](const GraphPoll &) {
-            if (single) first_of_duplicates(p.data<float>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
-            else first_of_duplicates(p.data<double>(), size_t(p.dim(0)), out.data<uint8_t>(), threads);
-        }))
-        return nullptr;
-    Py_RETURN_NONE;
+    return per_point<uint8_t, true>(args, kwargs, 'B', [](const auto *p, size_t n, uint8_t *out, int threads) {
+        first_of_duplicates(p, n, out, threads);
+    });
 }
 
 PyObject *graph_weights(PyObject *, PyObject *args, PyObject *kwargs) {
