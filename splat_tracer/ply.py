@@ -17,7 +17,7 @@ from typing import Optional
 import numpy as np
 
 from . import spacing
-from .columns import compress, finite_rows, in_blocks
+from .columns import compress, finite_rows, in_blocks, kept_rows
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -49,7 +49,8 @@ class PointCloud:
     dropped_normals: int = 0         # rows dropped for a zero or non-finite normal
     merged_duplicates: int = 0       # rows dropped for repeating an earlier row's position
     first_duplicate_row: int = -1    # the first of those, as a row of the file
-    rows: Optional[np.ndarray] = None  # (N,) int64: each point's row in the file; None: point i is row i
+    # (N,) integers (int32 from a mask below 2^31 rows): each point's row in the file; None: point i is row i
+    rows: Optional[np.ndarray] = None
     # Per-point attributes kept on the object besides the splat's own (LAS intensity,
     # classification, return number; text intensity): name -> (N,) int32 or float32.
     attributes: dict = field(default_factory=dict)
@@ -77,7 +78,7 @@ class PointCloud:
             pos, nrm, col, rad, rows, scn, *attrs = compress(
                 [self.positions, self.normals, self.colours, self.radii, self.rows, self.scanners,
                  *(self.attributes[k] for k in names)], keep, in_place=in_place)
-            rows = np.flatnonzero(keep) if self.rows is None else rows
+            rows = kept_rows(keep) if self.rows is None else rows
             return replace(self, positions=pos, normals=nrm, colours=col, radii=rad, rows=rows, scanners=scn,
                            attributes=dict(zip(names, attrs)))
         take = (lambda a: None if a is None else a[keep])

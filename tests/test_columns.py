@@ -55,6 +55,14 @@ def test_compress_in_place_moves_the_kept_rows_to_the_front(drop):
     assert not np.shares_memory(out[1], fixed) and (out[1] == 7).all() and len(out[1]) == keep.sum()
 
 
+def test_kept_rows_is_flatnonzero_in_int32():
+    for n in (0, 5, 3 * columns.BLOCK_ROWS + 7):
+        keep = RNG.random(n) > 0.4
+        got = columns.kept_rows(keep)
+        assert got.dtype == np.int32
+        np.testing.assert_array_equal(got, np.flatnonzero(keep))
+
+
 def test_in_blocks_covers_every_row_once_and_passes_errors_on():
     n = 5 * columns.BLOCK_ROWS + 7
     seen = np.zeros(n, np.int32)
