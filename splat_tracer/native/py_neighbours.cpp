@@ -340,7 +340,10 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     // threads: read by id from inside the search, each was a cache and TLB miss that a
     // prefetch a leaf ahead did not hide (4 % of the radii at 10M points).
     Buffer<float> n_rows(c ? 3 * m : 0);
-    if (c && !for_rows(m, threads, [&](size_t i) { std::copy(n + 3 * size_t(r[i]), n + 3 * size_t(r[i]) + 3, &n_rows[3 * i]); }))
+    if (c && !for_rows(m, threads, [&](size_t i) {
+            const float *from = n + 3 * size_t(r[i]);
+            n_rows[3 * i] = from[0], n_rows[3 * i + 1] = from[1], n_rows[3 * i + 2] = from[2];
+        }))
         return nullptr;
     BadNormals bad;
     if (!for_neighbours(index, r, m, k, threads, [&](size_t i, uint32_t self, const float *d2, const uint32_t *nb) {
