@@ -187,13 +187,14 @@ class PointIndex:
         return out
 
     def radii(self, rows, spacing_k: int, normals: Optional[np.ndarray] = None, cover_k: int = 0, hole: float = 0.0,
-              max_gap: float = 0.0, out=None) -> tuple[np.ndarray, Optional[np.ndarray]]:
+              max_gap: float = 0.0, out=None, cover_cap: float = 0.0) -> tuple[np.ndarray, Optional[np.ndarray]]:
         """(spacing (m,) float32, cover (m,) float32 or None) from one search: each row's
         distance to its spacing_k-th nearest other point and, given normals ((N,3), any length),
         its gap-closing radius among its cover_k nearest with that distance as the spacing
         (`covering`'s rule). out: (spacing, cover) float32 arrays (N,) (cover None without
         normals) to write each row's values into at the row's own place (rows: distinct),
-        instead of new (m,) arrays; they are returned."""
+        instead of new (m,) arrays; they are returned. cover_cap >= 1: each cover is kept
+        between the row's spacing and cover_cap times it (0: as the rule gives it)."""
         rows = self._rows(rows)
         by_row = out is not None
         if by_row:
@@ -207,7 +208,7 @@ class PointIndex:
             self._index.radii(rows, spacing_k, spacing, threads=self.threads, by_row=by_row)
         else:
             self._index.radii(rows, spacing_k, spacing, _f32(normals, "normals", (len(self), 3)), cover_k, float(hole),
-                              float(max_gap), cover, self.threads, by_row)
+                              float(max_gap), cover, self.threads, by_row, float(cover_cap))
         return spacing, cover
 
     def widest_gaps(self, rows, normals: np.ndarray, k: int) -> np.ndarray:

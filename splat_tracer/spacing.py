@@ -163,7 +163,8 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
             idx = order[start:start + _CHUNK]
             # the spacing and the gap-closing radii (normals given) from one search (no (n, k)
             # arrays), written by the core at each point's own row (no scatter here)
-            tree.radii(idx, k, nrm if cover_k else None, cover_k, COVER_HOLE, COVER_MAX_GAP, out=(spacing, cover))
+            tree.radii(idx, k, nrm if cover_k else None, cover_k, COVER_HOLE, COVER_MAX_GAP, out=(spacing, cover),
+                       cover_cap=COVER_CAP)  # at least the spacing, at most COVER_CAP x it (below)
             if nrm is not None:
                 hits += boundary_hits(start, start + len(idx))
     elif nrm is not None:  # the radii were known: the boundary test alone
@@ -177,9 +178,11 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
         if good.size == 0:
             raise SpacingError("all points coincide: the spacing is zero everywhere")
         spacing[degenerate] = np.median(good)
-    if cover is not None:  # a point sharing its position with k+ others: the median, like its spacing
+    if cover is not None and not searched:  # known_cover: at least the spacing, at most COVER_CAP x it
         np.maximum(cover, spacing, out=cover)  # in place: no 10M-point temporaries
         np.minimum(cover, COVER_CAP * spacing, out=cover)
+    elif cover is not None and n_degenerate:  # the core applied the rule; a point sharing its position
+        cover[degenerate] = spacing[degenerate]  # with k+ others gets the median, like its spacing
     closed = nrm is not None and boundary < CLOSED_MAX_BOUNDARY * np.sqrt(n)
     return Neighbourhood(spacing, n_degenerate, boundary, bool(closed), tested, cover)
 

@@ -288,6 +288,11 @@ def test_spacing_and_gap_closing_radii_from_one_search():
         index.radii(rows[:100], 6, out=(only, None))
         np.testing.assert_array_equal(only[rows[:100]], s[:100])
         assert (np.delete(only, rows[:100]) == -1).all()  # nothing else written
+        capped = index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP, cover_cap=1.1)[1]
+        np.testing.assert_array_equal(capped, np.minimum(np.maximum(cover, s), np.float32(1.1) * s))
+        assert (capped < cover).any()  # the cap bites somewhere: the comparison means something
+        with pytest.raises(ValueError, match="cover_cap"):
+            index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP, cover_cap=0.5)
         with pytest.raises(ValueError, match="size"):
             index.radii(rows, 6, out=(np.empty(n - 1, np.float32), None))
         with pytest.raises(ValueError, match="cover"):

@@ -298,16 +298,20 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
 // spacing and cover hold one value per entry of rows (m,), or with by_row one per point of
 // the index (N,), written at the row's own place: the importer's chunks of the tree's order
 // then need no scatter of the results in Python (numpy's, on one thread: 0.35 s at 10M
-// points). A row listed twice is written twice with the same values.
+// points). A row listed twice is written twice with the same values. cover_cap > 0: each
+// gap-closing radius is kept between the spacing and cover_cap times it.
 PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"rows", "spacing_k", "spacing", "normals", "cover_k", "hole", "max_gap", "cover",
-                                   "threads", "by_row", nullptr};
+                                   "threads", "by_row", "cover_cap", nullptr};
     PyObject *orows, *ospacing, *onrm = Py_None, *ocover = Py_None;
     int spacing_k, cover_k = 0, threads = 0, by_row = 0;
-    float hole = 0.f, max_gap = 0.f;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiffOip", const_cast<char **>(kwlist), &orows, &spacing_k,
-                                     &ospacing, &onrm, &cover_k, &hole, &max_gap, &ocover, &threads, &by_row))
+    float hole = 0.f, max_gap = 0.f, cover_cap = 0.f;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OiO|OiffOipf", const_cast<char **>(kwlist), &orows, &spacing_k,
+                                     &ospacing, &onrm, &cover_k, &hole, &max_gap, &ocover, &threads, &by_row,
+                                     &cover_cap))
         return nullptr;
+    if (!(cover_cap == 0.f || (std::isfinite(cover_cap) && cover_cap >= 1.f)))
+        return PyErr_Format(PyExc_ValueError, "cover_cap must be 0 (none) or at least 1, got %g", double(cover_cap));
     const PointIndex &index = index_of(self);
     View rows, sp, nrm, cov;
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(spacing_k, index.size() - 1, "spacing_k"))
@@ -351,6 +355,9 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
             if (!c) return;
             const float *ni = &n_rows[3 * i];
             c[i] = bad.usable(ni, r[i]) ? covering_radius(index, self, nb, cover_k, ni, s[i], hole, max_gap) : 0.f;
+            // at least the spacing, at most cover_cap times it (spacing.analyse's rule; float
+            // products, as numpy's on float32 arrays)
+            if (cover_cap > 0.f) c[i] = std::min(std::max(c[i], s[i]), cover_cap * s[i]);
         }) || !bad.check())
         return nullptr;
     if (by_row) {
@@ -466,7 +473,7 @@ PyMethodDef PointIndex_methods[] = {
     METHOD(knn_at, "knn_at(positions, k, dist, ids, threads=0): the k nearest points to each position."),
     METHOD(covering, "covering(rows, normals, spacing, k, hole, max_gap, out, threads=0): gap-closing radii."),
     METHOD(radii, "radii(rows, spacing_k, spacing, normals=None, cover_k=0, hole=0, max_gap=0, cover=None, threads=0, "
-                  "by_row=False): k-NN spacing and gap-closing radii from one search."),
+                  "by_row=False, cover_cap=0): k-NN spacing and gap-closing radii from one search."),
     METHOD(pca, "pca(rows, k, normals, graph=None, spacing_k=0, spacing=None, cover_k=0, hole=0, max_gap=0, cover=None, "
                 "threads=0): PCA normals, and what the import needs from the same search."),
     {nullptr, nullptr, 0, nullptr},
