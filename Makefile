@@ -124,7 +124,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) benchmarks/accuracy.py --output benchmarks/results
 	$(VPY) benchmarks/frame_time.py --output benchmarks/results
 	$(VPY) benchmarks/viewport_latency.py --output benchmarks/results/viewport_latency.md
-	$(VPY) benchmarks/import_speed.py --output benchmarks/results
+	$(VPY) benchmarks/import_speed.py --repeat 3 --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

@@ -270,6 +270,9 @@ def main(argv=None) -> int:
     ap.add_argument("--points", type=int, default=0, help=f"points (default {FULL_POINTS:,})")
     ap.add_argument("--output", default=str(HERE / "results"))
     ap.add_argument("--open3d-python", default=str(DEFAULT_O3D), help="a Python with open3d (default: build/o3d)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="runs of every case (in rounds: each round runs every case once); the table gives each "
+                         "case's median run and the others beside it (`make bench`: 3)")
     ap.add_argument("--case", help=argparse.SUPPRESS)
     ap.add_argument("--file", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -291,37 +294,47 @@ def main(argv=None) -> int:
             ("blender_ply", me, "blender", ply_path), ("ours_normals", me, "ours_normals", ply_path)]
     if o3d:
         runs += [("open3d_ply", o3d, "open3d_read", ply_path), ("open3d_normals", o3d, "open3d_normals", ply_path)]
-    for key, python, case, path in runs:
-        r = spawn(python, case, path)
-        results[key] = r
-        print(f"import_speed: {key}: " + (f"{r['seconds']:.2f} s, peak {r['peak_bytes'] / n:.0f} B/point"
-                                          if "seconds" in r else f"failed: {r['error']}"), flush=True)
-        if key.startswith("open3d") and "error" in r and o3d_why is None:
-            o3d_why = f"Open3D failed: {r['error']}"
+    repeat = max(1, args.repeat)
+    every = {key: [] for key, *_ in runs}
+    for _ in range(repeat):  # in rounds: a slow spell of the machine falls on every case alike
+        for key, python, case, path in runs:
+            r = spawn(python, case, path)
+            every[key].append(r)
+            print(f"import_speed: {key}: " + (f"{r['seconds']:.2f} s, peak {r['peak_bytes'] / n:.0f} B/point"
+                                              if "seconds" in r else f"failed: {r['error']}"), flush=True)
+            if key.startswith("open3d") and "error" in r and o3d_why is None:
+                o3d_why = f"Open3D failed: {r['error']}"
+    for key, rs in every.items():  # the median run (its stages and memory), all runs' times beside it
+        ok = sorted((r for r in rs if "seconds" in r), key=lambda r: r["seconds"])
+        results[key] = dict(ok[(len(ok) - 1) // 2], runs=[r["seconds"] for r in rs if "seconds" in r]) if ok else rs[0]
     nm = results.get("ours_normals", {})
     if "stages" in nm:
-        results["ours_pca"] = dict(nm, seconds=nm["stages"]["estimate (PCA)"], peak_bytes=None)
-    report = {"points": n, "cpus": os.cpu_count(), "results": results, "open3d_skipped": o3d_why,
+        pca = sorted(r["stages"]["estimate (PCA)"] for r in every["ours_normals"] if "stages" in r)
+        results["ours_pca"] = dict(nm, seconds=pca[(len(pca) - 1) // 2], peak_bytes=None, runs=pca)
+    report = {"points": n, "cpus": os.cpu_count(), "repeat": repeat, "results": results, "open3d_skipped": o3d_why,
               "targets": {"import_seconds": TARGET_IMPORT_SECONDS, "normals_seconds": TARGET_NORMALS_SECONDS}}
     out_dir = Path(args.output)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "import_speed.json").write_text(json.dumps(report, indent=1))
     lines = [f"# Import speed: {n:,} points", "",
-             f"`benchmarks/import_speed.py`{' --quick' if args.quick else ''}: one run of each case, each in a fresh "
-             f"process, {os.cpu_count()} CPUs (shared with other work: timings vary by tens of percent). Memory: the "
-             "case's peak RSS beyond the process's before it, per point.", "",
-             "| what | file | does | time (s) | peak memory (bytes/point) |", "|---|---|---|---:|---:|"]
+             f"`benchmarks/import_speed.py`{' --quick' if args.quick else ''}"
+             f"{f' --repeat {repeat}' if repeat > 1 else ''}: "
+             + ("one run of each case" if repeat == 1 else f"{repeat} runs of each case, in rounds; the median run")
+             + f", each in a fresh process, {os.cpu_count()} CPUs (shared with other work: timings vary by tens of "
+             "percent). Memory: the case's peak RSS beyond the process's before it, per point.", "",
+             "| what | file | does | time (s) | runs (s) | peak memory (bytes/point) |", "|---|---|---|---:|---|---:|"]
     for key, who, file, what in ROWS:
         r = results.get(key)
         if r is None:
             if key.startswith("open3d"):
-                lines.append(f"| {who} | {file} | skipped: {o3d_why} | | |")
+                lines.append(f"| {who} | {file} | skipped: {o3d_why} | | | |")
             continue
         if "error" in r:
-            lines.append(f"| {who} | {file} | failed: {r['error']} | | |")
+            lines.append(f"| {who} | {file} | failed: {r['error']} | | | |")
             continue
         mem = "" if r.get("peak_bytes") is None else f"{r['peak_bytes'] / n:.0f}"
-        lines.append(f"| {who} | {file} | {what} | {r['seconds']:.2f} | {mem} |")
+        runs_s = ", ".join(f"{t:.2f}" for t in r.get("runs", [r["seconds"]]))
+        lines.append(f"| {who} | {file} | {what} | {r['seconds']:.2f} | {runs_s} | {mem} |")
     for key in ("ours_ply", "ours_las", "ours_las_total", "ours_normals"):
         if "stages" in results.get(key, {}):
             st = results[key]["stages"]
