@@ -30,13 +30,15 @@ from .ply import CloudFileError, PointCloud
 from .progress import ProgressFn, nothing, scaled
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
-# (peak RSS above the process's RSS before the import, Blender object included): 150 bytes
-# for a PLY with normals and 176 for a LAS given normals (positions in float64, colours,
-# attributes, the k-d tree, the float32 copies handed to Blender), 243 for a LAS whose
-# normals are estimated; the extra for estimating normals and orienting them along the
-# neighbour graph was 231 bytes on top of the positions (the graph's 8 edges per point, the
-# renumbered copies, the spanning forest). The budgets below were set from the earlier, larger
-# figures (210-223 and 275 bytes) and are kept: headroom, not a measurement.
+# (peak RSS above the process's RSS before the import, Blender object included): 78 bytes
+# for a PLY with normals (float32 coordinates) and 92 for a LAS given normals (positions in
+# float64, colours, attributes, the k-d tree, the float32 offsets handed to Blender, each
+# array let go of as Blender copies it), 214 for a LAS whose normals are estimated; the
+# extra for estimating normals and orienting them along the neighbour graph was 231 bytes on
+# top of the positions (the graph's 8 edges per point, the renumbered copies, the spanning
+# forest). The budgets below were set from earlier, larger figures (210-223 and 275 bytes)
+# and are kept: headroom (a PLY with float64 coordinates, a file with more attributes), not
+# a measurement.
 BYTES_PER_POINT_READ = 300
 BYTES_PER_POINT_NORMALS = 350
 # The budget's grid: at most this many refinements of the cell size (each one sort of the
