@@ -150,7 +150,7 @@ def create_objects(context, loaded, notes_for, progress=None, consume: bool = Fa
             def release(what: str, prep=prep, attributes=attributes) -> None:
                 if what == "positions":
                     prep.local = None
-                elif what == "radii":
+                elif what == "radii":  # (a file's own radii stay: prep.cloud.radii says the file had them)
                     prep.radii = None
                 elif what in ("normals", "colours"):
                     setattr(prep.cloud, what, None)

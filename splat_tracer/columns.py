@@ -78,7 +78,8 @@ def compress(arrays: list, keep: np.ndarray, threads: int = 0, in_place: bool = 
     at a time on all cores: an import drops a few rows (duplicates, NaN) from 10M and copies
     every per-point array, which numpy does on one core. in_place: the kept rows are moved
     to the front of each array instead, and views of that front are returned: no fresh
-    memory, whose first touch costs more than the copy (a reader's own arrays)."""
+    memory, whose first touch costs more than the copy (a reader's own arrays); when one of
+    the arrays cannot be written (a broadcast), all are copied as without it."""
     n = len(keep)
     counts = [int(np.count_nonzero(keep[s:s + BLOCK_ROWS])) for s in range(0, n, BLOCK_ROWS)]
     at = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

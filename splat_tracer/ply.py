@@ -381,7 +381,9 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     rows with a zero or non-finite normal dropped and counted, exact duplicate positions
     merged into their first row. `fields` are PointCloud's other fields (format, orientation,
     oriented, notes). Raises CloudFileError naming `path` when nothing usable is left.
-    float32 normals are made unit in place: the readers hand over arrays of their own."""
+    The readers hand over arrays of their own, which are changed in place: float32 normals
+    made unit, and the rows dropped compacted away in every per-point array (positions,
+    normals, colours, radii, attributes, scanners), the result viewing their fronts."""
     pos = np.asarray(positions)
     if pos.dtype != np.float32:  # float32 coordinates stay so (see PointCloud.positions)
         pos = pos.astype(np.float64, copy=False)

@@ -149,7 +149,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     # radii chunk by chunk while that part of the tree is in the cache (on their own after
     # the search they took twice as long: 0.25 s for 200k points at 10M).
     at = None if nrm is None or n <= BOUNDARY_SAMPLE else _sample_runs(n, BOUNDARY_SAMPLE)
-    tested = 0 if nrm is None else (n if at is None else len(at))
+    tested = n if at is None else len(at)  # (every point, without normals: nothing to test, nothing sampled)
     hits = 0
 
     def boundary_hits(b: int, e: int) -> int:  # of the tested points at positions [b, e) of the order
@@ -170,7 +170,7 @@ def analyse(points: np.ndarray, normals=None, k: int = DEFAULT_K, workers: int =
     elif nrm is not None:  # the radii were known: the boundary test alone
         for start in chunks(n, _CHUNK, progress, "splat radii: closed surface guess"):
             hits += boundary_hits(start, min(n, start + _CHUNK))
-    boundary = int(round(hits * n / tested)) if tested else 0
+    boundary = int(round(hits * n / tested)) if nrm is not None else 0
     degenerate = spacing <= 0
     n_degenerate = int(degenerate.sum())
     if n_degenerate:

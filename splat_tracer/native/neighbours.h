@@ -12,8 +12,8 @@
 // other positions. A point's query starts in its own leaf, which gives a tight bound before
 // the descent from the root; the descent keeps the squared distance from the query to each
 // cell incrementally (per axis), as nanoflann does, and skips cells no nearer than the k-th
-// candidate. The caller walks the points in the tree's order (`order()`), so that
-// consecutive queries touch the same nodes and leaves.
+// candidate. The caller walks the points in the tree's order (`id(0)`, `id(1)`, ...), so
+// that consecutive queries touch the same nodes and leaves.
 #pragma once
 
 #include <cstddef>
@@ -56,7 +56,9 @@ public:
     // id(slot) for slots 0, 1, ... is the tree's order: neighbouring points are close in it.
     uint32_t slot(uint32_t id) const { return slot_[id]; }
     uint32_t id(uint32_t slot) const { return pts_[slot].id; }
-    void at(uint32_t slot, float out[3]) const { out[0] = pts_[slot].c[0], out[1] = pts_[slot].c[1], out[2] = pts_[slot].c[2]; }
+    void at(uint32_t slot, float out[3]) const {
+        out[0] = pts_[slot].c[0], out[1] = pts_[slot].c[1], out[2] = pts_[slot].c[2];
+    }
     // The end of the leaf holding slot s (one past its last point).
     size_t leaf_end(size_t s) const { return begin(leaf_of(s) + 1, depth_); }
 
@@ -68,14 +70,15 @@ public:
     int nearest_of(uint32_t s, int k, float *d2, uint32_t *slots) const;
     // The k nearest other points of each of the points at slots [b, e), all in one leaf
     // (k <= size() - 1): k squared distances and slots per point, nearest first. The same
-    // answer as nearest_of, found for the leaf's points together: their candidates within
-    // a smallest surrounding subtree give a bound, the leaves within that bound of the
-    // points' box are gathered and copied by axis once, and each point computes its
-    // distances to all of them, four at a time, and ranks those within a bound (the previous
-    // point's k-th distance, widened; else the exact one) without sorted insertion. Among
-    // equal distances the candidate visited first by a one-point scan of the subtree and
-    // then of the gathered leaves in tree order comes first (the answer the sequential
-    // version gave, to the bit). guess: a squared distance the k-th neighbours probably lie
+    // answer as nearest_of, found for the leaf's points together: the guess (below) or,
+    // without one, their candidates within a smallest surrounding subtree give a bound (a
+    // point whose k nearest are not all within it searches on its own), the leaves within
+    // that bound of the points' box are gathered and copied by axis once, and each point
+    // computes its distances to all of them, four at a time, and ranks those within a bound
+    // (the previous point's k-th distance, widened; else the exact one) without sorted
+    // insertion. Among equal distances the candidate visited first by a one-point scan of
+    // the subtree and then of the gathered leaves in tree order comes first (the answer the
+    // sequential version gave, to the bit). guess: a squared distance the k-th neighbours probably lie
     // within (0: none), in; for the next leaf in the tree's order, out (the caller walking
     // the leaves in order passes it on).
     void leaf_nearest(size_t b, size_t e, int k, float *d2, uint32_t *slots, float &guess) const;

@@ -23,7 +23,7 @@ struct PointIndexObject {
 PointIndex &index_of(PyObject *self) { return *reinterpret_cast<PointIndexObject *>(self)->index; }
 
 // Rows per task: enough work to amortise the task counter, few enough to balance 2+ threads
-// on a chunk of 2^16 rows.
+// on one of the importer's chunks (2^18 rows; the closed guess's, a few thousand).
 constexpr size_t kRowsPerTask = 512;
 
 // Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL.
@@ -298,7 +298,8 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
 // spacing and cover hold one value per entry of rows (m,), or with by_row one per point of
 // the index (N,), written at the row's own place: the importer's chunks of the tree's order
 // then need no scatter of the results in Python (numpy's, on one thread: 0.35 s at 10M
-// points). A row listed twice is written twice with the same values. cover_cap > 0: each
+// points); the rows must then be distinct (a row listed twice would be written by two
+// threads at once, with the same values). cover_cap > 0: each
 // gap-closing radius is kept between the spacing and cover_cap times it.
 PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"rows", "spacing_k", "spacing", "normals", "cover_k", "hole", "max_gap", "cover",
@@ -335,15 +336,19 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     // search, in a loop of their own: written at random rows from inside the search, their
     // cache misses slowed the search itself (10M points: 3.6 s against 3.3 s for the search
     // and numpy's scatter).
-    Buffer<float> s_rows, c_rows;
-    if (by_row) {
-        s_rows.allocate(m), s = s_rows.data();
-        if (c) c_rows.allocate(m), c = c_rows.data();
-    }
     // The rows' normals gathered in the rows' order first, in a loop of their own on the
     // threads: read by id from inside the search, each was a cache and TLB miss that a
     // prefetch a leaf ahead did not hide (4 % of the radii at 10M points).
-    Buffer<float> n_rows(c ? 3 * m : 0);
+    Buffer<float> s_rows, c_rows, n_rows;
+    try {  // a refused allocation is a MemoryError, never an exception out of this function
+        if (by_row) {
+            s_rows.allocate(m), s = s_rows.data();
+            if (c) c_rows.allocate(m), c = c_rows.data();
+        }
+        if (c) n_rows.allocate(3 * m);
+    } catch (const std::bad_alloc &) {
+        return PyErr_NoMemory();
+    }
     if (c && !for_rows(m, threads, [&](size_t i) {
             const float *from = n + 3 * size_t(r[i]);
             n_rows[3 * i] = from[0], n_rows[3 * i + 1] = from[1], n_rows[3 * i + 2] = from[2];
