@@ -73,6 +73,13 @@ def nonzero_rows(a: np.ndarray) -> np.ndarray:
 BLOCK_ROWS = 1 << 16
 
 
+def _kept_offsets(keep: np.ndarray) -> np.ndarray:
+    """(blocks + 1,) int64: where each block of BLOCK_ROWS rows' kept rows start among all
+    the kept rows (the last entry: how many are kept)."""
+    counts = [int(np.count_nonzero(keep[s:s + BLOCK_ROWS])) for s in range(0, len(keep), BLOCK_ROWS)]
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
 def compress(arrays: list, keep: np.ndarray, threads: int = 0, in_place: bool = False) -> list:
     """[a[keep] for a in arrays] (None stays None; keep an (N,) bool mask), a block of rows
     at a time on all cores: an import drops a few rows (duplicates, NaN) from 10M and copies
@@ -81,8 +88,7 @@ def compress(arrays: list, keep: np.ndarray, threads: int = 0, in_place: bool = 
     memory, whose first touch costs more than the copy (a reader's own arrays); when one of
     the arrays cannot be written (a broadcast), all are copied as without it."""
     n = len(keep)
-    counts = [int(np.count_nonzero(keep[s:s + BLOCK_ROWS])) for s in range(0, n, BLOCK_ROWS)]
-    at = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    at = _kept_offsets(keep)
     if in_place and all(a is None or a.flags.writeable for a in arrays):
         # Each array block by block in order: a block's rows go to at or before their own
         # place, over rows already moved (copied out of the block first: no overlap within
@@ -118,8 +124,7 @@ def kept_rows(keep: np.ndarray) -> np.ndarray:
     n = len(keep)
     if n >= 2 ** 31:
         return np.flatnonzero(keep)
-    counts = [int(np.count_nonzero(keep[s:s + BLOCK_ROWS])) for s in range(0, n, BLOCK_ROWS)]
-    at = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    at = _kept_offsets(keep)
     out = np.empty(int(at[-1]), np.int32)
 
     def block(b: int, e: int) -> None:

@@ -688,22 +688,23 @@ float covering_radius(const PointIndex &index, uint32_t self, const uint32_t *sl
             y[j] = o[0] * v[0] + o[1] * v[1] + o[2] * v[2];
             ang[j] = pseudo_angle(x[j], y[j]);
         }
-    // next[j]: the neighbour after j counter-clockwise (the last one's is the first). No
-    // sorted copies of x and y: their scatter's scalar stores stalled the vector loads of
-    // the loops after it (a fifth of the time, with GCC).
-    int next[PointIndex::kMaxK], order[PointIndex::kMaxK + 1];
+    // (xn[j], yn[j]): the neighbour after j counter-clockwise (the last one's is the first),
+    // gathered by j's rank and stored in order, so that the test below is a loop of vector
+    // arithmetic (scalar before: a fifth of this function's time). No sorted copies of x and
+    // y: their scatter's scalar stores stalled the vector loads of the loops after it.
+    int order[PointIndex::kMaxK + 1];
     int32_t rank[PointIndex::kMaxK];
     angular_order(ang, m, order, rank);
-    for (int j = 0; j < m; ++j) next[j] = order[rank[j] + 1];  // gathered: stored in order, as the loops read it
+    double xn[PointIndex::kMaxK], yn[PointIndex::kMaxK];
+    for (int j = 0; j < m; ++j) {
+        const int after = order[rank[j] + 1];
+        xn[j] = x[after], yn[j] = y[after];
+    }
     // First which adjacent pairs have a circle within the spacing band, without branches
     // (whether one does is unpredictable: mispredictions were most of this function's time),
     // then only those few are solved and tested.
     const double lo2 = double(spacing) * spacing, hi2 = lo2 * double(hole) * hole;
-    // Each neighbour's successor gathered first (stored in order), so that the test below is
-    // a loop of vector arithmetic (scalar before: a fifth of this function's time).
-    double xn[PointIndex::kMaxK], yn[PointIndex::kMaxK];
     int32_t in_band[PointIndex::kMaxK];
-    for (int j = 0; j < m; ++j) xn[j] = x[next[j]], yn[j] = y[next[j]];
     for (int j = m; j < mb; ++j) xn[j] = yn[j] = 0.0;  // the padding (the point itself): d = 0, no circle
     for (int b = 0; b < mb; b += kBlock)
         for (int j = b; j < b + kBlock; ++j) {

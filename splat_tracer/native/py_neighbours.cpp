@@ -299,8 +299,8 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
 // the index (N,), written at the row's own place: the importer's chunks of the tree's order
 // then need no scatter of the results in Python (numpy's, on one thread: 0.35 s at 10M
 // points); the rows must then be distinct (a row listed twice would be written by two
-// threads at once, with the same values). cover_cap > 0: each
-// gap-closing radius is kept between the spacing and cover_cap times it.
+// threads at once, with the same values). cover_cap > 0: each gap-closing radius is kept
+// between the spacing and cover_cap times it.
 PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"rows", "spacing_k", "spacing", "normals", "cover_k", "hole", "max_gap", "cover",
                                    "threads", "by_row", "cover_cap", nullptr};
@@ -335,10 +335,9 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
     // by_row: the values go to (m,) arrays first and are scattered to their rows after the
     // search, in a loop of their own: written at random rows from inside the search, their
     // cache misses slowed the search itself (10M points: 3.6 s against 3.3 s for the search
-    // and numpy's scatter).
-    // The rows' normals gathered in the rows' order first, in a loop of their own on the
-    // threads: read by id from inside the search, each was a cache and TLB miss that a
-    // prefetch a leaf ahead did not hide (4 % of the radii at 10M points).
+    // and numpy's scatter). Likewise the rows' normals are gathered in the rows' order first,
+    // on the threads: read by id from inside the search, each was a cache and TLB miss that
+    // a prefetch a leaf ahead did not hide (4 % of the radii at 10M points).
     Buffer<float> s_rows, c_rows, n_rows;
     try {  // a refused allocation is a MemoryError, never an exception out of this function
         if (by_row) {
