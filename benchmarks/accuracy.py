@@ -41,7 +41,11 @@ import meshes  # noqa: E402
 import scoring  # noqa: E402
 import synthetic  # noqa: E402
 import truth as truth_mod  # noqa: E402
-from splat_tracer import core, ply, spacing  # noqa: E402
+from splat_tracer import ply, spacing  # noqa: E402
+from splat_tracer.camera import Camera  # noqa: E402
+from splat_tracer.method import PRESETS, Method  # noqa: E402
+from splat_tracer.neighbours import local_frame  # noqa: E402
+from splat_tracer.splats import SplatCloud  # noqa: E402
 
 PAPER = {"model": "stanford-bunny", "cloud": "vertices", "renderer": "paper (Beddiaf & Babahenini)",
          "method": "full", "points": 35945, "seconds": 8.5, "seconds_range": "7-10", "cores": None}
@@ -78,16 +82,16 @@ def cases(quick: bool, n_samples: int):
 
 def configs(quick: bool):
     """(label, method, radius factor, closed override or None for the guess, hole-free radii)."""
-    presets = [(p.lower().replace("_", "-"), core.Method.preset(p), 1.0, None, True) for p in core.PRESETS]
+    presets = [(p.lower().replace("_", "-"), Method.preset(p), 1.0, None, True) for p in PRESETS]
     if quick:
         return presets
-    sweep = [(f"full eps={eps:g} rf={rf:g}", core.Method.preset("FULL", epsilon=eps), rf, None, True)
+    sweep = [(f"full eps={eps:g} rf={rf:g}", Method.preset("FULL", epsilon=eps), rf, None, True)
              for eps in (0.5, 1.0, 2.0) for rf in (0.8, 1.0, 1.25, 1.5) if not (eps == 1.0 and rf == 1.0)]
-    sweep += [("full smooth-kernel", core.Method.preset("FULL", kernel="SMOOTH"), 1.0, None, True),
-              ("full crease=45", core.Method.preset("FULL", crease_angle=45), 1.0, None, True),
-              ("full crease=60", core.Method.preset("FULL", crease_angle=60), 1.0, None, True),
-              ("full, k-NN radii", core.Method.preset("FULL"), 1.0, None, False),
-              ("full, forced closed", core.Method.preset("FULL"), 1.0, True, True)]
+    sweep += [("full smooth-kernel", Method.preset("FULL", kernel="SMOOTH"), 1.0, None, True),
+              ("full crease=45", Method.preset("FULL", crease_angle=45), 1.0, None, True),
+              ("full crease=60", Method.preset("FULL", crease_angle=60), 1.0, None, True),
+              ("full, k-NN radii", Method.preset("FULL"), 1.0, None, False),
+              ("full, forced closed", Method.preset("FULL"), 1.0, True, True)]
     return presets + sweep
 
 
@@ -111,11 +115,11 @@ def run(args) -> list[dict]:
     rows = []
     for model, cloud_name, vertices, triangles, points, normals, view_options in cases(args.quick, n_samples):
         cnormals = meshes.corner_normals(vertices, triangles)
-        origin, local = core.local_frame(points)
+        origin, local = local_frame(points)
         hood = spacing.analyse(local, normals)
         covering = spacing.covering_radii(local, normals, hood.spacing)  # what the importer gives
         view = meshes.camera_view(points, width, height, **view_options)
-        cam = core.Camera.look_at(**view)
+        cam = Camera.look_at(**view)
         o, d = cam.rays(width, height)
         o64, d64 = o.astype(np.float64), d.astype(np.float64)
         d64 /= np.linalg.norm(d64, axis=1, keepdims=True)
@@ -124,13 +128,13 @@ def run(args) -> list[dict]:
                 "width": width, "height": height}
         print(f"{model:16s} {cloud_name:12s} {len(points):7d} points, closed guess {hood.closed_guess}",
               flush=True)
-        cam_local = core.Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
+        cam_local = Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
         for label, method, rf, closed, hole_free in configs(args.quick):
             closed_flag = hood.closed_guess if closed is None else closed
             radii = covering if hole_free else hood.spacing
 
             def frame():
-                scene = core.Scene(local, normals, radii * rf, closed=closed_flag)
+                scene = SplatCloud(local, normals, radii * rf, closed=closed_flag)
                 return scene.render(cam_local, width, height, method=method)
 
             wall, cores, img = timed(frame, repeats)

@@ -34,7 +34,7 @@ def _blender(workdir: Path):
 def render(engine: str, ply_path: Path, view: dict, width: int, height: int, workdir: Path, closed: bool,
            method: str = "FULL") -> dict:
     """Renders the cloud in `ply_path` with `engine` ('SPLAT_TRACER' or 'CYCLES') from the
-    camera `view` (core.Camera.look_at arguments). Returns wall seconds of the render call,
+    camera `view` (Camera.look_at arguments). Returns wall seconds of the render call,
     the threads Blender was told to use, and top-row-first coverage, depth and normals."""
     bpy = _blender(workdir)
     from blender_helpers import render_to_exr

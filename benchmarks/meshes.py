@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from splat_tracer.camera import Camera
+
 SHARED_MESHES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "meshes"
 
 
@@ -43,7 +45,7 @@ def vertex_cloud(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarra
 
 def camera_view(centres: np.ndarray, width: int, height: int, direction=(-0.3, -0.2, -1.0),
                 up=(0.0, 1.0, 0.0), fov_y: float = 30.0) -> dict:
-    """Arguments of core.Camera.look_at for a perspective view that frames the cloud's
+    """Arguments of Camera.look_at for a perspective view that frames the cloud's
     bounding box (the meshes are y-up; the default looks at the model's front, +z, from
     slightly above and to the side)."""
     lo, hi = centres.min(axis=0), centres.max(axis=0)
@@ -56,9 +58,9 @@ def camera_view(centres: np.ndarray, width: int, height: int, direction=(-0.3, -
                 near=distance * 1e-3, far=distance * 10)
 
 
-def fit_camera(core, centres: np.ndarray, width: int, height: int):
-    """A core.Camera framing the cloud (see camera_view)."""
-    return core.Camera.look_at(**camera_view(centres, width, height))
+def fit_camera(centres: np.ndarray, width: int, height: int):
+    """A Camera framing the cloud (see camera_view)."""
+    return Camera.look_at(**camera_view(centres, width, height))
 
 
 def vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -37,14 +37,15 @@ def inputs(n: int) -> Path:
     if (folder / "graph.npy").is_file():
         return folder
     from import_speed import terrain
-    from splat_tracer import core, normals
+    from splat_tracer import normals
+    from splat_tracer.neighbours import PointIndex
 
     pos, nrm, _ = terrain(n)
     rng = np.random.default_rng(1)
     nrm = nrm + NOISE * rng.normal(size=nrm.shape)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     nrm *= rng.choice([-1.0, 1.0], (n, 1))
-    tree = core.PointIndex(pos)  # the importer's neighbour search: the table estimate() fills
+    tree = PointIndex(pos)  # the importer's neighbour search: the table estimate() fills
     graph = np.empty((n, normals.GRAPH_K + 1), np.int32)
     graph[tree.order, 0] = tree.order
     graph[tree.order, 1:] = tree.knn(tree.order, normals.GRAPH_K)[1]

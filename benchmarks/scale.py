@@ -7,12 +7,12 @@ A closed torus (major radius 1, minor 0.4) sampled uniformly by area -- no exter
 with analytic normals and radii that cover each point with about three discs, on a mesh
 floor, lit by one sun that casts the torus' shadow onto the floor. For each size it prints:
 
-- the build of core.Scene with the default settings (threads=0: all cores) and with 1
+- the build of SplatCloud with the default settings (threads=0: all cores) and with 1
   thread (the speed-up from cores), median of interleaved runs;
 - bytes per splat kept after the build, from the core's own accounting (Scene.bvh_stats()
   'bytes') and from the process' resident memory (RSS after the build minus before, the
   input arrays already freed), and the peak while building (input arrays included);
-- a 1920x1080 frame of core.RenderScene with the full method, 1 sample, the sun's shadow
+- a 1920x1080 frame of RenderScene with the full method, 1 sample, the sun's shadow
   rays and no bounce (the integrator path Blender uses);
 - Embree 3's build of the same discs (benchmarks/embree_harness.cpp, its own
   oriented-disc primitive, quality medium, on all cores), when libembree-dev is there and
@@ -39,7 +39,10 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
-from splat_tracer import core  # noqa: E402
+from splat_tracer.camera import Camera  # noqa: E402
+from splat_tracer.method import Method  # noqa: E402
+from splat_tracer.scene import Instance, Mesh, RenderScene  # noqa: E402
+from splat_tracer.splats import SplatCloud, simd_path  # noqa: E402
 from splat_tracer.shading import Light, Material, RenderSettings, World  # noqa: E402
 
 R_MAJOR, R_MINOR = 1.0, 0.4
@@ -71,9 +74,9 @@ def torus_cloud(n: int, seed: int = 1, chunk: int = 5_000_000):
     return centres, normals, np.full(n, radius, np.float32)
 
 
-def floor_mesh(half: float = 3.0) -> core.Mesh:
+def floor_mesh(half: float = 3.0) -> Mesh:
     v = np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]], np.float32)
-    return core.Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
+    return Mesh(v, np.array([[0, 1, 2], [0, 2, 3]]))
 
 
 def rss_bytes() -> int:
@@ -89,10 +92,13 @@ def kept_rss(n_splats: int) -> float:
 import ctypes, gc, sys
 sys.path.insert(0, {str(HERE)!r}); sys.path.insert(0, {str(HERE.parent)!r})
 import scale
-from splat_tracer import core
+from splat_tracer.camera import Camera
+from splat_tracer.method import Method
+from splat_tracer.scene import Instance, Mesh, RenderScene
+from splat_tracer.splats import SplatCloud, simd_path
 before = scale.rss_bytes()
 c, n, r = scale.torus_cloud({n_splats})
-s = core.Scene(c, n, r, closed=True)
+s = SplatCloud(c, n, r, closed=True)
 del c, n, r
 gc.collect()
 ctypes.CDLL("libc.so.6").malloc_trim(0)
@@ -113,7 +119,7 @@ def timed_builds(c, n, r, rounds: int) -> dict:
     for _ in range(rounds):
         for threads in (0, 1):
             t0 = time.perf_counter()
-            s = core.Scene(c, n, r, closed=True, threads=threads)
+            s = SplatCloud(c, n, r, closed=True, threads=threads)
             times[threads].append(time.perf_counter() - t0)
             del s
             gc.collect()
@@ -143,14 +149,14 @@ def embree_build(c, n, r, work: Path) -> float | None:
     return json.loads(run.stdout.strip().splitlines()[-1])["build_s"]
 
 
-def frame(scene: core.Scene, width: int, height: int) -> tuple[float, dict]:
+def frame(scene: SplatCloud, width: int, height: int) -> tuple[float, dict]:
     sun = Light(type="SUN", power=3.0, direction=(-0.4, 0.3, -1.0))
-    rs = core.RenderScene([core.Instance(scene, materials=(Material(base_colour=(0.8, 0.5, 0.3)),)),
-                           core.Instance(floor_mesh())], [sun], World(colour=(0.2, 0.2, 0.25)))
-    cam = core.Camera.look_at((0.0, -3.2, 2.4), (0.0, 0.0, 0.3), fov_y=40.0, aspect=width / height)
+    rs = RenderScene([Instance(scene, materials=(Material(base_colour=(0.8, 0.5, 0.3)),)),
+                      Instance(floor_mesh())], [sun], World(colour=(0.2, 0.2, 0.25)))
+    cam = Camera.look_at((0.0, -3.2, 2.4), (0.0, 0.0, 0.3), fov_y=40.0, aspect=width / height)
     settings = RenderSettings(samples=1, diffuse_bounces=0, glossy_bounces=0, transmission_bounces=0)
     t0 = time.perf_counter()
-    fr = rs.render(cam, width, height, settings, method=core.Method.preset("FULL"))
+    fr = rs.render(cam, width, height, settings, method=Method.preset("FULL"))
     return time.perf_counter() - t0, fr.counters
 
 
@@ -171,7 +177,7 @@ def main(argv=None) -> int:
     rounds = args.rounds or (1 if args.quick else 3)
     width, height = (960, 540) if args.quick else (1920, 1080)
     print(f"scale: torus, closed, {COVER:g} discs per point; hardware threads: {core_threads()}; "
-          f"box and disc tests in {core.simd_path()}; "
+          f"box and disc tests in {simd_path()}; "
           f"build medians of {rounds} interleaved round(s); frame {width}x{height}, full method, 1 sample, one sun "
           f"with shadows, on all threads. Shared machine: timings vary by +-25 %.")
     print("| splats | build, default threads (s) | build, 1 thread (s) | speed-up | Embree build (s) "
@@ -184,7 +190,7 @@ def main(argv=None) -> int:
         # Embree's copy and BVH of 100M discs would not fit beside ours: up to 20M.
         embree = None if args.no_embree or n_splats > EMBREE_MAX else embree_build(c, n, r, Path("build") / "bench-scale")
         builds = timed_builds(c, n, r, rounds) if rounds > 0 else {0: float("nan"), 1: float("nan")}
-        scene = core.Scene(c, n, r, closed=True)
+        scene = SplatCloud(c, n, r, closed=True)
         del c, n, r
         gc.collect()
         core_kept = scene.bvh_stats().get("bytes", float("nan")) / n_splats

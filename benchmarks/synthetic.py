@@ -121,22 +121,26 @@ def scenes(n_samples: int = 50000) -> list[SyntheticScene]:
 
 
 def score_methods(sc: SyntheticScene, methods: dict, width: int, height: int, radius_factor: float = 1.0) -> dict:
-    """{label: scoring.score(...)} for each core.Method in `methods`, rendering the scene's
+    """{label: scoring.score(...)} for each Method in `methods`, rendering the scene's
     cloud (k-NN radii, the importer's closed guess) from its view with pixel-centre rays."""
-    from splat_tracer import core, spacing
+    from splat_tracer import spacing
+    from splat_tracer.camera import Camera
+    from splat_tracer.method import Method
+    from splat_tracer.neighbours import local_frame
+    from splat_tracer.splats import SplatCloud
 
-    origin, local = core.local_frame(sc.points)
+    origin, local = local_frame(sc.points)
     hood = spacing.analyse(local, sc.normals)
     view = meshes.camera_view(sc.points, width, height, **sc.view)
-    cam = core.Camera.look_at(**view)
+    cam = Camera.look_at(**view)
     o, d = cam.rays(width, height)
     d64 = d.astype(np.float64)
     d64 /= np.linalg.norm(d64, axis=1, keepdims=True)
     truth = truth_mod.cast(sc.vertices, sc.triangles, meshes.corner_normals(sc.vertices, sc.triangles),
                            o.astype(np.float64), d64, cam.position, cam.forward)
-    cam_local = core.Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
+    cam_local = Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
     radii = spacing.covering_radii(local, sc.normals, hood.spacing)  # what the importer gives
-    scene = core.Scene(local, sc.normals, radii * radius_factor, closed=hood.closed_guess)
+    scene = SplatCloud(local, sc.normals, radii * radius_factor, closed=hood.closed_guess)
     out = {}
     for label, method in methods.items():
         img = scene.render(cam_local, width, height, method=method)

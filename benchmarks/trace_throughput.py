@@ -37,7 +37,11 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
 from meshes import SHARED_MESHES, area_samples, fit_camera, icosphere, read_obj, vertex_cloud  # noqa: E402
-from splat_tracer import core, spacing  # noqa: E402
+from splat_tracer import _core, spacing  # noqa: E402
+from splat_tracer.camera import PACKET_RAYS, packet_order  # noqa: E402
+from splat_tracer.method import PRESETS, Method  # noqa: E402
+from splat_tracer.neighbours import local_frame  # noqa: E402
+from splat_tracer.splats import SplatCloud, hardware_threads, simd_path  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
 PAPER_SECONDS = (7.0, 10.0)  # Beddiaf & Babahenini, sec. IV: 35,945 points at 640x480
@@ -52,11 +56,11 @@ def load_cloud():
 
 def sse2(fn):
     """fn() with the packet kernels held to SSE2 (where the CPU would run AVX2)."""
-    before = core._core._use_avx2(False)
+    before = _core._use_avx2(False)
     try:
         return fn()
     finally:
-        core._core._use_avx2(before)
+        _core._use_avx2(before)
 
 
 def timed(fn, repeats):
@@ -126,20 +130,20 @@ def main(argv=None) -> int:
     repeats = 3 if args.quick else 7
 
     name, positions, normals = load_cloud()
-    origin, local = core.local_frame(positions)
+    origin, local = local_frame(positions)
     radii, _ = spacing.knn_spacing(local)
-    cores = core.hardware_threads()
-    build_s, scene = timed(lambda: core.Scene(local, normals, radii, closed=True), repeats)
-    cam = fit_camera(core, local, WIDTH, HEIGHT)
+    cores = hardware_threads()
+    build_s, scene = timed(lambda: SplatCloud(local, normals, radii, closed=True), repeats)
+    cam = fit_camera(local, WIDTH, HEIGHT)
     origins, dirs = cam.rays(WIDTH, HEIGHT)
     n_rays = len(origins)
-    # The core's rows take the rays in 4x4 pixel tiles (core.packet_order: 16 consecutive
+    # The core's rows take the rays in 4x4 pixel tiles (packet_order: 16 consecutive
     # rays make one packet), as Embree's rtcIntersect16 row does; Embree's rtcIntersect1
     # and the harness take them row by row (it cuts its own tiles).
-    order = core.packet_order(WIDTH, HEIGHT)
+    order = packet_order(WIDTH, HEIGHT)
     tile_o, tile_d = np.ascontiguousarray(origins[order]), np.ascontiguousarray(dirs[order])
 
-    full = core.Method.preset("FULL")
+    full = Method.preset("FULL")
     # Every row is timed once per round and the rounds interleave the core's rows with
     # Embree's, so that a change in the machine's load (it is shared) falls on all of them
     # alike; each row's time is its median over the rounds.
@@ -151,12 +155,12 @@ def main(argv=None) -> int:
         runs.append(("core trace(), nearest hit, one ray at a time", threads,
                      lambda threads=threads: scene.trace(tile_o, tile_d, normals=False, threads=threads,
                                                          packets=False)))
-        for preset in core.PRESETS:
-            method = core.Method.preset(preset)
+        for preset in PRESETS:
+            method = Method.preset(preset)
             runs.append((f"core trace_surface(), {preset.lower().replace('_', '-')} method", threads,
                          lambda threads=threads, method=method: scene.trace_surface(tile_o, tile_d, method,
                                                                                     threads=threads)))
-        if "AVX2" in core.simd_path():  # the baseline every other x86-64 CPU runs
+        if "AVX2" in simd_path():  # the baseline every other x86-64 CPU runs
             runs.append(("core trace(), nearest hit, SSE2 kernels", threads,
                          lambda threads=threads: sse2(lambda: scene.trace(tile_o, tile_d, normals=False,
                                                                           threads=threads))))
@@ -208,8 +212,8 @@ def main(argv=None) -> int:
     print(f"# Trace throughput: {name}, {len(local):,} splats, {WIDTH}x{HEIGHT} = {n_rays:,} rays, "
           f"{coverage:.1%} of pixels hit")
     print(f"# BVH: built in {build_s * 1e3:.1f} ms on {cores} threads; {stats['nodes']:,} 4-wide nodes, "
-          f"box and disc tests in {core.simd_path()} (no -march=native; AVX2 chosen at run time where the CPU has it), rays in packets "
-          f"of {core.PACKET_RAYS} (4x4 pixels) unless the row says one at a time; "
+          f"box and disc tests in {simd_path()} (no -march=native; AVX2 chosen at run time where the CPU has it), rays in packets "
+          f"of {PACKET_RAYS} (4x4 pixels) unless the row says one at a time; "
           f"depth {stats['depth']}; median of {repeats} interleaved rounds (every row once per round)\n")
     if embree is None:
         print(f"# Embree reference skipped: {why_not}\n")

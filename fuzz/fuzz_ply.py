@@ -22,11 +22,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
     import plyfile  # noqa: F401  (instrumented: its parser is half of the reader)
     from splat_tracer import ply, prepare
+    from splat_tracer.cloud import CloudFileError, PointCloud
 
 PATH = os.path.join(tempfile.mkdtemp(prefix="fuzz_ply_"), "input.ply")
 
 
-def check_cloud(cloud: ply.PointCloud) -> None:
+def check_cloud(cloud: PointCloud) -> None:
     n = len(cloud)
     assert n > 0 and cloud.positions.shape == (n, 3) and np.isfinite(cloud.positions).all()
     if cloud.normals is not None:  # None: the file has none, prepare() estimates them
@@ -44,12 +45,12 @@ def TestOneInput(data: bytes) -> None:
         f.write(data)
     try:
         cloud = ply.read_ply(PATH)
-    except ply.CloudFileError:
+    except CloudFileError:
         return
     check_cloud(cloud)
     try:
         prepared = prepare.prepare(cloud, PATH, workers=1)
-    except ply.CloudFileError:
+    except CloudFileError:
         return
     m = len(prepared.cloud)
     assert prepared.local.shape == (m, 3) and prepared.local.dtype == np.float32

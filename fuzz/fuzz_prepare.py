@@ -6,7 +6,7 @@ The input bytes are decoded (atheris.FuzzedDataProvider) into a point cloud as
 ply.read_ply hands it over -- finite float64 positions of any magnitude (clusters,
 outliers, near-duplicates, values up to 1e300), unit normals, optional colours and
 radii -- and passed to:
-- spacing.first_of_duplicates, on the raw positions with NaN, inf and -0.0 mixed in: must
+- first_of_duplicates, on the raw positions with NaN, inf and -0.0 mixed in: must
   give a (N,) bool mask keeping the first of every set of equal rows;
 - prepare.bulk_mask: (N,) bool, never raises;
 - prepare.prepare (frame, outliers, k-NN radii, closed guess), with a fuzzed k and
@@ -22,7 +22,9 @@ import numpy as np  # imported before instrumenting: coverage is wanted for our 
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
-    from splat_tracer import ply, prepare, spacing
+    from splat_tracer import ply, prepare
+    from splat_tracer.cloud import CloudFileError, PointCloud
+    from splat_tracer.neighbours import first_of_duplicates
 
 SPECIAL = [0.0, -0.0, 1.0, -1.0, 1e-300, 1e-45, 1e7, -1e7, 1e15, 1e16, 1e300, -1e300, 3.4e38, 0.1, 1e-7]
 
@@ -51,10 +53,10 @@ def TestOneInput(data: bytes) -> None:
     raw = pos.copy()
     if n and fdp.ConsumeBool():  # NaN, inf and -0.0 where they hurt the duplicate search
         raw[fdp.ConsumeIntInRange(0, n - 1), fdp.ConsumeIntInRange(0, 2)] = [np.nan, np.inf, -0.0][fdp.ConsumeIntInRange(0, 2)]
-    keep = spacing.first_of_duplicates(raw)
+    keep = first_of_duplicates(raw)
     assert keep.shape == (n,) and keep.dtype == bool and (n == 0 or keep[0])
 
-    pos = pos[spacing.first_of_duplicates(pos)]  # read_ply merges duplicates
+    pos = pos[first_of_duplicates(pos)]  # read_ply merges duplicates
     pos = pos[np.isfinite(pos).all(axis=1)]
     m = len(pos)
     if m:
@@ -67,12 +69,12 @@ def TestOneInput(data: bytes) -> None:
         radii = np.array([10.0 ** fdp.ConsumeFloatInRange(-30, 30) for _ in range(m)], np.float32)
         radii = np.where(np.isfinite(radii) & (radii > 0), radii, np.float32(1.0))
     colours = np.full((m, 4), 0.5, np.float32) if fdp.ConsumeBool() else None
-    cloud = ply.PointCloud(pos, nrm, colours, radii, merged_duplicates=fdp.ConsumeIntInRange(0, 3),
-                           rows=np.arange(m))
+    cloud = PointCloud(pos, nrm, colours, radii, merged_duplicates=fdp.ConsumeIntInRange(0, 3),
+                       rows=np.arange(m))
     k = fdp.ConsumeIntInRange(1, 30)
     try:
         prepared = prepare.prepare(cloud, "fuzzed.ply", k=k, drop_outliers=fdp.ConsumeBool(), workers=1)
-    except ply.CloudFileError:
+    except CloudFileError:
         return
     kept = len(prepared.cloud)
     assert 0 < kept <= m

@@ -13,11 +13,12 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..splat_tracer import ab, core, difference
+from ..splat_tracer import ab, difference
+from ..splat_tracer.method import PRESETS, Method
 from ..splat_tracer.session import render_frame
 
 _CHOICES = tuple((p, p.replace("_", " ").title(), f"The {p.replace('_', ' ').lower()} preset")
-                 for p in core.PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)
+                 for p in PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)
 IMAGE_NAMES = ("Splat Compare A", "Splat Compare B", "Splat Compare Difference")
 _TOGGLES = (("NONE", "None", "Compare the A and B settings"),
             ("use_wrong_hit_elimination", "Wrong Hit Elimination", "The scene's settings without and with it"),
@@ -27,12 +28,12 @@ _TOGGLES = (("NONE", "None", "Compare the A and B settings"),
             ("use_nearest_centre", "Nearest Centre", "The scene's settings without and with it"))
 
 
-def _method(choice: str, scene) -> core.Method:
+def _method(choice: str, scene) -> Method:
     settings = scene.splat_tracer
     if choice == "SCENE":
         return settings.core_method()
-    return core.Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel,
-                              crease_angle=settings.core_method().crease_angle)
+    return Method.preset(choice, epsilon=settings.epsilon, kernel=settings.kernel,
+                         crease_angle=settings.core_method().crease_angle)
 
 
 def _store_image(name: str, rgba_top_first: np.ndarray, float_buffer: bool = True) -> bpy.types.Image:

@@ -19,6 +19,7 @@ import bpy
 from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
 
 from ..splat_tracer import importer, normals, ply, prepare, readers, spacing
+from ..splat_tracer.cloud import CloudFileError
 from ..splat_tracer.cloud_object import NORMAL, RADIUS, create_cloud_object, mesh_positions
 from ..splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress, scaled
 
@@ -35,7 +36,7 @@ _ORIENTATION_ITEMS = [
 _TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progress
 # What a failed or cancelled run reports, and which exceptions are the user's problem
 # (reported) rather than a bug (raised).
-_REPORTED = (ply.CloudFileError, MemoryError, ValueError, Cancelled)
+_REPORTED = (CloudFileError, MemoryError, ValueError, Cancelled)
 
 
 def _decimal(value: float) -> float:

@@ -12,7 +12,8 @@ from typing import Optional
 
 import numpy as np
 
-from . import core, difference
+from . import difference
+from .method import Method
 
 MODES = ("OFF", "A", "B", "SPLIT")
 DIVIDER = 2                       # the wipe's divider line, pixels wide
@@ -27,7 +28,7 @@ class Variant:
     (baked into the clouds' splats: two radius factors need two sets of cloud geometry)."""
 
     name: str
-    method: core.Method
+    method: Method
     radius_factor: float
 
 
@@ -92,7 +93,7 @@ def display_buffer(mode: str, shape, scene: Optional[np.ndarray] = None, a: Opti
 # --------------------------------------------------------------------------------------
 # When A and B cannot differ
 
-def ineffective_differences(a: core.Method, b: core.Method, *, clouds: int, closed_clouds: int, headlight: bool,
+def ineffective_differences(a: Method, b: Method, *, clouds: int, closed_clouds: int, headlight: bool,
                             radius_a: float = 1.0, radius_b: float = 1.0) -> list[str]:
     """Notes, one per setting in which A and B differ but which cannot change the Combined
     image under the other settings (from the visibility code's logic, docs/ALGORITHM.md);

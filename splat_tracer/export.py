@@ -2,8 +2,8 @@
 
 Walks `depsgraph.object_instances` (modifiers, collection and Geometry Nodes instancing,
 world matrices, the view layer's collections all honoured) and turns:
-- point clouds carrying splat normals into splat geometry (core.Scene),
-- meshes (and curves, text, surfaces, metaballs through their evaluated mesh) into core.Mesh,
+- point clouds carrying splat normals into splat geometry (SplatCloud),
+- meshes (and curves, text, surfaces, metaballs through their evaluated mesh) into Mesh,
 - lamps into shading.Light, materials into shading.Material (export_shading.py),
 into instances: each unique geometry is read and built once and shared by all its
 instances, and kept across frames by the session's cache (session.py), keyed by content.
@@ -19,7 +19,10 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import core, export_shading, resources, shading
+from . import export_shading, resources, shading
+from .camera import Camera
+from .scene import RAY_VISIBILITY, Instance, Mesh, RenderScene
+from .splats import SplatCloud
 from .cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
 from .columns import finite_rows, nonzero_rows
 
@@ -31,7 +34,7 @@ _NOTHING_TO_RENDER = {"CAMERA", "EMPTY", "ARMATURE", "LATTICE", "SPEAKER", "LIGH
 
 @dataclass
 class ExportedScene:
-    render_scene: core.RenderScene
+    render_scene: RenderScene
     origin: np.ndarray                 # float64 world position of the local frame's origin
     instances: int = 0
     clouds: int = 0                    # cloud instances
@@ -184,7 +187,7 @@ class _Frame:
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
                                 len(pos) * resources.BYTES_PER_SPLAT,
-                                lambda: core.Scene(pos, nrm, rad * self.radius_factor, col, closed=closed,
+                                lambda: SplatCloud(pos, nrm, rad * self.radius_factor, col, closed=closed,
                                                    threads=self.threads, alphas=alpha))
         self.splats += self._first_use(key, geometry)
         if closed:
@@ -228,7 +231,7 @@ class _Frame:
         key = ("mesh", _digest(verts, tris, normals, mats))
         geometry = self._cached(key, f"mesh '{obj.name}' ({len(tris):,} triangles)",
                                 len(tris) * resources.BYTES_PER_TRIANGLE,
-                                lambda: core.Mesh(verts, tris, normals, mats, threads=self.threads))
+                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads))
         self.triangles += self._first_use(key, geometry)
         return geometry
 
@@ -260,7 +263,7 @@ class _Frame:
 
 def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_factor: float = 1.0,
                  threads: int = 0, report: shading.Report | None = None) -> ExportedScene:
-    """The depsgraph's view layer as a core.RenderScene in the local frame at `origin`."""
+    """The depsgraph's view layer as a RenderScene in the local frame at `origin`."""
     report = report if report is not None else shading.Report()
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
@@ -292,14 +295,14 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
-        instances.append(core.Instance(
+        instances.append(Instance(
             geometry, matrix, materials,
-            visibility=frozenset(k for k in core.RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
+            visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
             pass_index=_source(obj).pass_index))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
-    render_scene = core.RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
-                                    threads=threads)
+    render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
+                               threads=threads)
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report)
@@ -310,7 +313,7 @@ def geometry_has_colours(obj) -> bool:
     return data is not None and hasattr(data, "attributes") and COLOUR in data.attributes
 
 
-def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> core.Camera:
+def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> Camera:
     scene = depsgraph.scene
     if scene.camera is None:
         raise RuntimeError("the scene has no active camera")
@@ -325,7 +328,7 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
     r = scene.render
     projection = cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=r.pixel_aspect_x,
                                         scale_y=r.pixel_aspect_y)
-    return core.Camera.from_view_projection(projection, cam.matrix_world.normalized(), origin)
+    return Camera.from_view_projection(projection, cam.matrix_world.normalized(), origin)
 
 
 def camera_origin(depsgraph: bpy.types.Depsgraph) -> np.ndarray:

@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear
+
 C0 = 0.28209479177387814
 GAUSSIAN_FIELDS = ("f_dc_0", "f_dc_1", "f_dc_2", "opacity", "rot_0", "rot_1", "rot_2", "rot_3",
                    "scale_0", "scale_1")
@@ -47,9 +49,7 @@ def quaternion_matrices(q: np.ndarray) -> np.ndarray:
     ], axis=1)
 
 
-def read_gaussians(path: str, v, names) -> "PointCloud":  # noqa: F821
-    from .ply import CloudFileError, make_cloud, srgb_to_linear
-
+def read_gaussians(path: str, v, names) -> PointCloud:
     missing = [f for f in GAUSSIAN_FIELDS if f not in names]
     if missing:
         raise CloudFileError(f"{path}: a Gaussian-splatting PLY (it has "

@@ -26,7 +26,8 @@ import numpy as np
 
 from . import matrices, normals, prepare, readers, resources, spacing
 from .columns import bounds
-from .ply import CloudFileError, PointCloud
+from .cloud import CloudFileError, PointCloud
+from .ply import read_header
 from .progress import ProgressFn, nothing, scaled
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
@@ -154,9 +155,7 @@ def declared_points(path: str, kind: str) -> Optional[int]:
     bounds what reading it allocates) or when the header cannot tell (the reader will say why)."""
     try:
         if kind == "PLY":
-            from .ply import _read_header
-
-            _, header = _read_header(path)
+            _, header = read_header(path)
             return sum(e.count for e in header.elements if e.name == "vertex")
         if kind == "LAS":
             import laspy
@@ -225,10 +224,8 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
 
 
 def _ply_has_normals(path: str) -> bool:
-    from .ply import _read_header
-
     try:
-        _, header = _read_header(path)
+        _, header = read_header(path)
     except CloudFileError:
         return False
     names = {p.name for e in header.elements if e.name == "vertex" for p in e.properties}

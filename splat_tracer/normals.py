@@ -3,7 +3,7 @@ consistent orientation.
 
 Estimation: each point's normal is the eigenvector of the smallest eigenvalue of the
 covariance of its k nearest neighbours (itself included), computed in the compiled core
-(core.PointIndex.pca: the search, the covariance in float64 about the point, the
+(PointIndex.pca: the search, the covariance in float64 about the point, the
 eigenvector in closed form with Jacobi rotations where the eigenvalues nearly repeat),
 in chunks of points in the k-d tree's own (spatially coherent) order.
 
@@ -20,10 +20,10 @@ Orientation (the PCA axis has no sign):
   centroid, oriented away from it (outward). A flat component (its seed's normal nearly
   perpendicular to the outward direction) or an open sheet (its oriented normals' sum at
   least OPEN_SHEET x their count: a terrain, a facade) is turned so that its normals' sum
-  points up (+Z; +Y, +X for vertical planes). The graph's steps are native (core.graph_weights,
+  points up (+Z; +Y, +X for vertical planes). The graph's steps are native (graph_weights,
   spanning_forest by Boruvka's algorithm, forest_traversal, chain_flips), on the cloud
   renumbered so that neighbours lie close in memory: in the import's k-d tree's order, or in
-  Morton order (core.spatial_order) when there is no tree.
+  Morton order (spatial_order) when there is no tree.
 In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
 perpendicular to the scanner's direction or to +Z: grazing views, walls in aerial data)
 takes its sign by propagation from its neighbours instead: from the anchor fewest tree
@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import core
+from .graph import chain_flips, forest_traversal, graph_weights, spanning_forest
+from .neighbours import PointIndex, permute_table, spatial_order, take_rows
 from . import spacing as spacing_mod
 from .progress import chunks, nothing, scaled
 from .spacing import neighbour_tree
@@ -138,7 +139,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
            k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None) -> Orientation:
     """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
     for estimate. The graph's steps (weights, spanning forest, traversal) are native
-    (core.graph_weights, spanning_forest, forest_traversal), on `workers` threads."""
+    (graph_weights, spanning_forest, forest_traversal), on `workers` threads."""
     if mode not in MODES:
         raise ValueError(f"unknown orientation mode {mode!r}")
     pts = np.asarray(points, dtype=np.float64)
@@ -182,16 +183,16 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     # plus 5 s to renumber).
     # `perm` maps the new numbers to the caller's; ties below are broken in the caller's.
     # The k-d tree's order is such a renumbering already (its leaves are compact in space).
-    perm = tree.order if tree is not None and len(tree) == n else core.spatial_order(pts, threads)
+    perm = tree.order if tree is not None and len(tree) == n else spatial_order(pts, threads)
     report(0.03, "orienting normals: neighbour graph")
     # Column 0 of a row is the point itself (or, among duplicate points, one at distance 0).
-    nbr = core.permute_table(table, perm, slice(1, k + 1), threads)
+    nbr = permute_table(table, perm, slice(1, k + 1), threads)
     report(0.1, "orienting normals: neighbour graph")
-    p, m, anchor_sign = core.take_rows(pts, perm, threads), core.take_rows(nrm, perm, threads), anchor_sign[perm]
-    w = core.graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
-                           _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
+    p, m, anchor_sign = take_rows(pts, perm, threads), take_rows(nrm, perm, threads), anchor_sign[perm]
+    w = graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
+                      _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
     report(0.3, "orienting normals: spanning tree")
-    forest = core.spanning_forest(nbr, w, threads, _fraction(report, 0.3, 0.8, "orienting normals: spanning tree"))
+    forest = spanning_forest(nbr, w, threads, _fraction(report, 0.3, 0.8, "orienting normals: spanning tree"))
     del nbr, w
     report(0.8, "orienting normals: propagation")
     n_comp, labels = forest.components, forest.labels
@@ -219,13 +220,13 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     # One breadth-first walk from every anchor at once (as if from a virtual root joined to
     # each), each point's sign its parent's unless their normals point apart.
     is_anchor = anchor_sign != 0
-    pred, order = core.forest_traversal(forest.edges, is_anchor,
-                                        _fraction(report, 0.85, 0.95, "orienting normals: propagation"))
+    pred, order = forest_traversal(forest.edges, is_anchor,
+                                   _fraction(report, 0.85, 0.95, "orienting normals: propagation"))
     del forest
     parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
     cos_parent = np.einsum("ij,ij->i", m, m[parent])
     flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
-    negative = core.chain_flips(order, parent, flip)
+    negative = chain_flips(order, parent, flip)
     ambiguous = ~is_anchor & (np.abs(cos_parent) < AMBIGUOUS_EDGE)
     del pred, order, parent, cos_parent, flip
 

@@ -10,7 +10,7 @@ closed guess and get a disc millions of metres wide.
   cannot widen it). A point more than OUTLIER_REACH such sizes outside that box is an
   outlier. They are kept by default (a point is never lost silently) or dropped on request,
   and reported either way (count and first file row).
-- The origin is the centre of the bulk's bounding box (core.local_frame with the inliers).
+- The origin is the centre of the bulk's bounding box (local_frame with the inliers).
 - The neighbourhood analysis (k-NN spacing, closed guess) runs on the inliers; a kept
   outlier's spacing is its k-NN distance among all points.
 - k-NN radii are clamped to RADIUS_CAP times the 95th percentile of the inliers' spacing,
@@ -22,9 +22,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import core, normals as normals_mod, spacing
+from . import normals as normals_mod, spacing
+from .neighbours import local_frame
 from .columns import bounds, rows_outside
-from .ply import CloudFileError, PointCloud
+from .cloud import CloudFileError, PointCloud
 from .progress import Steps, scaled
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
@@ -213,7 +214,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         if statistical:
             cloud, bulk = _subset(cloud, keep), bulk[keep]
     _check_float32_safe(cloud.positions, bulk, path)
-    origin, local = core.local_frame(cloud.positions, bulk)
+    origin, local = local_frame(cloud.positions, bulk)
     if needs_normals and cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
         raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
                              f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")

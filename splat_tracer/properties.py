@@ -3,7 +3,8 @@ import math
 
 import bpy
 
-from . import core, shading
+from . import shading
+from .method import PRESETS, Method
 
 # Hard limits are the ones shading.RenderSettings accepts.
 _MAX_SAMPLES = 1 << 16
@@ -16,27 +17,27 @@ _PRESET_ITEMS = (
     ("FULL", "Full", "The paper's method: every visibility rule and normal interpolation"),
     ("CUSTOM", "Custom", "The switches below do not match a preset"),
 )
-# Switch values of each preset (core.Method.preset is the single source of truth).
+# Switch values of each preset (Method.preset is the single source of truth).
 _SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
              "use_nearest_centre")
 _syncing = False  # set while one property's update writes the others
 
 
-def method_from_switches(switches: dict, epsilon: float, kernel: str, crease_angle: float = math.pi) -> core.Method:
+def method_from_switches(switches: dict, epsilon: float, kernel: str, crease_angle: float = math.pi) -> Method:
     """The core method for a set of switch values (keys as in _SWITCHES); crease_angle in
     radians, as Blender stores angles."""
     if switches["use_near_phase"]:
         position = "NEAR_PHASE"
     else:
         position = "NEAREST_CENTRE" if switches["use_nearest_centre"] else "FIRST"
-    return core.Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
-                       interpolate_normals=switches["use_normal_interpolation"],
-                       far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon,
-                       crease_angle=min(180.0, max(0.0, math.degrees(crease_angle))))
+    return Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
+                  interpolate_normals=switches["use_normal_interpolation"],
+                  far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon,
+                  crease_angle=min(180.0, max(0.0, math.degrees(crease_angle))))
 
 
 def _switches_of(preset: str) -> dict:
-    m = core.Method.preset(preset)
+    m = Method.preset(preset)
     return dict(use_wrong_hit_elimination=m.eliminate_wrong_hits, use_normal_interpolation=m.interpolate_normals,
                 use_far_phase=m.far_phase, use_near_phase=m.position == "NEAR_PHASE",
                 use_nearest_centre=m.position == "NEAREST_CENTRE")
@@ -59,7 +60,7 @@ def _on_switch(self, context):
     if _syncing:
         return
     current = self.switches()
-    match = next((p for p in core.PRESETS if _switches_of(p) == current), "CUSTOM")
+    match = next((p for p in PRESETS if _switches_of(p) == current), "CUSTOM")
     _syncing = True
     try:
         self.method = match
@@ -80,7 +81,7 @@ class _VisibilitySettings:
     epsilon: bpy.props.FloatProperty(
         name="Epsilon",
         description="Depth of a surface layer, in radii of its first splat: hits this close count as one surface",
-        default=core.Method().epsilon, min=0.0, soft_max=4.0, precision=3,
+        default=Method().epsilon, min=0.0, soft_max=4.0, precision=3,
     )
     radius_factor: bpy.props.FloatProperty(
         name="Radius Factor",
@@ -118,7 +119,7 @@ class _VisibilitySettings:
         description="Weight of a splat in the interpolated normal, by the distance of the hit from its centre",
     )
     crease_angle: bpy.props.FloatProperty(
-        name="Crease Angle", subtype="ANGLE", default=math.radians(core.Method().crease_angle),
+        name="Crease Angle", subtype="ANGLE", default=math.radians(Method().crease_angle),
         min=0.0, max=math.pi,
         description="Splats whose normals differ by more than this do not blend, so sharp edges stay sharp "
                     "(like Auto Smooth); 180 degrees blends every overlapping splat as the paper does, right for "
@@ -128,7 +129,7 @@ class _VisibilitySettings:
     def switches(self) -> dict:
         return {key: getattr(self, key) for key in _SWITCHES}
 
-    def core_method(self, **overrides) -> core.Method:
+    def core_method(self, **overrides) -> Method:
         """The method these settings describe; `overrides` force switches (by property name)
         without touching the stored settings."""
         return method_from_switches({**self.switches(), **overrides}, self.epsilon, self.kernel, self.crease_angle)

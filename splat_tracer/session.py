@@ -15,7 +15,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import core, export, export_shading, shading
+from . import export, export_shading, shading
+from .method import Method
 
 
 class GeometryCache:
@@ -119,7 +120,7 @@ def lit_settings(scene, exported, settings: shading.RenderSettings, headlight: O
     return settings, bool(headlight)
 
 
-def render_frame(depsgraph, method: core.Method, passes=("Combined",), progress=None, stats=None,
+def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None, stats=None,
                  use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
                  settings: Optional[shading.RenderSettings] = None) -> Frame:
     """Exports the depsgraph's view layer and renders the frame (or its border) with

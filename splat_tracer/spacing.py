@@ -23,6 +23,7 @@ from typing import Optional
 
 import numpy as np
 
+from .neighbours import PointIndex
 from .progress import chunks
 
 DEFAULT_K = 6
@@ -51,7 +52,7 @@ BOUNDARY_SEED = 0
 # widens the count's spread, but 250 expected hits against a limit of 13 leave room.
 BOUNDARY_RUN = 32
 # Queries go in chunks of this many points, in the k-d tree's own (spatially coherent)
-# order: the core then answers a leaf of points at a time (core.PointIndex), the chunks
+# order: the core then answers a leaf of points at a time (PointIndex), the chunks
 # bound the memory of the (chunk, k) arrays, and progress and cancelling act between them
 # (about every 0.1 s). Each chunk costs a call's threads and their last unbalanced tasks:
 # at 2^16 points the 153 chunks of a 10M-point cloud's radii took 0.2 s longer.
@@ -77,36 +78,21 @@ class Neighbourhood:
                 f"(limit {CLOSED_MAX_BOUNDARY * np.sqrt(len(self.spacing)):.0f} for a closed surface)")
 
 
-def first_of_duplicates(points: np.ndarray) -> np.ndarray:
-    """(N,) bool: True for each row whose position no earlier row has (exact equality of
-    the coordinates' values; -0.0 equals 0.0; a row with a NaN coordinate equals no row, and
-    is kept). Coincident points make the k-NN query pathological (every neighbour at
-    distance 0: 200k copies of one point took 90 s), so they are found first, in the
-    compiled core (core.first_of_duplicates): rows are bucketed and sorted by a hash of
-    their coordinates, and only rows sharing a hash are compared by value, in about linear
-    time however many copies there are."""
-    from . import core
-
-    return core.first_of_duplicates(points)
-
-
 def neighbour_tree(points: np.ndarray, workers: int = -1):
-    """The compiled core's k-d tree of the points (core.PointIndex, float32), built for the
-    importer's all-points queries: asked about runs of its own order (`order`), it answers
-    a leaf of points at a time. Measured at 1M points on a terrain against scipy's cKDTree
-    (the sliding-midpoint build the importer used before): build and a k = 6 search of every
+    """The compiled core's k-d tree of the points (neighbours.PointIndex, float32), built for
+    the importer's all-points queries: asked about runs of its own order (`order`), it
+    answers a leaf of points at a time. Measured at 1M points on a terrain against scipy's
+    cKDTree (sliding-midpoint build): build and a k = 6 search of every
     point in about a third of the time, and the gap-closing radii and PCA normals, computed
     natively beside the search, 3-4x faster than numpy over the neighbour arrays. workers:
     threads, -1 (the importer's convention, scipy's) or 0 for all cores."""
-    from . import core
-
-    return core.PointIndex(points, max(workers, 0))
+    return PointIndex(points, max(workers, 0))
 
 
 def _boundary_count(tree, idx: np.ndarray, normals: np.ndarray, k: int) -> int:
     """How many of the points `idx` of the tree are on a boundary: their k nearest leave an
     angular gap wider than BOUNDARY_GAP (see the module's text; the compiled core computes
-    the angles, core.PointIndex.widest_gaps)."""
+    the angles, PointIndex.widest_gaps)."""
     return int((tree.widest_gaps(idx, normals, k) > BOUNDARY_GAP).sum())
 
 
@@ -241,7 +227,7 @@ def covering_radii(points: np.ndarray, normals: np.ndarray, spacing: np.ndarray,
     """(N,) float32 radii that close the gaps between samples: each point's k-NN spacing
     raised to the largest empty circle it is on, at most COVER_CAP x the spacing (see above).
     tree: a neighbour_tree of `points` already built; progress: as analyse's. The rule is
-    computed in the compiled core (core.PointIndex.covering)."""
+    computed in the compiled core (PointIndex.covering)."""
     nrm = np.asarray(normals, dtype=np.float32)  # directions of any length (the core normalises them)
     s = np.asarray(spacing, dtype=np.float32)
     k = int(min(COVER_K, len(points) - 1))

@@ -20,7 +20,10 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import ab, core, matrices, shading
+from . import ab, matrices, shading
+from .camera import Camera
+from .method import Method
+from .scene import RenderScene
 
 # --------------------------------------------------------------------------------------
 # The view
@@ -34,13 +37,13 @@ def _matrix(m) -> np.ndarray:
     return a
 
 
-def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> core.Camera:
+def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> Camera:
     """The core camera of a 3D view: `window_matrix` is its projection (view space to clip
     space, RegionView3D.window_matrix) and `view_matrix` maps world to view space
     (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
     way: Blender folds the camera's lens, sensor fit, shift, the view's zoom and its offset
     into window_matrix. `origin`: the scene's local-frame origin (float64 world position)."""
-    return core.Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin)
+    return Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin)
 
 
 def view_position(view_matrix) -> np.ndarray:
@@ -236,11 +239,11 @@ def _window_pixels(view: View) -> int:
 class _Job:
     generation: int
     variant: str
-    render_scene: core.RenderScene
-    camera: core.Camera
+    render_scene: RenderScene
+    camera: Camera
     view: View
     settings: shading.RenderSettings
-    method: core.Method
+    method: Method
     threads: int
     schedule: tuple
 
@@ -333,7 +336,7 @@ class ViewportSession:
         self._variants: tuple = ()
         self._states: dict = {}     # variant name -> (variant, settings, threads, render scene) of its job
         self._view: Optional[View] = None
-        self._camera: Optional[core.Camera] = None
+        self._camera: Optional[Camera] = None
         self._cond = threading.Condition()
         self._jobs: dict = {}       # variant name -> _Job
         self._next: dict = {}       # variant name -> its next pass

@@ -9,7 +9,8 @@ from scipy.ndimage import distance_transform_edt
 
 from blender_helpers import add_camera
 from geometry import blender_camera_rays, cube_cloud, fibonacci_sphere, ray_box
-from splat_tracer import core, ply
+from splat_tracer import ply
+from splat_tracer.method import Method
 
 SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
             "use_nearest_centre")
@@ -19,18 +20,18 @@ def test_presets_set_the_switches_and_switches_set_the_preset(blender, empty_sce
     s = empty_scene.splat_tracer
     # The add-on has its own copy of the core module (bl_ext.dev...): compare as tuples.
     method = lambda: s.core_method().as_tuple()  # noqa: E731
-    assert s.method == "FULL" and method() == core.Method.preset("FULL").as_tuple()
+    assert s.method == "FULL" and method() == Method.preset("FULL").as_tuple()
     s.method = "GENERAL"
     assert not any(getattr(s, k) for k in SWITCHES)
-    assert method() == core.Method.preset("GENERAL").as_tuple()
+    assert method() == Method.preset("GENERAL").as_tuple()
     s.method = "NEAREST_CENTRE"
-    assert method() == core.Method.preset("NEAREST_CENTRE").as_tuple()
+    assert method() == Method.preset("NEAREST_CENTRE").as_tuple()
     s.use_far_phase = True  # no preset has this combination
     assert s.method == "CUSTOM" and s.core_method().far_phase
     s.use_far_phase = False
     assert s.method == "NEAREST_CENTRE"
     s.epsilon, s.kernel = 2.5, "SMOOTH"
-    assert method() == core.Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
+    assert method() == Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
     s.crease_angle = math.radians(45)  # Blender stores angles in radians, the core takes degrees
     assert s.core_method().crease_angle == pytest.approx(45)
 

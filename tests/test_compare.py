@@ -7,7 +7,8 @@ import pytest
 
 from test_blender_method import cube_in_blender, image_pixels  # noqa: F401 - a fixture
 
-from splat_tracer import ab, core, difference
+from splat_tracer import ab, difference
+from splat_tracer.method import Method
 
 IMAGES = ("Splat Compare A", "Splat Compare B", "Splat Compare Difference")
 
@@ -61,15 +62,15 @@ def test_the_legend_shows_the_ramp_with_its_breakpoints():
 
 
 def test_ineffective_differences_follow_the_visibility_logic():
-    full = core.Method.preset("FULL")
-    flat = core.Method.preset("FULL", interpolate_normals=False)
+    full = Method.preset("FULL")
+    flat = Method.preset("FULL", interpolate_normals=False)
     from dataclasses import replace
     notes = lambda a, b, **kw: ab.ineffective_differences(a, b, **{"clouds": 1, "closed_clouds": 1,  # noqa: E731
                                                                     "headlight": False, **kw})
     assert notes(full, replace(full, far_phase=False)) == []
     assert "Closed Surface" in notes(full, replace(full, far_phase=False), closed_clouds=0)[0]
-    assert "no point cloud" in notes(full, core.Method.preset("GENERAL"), clouds=0)[0]
-    assert "cannot differ" in notes(full, core.Method.preset("GENERAL"), clouds=0)[-1]
+    assert "no point cloud" in notes(full, Method.preset("GENERAL"), clouds=0)[0]
+    assert "cannot differ" in notes(full, Method.preset("GENERAL"), clouds=0)[-1]
     assert "Kernel" in notes(flat, replace(flat, kernel="SMOOTH"))[0]
     assert notes(full, replace(full, kernel="SMOOTH")) == []
     # The position rule: nothing to choose with ε 0; invisible to the headlight when interpolating.
@@ -78,7 +79,7 @@ def test_ineffective_differences_follow_the_visibility_logic():
     assert "headlight" in notes(full, replace(full, position="FIRST"), headlight=True)[0]
     assert notes(full, replace(full, position="FIRST"), headlight=False) == []
     # ε matters only to rules that use the layer.
-    general = core.Method.preset("GENERAL")
+    general = Method.preset("GENERAL")
     assert "Epsilon" in notes(general, replace(general, epsilon=2.0))[0]
     assert notes(full, replace(full, epsilon=2.0)) == []
     # Two differences, one of which shows: no "cannot differ".

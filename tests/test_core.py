@@ -4,7 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from splat_tracer import _core, core
+from splat_tracer import _core
+from splat_tracer.camera import Camera
+from splat_tracer.method import Method
+from splat_tracer.splats import SplatCloud, TraceResult
 
 
 def random_discs(n, rng, spread=1.0, offset=0.0):
@@ -25,7 +28,7 @@ def in_plane_directions(normals, rng):
     return unit(u)
 
 
-def assert_same_hits(a: core.TraceResult, b: core.TraceResult):
+def assert_same_hits(a: TraceResult, b: TraceResult):
     np.testing.assert_array_equal(a.id, b.id)
     np.testing.assert_array_equal(a.t, b.t)
     np.testing.assert_array_equal(a.front, b.front)
@@ -36,7 +39,7 @@ def assert_same_hits(a: core.TraceResult, b: core.TraceResult):
 def test_bvh_matches_brute_force_on_random_rays(offset):
     rng = np.random.default_rng(7)
     c, n, r = random_discs(3000, rng, offset=offset)
-    scene = core.Scene(c, n, r)
+    scene = SplatCloud(c, n, r)
     origins = rng.uniform(-2, 2, size=(20000, 3)) + offset
     dirs = rng.normal(size=(20000, 3))
     bvh, brute = scene.trace(origins, dirs), scene.trace(origins, dirs, brute_force=True)
@@ -49,7 +52,7 @@ def test_bvh_matches_brute_force_on_rim_and_grazing_rays():
     a hair of the disc plane: where a too-tight box or a lax traversal would lose hits."""
     rng = np.random.default_rng(11)
     c, n, r = random_discs(2000, rng)
-    scene = core.Scene(c, n, r)
+    scene = SplatCloud(c, n, r)
     nu = unit(n)
     pick = rng.integers(0, len(c), size=6000)
     u = in_plane_directions(nu[pick], rng)
@@ -73,7 +76,7 @@ def test_bvh_matches_brute_force_on_rim_and_grazing_rays():
 
 def test_results_do_not_depend_on_thread_count():
     rng = np.random.default_rng(3)
-    scene = core.Scene(*random_discs(5000, rng))
+    scene = SplatCloud(*random_discs(5000, rng))
     o, d = rng.uniform(-2, 2, size=(50000, 3)), rng.normal(size=(50000, 3))
     assert_same_hits(scene.trace(o, d, threads=1), scene.trace(o, d, threads=2))
 
@@ -85,11 +88,11 @@ def test_build_does_not_depend_on_thread_count():
     and so the same results of every query as on one thread."""
     rng = np.random.default_rng(5)
     discs = random_discs(150000, rng)
-    one, two = core.Scene(*discs, threads=1), core.Scene(*discs, threads=2)
+    one, two = SplatCloud(*discs, threads=1), SplatCloud(*discs, threads=2)
     assert one.bvh_stats() == two.bvh_stats()
     o, d = rng.uniform(-2, 2, size=(20000, 3)), rng.normal(size=(20000, 3))
     assert_same_hits(one.trace(o, d), two.trace(o, d))
-    full = core.Method.preset("FULL")
+    full = Method.preset("FULL")
     a, b = one.trace_surface(o, d, full, members=True), two.trace_surface(o, d, full, members=True)
     for field in ("t", "id", "normal", "members"):
         np.testing.assert_array_equal(getattr(a, field), getattr(b, field))
@@ -101,14 +104,14 @@ def test_scene_keeps_at_most_64_bytes_per_splat():
     without colours, the 4-wide tree shrunk to the nodes used."""
     from geometry import sphere_cloud
     c, n, r = sphere_cloud(200000)
-    plain = core.Scene(c, n, r, closed=True).bvh_stats()["bytes"] / len(c)
+    plain = SplatCloud(c, n, r, closed=True).bvh_stats()["bytes"] / len(c)
     assert plain <= 64, plain
-    coloured = core.Scene(c, n, r, colours=np.ones_like(c)).bvh_stats()["bytes"] / len(c)
+    coloured = SplatCloud(c, n, r, colours=np.ones_like(c)).bvh_stats()["bytes"] / len(c)
     assert coloured == pytest.approx(plain + 12, abs=0.01)
 
 
 def single_disc(normal=(0, 0, 1), radius=1.0, centre=(0, 0, 0)):
-    return core.Scene([centre], [normal], [radius])
+    return SplatCloud([centre], [normal], [radius])
 
 
 def trace_one(scene, origin, direction, **kw):
@@ -145,16 +148,16 @@ def test_hand_made_oblique_hit_and_unnormalised_inputs():
 
 
 def test_equal_distance_ties_go_to_the_smaller_id():
-    scene = core.Scene([[0, 0, 0], [0.1, 0, 0], [0.05, 0, 0]], [[0, 0, 1]] * 3, [1, 1, 1])
+    scene = SplatCloud([[0, 0, 0], [0.1, 0, 0], [0.05, 0, 0]], [[0, 0, 1]] * 3, [1, 1, 1])
     assert trace_one(scene, (0.05, 0, 1), (0, 0, -1))[1] == 0
 
 
 def test_empty_scene_misses_everything():
-    scene = core.Scene(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    scene = SplatCloud(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     res = scene.trace([[0, 0, 0]], [[0, 0, 1]])
     assert res.id[0] == -1 and np.isinf(res.t[0])
     assert scene.bounds is None
-    img = scene.render(core.Camera.look_at((0, -5, 0), (0, 0, 0)), 8, 6, background=(0.1, 0.2, 0.3, 1))
+    img = scene.render(Camera.look_at((0, -5, 0), (0, 0, 0)), 8, 6, background=(0.1, 0.2, 0.3, 1))
     np.testing.assert_allclose(img.rgba[..., :3], np.broadcast_to([0.1, 0.2, 0.3], (6, 8, 3)), rtol=1e-6)
 
 
@@ -171,7 +174,7 @@ def test_invalid_scene_input_raises(bad, message):
     rng = np.random.default_rng(0)
     c, n, r = random_discs(10, rng)
     with pytest.raises(ValueError, match=message):
-        core.Scene(*bad(c, n, r))
+        SplatCloud(*bad(c, n, r))
 
 
 def test_native_module_validates_buffers_itself():
@@ -213,7 +216,7 @@ def test_native_module_validates_buffers_itself():
 
 def test_render_window_and_callback_validation():
     scene = single_disc()
-    cam = core.Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
+    cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
     with pytest.raises(ValueError, match="window"):
         scene.render(cam, 16, 16, window=(8, 8, 9, 4))
     with pytest.raises(TypeError, match="callable"):
@@ -228,8 +231,8 @@ def test_render_window_and_callback_validation():
 
 def test_render_stops_when_progress_asks():
     rng = np.random.default_rng(1)
-    scene = core.Scene(*random_discs(20000, rng))
-    cam = core.Camera.look_at((0, -4, 0), (0, 0, 0))
+    scene = SplatCloud(*random_discs(20000, rng))
+    cam = Camera.look_at((0, -4, 0), (0, 0, 0))
     calls = []
 
     def stop(done, total):
@@ -248,11 +251,11 @@ def test_render_stops_when_progress_asks():
 def test_render_agrees_with_trace_and_planar_depth():
     """render() shoots exactly Camera.rays(); its depth pass is the planar depth."""
     rng = np.random.default_rng(5)
-    scene = core.Scene(*random_discs(4000, rng))
-    for cam in (core.Camera.look_at((0.3, -4, 0.5), (0, 0, 0), fov_y=50),
-                core.Camera.look_at((0.3, -4, 0.5), (0, 0, 0), ortho_height=2.5)):
+    scene = SplatCloud(*random_discs(4000, rng))
+    for cam in (Camera.look_at((0.3, -4, 0.5), (0, 0, 0), fov_y=50),
+                Camera.look_at((0.3, -4, 0.5), (0, 0, 0), ortho_height=2.5)):
         w, h = 64, 48
-        img = scene.render(cam, w, h, method=core.Method.preset("GENERAL"))
+        img = scene.render(cam, w, h, method=Method.preset("GENERAL"))
         o, d = cam.rays(w, h)
         hits = scene.trace(o, d)
         hit = hits.id.reshape(h, w) >= 0
@@ -268,8 +271,8 @@ def test_render_agrees_with_trace_and_planar_depth():
 
 def test_window_render_equals_crop_of_full_render():
     rng = np.random.default_rng(9)
-    scene = core.Scene(*random_discs(3000, rng))
-    cam = core.Camera.look_at((0, -4, 1), (0, 0, 0))
+    scene = SplatCloud(*random_discs(3000, rng))
+    cam = Camera.look_at((0, -4, 1), (0, 0, 0))
     full = scene.render(cam, 80, 60)
     part = scene.render(cam, 80, 60, window=(10, 20, 33, 17))
     np.testing.assert_array_equal(part.rgba, full.rgba[20:37, 10:43])
@@ -277,7 +280,7 @@ def test_window_render_equals_crop_of_full_render():
 
 
 def test_camera_look_at_centre_ray_is_the_view_axis():
-    cam = core.Camera.look_at((1, 2, 3), (4, 6, 3), up=(0, 0, 1), fov_y=30, aspect=2.0)
+    cam = Camera.look_at((1, 2, 3), (4, 6, 3), up=(0, 0, 1), fov_y=30, aspect=2.0)
     o, d = cam.rays(3, 3)
     np.testing.assert_allclose(d[4], unit([3, 4, 0]), atol=1e-6)
     np.testing.assert_allclose(cam.forward, unit([3, 4, 0]))

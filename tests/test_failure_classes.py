@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
 import synthetic  # noqa: E402
-from splat_tracer import core  # noqa: E402
+from splat_tracer.method import Method  # noqa: E402
 
 W, H = 320, 240
 N_SAMPLES = 40000
@@ -23,7 +23,7 @@ N_SAMPLES = 40000
 # of the object's size.)
 RELATIVE_NOISE = 0.02
 FLOOR = {"normal_mean_deg": 0.01, "normal_p95_deg": 0.01, "wrong_surface_pct": 0.01}
-METHODS = {"nearest-centre": core.Method.preset("NEAREST_CENTRE"), "full": core.Method.preset("FULL")}
+METHODS = {"nearest-centre": Method.preset("NEAREST_CENTRE"), "full": Method.preset("FULL")}
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
-"""The native neighbour-graph routines (core.spatial_order, permute_table, take_rows,
+"""The native neighbour-graph routines (spatial_order, permute_table, take_rows,
 graph_weights, spanning_forest, forest_traversal, chain_flips) against scipy and numpy,
 normals.orient, which runs on them, against the scipy-based propagation it replaced, and
-the importer's duplicate search (core.first_of_duplicates) against numpy's np.unique."""
+the importer's duplicate search (first_of_duplicates) against numpy's np.unique."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,7 +10,9 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from splat_tracer import _core, core, normals
+from splat_tracer import _core, normals
+from splat_tracer.graph import chain_flips, forest_traversal, graph_weights, spanning_forest
+from splat_tracer.neighbours import first_of_duplicates, permute_table, spatial_order, take_rows
 from splat_tracer.progress import Cancelled
 
 
@@ -58,7 +60,7 @@ def test_spanning_forest_has_scipys_weight_and_components(seed):
     rng = np.random.default_rng(seed)
     n, k = int(rng.integers(1, 400)), int(rng.integers(0, 7))
     nbr, w = random_table(rng, n, k, ties=seed % 3 == 0)
-    forest = core.spanning_forest(nbr, w, threads=seed % 3)
+    forest = spanning_forest(nbr, w, threads=seed % 3)
     total, count, labels = scipy_forest(nbr, w)
     assert forest.components == count
     assert forest.edges.shape == (n - count, 2)
@@ -81,7 +83,7 @@ def test_spanning_forest_on_a_knn_graph_matches_scipy_edge_for_edge():
     p = rng.random((3000, 3))
     nbr = cKDTree(p).query(p, k=9)[1][:, 1:].astype(np.int32)
     w = np.linalg.norm(p[nbr] - p[:, None], axis=2).astype(np.float32)
-    forest = core.spanning_forest(nbr, w)
+    forest = spanning_forest(nbr, w)
     total, count, _ = scipy_forest(nbr, w)
     assert forest.components == count
     assert forest_weight(nbr, w, forest.edges) == pytest.approx(total, rel=1e-9)
@@ -96,23 +98,23 @@ def test_spanning_forest_on_a_knn_graph_matches_scipy_edge_for_edge():
 def test_spanning_forest_is_the_same_for_any_number_of_threads():
     rng = np.random.default_rng(4)
     nbr, w = random_table(rng, 200_000, 8, ties=True)
-    ref = core.spanning_forest(nbr, w, threads=1)
+    ref = spanning_forest(nbr, w, threads=1)
     for threads in (2, 3, 0):
-        f = core.spanning_forest(nbr, w, threads=threads)
+        f = spanning_forest(nbr, w, threads=threads)
         np.testing.assert_array_equal(f.edges, ref.edges)
         np.testing.assert_array_equal(f.labels, ref.labels)
 
 
 def test_spanning_forest_of_degenerate_tables():
-    empty = core.spanning_forest(np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
+    empty = spanning_forest(np.zeros((0, 3), np.int32), np.zeros((0, 3), np.float32))
     assert empty.components == 0 and empty.edges.shape == (0, 2) and empty.labels.shape == (0,)
-    alone = core.spanning_forest(np.zeros((1, 0), np.int32), np.zeros((1, 0), np.float32))
+    alone = spanning_forest(np.zeros((1, 0), np.int32), np.zeros((1, 0), np.float32))
     assert alone.components == 1 and len(alone.edges) == 0
     # every row only itself: no edges at all
-    selfish = core.spanning_forest(np.arange(5, dtype=np.int32)[:, None].repeat(3, 1), np.zeros((5, 3), np.float32))
+    selfish = spanning_forest(np.arange(5, dtype=np.int32)[:, None].repeat(3, 1), np.zeros((5, 3), np.float32))
     assert selfish.components == 5 and list(selfish.labels) == [0, 1, 2, 3, 4]
     # duplicate points: rows full of one neighbour, weights all equal
-    dup = core.spanning_forest(np.array([[1, 1], [0, 0], [0, 1]], np.int32), np.zeros((3, 2), np.float32))
+    dup = spanning_forest(np.array([[1, 1], [0, 0], [0, 1]], np.int32), np.zeros((3, 2), np.float32))
     assert dup.components == 1 and len(dup.edges) == 2
 
 
@@ -127,7 +129,7 @@ def test_graph_weights_match_the_numpy_formula():
     d /= np.maximum(np.linalg.norm(d, axis=2, keepdims=True), 1e-300)
     ni, nj = nrm[:, None], nrm[nbr]
     want = (1 - np.abs((ni * nj).sum(2)) + 0.7 * 0.5 * (np.abs((ni * d).sum(2)) + np.abs((nj * d).sum(2))))
-    got = core.graph_weights(p, nrm, nbr, across=0.7)
+    got = graph_weights(p, nrm, nbr, across=0.7)
     assert got.dtype == np.float32
     np.testing.assert_allclose(got, want, atol=1e-6)
     # both directions of an edge: bitwise the same weight
@@ -142,9 +144,9 @@ def test_traversal_is_breadth_first_from_every_anchor():
     rng = np.random.default_rng(6)
     p = rng.random((4000, 3))
     nbr = cKDTree(p).query(p, k=9)[1][:, 1:].astype(np.int32)
-    forest = core.spanning_forest(nbr, core.graph_weights(p, np.tile([0.0, 0, 1], (4000, 1)), nbr))
+    forest = spanning_forest(nbr, graph_weights(p, np.tile([0.0, 0, 1], (4000, 1)), nbr))
     anchors = rng.random(4000) < 0.01
-    parent, order = core.forest_traversal(forest.edges, anchors)
+    parent, order = forest_traversal(forest.edges, anchors)
     n = len(p)
     # scipy from a virtual root joined to every anchor: the same hop count for every vertex
     rows = np.r_[forest.edges[:, 0], np.full(anchors.sum(), n)]
@@ -169,7 +171,7 @@ def test_traversal_is_breadth_first_from_every_anchor():
 
 
 def test_traversal_leaves_unreached_vertices_out():
-    parent, order = core.forest_traversal(np.array([[0, 1], [2, 3]], np.int32), np.array([1, 0, 0, 0, 0], bool))
+    parent, order = forest_traversal(np.array([[0, 1], [2, 3]], np.int32), np.array([1, 0, 0, 0, 0], bool))
     assert list(parent) == [0, 0, -1, -1, -1] and list(order) == [0, 1]
 
 
@@ -178,33 +180,33 @@ def test_chain_flips_match_a_loop():
     n = 3000
     p = rng.random((n, 3))
     nbr = cKDTree(p).query(p, k=5)[1][:, 1:].astype(np.int32)
-    forest = core.spanning_forest(nbr, rng.random((n, 4)).astype(np.float32))
+    forest = spanning_forest(nbr, rng.random((n, 4)).astype(np.float32))
     anchors = rng.random(n) < 0.02
-    parent, order = core.forest_traversal(forest.edges, anchors)
+    parent, order = forest_traversal(forest.edges, anchors)
     parent = np.where(parent < 0, np.arange(n), parent)
     flip = rng.random(n) < 0.3
     want = flip.copy()
     for v in order:
         if parent[v] != v:
             want[v] = want[parent[v]] ^ flip[v]
-    np.testing.assert_array_equal(core.chain_flips(order, parent, flip), want)
+    np.testing.assert_array_equal(chain_flips(order, parent, flip), want)
 
 
 def test_spatial_order_permute_table_and_take_rows():
     rng = np.random.default_rng(9)
     p = rng.random((5000, 3)) * [100, 1, 0]  # a flat box: one axis without extent
-    order = core.spatial_order(p)
+    order = spatial_order(p)
     assert sorted(order) == list(range(5000))
     # Morton order is local: consecutive points are close (random order: ~37 apart on average)
     assert np.median(np.linalg.norm(np.diff(p[order], axis=0), axis=1)) < 1.0
     table = rng.integers(0, 5000, (5000, 6)).astype(np.int32)
     rank = np.argsort(order)
-    np.testing.assert_array_equal(core.permute_table(table, order, slice(1, 5)), rank[table[order, 1:5]])
-    np.testing.assert_array_equal(core.permute_table(table, order), rank[table[order]])
-    np.testing.assert_array_equal(core.take_rows(p, order), p[order])
-    np.testing.assert_array_equal(core.take_rows(p, order[:7]), p[order[:7]])
+    np.testing.assert_array_equal(permute_table(table, order, slice(1, 5)), rank[table[order, 1:5]])
+    np.testing.assert_array_equal(permute_table(table, order), rank[table[order]])
+    np.testing.assert_array_equal(take_rows(p, order), p[order])
+    np.testing.assert_array_equal(take_rows(p, order[:7]), p[order[:7]])
     same = np.zeros((10, 3))
-    assert list(core.spatial_order(same)) == list(range(10))  # all equal: index order
+    assert list(spatial_order(same)) == list(range(10))  # all equal: index order
 
 
 # --- first_of_duplicates against np.unique ---------------------------------------------
@@ -226,7 +228,7 @@ def check_first_of_duplicates(points):
     """The native mask on one and on two threads: both np.unique's."""
     want = unique_first(points)
     for threads in (1, 2):
-        got = core.first_of_duplicates(points, threads=threads)
+        got = first_of_duplicates(points, threads=threads)
         assert got.dtype == bool and got.shape == want.shape
         np.testing.assert_array_equal(got, want)
     return want
@@ -284,7 +286,7 @@ def test_many_copies_of_one_row_among_others():
     assert (~keep).sum() == (p == p[12345]).all(axis=1).sum() - 1
     check_first_of_duplicates(np.full((100_000, 3), 7.0))  # nothing else
     signs = np.where(rng.random((100_000, 3)) < 0.5, 1.0, -1.0)
-    assert core.first_of_duplicates(np.zeros((100_000, 3)) * signs).sum() == 1  # 0.0 and -0.0 mixed
+    assert first_of_duplicates(np.zeros((100_000, 3)) * signs).sum() == 1  # 0.0 and -0.0 mixed
 
 
 def test_rows_one_bit_apart_are_distinct():
@@ -344,7 +346,7 @@ def test_a_pile_of_distinct_rows_with_one_hash_is_not_quadratic():
     p = colliding_rows(rng, 20_000)
     p = np.concatenate([p] * 10)  # 200k rows, 20k distinct, one hash
     start = time.perf_counter()
-    keep = core.first_of_duplicates(p)
+    keep = first_of_duplicates(p)
     # Sorted by value: milliseconds; comparing each row with every earlier one of its hash
     # would take about 2e10 comparisons. The bound only catches that.
     assert time.perf_counter() - start < 5.0
@@ -354,7 +356,7 @@ def test_a_pile_of_distinct_rows_with_one_hash_is_not_quadratic():
 def test_first_of_duplicates_of_non_finite_rows():
     nan, inf = np.nan, np.inf
     p = [[nan, 0, 0], [nan, 0, 0], [inf, 0, 0], [inf, 0, 0], [-inf, 1, 2], [0, 0, nan], [-inf, 1, 2], [0, 0, 0]]
-    np.testing.assert_array_equal(core.first_of_duplicates(p), [1, 1, 1, 0, 1, 1, 0, 1])
+    np.testing.assert_array_equal(first_of_duplicates(p), [1, 1, 1, 0, 1, 1, 0, 1])
     check_first_of_duplicates(p)
     rng = np.random.default_rng(7)
     q = sprinkle_copies(rng, rng.normal(size=(20_000, 3)), 5000)
@@ -363,13 +365,13 @@ def test_first_of_duplicates_of_non_finite_rows():
 
 
 def test_first_of_duplicates_of_no_and_one_row():
-    assert core.first_of_duplicates(np.empty((0, 3))).shape == (0,)
-    np.testing.assert_array_equal(core.first_of_duplicates([[1.0, 2.0, 3.0]]), [True])
-    np.testing.assert_array_equal(core.first_of_duplicates([[1.0, 2.0, 3.0]] * 2), [True, False])
-    np.testing.assert_array_equal(core.first_of_duplicates(np.arange(6.0).reshape(2, 3)), [True, True])
+    assert first_of_duplicates(np.empty((0, 3))).shape == (0,)
+    np.testing.assert_array_equal(first_of_duplicates([[1.0, 2.0, 3.0]]), [True])
+    np.testing.assert_array_equal(first_of_duplicates([[1.0, 2.0, 3.0]] * 2), [True, False])
+    np.testing.assert_array_equal(first_of_duplicates(np.arange(6.0).reshape(2, 3)), [True, True])
     # any float dtype and layout: converted to C-contiguous float64 first
     p = np.asfortranarray(np.array([[1, 2, 3], [1, 2, 3], [3, 2, 1]], np.float32))
-    np.testing.assert_array_equal(core.first_of_duplicates(p), [True, False, True])
+    np.testing.assert_array_equal(first_of_duplicates(p), [True, False, True])
 
 
 # --- normals.orient against the scipy propagation it replaced ----------------------------
@@ -384,7 +386,7 @@ def scipy_orient(pts, nrm, mode="PROPAGATE"):
         anchor_sign[nrm[:, 2] >= normals.AMBIGUOUS_RULE] = 1
         anchor_sign[nrm[:, 2] <= -normals.AMBIGUOUS_RULE] = -1
     j = cKDTree(pts).query(pts, k=k + 1)[1][:, 1:].astype(np.int32)
-    w = core.graph_weights(pts, nrm, j, normals.ACROSS_WEIGHT).astype(np.float64) + 1e-9
+    w = graph_weights(pts, nrm, j, normals.ACROSS_WEIGHT).astype(np.float64) + 1e-9
     mst = minimum_spanning_tree(csr_matrix((w.ravel(), j.ravel(), np.arange(0, n * k + 1, k)), shape=(n, n)))
     n_comp, labels = connected_components(mst, directed=False)
     has_anchor = np.zeros(n_comp, bool)
@@ -480,54 +482,54 @@ def test_native_steps_stop_when_progress_raises():
     def stop(fraction):
         raise Cancelled("stop")
     with pytest.raises(Cancelled):
-        core.spanning_forest(nbr, w, progress=stop)
+        spanning_forest(nbr, w, progress=stop)
     with pytest.raises(Cancelled):
-        core.graph_weights(rng.random((1000, 3)), rng.random((1000, 3)), nbr, progress=stop)
-    forest = core.spanning_forest(nbr, w)
+        graph_weights(rng.random((1000, 3)), rng.random((1000, 3)), nbr, progress=stop)
+    forest = spanning_forest(nbr, w)
     with pytest.raises(Cancelled):
-        core.forest_traversal(forest.edges, np.ones(1000, bool), progress=stop)
+        forest_traversal(forest.edges, np.ones(1000, bool), progress=stop)
     seen = []
-    core.spanning_forest(nbr, w, progress=seen.append)
+    spanning_forest(nbr, w, progress=seen.append)
     assert seen[0] == 0.0 and seen[-1] == 1.0 and all(0.0 <= f <= 1.0 for f in seen)
 
 
 @pytest.mark.parametrize("call, error, message", [
-    (lambda: core.spanning_forest([[1], [5]], np.zeros((2, 1))), ValueError, "row 1, column 0: 5 is not a point"),
-    (lambda: core.spanning_forest([[1], [-1]], np.zeros((2, 1))), ValueError, "-1"),
-    (lambda: core.spanning_forest([[1], [2 ** 40]], np.zeros((2, 1))), ValueError, "beyond int32"),
-    (lambda: core.spanning_forest([[1.0], [0.0]], np.zeros((2, 1))), TypeError, "integers"),
-    (lambda: core.spanning_forest([1, 0], np.zeros(2)), ValueError, "shape"),
-    (lambda: core.spanning_forest([[1], [0]], np.zeros((2, 2))), ValueError, "shape"),
-    (lambda: core.spanning_forest([[1], [0]], [[0.0], [np.nan]]), ValueError, "row 1, column 0 is not finite"),
-    (lambda: core.spanning_forest([[1], [0]], [[0.0], [np.inf]]), ValueError, "not finite"),
-    (lambda: core.spanning_forest([[1], [0]], [[0.0], [0.0]], threads=-1), ValueError, "threads"),
-    (lambda: core.spanning_forest([[1], [0]], [[0.0], [0.0]], progress=3), TypeError, "callable"),
-    (lambda: core.graph_weights([[0, 0, 0], [np.nan, 0, 0]], np.ones((2, 3)), [[1], [0]]), ValueError,
+    (lambda: spanning_forest([[1], [5]], np.zeros((2, 1))), ValueError, "row 1, column 0: 5 is not a point"),
+    (lambda: spanning_forest([[1], [-1]], np.zeros((2, 1))), ValueError, "-1"),
+    (lambda: spanning_forest([[1], [2 ** 40]], np.zeros((2, 1))), ValueError, "beyond int32"),
+    (lambda: spanning_forest([[1.0], [0.0]], np.zeros((2, 1))), TypeError, "integers"),
+    (lambda: spanning_forest([1, 0], np.zeros(2)), ValueError, "shape"),
+    (lambda: spanning_forest([[1], [0]], np.zeros((2, 2))), ValueError, "shape"),
+    (lambda: spanning_forest([[1], [0]], [[0.0], [np.nan]]), ValueError, "row 1, column 0 is not finite"),
+    (lambda: spanning_forest([[1], [0]], [[0.0], [np.inf]]), ValueError, "not finite"),
+    (lambda: spanning_forest([[1], [0]], [[0.0], [0.0]], threads=-1), ValueError, "threads"),
+    (lambda: spanning_forest([[1], [0]], [[0.0], [0.0]], progress=3), TypeError, "callable"),
+    (lambda: graph_weights([[0, 0, 0], [np.nan, 0, 0]], np.ones((2, 3)), [[1], [0]]), ValueError,
      "point 1: its position is not finite"),
-    (lambda: core.graph_weights(np.zeros((2, 3)), [[0, 0, 1], [0, np.inf, 1]], [[1], [0]]), ValueError,
+    (lambda: graph_weights(np.zeros((2, 3)), [[0, 0, 1], [0, np.inf, 1]], [[1], [0]]), ValueError,
      "point 1: its normal is not finite"),
-    (lambda: core.graph_weights(np.zeros((2, 3)), np.ones((3, 3)), [[1], [0]]), ValueError, "normals has size 3"),
-    (lambda: core.graph_weights(np.zeros((2, 3)), np.ones((2, 3)), [[1], [2]]), ValueError, "2 is not a point"),
-    (lambda: core.graph_weights(np.zeros((2, 3)), np.ones((2, 3)), [[1], [0]], across=np.nan), ValueError,
+    (lambda: graph_weights(np.zeros((2, 3)), np.ones((3, 3)), [[1], [0]]), ValueError, "normals has size 3"),
+    (lambda: graph_weights(np.zeros((2, 3)), np.ones((2, 3)), [[1], [2]]), ValueError, "2 is not a point"),
+    (lambda: graph_weights(np.zeros((2, 3)), np.ones((2, 3)), [[1], [0]], across=np.nan), ValueError,
      "across"),
-    (lambda: core.forest_traversal([[0, 3]], np.ones(3, bool)), ValueError, "edge 0: 3 is not a vertex"),
-    (lambda: core.forest_traversal([[0, 1, 2]], np.ones(3, bool)), ValueError, "shape"),
-    (lambda: core.forest_traversal([[0, 1]], np.ones((3, 1), bool)), ValueError, "anchors"),
-    (lambda: core.chain_flips([1, 0], [0, 0], [0, 0]), ValueError, "vertex 1 comes before its parent 0"),
-    (lambda: core.chain_flips([0, 0], [0, 0], [0, 0]), ValueError, "twice"),
-    (lambda: core.chain_flips([0, 2], [0, 0], [0, 0]), ValueError, "2 is not a vertex"),
-    (lambda: core.chain_flips([0, 1], [0, 7], [0, 0]), ValueError, "parent 7"),
-    (lambda: core.chain_flips([0, 1], [0, 0], [0, 0, 0]), ValueError, "flip"),
-    (lambda: core.chain_flips([0, 1, 1], [0, 0], [0, 0]), ValueError, "more entries"),
-    (lambda: core.permute_table([[1], [0]], [0, 0]), ValueError, "not a permutation"),
-    (lambda: core.permute_table([[1], [0]], [0, 2]), ValueError, "not a permutation"),
-    (lambda: core.permute_table([[1], [3]], [1, 0]), ValueError, "row 1, column 0: 3 is not a point"),
-    (lambda: core.permute_table([[1], [0]], [1, 0], slice(0, 2, 2)), ValueError, "step 1"),
-    (lambda: core.take_rows(np.zeros((2, 3)), [0, 2]), ValueError, "order entry 1: 2 is not a row"),
-    (lambda: core.spatial_order([[0, 0, 0], [0, np.inf, 0]]), ValueError, "point 1"),
-    (lambda: core.first_of_duplicates(np.zeros((2, 2))), ValueError, "size 2 along axis 1"),
-    (lambda: core.first_of_duplicates(np.zeros(3)), ValueError, "2 dimension"),
-    (lambda: core.first_of_duplicates(np.zeros((2, 3)), threads=-1), ValueError, "threads"),
+    (lambda: forest_traversal([[0, 3]], np.ones(3, bool)), ValueError, "edge 0: 3 is not a vertex"),
+    (lambda: forest_traversal([[0, 1, 2]], np.ones(3, bool)), ValueError, "shape"),
+    (lambda: forest_traversal([[0, 1]], np.ones((3, 1), bool)), ValueError, "anchors"),
+    (lambda: chain_flips([1, 0], [0, 0], [0, 0]), ValueError, "vertex 1 comes before its parent 0"),
+    (lambda: chain_flips([0, 0], [0, 0], [0, 0]), ValueError, "twice"),
+    (lambda: chain_flips([0, 2], [0, 0], [0, 0]), ValueError, "2 is not a vertex"),
+    (lambda: chain_flips([0, 1], [0, 7], [0, 0]), ValueError, "parent 7"),
+    (lambda: chain_flips([0, 1], [0, 0], [0, 0, 0]), ValueError, "flip"),
+    (lambda: chain_flips([0, 1, 1], [0, 0], [0, 0]), ValueError, "more entries"),
+    (lambda: permute_table([[1], [0]], [0, 0]), ValueError, "not a permutation"),
+    (lambda: permute_table([[1], [0]], [0, 2]), ValueError, "not a permutation"),
+    (lambda: permute_table([[1], [3]], [1, 0]), ValueError, "row 1, column 0: 3 is not a point"),
+    (lambda: permute_table([[1], [0]], [1, 0], slice(0, 2, 2)), ValueError, "step 1"),
+    (lambda: take_rows(np.zeros((2, 3)), [0, 2]), ValueError, "order entry 1: 2 is not a row"),
+    (lambda: spatial_order([[0, 0, 0], [0, np.inf, 0]]), ValueError, "point 1"),
+    (lambda: first_of_duplicates(np.zeros((2, 2))), ValueError, "size 2 along axis 1"),
+    (lambda: first_of_duplicates(np.zeros(3)), ValueError, "2 dimension"),
+    (lambda: first_of_duplicates(np.zeros((2, 3)), threads=-1), ValueError, "threads"),
 ])
 def test_bad_input_is_refused(call, error, message):
     with pytest.raises(error, match=message):
@@ -572,5 +574,5 @@ def test_spatial_order_of_points_spanning_the_float64_range():
     """Found by fuzz_core under UBSan: points at +-1e308 overflow the box's extent to inf and
     the cell's coordinate to NaN, whose conversion to an integer was undefined behaviour."""
     pts = np.array([[-1.7e308, 0.0, 1.0], [1.7e308, 1.0, 0.0], [0.0, -1e308, 1e308], [5.0, 5.0, 5.0]])
-    order = core.spatial_order(pts)
+    order = spatial_order(pts)
     assert sorted(order) == [0, 1, 2, 3]

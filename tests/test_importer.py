@@ -13,6 +13,8 @@ import pytest
 
 from geometry import fibonacci_sphere
 from splat_tracer import importer, ply, prepare, readers, resources, spacing
+from splat_tracer import las as las_reader
+from splat_tracer.cloud import CloudFileError, make_cloud
 from splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress
 
 # bpy_extras.io_utils.axis_conversion(from_forward="-Z", from_up="Y"): a Y-up file into
@@ -75,8 +77,8 @@ def test_axes_and_scale_turn_normals_and_keep_the_georeference_exact(tmp_path):
 
 
 def test_scale_multiplies_file_radii_and_scanner_positions():
-    cloud = ply.make_cloud("c", RNG.uniform(0, 1, (50, 3)), None, None, np.full(50, 0.1, np.float32),
-                           scanners=np.tile([1.0, 2.0, 3.0], (50, 1)))
+    cloud = make_cloud("c", RNG.uniform(0, 1, (50, 3)), None, None, np.full(50, 0.1, np.float32),
+                       scanners=np.tile([1.0, 2.0, 3.0], (50, 1)))
     out = importer.transform(cloud, Y_UP, 2.0)
     np.testing.assert_allclose(out.radii, 0.2, rtol=1e-6)
     np.testing.assert_allclose(out.scanners[0], np.array([1.0, -3.0, 2.0]) * 2)
@@ -161,7 +163,7 @@ def test_las_reading_reports_progress_by_chunks_and_can_be_cancelled(tmp_path, m
     las.x, las.y, las.z = RNG.uniform(0, 10, (3, 1000))
     path = tmp_path / ("scan.laz" if compress else "scan.las")
     las.write(str(path), do_compress=compress)
-    monkeypatch.setattr(readers, "_LAS_CHUNK", 300)
+    monkeypatch.setattr(las_reader, "_LAS_CHUNK", 300)
     seen = []
     cloud = readers.read_cloud(str(path), progress=lambda f, m: seen.append(f))
     assert len(cloud) == 1000 and seen == [0.0, 0.3, 0.6, 0.9]
@@ -221,7 +223,7 @@ def test_a_count_too_large_for_memory_is_refused_before_reading(tmp_path, monkey
     monkeypatch.setattr(readers, "read_cloud", lambda *a: pytest.fail("read before the memory check"))
     resources.override(100 << 10)  # 100 KiB free
     try:
-        with pytest.raises(ply.CloudFileError, match=r"declares 2,000 points; importing them needs about .* GB "
+        with pytest.raises(CloudFileError, match=r"declares 2,000 points; importing them needs about .* GB "
                                                       r"of memory but only 0.0 GB are available") as err:
             importer.load(path)
     finally:
@@ -306,7 +308,7 @@ def make_bad(tmp_path, name, content):
 def test_bad_inputs_are_refused_naming_the_file_and_the_problem(tmp_path, name, content, message):
     path = make_bad(tmp_path, name, content)
     before = path.read_bytes()
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         importer.load(str(path))
     assert str(path) in str(err.value) and message in str(err.value), str(err.value)
     assert path.read_bytes() == before  # the source is never touched

@@ -8,8 +8,9 @@ import time
 import numpy as np
 import pytest
 
-from splat_tracer import core, difference, importer, matrices
-from splat_tracer.ply import PointCloud
+from splat_tracer import difference, importer, matrices
+from splat_tracer.camera import Camera
+from splat_tracer.cloud import PointCloud
 
 RNG = np.random.default_rng(11)
 
@@ -97,7 +98,7 @@ def test_per_frame_matrix_work_leaves_no_blas_thread_spinning():
     image = RNG.random((120, 160, 3))
 
     def frame():
-        cam = core.Camera.from_view_projection(proj, world_from_camera, origin=(0.5, 0.5, 0.0))
+        cam = Camera.from_view_projection(proj, world_from_camera, origin=(0.5, 0.5, 0.0))
         cam.rays(64, 48)
         matrices.inverse(world_from_camera)
         importer.transform(cloud, axes, 2.0)

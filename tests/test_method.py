@@ -6,19 +6,22 @@ import pytest
 from scipy.ndimage import distance_transform_edt
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere, ray_box, ray_sphere
-from splat_tracer import core, spacing
+from splat_tracer import spacing
+from splat_tracer.camera import Camera
+from splat_tracer.method import POSITION_RULES, Method
+from splat_tracer.splats import SplatCloud
 
 W, H = 320, 240
-FULL = core.Method.preset("FULL")
+FULL = Method.preset("FULL")
 
 
 def cloud_scene(points, normals, closed, radius_factor=1.0):
     radii, _ = spacing.knn_spacing(points)
-    return core.Scene(points, normals, radii * radius_factor, closed=closed), radii
+    return SplatCloud(points, normals, radii * radius_factor, closed=closed), radii
 
 
 def camera_rays(eye, target=(0, 0, 0), fov_y=35.0):
-    cam = core.Camera.look_at(eye, target, fov_y=fov_y, aspect=W / H)
+    cam = Camera.look_at(eye, target, fov_y=fov_y, aspect=W / H)
     return cam.rays(W, H)
 
 
@@ -34,12 +37,12 @@ def test_ε_window_query_matches_brute_force():
     p, n = fibonacci_sphere(3000)
     centres = np.concatenate([p, p * 0.6 + 0.05])  # two nested closed shells
     normals = np.concatenate([n, n])
-    scene = core.Scene(centres, normals, np.full(len(centres), 0.07), closed=True)
+    scene = SplatCloud(centres, normals, np.full(len(centres), 0.07), closed=True)
     origins = rng.uniform(-2, 2, size=(6000, 3))
     dirs = rng.normal(size=(6000, 3))
     inside = rng.uniform(size=6000) < 0.3
-    for method in (FULL, core.Method.preset("NEAREST_CENTRE"), core.Method.preset("GENERAL"),
-                   core.Method.preset("FULL", eliminate_wrong_hits=False, epsilon=2.5)):
+    for method in (FULL, Method.preset("NEAREST_CENTRE"), Method.preset("GENERAL"),
+                   Method.preset("FULL", eliminate_wrong_hits=False, epsilon=2.5)):
         a = scene.trace_surface(origins, dirs, method, inside=inside, members=True)
         b = scene.trace_surface(origins, dirs, method, inside=inside, members=True, brute_force=True)
         for x, y in zip(a, b):
@@ -56,10 +59,10 @@ def test_ε_window_query_does_not_depend_on_the_order_hits_arrive():
     p, n = fibonacci_sphere(6000)
     p = p + rng.normal(scale=0.01, size=p.shape)  # a rough surface: layers of several depths
     radii = 0.03 * rng.uniform(0.5, 3.0, size=len(p))  # 6x from the smallest to the largest
-    scene = core.Scene(p, n, radii, closed=True)
+    scene = SplatCloud(p, n, radii, closed=True)
     origins = rng.uniform(-2, 2, size=(20000, 3))
     dirs = -origins + rng.normal(scale=0.3, size=origins.shape)  # towards the sphere, mostly
-    for method in (FULL, core.Method.preset("NEAREST_CENTRE"), core.Method.preset("FULL", epsilon=3.0)):
+    for method in (FULL, Method.preset("NEAREST_CENTRE"), Method.preset("FULL", epsilon=3.0)):
         a = scene.trace_surface(origins, dirs, method, members=True)
         b = scene.trace_surface(origins, dirs, method, members=True, brute_force=True)
         for x, y in zip(a, b):
@@ -76,14 +79,14 @@ def test_sphere_interpolated_normals_are_smooth_and_flat_ones_are_not():
     hit = np.isfinite(t_true)
     truth = o + d * np.where(hit, t_true, 0)[:, None]
     smooth = scene.trace_surface(o, d, FULL)
-    flat = scene.trace_surface(o, d, core.Method.preset("FULL", interpolate_normals=False))
+    flat = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
     both = hit & (smooth.id >= 0)
     assert both.sum() > 0.99 * hit.sum()
     err_smooth = angle_deg(smooth.normal[both], truth[both])
     err_flat = angle_deg(flat.normal[both], truth[both])
     assert err_smooth.max() < 2.0 and err_smooth.mean() < 0.25, (err_smooth.max(), err_smooth.mean())
     assert err_flat.mean() > 4 * err_smooth.mean()
-    smooth_kernel = scene.trace_surface(o, d, core.Method.preset("FULL", kernel="SMOOTH"))
+    smooth_kernel = scene.trace_surface(o, d, Method.preset("FULL", kernel="SMOOTH"))
     assert angle_deg(smooth_kernel.normal[both], truth[both]).max() < 2.0
 
 
@@ -104,10 +107,10 @@ def test_cube_far_phase_gives_the_true_silhouette(cube):
     full = (scene.trace_surface(o, d, FULL).id >= 0).reshape(H, W)
     wrong = full != truth
     assert wrong.sum() < 20 and edge[wrong].max() <= 1.5, (wrong.sum(), edge[wrong].max())
-    no_far = (scene.trace_surface(o, d, core.Method.preset("FULL", far_phase=False)).id >= 0).reshape(H, W)
+    no_far = (scene.trace_surface(o, d, Method.preset("FULL", far_phase=False)).id >= 0).reshape(H, W)
     fringe = no_far & ~truth
     assert fringe.sum() > 200 and edge[fringe].max() >= 2.0
-    general = (scene.trace_surface(o, d, core.Method.preset("GENERAL")).id >= 0).reshape(H, W)
+    general = (scene.trace_surface(o, d, Method.preset("GENERAL")).id >= 0).reshape(H, W)
     assert (general & ~truth).sum() > 200
 
 
@@ -115,11 +118,11 @@ def test_cube_full_method_puts_the_surface_on_the_cube(cube):
     """Depth: the full method's surface points lie on the cube's faces (flat normals are
     then exactly the face normals); the general method's fringe and edge hits do not."""
     scene, o, d, truth, t_true, n_true = cube
-    flat_full = scene.trace_surface(o, d, core.Method.preset("FULL", interpolate_normals=False))
+    flat_full = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
     both = (flat_full.id >= 0) & np.isfinite(t_true)
     np.testing.assert_allclose(flat_full.t[both], t_true[both], atol=1e-4)
     np.testing.assert_array_equal(flat_full.normal[both], n_true[both])
-    general = scene.trace_surface(o, d, core.Method.preset("GENERAL"))
+    general = scene.trace_surface(o, d, Method.preset("GENERAL"))
     both = (general.id >= 0) & np.isfinite(t_true)
     assert np.abs(general.t[both] - t_true[both]).max() > 0.02
 
@@ -131,17 +134,17 @@ def test_crease_angle_keeps_cube_edges_sharp_and_spheres_smooth(cube):
     nothing: neighbouring normals differ by a few degrees."""
     scene, o, d, _, t_true, n_true = cube
     blended = scene.trace_surface(o, d, FULL)
-    sharp = scene.trace_surface(o, d, core.Method.preset("FULL", crease_angle=45))
+    sharp = scene.trace_surface(o, d, Method.preset("FULL", crease_angle=45))
     both = (sharp.id >= 0) & np.isfinite(t_true)
     assert angle_deg(blended.normal[both], n_true[both]).max() > 20
     assert angle_deg(sharp.normal[both], n_true[both]).max() < 0.01
     p, n = fibonacci_sphere(20000)
     sphere, _ = cloud_scene(p, n, closed=True)
     o, d = camera_rays((0.5, -4.0, 1.2))
-    a, b = sphere.trace_surface(o, d, FULL), sphere.trace_surface(o, d, core.Method.preset("FULL", crease_angle=45))
+    a, b = sphere.trace_surface(o, d, FULL), sphere.trace_surface(o, d, Method.preset("FULL", crease_angle=45))
     np.testing.assert_array_equal(a.normal, b.normal)
     with pytest.raises(ValueError, match="crease_angle"):
-        core.Method(crease_angle=200)
+        Method(crease_angle=200)
 
 
 # Two discs at a sharp edge (the paper's Figs. 9-10), seen by one ray along -x-z.
@@ -160,10 +163,10 @@ CONCAVE = dict(centres=[[0.9, 0, 0], [0, 0, 0.02]], normals=[[0, 0, 1], [1, 0, 0
 
 @pytest.mark.parametrize("case, surface, near_centre_pick", [(CONVEX, 1, 0), (CONCAVE, 0, 1)])
 def test_near_phase_picks_the_right_hit_at_edges(case, surface, near_centre_pick):
-    scene = core.Scene(case["centres"], case["normals"], case["radii"], closed=False)
+    scene = SplatCloud(case["centres"], case["normals"], case["radii"], closed=False)
     pick = {}
-    for position in core.POSITION_RULES:
-        res = scene.trace_surface(RAY_O, RAY_D, core.Method(position=position, far_phase=False), members=True)
+    for position in POSITION_RULES:
+        res = scene.trace_surface(RAY_O, RAY_D, Method(position=position, far_phase=False), members=True)
         assert sorted(res.members[0][:2]) == [0, 1]  # both discs are in the layer
         pick[position] = int(res.id[0])
     assert pick["NEAR_PHASE"] == surface
@@ -175,7 +178,7 @@ def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
     """The core decides omega > pi without acos (visibility.cpp, near_phase_convex): on
     random pairs of discs in one layer, the pick is the paper's rule computed with arccos."""
     rng = np.random.default_rng(8)
-    method = core.Method(position="NEAR_PHASE", far_phase=False, interpolate_normals=False, epsilon=1000.0)
+    method = Method(position="NEAR_PHASE", far_phase=False, interpolate_normals=False, epsilon=1000.0)
     o, d = np.array([[0.0, 0.0, 5.0]]), np.array([[0.0, 0.0, -1.0]])
     checked = 0
     for _ in range(400):
@@ -189,7 +192,7 @@ def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
         omega = np.arccos(np.dot(dk, nj) / np.linalg.norm(dk)) + np.arccos(np.dot(-dk, nk) / np.linalg.norm(dk))
         if abs(omega - np.pi) < 1e-4:
             continue  # a rounding apart from the threshold either way
-        res = core.Scene(c, n, [10.0, 10.0], closed=False).trace_surface(o, d, method, members=True)
+        res = SplatCloud(c, n, [10.0, 10.0], closed=False).trace_surface(o, d, method, members=True)
         assert sorted(res.members[0][:2]) == [0, 1]
         assert int(res.id[0]) == (k if omega > np.pi else j), (c, n, omega)
         checked += 1
@@ -199,7 +202,7 @@ def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
 def test_omega_classifies_convex_and_concave():
     c, n = np.array(CONVEX["centres"]), np.array(CONVEX["normals"])
     # Symmetric roof and valley with faces at 90 degrees: omega = 270 and 90 degrees.
-    scene = core.Scene(c, n, CONVEX["radii"])
+    scene = SplatCloud(c, n, CONVEX["radii"])
     assert scene is not None
     omega = lambda cj, nj, ck, nk: np.degrees(
         np.arccos(np.dot(ck - cj, nj) / np.linalg.norm(ck - cj)) + np.arccos(np.dot(cj - ck, nk) / np.linalg.norm(cj - ck)))
@@ -238,7 +241,7 @@ def test_thin_closed_slab_renders_from_both_sides(eye, normal):
     p, n = slab_cloud()
     radii, _ = spacing.knn_spacing(p)
     assert 0.02 < FULL.epsilon * radii.min()  # the two sides are within one layer
-    scene = core.Scene(p, n, radii, closed=True)
+    scene = SplatCloud(p, n, radii, closed=True)
     o, d = camera_rays(eye, fov_y=50)
     t_true, _ = ray_box(o.astype(np.float64) / [1, 1, 0.01], d.astype(np.float64) / [1, 1, 0.01])
     truth = np.isfinite(t_true).reshape(H, W)
@@ -277,7 +280,7 @@ def test_open_surface_is_fully_rendered_when_not_closed():
     res = open_scene.trace_surface(o, d, FULL)
     hit = (res.id >= 0).reshape(H, W)
     # The patch's footprint: what the general method covers, minus a pixel at its rim.
-    general = (open_scene.trace_surface(o, d, core.Method.preset("GENERAL")).id >= 0).reshape(H, W)
+    general = (open_scene.trace_surface(o, d, Method.preset("GENERAL")).id >= 0).reshape(H, W)
     inner = general & (distance_transform_edt(general) > 2)
     assert inner.sum() > 20000
     assert np.all(hit[inner]), f"{(~hit[inner]).sum()} holes"
@@ -303,7 +306,7 @@ def test_secondary_rays_never_hit_the_splats_around_their_origin(scale):
     nrm, members = prim.normal[ok], prim.members[ok]
     light = np.array([0.6, -0.3, 0.75]) / np.linalg.norm([0.6, -0.3, 0.75])
     mirror = d[ok] - 2 * np.einsum("ij,ij->i", d[ok], nrm)[:, None] * nrm
-    general = core.Method.preset("GENERAL")
+    general = Method.preset("GENERAL")
     for direction in (np.tile(light, (len(origin), 1)), mirror):
         leaving = np.einsum("ij,ij->i", direction, nrm) > 0
         ray_o, ray_d = origin[leaving], direction[leaving]
@@ -342,12 +345,12 @@ def test_rays_inside_an_object_swap_front_and_back():
 
 def test_method_validation():
     with pytest.raises(ValueError, match="position"):
-        core.Method(position="MIDDLE")
+        Method(position="MIDDLE")
     with pytest.raises(ValueError, match="epsilon"):
-        core.Method(epsilon=-1)
+        Method(epsilon=-1)
     with pytest.raises(ValueError, match="preset"):
-        core.Method.preset("BEST")
-    scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
+        Method.preset("BEST")
+    scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
     with pytest.raises(ValueError, match="exclude"):
         scene.trace_surface([[0, 0, 1]], [[0, 0, -1]], exclude=np.zeros(3, np.int32))
     with pytest.raises(TypeError):
@@ -358,7 +361,7 @@ def test_method_validation():
 
 def test_render_uses_the_method_and_agrees_with_trace_surface(cube):
     scene, o, d, truth, _, _ = cube
-    cam = core.Camera.look_at((2.5, -4.0, 3.0), (0, 0, 0), fov_y=35.0, aspect=W / H)
+    cam = Camera.look_at((2.5, -4.0, 3.0), (0, 0, 0), fov_y=35.0, aspect=W / H)
     img = scene.render(cam, W, H, method=FULL)
     surf = scene.trace_surface(o, d, FULL)
     # render() makes its rays in double precision, Camera.rays() in numpy and then float32:

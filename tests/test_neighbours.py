@@ -1,9 +1,10 @@
-"""The compiled neighbour search (core.PointIndex, native/neighbours.cpp) against brute force
+"""The compiled neighbour search (PointIndex, native/neighbours.cpp) against brute force
 and against numpy versions of the rules it computes (the gap-closing radius, PCA normals)."""
 import numpy as np
 import pytest
 
-from splat_tracer import core, spacing
+from splat_tracer import _core, spacing
+from splat_tracer.neighbours import PointIndex
 
 RNG = np.random.default_rng(7)
 
@@ -48,7 +49,7 @@ def clouds():
 @pytest.mark.parametrize("name, points", list(clouds()), ids=[c[0] for c in clouds()])
 def test_knn_finds_the_brute_force_neighbours(name, points):
     pts = points.astype(np.float32)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     n = len(pts)
     assert sorted(index.order) == list(range(n))
     for k in sorted({1, min(6, n - 1), min(24, n - 1)}):
@@ -67,7 +68,7 @@ def test_knn_finds_the_brute_force_neighbours(name, points):
 
 def test_a_chunk_of_the_order_starting_mid_leaf_gets_the_same_answer():
     pts = RNG.normal(size=(5000, 3)).astype(np.float32)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     whole = index.knn(index.order, 8)
     for start, stop in ((3, 40), (17, 4999), (4990, 5000), (100, 101)):
         part = index.knn(index.order[start:stop], 8)
@@ -78,7 +79,7 @@ def test_rows_made_of_many_runs_of_the_order_get_the_same_answer():
     """Runs of the tree's order (the boundary test's sample), lone rows, runs crossing leaf
     ends and runs that continue one another, in one call: each row as if asked alone."""
     pts = RNG.normal(size=(5000, 3)).astype(np.float32)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     o = index.order
     rows = np.concatenate([o[10:42], o[500:501], o[7:9], o[3000:3100], o[3100:3101], o[4999:5000], o[0:1],
                            o[200:233], o[1000:1001], o[1002:1003], o[999:1000]])
@@ -118,8 +119,8 @@ def test_leaf_queries_match_brute_force_exactly(name, points, threads):
     order starting mid-leaf."""
     pts = points.astype(np.float32)
     n = len(pts)
-    index = core.PointIndex(pts, threads=threads)
-    other = core.PointIndex(pts, threads=3 - threads)
+    index = PointIndex(pts, threads=threads)
+    other = PointIndex(pts, threads=3 - threads)
     nrm = RNG.normal(size=(n, 3)).astype(np.float32)
     for k in (6, 12, 24):
         rows = index.order
@@ -149,7 +150,7 @@ def test_leaf_queries_match_brute_force_exactly(name, points, threads):
 
 def test_knn_at_any_position():
     pts = RNG.normal(size=(4000, 3)).astype(np.float32)
-    index = core.PointIndex(pts, threads=1)
+    index = PointIndex(pts, threads=1)
     q = RNG.normal(size=(300, 3)).astype(np.float32) * 2
     q[:5] = pts[:5]  # positions of indexed points: found at distance 0
     dist, ids = index.knn_at(q, 7)
@@ -166,7 +167,7 @@ def test_a_huge_cluster_of_coincident_points_stays_fast():
 
     pts = np.zeros((200_000, 3), np.float32)
     pts[:1000] = RNG.normal(size=(1000, 3))
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     t = time.perf_counter()
     s = index.kth_distance(index.order, 6)
     assert time.perf_counter() - t < 20  # a generous bound: ~0.3 s measured; quadratic would take minutes
@@ -206,7 +207,7 @@ def test_covering_radius_follows_the_rule(k):
     p /= np.linalg.norm(p, axis=1, keepdims=True)
     p[: n // 2, 2] = np.abs(p[: n // 2, 2])  # half the sphere denser: uneven spacing, gaps
     pts, nrm = p.astype(np.float32), p.astype(np.float32)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     s = index.kth_distance(np.arange(n), 6)
     hole, max_gap = spacing.COVER_HOLE, spacing.COVER_MAX_GAP
     got = index.covering(np.arange(n), nrm, s, k, hole, max_gap)
@@ -253,7 +254,7 @@ def test_widest_gaps_follow_the_boundary_rule(shape):
         nrm = np.zeros((n, 3))
         nrm[np.arange(n), axis] = pts[np.arange(n), axis]
     pts = pts.astype(np.float32)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     k = spacing.BOUNDARY_K
     scaled = (nrm * RNG.uniform(0.01, 100, (n, 1))).astype(np.float32)
     for rows in (index.order, RNG.permutation(n)[:500]):
@@ -269,7 +270,7 @@ def test_widest_gaps_follow_the_boundary_rule(shape):
 def test_spacing_and_gap_closing_radii_from_one_search():
     n = 3000
     pts = sphere(n)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     for rows in (index.order, RNG.permutation(n)):
         s, cover = index.radii(rows, 6, pts, 12, spacing.COVER_HOLE, spacing.COVER_MAX_GAP)
         np.testing.assert_array_equal(s, index.kth_distance(rows, 6))
@@ -307,7 +308,7 @@ def test_pca_normals_and_what_they_share():
     n = 2000
     pts = sphere(n)
     p = pts.astype(np.float64)
-    index = core.PointIndex(pts)
+    index = PointIndex(pts)
     rows = index.order
     normals, graph, dist, cover = index.pca(rows, 16, graph_width=9, spacing_k=6, cover_k=12,
                                             hole=spacing.COVER_HOLE, max_gap=spacing.COVER_MAX_GAP)
@@ -343,7 +344,7 @@ def test_pca_of_degenerate_neighbourhoods_is_a_unit_vector(shape):
     else:
         g = np.array([-1.0, 0, 1])
         pts = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
-    index = core.PointIndex(pts.astype(np.float32))
+    index = PointIndex(pts.astype(np.float32))
     normals, _, _, _ = index.pca(np.arange(len(pts)), min(16, len(pts) - 1))
     assert np.isfinite(normals).all()
     np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1, rtol=1e-9)
@@ -353,20 +354,20 @@ def test_pca_of_degenerate_neighbourhoods_is_a_unit_vector(shape):
 
 def test_bad_input_raises_instead_of_crashing():
     good = RNG.normal(size=(100, 3)).astype(np.float32)
-    index = core.PointIndex(good)
+    index = PointIndex(good)
     bad = good.copy()
     bad[42, 1] = np.nan
     with pytest.raises(ValueError, match="point 42"):
-        core.PointIndex(bad)
+        PointIndex(bad)
     with pytest.raises(ValueError, match="at least one point"):
-        core.PointIndex(np.zeros((0, 3), np.float32))
+        PointIndex(np.zeros((0, 3), np.float32))
     with pytest.raises(ValueError, match="shape"):
-        core.PointIndex(np.zeros((10, 2)))
+        PointIndex(np.zeros((10, 2)))
     with pytest.raises(ValueError, match="rows"):
         index.knn([0, 100], 3)
     with pytest.raises(ValueError, match="rows"):
         index.kth_distance([-1], 3)
-    for k in (0, 100, core._core.MAX_NEIGHBOURS + 1):
+    for k in (0, 100, _core.MAX_NEIGHBOURS + 1):
         with pytest.raises(ValueError, match="k must be"):
             index.knn([0], k)
     with pytest.raises(ValueError, match="direction"):
@@ -403,4 +404,4 @@ def test_bad_input_raises_instead_of_crashing():
     with pytest.raises(ValueError, match="beyond 1e18"):
         index.knn_at([[1e30, 0, 0]], 3)
     with pytest.raises(ValueError, match="threads"):
-        core.PointIndex(good, threads=-1)
+        PointIndex(good, threads=-1)

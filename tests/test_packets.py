@@ -8,7 +8,10 @@ import numpy as np
 import pytest
 
 from geometry import cube_cloud, fibonacci_sphere
-from splat_tracer import core, spacing
+from splat_tracer import _core, spacing
+from splat_tracer.camera import Camera, packet_order
+from splat_tracer.method import PRESETS, Method
+from splat_tracer.splats import SplatCloud, SurfaceResult, TraceResult, simd_path
 
 W, H = 96, 72  # not multiples of 16 rays per row: packets straddle rows and the last is short
 
@@ -18,13 +21,13 @@ def simd(request):
     """Every test on both packet kernels: AVX2 (chosen at run time where the CPU has it)
     and the SSE2 baseline every x86-64 build runs elsewhere."""
     want = request.param == "AVX2"
-    before = core._core._use_avx2(want)
+    before = _core._use_avx2(want)
     try:
-        if want and "AVX2" not in core.simd_path():
+        if want and "AVX2" not in simd_path():
             pytest.skip("this CPU has no AVX2")
         yield request.param
     finally:
-        core._core._use_avx2(before)
+        _core._use_avx2(before)
 
 
 @pytest.fixture(scope="module")
@@ -37,25 +40,25 @@ def scene():
     radii = 0.025 * rng.uniform(0.5, 3.0, size=len(p))
     q, m = cube_cloud(40)
     rq, _ = spacing.knn_spacing(q)
-    return core.Scene(np.concatenate([p, q]), np.concatenate([n, m]), np.concatenate([radii, rq]), closed=True)
+    return SplatCloud(np.concatenate([p, q]), np.concatenate([n, m]), np.concatenate([radii, rq]), closed=True)
 
 
 def tiles(cam):
     o, d = cam.rays(W, H)
-    order = core.packet_order(W, H)
+    order = packet_order(W, H)
     return o[order], d[order]
 
 
 CAMERAS = {
-    "perspective, outside": lambda: core.Camera.look_at((2.6, -3.1, 1.9), (0, 0, 0), fov_y=40, aspect=W / H),
-    "perspective, inside the cube": lambda: core.Camera.look_at((0.1, -0.85, 0.2), (0, 0, 0), fov_y=70,
+    "perspective, outside": lambda: Camera.look_at((2.6, -3.1, 1.9), (0, 0, 0), fov_y=40, aspect=W / H),
+    "perspective, inside the cube": lambda: Camera.look_at((0.1, -0.85, 0.2), (0, 0, 0), fov_y=70,
                                                                aspect=W / H),
-    "orthographic": lambda: core.Camera.look_at((3, 2, 1.5), (0, 0, 0), ortho_height=2.6, aspect=W / H),
+    "orthographic": lambda: Camera.look_at((3, 2, 1.5), (0, 0, 0), ortho_height=2.6, aspect=W / H),
     # Along -z exactly: every ray's x and y direction components are 0 (orthographic) or
     # change sign across the image (perspective): axes the packet test must leave untested.
-    "orthographic along an axis": lambda: core.Camera.look_at((0, 0, 4), (0, 0, 0), up=(0, 1, 0),
+    "orthographic along an axis": lambda: Camera.look_at((0, 0, 4), (0, 0, 0), up=(0, 1, 0),
                                                              ortho_height=2.6, aspect=W / H),
-    "perspective along an axis": lambda: core.Camera.look_at((0, 0, 4), (0, 0, 0), up=(0, 1, 0), fov_y=40,
+    "perspective along an axis": lambda: Camera.look_at((0, 0, 4), (0, 0, 0), up=(0, 1, 0), fov_y=40,
                                                             aspect=W / H),
 }
 
@@ -72,7 +75,7 @@ def test_nearest_hit_packets_equal_single_rays_and_brute_force(scene, camera):
     packed = scene.trace(o, d, packets=True)
     assert_same(packed, scene.trace(o, d, packets=False))
     sub = slice(0, len(o), 7)  # brute force on every 7th ray (it tests every splat)
-    assert_same(core.TraceResult(*(None if v is None else v[sub] for v in packed)),
+    assert_same(TraceResult(*(None if v is None else v[sub] for v in packed)),
                 scene.trace(o[sub], d[sub], brute_force=True))
     assert 0.2 < (packed.id >= 0).mean() <= 1.0
     # The packets were really traced as packets: their inner nodes count once for 16 rays.
@@ -80,14 +83,14 @@ def test_nearest_hit_packets_equal_single_rays_and_brute_force(scene, camera):
 
 
 @pytest.mark.parametrize("camera", CAMERAS)
-@pytest.mark.parametrize("preset", core.PRESETS)
+@pytest.mark.parametrize("preset", PRESETS)
 def test_surface_packets_equal_single_rays(scene, camera, preset):
     o, d = tiles(CAMERAS[camera]())
-    method = core.Method.preset(preset)
+    method = Method.preset(preset)
     a = scene.trace_surface(o, d, method, members=True, packets=True)
     assert_same(a, scene.trace_surface(o, d, method, members=True, packets=False))
     sub = slice(3, len(o), 11)
-    assert_same(core.SurfaceResult(*(v[sub] for v in a)),
+    assert_same(SurfaceResult(*(v[sub] for v in a)),
                 scene.trace_surface(o[sub], d[sub], method, members=True, brute_force=True))
 
 
@@ -97,10 +100,10 @@ def test_surface_packets_with_inside_rays_and_exclusions(scene):
     o, d = tiles(CAMERAS["perspective, outside"]())
     rng = np.random.default_rng(2)
     inside = rng.uniform(size=len(o)) < 0.4
-    first = scene.trace_surface(o, d, core.Method.preset("FULL"), members=True)
+    first = scene.trace_surface(o, d, Method.preset("FULL"), members=True)
     exclude = np.roll(first.members[:, :4], 1, axis=0)
-    for preset in core.PRESETS:
-        method = core.Method.preset(preset)
+    for preset in PRESETS:
+        method = Method.preset(preset)
         for kwargs in ({"inside": inside}, {"exclude": exclude}, {"inside": inside, "exclude": exclude}):
             a = scene.trace_surface(o, d, method, members=True, packets=True, **kwargs)
             assert_same(a, scene.trace_surface(o, d, method, members=True, packets=False, **kwargs))
@@ -108,8 +111,8 @@ def test_surface_packets_with_inside_rays_and_exclusions(scene):
 
 def test_render_packets_give_the_same_image(scene):
     cam = CAMERAS["perspective, outside"]()
-    for preset in core.PRESETS:
-        method = core.Method.preset(preset)
+    for preset in PRESETS:
+        method = Method.preset(preset)
         for tile in (32, 7):  # 7: blocks cut short at every tile's edge
             a = scene.render(cam, W, H, method=method, tile_size=tile)
             b = scene.render(cam, W, H, method=method, tile_size=tile, packets=False)
@@ -125,8 +128,8 @@ def test_incoherent_rays_are_traced_one_by_one_with_the_same_answers(scene):
     assert_same(scene.trace(o, d, packets=True), scene.trace(o, d, packets=False))
     # Nothing was packed: the same work as one ray at a time.
     assert scene.traversal_cost(o, d, packets=True) == scene.traversal_cost(o, d)
-    for preset in core.PRESETS:
-        method = core.Method.preset(preset)
+    for preset in PRESETS:
+        method = Method.preset(preset)
         assert_same(scene.trace_surface(o, d, method, members=True),
                     scene.trace_surface(o, d, method, members=True, packets=False))
 
@@ -147,9 +150,9 @@ def test_a_packet_wider_than_the_cone_is_not_packed(scene):
 
 
 def test_packet_order_puts_4x4_tiles_together():
-    order = core.packet_order(10, 6)
+    order = packet_order(10, 6)
     assert sorted(order) == list(range(60))
     rows, cols = np.divmod(order[:16], 10)
     assert set(rows) == {0, 1, 2, 3} and set(cols) == {0, 1, 2, 3}
     with pytest.raises(ValueError):
-        core.packet_order(0, 4)
+        packet_order(0, 4)

@@ -6,6 +6,8 @@ import pytest
 
 from geometry import cube_cloud, fibonacci_sphere
 from splat_tracer import ply, spacing
+from splat_tracer.cloud import CloudFileError, srgb_to_linear
+from splat_tracer.neighbours import first_of_duplicates
 
 
 @pytest.mark.parametrize("binary, order", [(False, "="), (True, "<"), (True, ">")])
@@ -53,7 +55,7 @@ def test_float32_normals_near_the_ends_of_float32s_range_become_unit(tmp_path):
 
 
 def test_srgb_to_linear_reference_values():
-    np.testing.assert_allclose(ply.srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
+    np.testing.assert_allclose(srgb_to_linear(np.array([0.0, 0.04045, 0.5, 1.0])),
                                [0.0, 0.04045 / 12.92, 0.21404, 1.0], rtol=1e-4)
 
 
@@ -71,13 +73,13 @@ def test_srgb_to_linear_reference_values():
 def test_meaningless_files_are_refused_with_the_file_named(tmp_path, body, message):
     path = tmp_path / "bad.ply"
     path.write_text("ply\nformat ascii 1.0\n" + body)
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value) and message in str(err.value)
 
 
 def test_missing_file(tmp_path):
-    with pytest.raises(ply.CloudFileError, match="no such file"):
+    with pytest.raises(CloudFileError, match="no such file"):
         ply.read_ply(str(tmp_path / "nope.ply"))
 
 
@@ -147,7 +149,7 @@ def test_header_beyond_the_limit_is_refused_with_a_clear_message(tmp_path):
     ply.write_ply(str(path), p, n)
     line = "comment " + "x" * 120
     _insert_header_lines(path, [line] * (ply.MAX_HEADER_BYTES // len(line) + 10))
-    with pytest.raises(ply.CloudFileError, match=r"header.*longer than") as err:
+    with pytest.raises(CloudFileError, match=r"header.*longer than") as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value)
 
@@ -170,7 +172,7 @@ def test_a_count_the_file_cannot_hold_is_refused_before_reading(tmp_path, binary
                             b"property list uchar int vertex_indices\nend_header\n")
     path.write_bytes(data)
     start = time.perf_counter()
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         ply.read_ply(str(path))
     # Before the fix: 54-72 s and 8 GB. A generous bound (the machine may be busy): only
     # the pathology is tested, not the speed, which the benchmarks measure.
@@ -217,7 +219,7 @@ def test_data_must_match_every_declared_count_with_list_properties(tmp_path, bin
     old, new = counts.split("->")
     data = path.read_bytes()
     path.write_bytes(data.replace(f"element {element} {old}\n".encode(), f"element {element} {new}\n".encode(), 1))
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value)
 
@@ -265,7 +267,7 @@ def test_colour_types_are_read_by_type_and_range(tmp_path, dtype, scale):
     stored = (lambda v: np.round(v * factor)) if factor > 1 else (lambda v: v)
     _coloured_cloud(path, dtype, stored(rgb), stored(alpha))
     cloud = ply.read_ply(str(path))
-    np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(rgb), atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb), atol=1e-6)
     np.testing.assert_allclose(cloud.colours[:, 3], alpha, atol=1e-6)
 
 
@@ -278,7 +280,7 @@ def test_colour_types_are_read_by_type_and_range(tmp_path, dtype, scale):
 def test_colours_outside_every_known_range_are_refused(tmp_path, dtype, rgb, alpha, bad):
     path = tmp_path / "colours.ply"
     _coloured_cloud(path, dtype, rgb, alpha)
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value) and bad in str(err.value), str(err.value)
 
@@ -300,15 +302,15 @@ def test_exact_duplicates_are_merged_keeping_the_first(tmp_path):
 
 
 def test_negative_zero_is_the_same_position():
-    keep = spacing.first_of_duplicates(np.array([[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [0.0, 1.0, 2.5]]))
+    keep = first_of_duplicates(np.array([[0.0, 1.0, 2.0], [-0.0, 1.0, 2.0], [0.0, 1.0, 2.5]]))
     np.testing.assert_array_equal(keep, [True, False, True])
 
 
 def test_rows_with_nan_equal_no_row():
     # The readers drop non-finite rows first; the duplicate search still takes them (the
     # fuzz harness passes them), a NaN row kept as its own, an infinite one like any value.
-    keep = spacing.first_of_duplicates(np.array([[np.nan, 1.0, 2.0], [np.nan, 1.0, 2.0], [np.inf, 0.0, 0.0],
-                                                 [np.inf, 0.0, -0.0]]))
+    keep = first_of_duplicates(np.array([[np.nan, 1.0, 2.0], [np.nan, 1.0, 2.0], [np.inf, 0.0, 0.0],
+                                                    [np.inf, 0.0, -0.0]]))
     np.testing.assert_array_equal(keep, [True, True, True, False])
 
 
@@ -319,7 +321,7 @@ def test_first_of_duplicates_on_many_points_is_fast():
     p = rng.normal(size=(1_000_006, 3)) * 1000 + 4e6  # a multiple of 7 rows
     p[::7] = p[1::7]  # every 7th row repeats the next one
     start = time.perf_counter()
-    keep = spacing.first_of_duplicates(p)
+    keep = first_of_duplicates(p)
     # About 0.015 s (0.3 s with the numpy version before the native one); a quadratic pass
     # over a million rows would take hours. The bound only catches that, with room for a
     # busy machine.
@@ -396,7 +398,7 @@ def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
         n = np.concatenate([n, [[0.0, 0.0, 1.0]]])
     path = tmp_path / "huge.ply"
     ply.write_ply(str(path), p, n)
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         prepare.prepare(ply.read_ply(str(path)), str(path))
     message = str(err.value)
     assert str(path) in message and "spans" in message and "float32" in message, message
@@ -420,7 +422,7 @@ def test_coordinates_near_the_float64_limit_are_refused_not_a_numpy_error(tmp_pa
     assert prepare.bulk_mask(p).all()
     path = tmp_path / "extreme.ply"
     ply.write_ply(str(path), p, np.tile([0.0, 0.0, 1.0], (len(p), 1)))
-    with pytest.raises(ply.CloudFileError, match="float32"):
+    with pytest.raises(CloudFileError, match="float32"):
         prepare.prepare(ply.read_ply(str(path)), str(path))
 
 
@@ -428,6 +430,6 @@ def test_non_ascii_bytes_after_ascii_data_are_refused_with_a_message(tmp_path):
     path = tmp_path / "junk.ply"
     _cloud_with_faces(path, binary=False, vertices=5000)  # the junk lies beyond plyfile's read-ahead
     path.write_bytes(path.read_bytes() + b"\n" * 100_000 + b"\xff\xfe junk\n")
-    with pytest.raises(ply.CloudFileError, match="follow") as err:
+    with pytest.raises(CloudFileError, match="follow") as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value)

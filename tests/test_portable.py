@@ -82,10 +82,12 @@ RENDER = r"""
 import json, sys
 import numpy as np
 sys.path.insert(0, sys.argv[1])
-from splat_tracer import _core, core
+from splat_tracer import _core
+from splat_tracer.camera import Camera
+from splat_tracer.splats import SplatCloud
 p, n = np.load(sys.argv[2])["p"], np.load(sys.argv[2])["n"]
-scene = core.Scene(p, n, np.full(len(p), 0.05))
-res = scene.render(core.Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60, threads=2)
+scene = SplatCloud(p, n, np.full(len(p), 0.05))
+res = scene.render(Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60, threads=2)
 np.savez(sys.argv[3], rgba=res.rgba, depth=res.depth)
 print(json.dumps({"module": _core.__file__}))
 """
@@ -105,9 +107,10 @@ def test_linux_module_loads_and_renders_like_the_development_build(native, tmp_p
     assert Path(json.loads(proc.stdout)["module"]) == package / "_core.abi3.so"
     portable = np.load(tmp_path / "out.npz")
 
-    from splat_tracer import core  # the development build (make build, gcc)
+    from splat_tracer.camera import Camera  # the development build (make build, gcc)
+    from splat_tracer.splats import SplatCloud
 
-    dev = core.Scene(p, n, np.full(len(p), 0.05)).render(core.Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60)
+    dev = SplatCloud(p, n, np.full(len(p), 0.05)).render(Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60)
     hit = dev.depth < 1e9
     assert 0.1 < hit.mean() < 0.8
     np.testing.assert_array_equal(portable["depth"] < 1e9, hit)

@@ -7,7 +7,7 @@ counts are fixed per test (EXAMPLES). In all, 1,740 examples (about 20 s on 2 co
 under a minute in `make test-sanitize`):
 
 - translation (100): a closed sphere cloud moved anywhere within 1e7 of the origin and
-  recentred with core.local_frame renders the same passes as at the origin: coverage to 4
+  recentred with local_frame renders the same passes as at the origin: coverage to 4
   pixels of 3072, planar depth to 1e-5 relative, normals to 0.06 degrees (99 % of pixels;
   the rest are rim pixels where the surface hit may change splat).
 - scale (100): the cloud and the camera scaled by 1e-4 .. 1e4: same coverage (to 4 pixels),
@@ -51,7 +51,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere
-from splat_tracer import core
+from splat_tracer.camera import Camera
+from splat_tracer.method import KERNELS, POSITION_RULES, Method
+from splat_tracer.neighbours import local_frame
+from splat_tracer.scene import Instance, RenderScene
+from splat_tracer.shading import Light, RenderSettings
+from splat_tracer.splats import SplatCloud
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -63,8 +68,8 @@ settings.load_profile("splat")
 EXAMPLES = dict(translation=100, scale=100, rotation=100, instance=50, holes=200, camera=40, secondary=150,
                 degenerate=1000)
 
-FULL = core.Method.preset("FULL")
-GENERAL = core.Method.preset("GENERAL")
+FULL = Method.preset("FULL")
+GENERAL = Method.preset("GENERAL")
 W, H = 64, 48
 
 # ---------------------------------------------------------------------------------------
@@ -94,7 +99,7 @@ log_scales = st.floats(-4, 4).map(lambda e: 10.0 ** e)
 
 
 def render(scene, eye, target, up=UP, scale=1.0):
-    cam = core.Camera.look_at(eye, target, up, fov_y=40, aspect=W / H, near=1e-3 * scale, far=1e3 * scale)
+    cam = Camera.look_at(eye, target, up, fov_y=40, aspect=W / H, near=1e-3 * scale, far=1e3 * scale)
     return scene.render(cam, W, H, method=FULL, threads=2)
 
 
@@ -115,7 +120,7 @@ def compare_passes(a, b, depth_scale=1.0, rotate=np.eye(3), coverage_px=4, depth
 @pytest.fixture(scope="module")
 def reference():
     c, n, r = SPHERE
-    scene = core.Scene(c, n, r, closed=True)
+    scene = SplatCloud(c, n, r, closed=True)
     return render(scene, EYE, TARGET)
 
 
@@ -128,8 +133,8 @@ def reference():
 def test_translation_with_recentring_changes_nothing(reference, offset):
     c, n, r = SPHERE
     offset = np.asarray(offset)
-    origin, local = core.local_frame(c + offset)  # what the importer stores
-    scene = core.Scene(local, n, r, closed=True)
+    origin, local = local_frame(c + offset)  # what the importer stores
+    scene = SplatCloud(local, n, r, closed=True)
     shift = offset - origin  # where the cloud's own origin lies in the local frame (float64)
     compare_passes(reference, render(scene, EYE + shift, TARGET + shift))
 
@@ -138,7 +143,7 @@ def test_translation_with_recentring_changes_nothing(reference, offset):
 @given(scale=log_scales)
 def test_scale_changes_nothing_but_depth(reference, scale):
     c, n, r = SPHERE
-    scene = core.Scene(c * scale, n, r * scale, closed=True)
+    scene = SplatCloud(c * scale, n, r * scale, closed=True)
     compare_passes(reference, render(scene, EYE * scale, TARGET * scale, scale=scale), depth_scale=scale)
 
 
@@ -147,7 +152,7 @@ def test_scale_changes_nothing_but_depth(reference, scale):
 def test_rotation_rotates_the_normals_and_nothing_else(reference, q):
     c, n, r = SPHERE
     rot = rotation(q)
-    scene = core.Scene(c @ rot.T, n @ rot.T, r, closed=True)
+    scene = SplatCloud(c @ rot.T, n @ rot.T, r, closed=True)
     b = render(scene, rot @ EYE, rot @ TARGET, rot @ UP)
     compare_passes(reference, b, rotate=rot, coverage_px=0.01 * W * H, depth_rel=1e-4, normal_deg=0.5, share=0.98)
 
@@ -155,16 +160,16 @@ def test_rotation_rotates_the_normals_and_nothing_else(reference, q):
 @pytest.fixture(scope="module")
 def instance_reference():
     c, n, r = SPHERE
-    geometry = core.Scene(c, n, r, closed=True)
+    geometry = SplatCloud(c, n, r, closed=True)
     return geometry, render_instance(geometry, np.eye(4), EYE, TARGET, UP)
 
 
 def render_instance(geometry, matrix, eye, target, up):
-    scene = core.RenderScene([core.Instance(geometry, matrix=tuple(map(tuple, matrix)))],
-                             [core.Light("POINT", power=500.0, position=tuple(eye))])
-    cam = core.Camera.look_at(eye, target, up, fov_y=40, aspect=W / H, near=1e-3, far=1e4)
-    settings_ = core.RenderSettings(samples=1, pixel_filter="BOX", filter_width=1.0, diffuse_bounces=0,
-                                    glossy_bounces=0)
+    scene = RenderScene([Instance(geometry, matrix=tuple(map(tuple, matrix)))],
+                        [Light("POINT", power=500.0, position=tuple(eye))])
+    cam = Camera.look_at(eye, target, up, fov_y=40, aspect=W / H, near=1e-3, far=1e4)
+    settings_ = RenderSettings(samples=1, pixel_filter="BOX", filter_width=1.0, diffuse_bounces=0,
+                               glossy_bounces=0)
     return scene.render(cam, W, H, settings_, FULL, passes=("Depth", "Normal"), threads=2)
 
 
@@ -231,7 +236,7 @@ def test_plane_of_overlapping_discs_has_no_holes(kind, q, scale, tilt, azimuth, 
     s, rot = 10.0 ** scale, rotation(q)
     a, t = np.radians(tilt), np.radians(azimuth)
     d_plane = np.array([np.sin(a) * np.cos(t), np.sin(a) * np.sin(t), -np.cos(a)])  # towards the front side
-    scene = core.Scene(centres @ rot.T * s, normals @ rot.T, radii * s, closed=False)
+    scene = SplatCloud(centres @ rot.T * s, normals @ rot.T, radii * s, closed=False)
     points = targets @ rot.T * s
     d = np.tile(rot @ d_plane, (len(points), 1))
     o = points - d * (5.0 * s)
@@ -243,8 +248,8 @@ def test_plane_of_overlapping_discs_has_no_holes(kind, q, scale, tilt, azimuth, 
     eye = -d_plane * 20.0  # far enough that the whole near plane is above the discs
     up = np.cross(d_plane, [1.0, 0.0, 0.0] if abs(d_plane[0]) < 0.9 else [0.0, 1.0, 0.0])
     height = 10.0 * np.cos(a)  # the view's footprint stays inside the interior
-    cam = core.Camera.look_at(rot @ eye * s, np.zeros(3), rot @ up, ortho_height=height * s, aspect=1.0,
-                              near=1e-3 * s, far=50 * s)
+    cam = Camera.look_at(rot @ eye * s, np.zeros(3), rot @ up, ortho_height=height * s, aspect=1.0,
+                         near=1e-3 * s, far=50 * s)
     img = scene.render(cam, 24, 24, method=FULL, threads=2)
     assert (img.rgba[..., 3] == 1).all(), f"render: {(img.rgba[..., 3] < 1).sum()} empty pixels"
 
@@ -273,13 +278,13 @@ def test_view_direction_does_not_change_the_cost(shape, ortho, distance):
     if shape == "rotated sphere":
         rot = rotation([0.3, -0.5, 0.7, 0.2])
         c, n = c @ rot.T, n @ rot.T
-    scene = core.Scene(c, n, r, closed=True)
+    scene = SplatCloud(c, n, r, closed=True)
     costs = []
     for d in DIRECTIONS:
         up = np.cross(d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
         fov = 2 * np.degrees(np.arctan(1.9 / distance))  # the object fills the same share of the view
-        cam = core.Camera.look_at(d * distance, np.zeros(3), up, fov_y=fov, aspect=1.0,
-                                  ortho_height=3.8 if ortho else None)
+        cam = Camera.look_at(d * distance, np.zeros(3), up, fov_y=fov, aspect=1.0,
+                             ortho_height=3.8 if ortho else None)
         costs.append(scene.traversal_cost(*cam.rays(40, 40))["nodes"])
     assert max(costs) < 2.0 * min(costs), dict(zip(map(tuple, np.round(DIRECTIONS, 2)), costs))
 
@@ -295,9 +300,9 @@ def test_secondary_rays_leaving_a_convex_cloud_hit_nothing(scale, q, tilt, azimu
     c, n, r = SPHERE
     rot = rotation(q)
     offset = np.asarray(offset) * scale
-    scene = core.Scene(c @ rot.T * scale + offset, n @ rot.T, r * scale, closed=True)
-    cam = core.Camera.look_at((EYE * 1.0) * scale + offset, offset, fov_y=40, aspect=1.0, near=1e-3 * scale,
-                              far=1e3 * scale)
+    scene = SplatCloud(c @ rot.T * scale + offset, n @ rot.T, r * scale, closed=True)
+    cam = Camera.look_at((EYE * 1.0) * scale + offset, offset, fov_y=40, aspect=1.0, near=1e-3 * scale,
+                         far=1e3 * scale)
     o, d = cam.rays(40, 40)
     prim = scene.trace_surface(o, d, FULL, members=True)
     ok = prim.id >= 0
@@ -338,7 +343,7 @@ def float_rows(draw, max_rows=6, columns=3):
 def _exercise(scene, rays, method_args, window):
     """Every query of an accepted scene: refusals are fine, anything else must be sane."""
     o, d = rays
-    for call in (lambda: scene.trace(o, d), lambda: scene.trace_surface(o, d, core.Method(*method_args), members=True),
+    for call in (lambda: scene.trace(o, d), lambda: scene.trace_surface(o, d, Method(*method_args), members=True),
                  lambda: scene.trace_surface(o, d, FULL, exclude=np.full((len(o), 2), len(scene) - 1, np.int32),
                                              inside=True)):
         try:
@@ -349,16 +354,16 @@ def _exercise(scene, rays, method_args, window):
         assert np.all((res.id >= -1) & (res.id < max(len(scene), 1)))
         assert np.all(np.isinf(res.t[~hit])) and np.all(np.isfinite(res.t[hit]))
         assert np.isfinite(res.normal).all()
-    cam = core.Camera.look_at((0, -3, 0.5), (0, 0, 0), fov_y=40, aspect=4 / 3)
+    cam = Camera.look_at((0, -3, 0.5), (0, 0, 0), fov_y=40, aspect=4 / 3)
     try:
-        img = scene.render(cam, 8, 6, window=window, method=core.Method(*method_args), threads=2)
+        img = scene.render(cam, 8, 6, window=window, method=Method(*method_args), threads=2)
     except (ValueError, TypeError):
         return
     assert np.isfinite(img.rgba).all() and np.isfinite(img.depth).all()
 
 
-methods = st.tuples(st.booleans(), st.booleans(), st.booleans(), st.sampled_from(core.POSITION_RULES),
-                    st.sampled_from(core.KERNELS), st.sampled_from([0.0, 1e-30, 1.0, 1e30, 3.4e38]))
+methods = st.tuples(st.booleans(), st.booleans(), st.booleans(), st.sampled_from(POSITION_RULES),
+                    st.sampled_from(KERNELS), st.sampled_from([0.0, 1e-30, 1.0, 1e30, 3.4e38]))
 
 
 @settings(max_examples=EXAMPLES["degenerate"])
@@ -372,7 +377,7 @@ def degenerate_inputs_body(centres, normals, radii, closed, origins, directions,
     with open(os.environ["SPLAT_LAST_EXAMPLE"], "w") as f:  # what was running if the process dies
         f.write(repr((centres[:n], normals[:n], radii[:n, 0], closed, origins[:k], directions[:k], method, window)))
     try:
-        scene = core.Scene(centres[:n], normals[:n], radii[:n, 0], closed=closed, threads=2)
+        scene = SplatCloud(centres[:n], normals[:n], radii[:n, 0], closed=closed, threads=2)
     except (ValueError, TypeError):
         scene = None
     if scene is not None:
@@ -381,7 +386,7 @@ def degenerate_inputs_body(centres, normals, radii, closed, origins, directions,
     # Mismatched shapes are refused, never read out of bounds.
     if len(centres) != len(normals):
         with pytest.raises((ValueError, TypeError)):
-            core.Scene(centres, normals, radii[:len(centres), 0])
+            SplatCloud(centres, normals, radii[:len(centres), 0])
 
 
 def test_degenerate_inputs_are_refused_or_handled_never_crash(tmp_path):

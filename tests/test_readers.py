@@ -7,6 +7,7 @@ import pytest
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere
 from splat_tracer import gaussians, normals, ply, prepare, readers
+from splat_tracer.cloud import CloudFileError, srgb_to_linear
 
 RNG = np.random.default_rng(7)
 
@@ -54,7 +55,7 @@ def test_text_round_trips(tmp_path, layout):
     else:
         assert cloud.normals is None
     if layout != "xyz":
-        np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(rgb / 255.0), atol=1e-6)
+        np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
     if layout in ("pts", "csv_header"):
         np.testing.assert_array_equal(cloud.attributes["intensity"], inten[:, 0])
 
@@ -64,13 +65,13 @@ def test_text_column_mapping_when_guessing_fails(tmp_path):
     extra = RNG.uniform(-5, 5, size=(len(p), 2))  # two unknown columns: no guess explains them
     path = tmp_path / "odd.xyz"
     path.write_text(_fmt(np.column_stack([extra[:, :1], p, rgb, extra[:, 1:]])))
-    with pytest.raises(ply.CloudFileError, match="Columns option") as err:
+    with pytest.raises(CloudFileError, match="Columns option") as err:
         readers.read_cloud(str(path))
     assert str(path) in str(err.value)
     cloud = readers.read_cloud(str(path), columns="_ x y z r g b i")
     np.testing.assert_allclose(cloud.positions, p)
     np.testing.assert_allclose(cloud.attributes["intensity"], extra[:, 1], rtol=1e-6)
-    with pytest.raises(ply.CloudFileError, match="names 3 columns"):
+    with pytest.raises(CloudFileError, match="names 3 columns"):
         readers.read_cloud(str(path), columns="x y z")
 
 
@@ -104,7 +105,7 @@ def test_las_and_laz_round_trip(tmp_path, bits, compress):
     cloud = readers.read_cloud(str(path))
     assert cloud.format == ("LAZ" if compress else "LAS") and cloud.orientation == "UP"
     np.testing.assert_allclose(cloud.positions, p, atol=1e-6)  # scale 0.001 and offset applied in float64
-    np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(rgb8 / 255.0), atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb8 / 255.0), atol=1e-6)
     np.testing.assert_array_equal(cloud.attributes["classification"], np.arange(2000) % 7)
     np.testing.assert_array_equal(cloud.attributes["intensity"], np.arange(2000) % 60000)
     np.testing.assert_array_equal(cloud.attributes["return_number"], 1 + np.arange(2000) % 3)
@@ -122,13 +123,13 @@ def test_las_lying_count_truncation_and_laz_without_backend(tmp_path, monkeypatc
     (tmp_path / "short.las").write_bytes(data[:-50])
     (tmp_path / "long.las").write_bytes(data + b"\0" * 34)  # one more record than the header says
     for name, message in (("short.las", "early end-of-file"), ("long.las", "more bytes follow")):
-        with pytest.raises(ply.CloudFileError, match=message) as err:
+        with pytest.raises(CloudFileError, match=message) as err:
             readers.read_cloud(str(tmp_path / name))
         assert name in str(err.value)
     laz = tmp_path / "scan.laz"
     _write_las(laz, p, compress=True)
     monkeypatch.setattr(laspy.LazBackend, "detect_available", staticmethod(lambda: ()))
-    with pytest.raises(ply.CloudFileError, match="no LAZ backend") as err:
+    with pytest.raises(CloudFileError, match="no LAZ backend") as err:
         readers.read_cloud(str(laz))
     assert str(laz) in str(err.value)
 
@@ -156,7 +157,7 @@ def test_e57_round_trip_with_scanner_positions(tmp_path):
     got = np.concatenate(halves)
     np.testing.assert_allclose(cloud.positions, got, atol=1e-6)  # pye57 writes single-precision coordinates
     np.testing.assert_allclose(cloud.scanners, np.repeat(stations, [len(h) for h in halves], axis=0))
-    np.testing.assert_allclose(cloud.colours[0, :3], ply.srgb_to_linear(np.array([200, 100, 50]) / 255), atol=1e-6)
+    np.testing.assert_allclose(cloud.colours[0, :3], srgb_to_linear(np.array([200, 100, 50]) / 255), atol=1e-6)
     prepared = prepare.prepare(cloud, str(path))
     assert prepared.normals_oriented == "SCANNER"
     towards = np.einsum("ij,ij->i", prepared.cloud.normals, cloud.scanners - got)
@@ -246,7 +247,7 @@ def test_gaussian_splat_ply_round_trip(tmp_path, three_d):
     np.testing.assert_allclose(cloud.positions, positions, atol=1e-6)
     np.testing.assert_allclose(np.abs(cloud.normals @ normal), 1.0, atol=1e-5)  # the thin axis, either sign
     np.testing.assert_allclose(cloud.radii, 2 * np.sqrt(0.7 * 0.5) * step, rtol=1e-5)
-    np.testing.assert_allclose(cloud.colours[:, :3], ply.srgb_to_linear(colour), atol=1e-5)
+    np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(colour), atol=1e-5)
     np.testing.assert_allclose(cloud.colours[:, 3], 0.98, atol=1e-5)  # sigmoid(opacity)
     prepared = prepare.prepare(cloud, str(path))
     signs = prepared.cloud.normals @ normal
@@ -261,7 +262,7 @@ def test_gaussian_ply_missing_fields(tmp_path):
                     "property float f_dc_0\nproperty float f_dc_1\nproperty float f_dc_2\nproperty float opacity\n"
                     "property float scale_0\nproperty float scale_1\nproperty float scale_2\nend_header\n"
                     "0 0 0 0 0 0 1 0 0 0\n")
-    with pytest.raises(ply.CloudFileError, match="Gaussian.*rot_0, rot_1, rot_2, rot_3") as err:
+    with pytest.raises(CloudFileError, match="Gaussian.*rot_0, rot_1, rot_2, rot_3") as err:
         readers.read_cloud(str(path))
     assert str(path) in str(err.value)
 
@@ -372,7 +373,7 @@ def test_up_and_scanner_orientation_fall_back_to_neighbours_where_the_rule_is_un
 def test_bad_inputs_are_refused_naming_the_file(tmp_path, name, content, message):
     path = tmp_path / name
     path.write_bytes(content)
-    with pytest.raises(ply.CloudFileError) as err:
+    with pytest.raises(CloudFileError) as err:
         prepare.prepare(readers.read_cloud(str(path)), str(path))
     assert str(path) in str(err.value) and message in str(err.value), str(err.value)
 
@@ -432,7 +433,7 @@ def test_gaussian_capture_renders_with_its_colours_and_orientation(blender, empt
     for x, colour in ((-0.4, [0.8, 0.3, 0.2]), (0.4, [0.2, 0.4, 0.9])):
         col, row = int(round((x / half_width + 1) / 2 * 160)), 60
         view = np.array([x, 0.0, 4.0]) / np.linalg.norm([x, 0.0, 4.0])  # towards the camera
-        expected = ply.srgb_to_linear(np.array(colour)) * abs(view @ normal)  # headlight: colour x |cos|
+        expected = srgb_to_linear(np.array(colour)) * abs(view @ normal)  # headlight: colour x |cos|
         np.testing.assert_allclose(out["rgba"][row, col, :3], expected, rtol=0.05)
         n = out["normal"][row, col]
         assert abs(n @ normal) > 0.99, n  # the Gaussians' thin axis

@@ -16,13 +16,17 @@ import pytest
 from numpy.polynomial.legendre import leggauss
 from scipy.ndimage import binary_dilation, binary_erosion, maximum_filter, minimum_filter, uniform_filter
 
-from splat_tracer import _core, core
+from splat_tracer import _core
+from splat_tracer.camera import Camera
+from splat_tracer.method import Method
+from splat_tracer.scene import RAY_VISIBILITY, FrameResult, Instance, Mesh, RenderScene
+from splat_tracer.splats import SplatCloud
 from splat_tracer.shading import Light, Material, RenderSettings, World
 
 from geometry import ray_sphere, sphere_cloud
 
-FULL = core.Method.preset("FULL")
-GENERAL = core.Method.preset("GENERAL")
+FULL = Method.preset("FULL")
+GENERAL = Method.preset("GENERAL")
 BLACK = World(colour=(0.0, 0.0, 0.0))
 ALBEDO = 0.8
 # Pure Lambert: no specular layer at all (Specular IOR Level 0), fully rough.
@@ -33,7 +37,7 @@ LAMBERT = Material(base_colour=(ALBEDO, ALBEDO, ALBEDO), specular_level=0.0, rou
 # Scene helpers
 
 
-def grid_mesh(half: float, n: int, z: float = 0.0, checker: bool = False) -> core.Mesh:
+def grid_mesh(half: float, n: int, z: float = 0.0, checker: bool = False) -> Mesh:
     """The square [-half, half]^2 at height z, n x n quads of two triangles, normal +Z;
     checker: material slots 0 and 1 alternate per quad."""
     g = np.linspace(-half, half, n + 1)
@@ -45,10 +49,10 @@ def grid_mesh(half: float, n: int, z: float = 0.0, checker: bool = False) -> cor
             a = i * (n + 1) + j
             tris += [(a, a + 1, a + n + 2), (a, a + n + 2, a + n + 1)]
             slots += [(i + j) % 2] * 2
-    return core.Mesh(verts, np.array(tris), material_index=np.array(slots) if checker else None)
+    return Mesh(verts, np.array(tris), material_index=np.array(slots) if checker else None)
 
 
-def uv_sphere(radius: float = 1.0, segments: int = 128, rings: int = 64) -> core.Mesh:
+def uv_sphere(radius: float = 1.0, segments: int = 128, rings: int = 64) -> Mesh:
     """A triangulated UV sphere about the origin, outward winding, smooth corner normals."""
     th, ph = np.meshgrid(np.linspace(0, np.pi, rings + 1), np.linspace(0, 2 * np.pi, segments + 1), indexing="ij")
     normals = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
@@ -62,12 +66,12 @@ def uv_sphere(radius: float = 1.0, segments: int = 128, rings: int = 64) -> core
             if i < rings - 1:
                 tris.append((b, c, d))
     tris = np.array(tris)
-    return core.Mesh(normals * radius, tris, corner_normals=normals[tris])
+    return Mesh(normals * radius, tris, corner_normals=normals[tris])
 
 
-def cloud_sphere(n: int = 8000, radius: float = 1.0, closed: bool = True) -> core.Scene:
+def cloud_sphere(n: int = 8000, radius: float = 1.0, closed: bool = True) -> SplatCloud:
     c, nrm, r = sphere_cloud(n, radius)
-    return core.Scene(c, nrm, r, closed=closed)
+    return SplatCloud(c, nrm, r, closed=closed)
 
 
 def affine(scale=(1.0, 1.0, 1.0), move=(0.0, 0.0, 0.0), rotate_z_deg: float = 0.0) -> tuple:
@@ -79,22 +83,22 @@ def affine(scale=(1.0, 1.0, 1.0), move=(0.0, 0.0, 0.0), rotate_z_deg: float = 0.
     return tuple(map(tuple, m))
 
 
-def ortho_down(cx: float = 0.0, cy: float = 0.0, width: float = 1.0, height: float = 1.0) -> core.Camera:
-    return core.Camera.look_at((cx, cy, 10.0), (cx, cy, 0.0), up=(0, 1, 0), ortho_height=height,
-                               aspect=width / height)
+def ortho_down(cx: float = 0.0, cy: float = 0.0, width: float = 1.0, height: float = 1.0) -> Camera:
+    return Camera.look_at((cx, cy, 10.0), (cx, cy, 0.0), up=(0, 1, 0), ortho_height=height,
+                          aspect=width / height)
 
 
-def pixel_points(cam: core.Camera, w: int, h: int) -> np.ndarray:
+def pixel_points(cam: Camera, w: int, h: int) -> np.ndarray:
     """(h, w, 2): the x, y of each pixel centre of an `ortho_down` camera."""
     o, _ = cam.rays(w, h)
     return o[:, :2].astype(np.float64).reshape(h, w, 2)
 
 
 def render(instances, lights=(), world=BLACK, cam=None, w=8, h=8, passes=("Combined",), method=FULL,
-           threads=0, **settings) -> core.FrameResult:
+           threads=0, **settings) -> FrameResult:
     """One frame; the settings default to 1 sample and no diffuse bounce (the analytic cases
     need direct light only)."""
-    scene = core.RenderScene(instances, lights, world)
+    scene = RenderScene(instances, lights, world)
     rs = RenderSettings(**{"samples": 1, "diffuse_bounces": 0, **settings})
     return scene.render(cam, w, h, rs, method=method, passes=passes, threads=threads)
 
@@ -107,7 +111,7 @@ def lit_plane(lights, cam, w, h, **settings) -> np.ndarray:
 
     lights = [dataclasses.replace(light, visible_camera=False) for light in lights]
     plane = grid_mesh(100.0, 1)
-    return render([core.Instance(plane, materials=(LAMBERT,))], lights, cam=cam, w=w, h=h,
+    return render([Instance(plane, materials=(LAMBERT,))], lights, cam=cam, w=w, h=h,
                   **settings).passes["Combined"][..., 0].astype(np.float64)
 
 
@@ -198,10 +202,10 @@ def test_specular_level_zero_is_pure_lambert_at_any_view_angle(view_deg):
     # reflected at grazing angles and dimmed the diffuse by it: 12 % too dark at 70 degrees,
     # 63 % at 85, with reflection rays traced. Now exact (1e-5) and no reflection ray.
     th = math.radians(view_deg)
-    cam = core.Camera.look_at((0.0, -10 * math.sin(th), 10 * math.cos(th)), (0, 0, 0), up=(0, 1, 0),
-                              ortho_height=0.1)
+    cam = Camera.look_at((0.0, -10 * math.sin(th), 10 * math.cos(th)), (0, 0, 0), up=(0, 1, 0),
+                         ortho_height=0.1)
     plane = grid_mesh(100.0, 1)
-    fr = render([core.Instance(plane, materials=(LAMBERT,))], [Light(type="SUN", power=3.0)], cam=cam, w=4, h=4,
+    fr = render([Instance(plane, materials=(LAMBERT,))], [Light(type="SUN", power=3.0)], cam=cam, w=4, h=4,
                 samples=4)
     np.testing.assert_allclose(fr.passes["Combined"][..., :3], ALBEDO / np.pi * 3.0, rtol=1e-5)
     assert fr.counters["reflection_rays"] == 0
@@ -242,7 +246,7 @@ def test_area_lamp_matches_integrated_radiance(shape, height):
 def test_area_lamp_facing_away_gives_no_light():
     # Hidden from the camera: the camera above would see its emitting front.
     lamp = Light(type="AREA", power=100.0, position=(0, 0, 1.0), direction=(0, 0, 1), size=1.0, visible_camera=False)
-    fr = render([core.Instance(grid_mesh(100.0, 1), materials=(LAMBERT,))], [lamp], cam=ortho_down(), w=4, h=4,
+    fr = render([Instance(grid_mesh(100.0, 1), materials=(LAMBERT,))], [lamp], cam=ortho_down(), w=4, h=4,
                 shadow_samples=16)
     assert np.all(fr.passes["Combined"][..., :3] == 0)
     assert np.all(fr.passes["Combined"][..., 3] == 1)
@@ -252,7 +256,7 @@ def test_uniform_world_lights_a_plane_by_its_albedo():
     # Only the world lights it (radiance C s), one diffuse bounce: L = a C s. Cosine-sampled
     # bounces under a uniform sky carry no variance: within 0.1 % (measured 1e-5).
     colour, strength = (0.5, 1.0, 0.25), 2.0
-    fr = render([core.Instance(grid_mesh(100.0, 1), materials=(LAMBERT,))], [],
+    fr = render([Instance(grid_mesh(100.0, 1), materials=(LAMBERT,))], [],
                 world=World(colour=colour, strength=strength), cam=ortho_down(), w=16, h=16, samples=4,
                 diffuse_bounces=1)
     got = fr.passes["Combined"][..., :3].reshape(-1, 3)
@@ -263,8 +267,8 @@ def test_uniform_world_lights_a_plane_by_its_albedo():
 @pytest.mark.parametrize("eye_z", [10.0, -10.0])
 def test_emission_is_seen_exactly_from_both_sides(eye_z):
     emission = (1.5, 3.0, 4.5)  # colour (0.3, 0.6, 0.9) x strength 5
-    cam = core.Camera.look_at((0, 0, eye_z), (0, 0, 0), up=(0, 1, 0), ortho_height=1.0)
-    fr = render([core.Instance(grid_mesh(100.0, 1), materials=(Material(emission=emission),))], [], cam=cam, w=4,
+    cam = Camera.look_at((0, 0, eye_z), (0, 0, 0), up=(0, 1, 0), ortho_height=1.0)
+    fr = render([Instance(grid_mesh(100.0, 1), materials=(Material(emission=emission),))], [], cam=cam, w=4,
                 h=4)
     np.testing.assert_allclose(fr.passes["Combined"].reshape(-1, 4), np.tile([*emission, 1.0], (16, 1)), rtol=1e-6)
 
@@ -290,11 +294,11 @@ def side_by_side():
     8 x 4 units, symmetric about x = 0 so the right half mirrors onto the left)."""
     cloud, mesh, floor = cloud_sphere(8000), uv_sphere(), grid_mesh(20.0, 1, z=FLOOR_Z)
     grey = Material(base_colour=(0.8, 0.8, 0.8), roughness=0.5)
-    instances = [core.Instance(cloud, matrix=affine(move=(-SIDE_X, SIDE_Y, 0)), materials=(grey,),
-                               pass_index=CLOUD_INDEX),
-                 core.Instance(mesh, matrix=affine(move=(SIDE_X, SIDE_Y, 0)), materials=(grey,),
-                               pass_index=MESH_INDEX),
-                 core.Instance(floor, materials=(LAMBERT,), pass_index=FLOOR_INDEX)]
+    instances = [Instance(cloud, matrix=affine(move=(-SIDE_X, SIDE_Y, 0)), materials=(grey,),
+                          pass_index=CLOUD_INDEX),
+                 Instance(mesh, matrix=affine(move=(SIDE_X, SIDE_Y, 0)), materials=(grey,),
+                          pass_index=MESH_INDEX),
+                 Instance(floor, materials=(LAMBERT,), pass_index=FLOOR_INDEX)]
     cam = ortho_down(width=8.0, height=4.0)
     frames = {}
     for lamp, light in SIDE_LAMPS.items():
@@ -404,12 +408,12 @@ def checker_scene():
     floor = grid_mesh(6.0, 12, z=-1.0, checker=True)
     sun = Light(type="SUN", power=3.0, direction=(-0.3, 0.5, -1.0))
     world = World(colour=(0.2, 0.3, 0.5))
-    cam = core.Camera.look_at((0, -5, 2.5), (0, 0, -0.2), fov_y=30.0, aspect=1.0)
+    cam = Camera.look_at((0, -5, 2.5), (0, 0, -0.2), fov_y=30.0, aspect=1.0)
     images = {}
     for mat_name, mat in (("mirror", MIRROR), ("glass", GLASS)):
         for geo_name, geo, method_name, method in (("mesh", mesh, "FULL", FULL), ("cloud", cloud, "FULL", FULL),
                                                    ("cloud", cloud, "GENERAL", GENERAL)):
-            fr = render([core.Instance(geo, materials=(mat,)), core.Instance(floor, materials=CHECKER)], [sun],
+            fr = render([Instance(geo, materials=(mat,)), Instance(floor, materials=CHECKER)], [sun],
                         world=world, cam=cam, w=FIG_SIZE, h=FIG_SIZE, method=method)
             images[mat_name, geo_name, method_name] = fr.passes["Combined"][..., :3].mean(-1)
     o, d = cam.rays(FIG_SIZE, FIG_SIZE)
@@ -459,9 +463,9 @@ def test_a_hundred_instances_share_one_geometry_and_all_appear():
     # projected disc's (113 pixels) within 5 %.
     cloud = cloud_sphere(2000, radius=0.3)
     centres = [(x - 4.5, y - 4.5) for y in range(10) for x in range(10)]
-    instances = [core.Instance(cloud, matrix=affine(move=(x, y, 0.0)), pass_index=k + 1)
+    instances = [Instance(cloud, matrix=affine(move=(x, y, 0.0)), pass_index=k + 1)
                  for k, (x, y) in enumerate(centres)]
-    scene = core.RenderScene(instances, [Light(type="SUN", power=3.0)], BLACK)
+    scene = RenderScene(instances, [Light(type="SUN", power=3.0)], BLACK)
     assert scene.geometry_count == 1
     cam = ortho_down(width=10.0, height=10.0)
     w = h = 200
@@ -485,7 +489,7 @@ def test_non_uniform_scale_renders_the_same_ellipsoid_as_a_scaled_mesh():
     w = h = 160
     cover = {}
     for name, geo in (("cloud", cloud_sphere(8000)), ("mesh", uv_sphere())):
-        fr = render([core.Instance(geo, matrix=matrix)], [Light(type="SUN", power=3.0)],
+        fr = render([Instance(geo, matrix=matrix)], [Light(type="SUN", power=3.0)],
                     world=World(transparent=True), cam=cam, w=w, h=h)
         cover[name] = fr.passes["Combined"][..., 3] > 0.5
     pixel_area = (4.0 / w) ** 2
@@ -501,16 +505,16 @@ def test_non_uniform_scale_renders_the_same_ellipsoid_as_a_scaled_mesh():
 
 def three_spheres(cloud=None):
     cloud = cloud if cloud is not None else cloud_sphere(4000)
-    return [core.Instance(cloud, matrix=affine(move=(-2.2, 0, 0)), materials=(MIRROR,)),
-            core.Instance(cloud, matrix=affine(move=(0, 0, 0)), materials=(GLASS,)),
-            core.Instance(uv_sphere(), matrix=affine(move=(2.2, 0, 0)), materials=(Material(roughness=0.4),)),
-            core.Instance(grid_mesh(10.0, 1, z=-1.0), materials=(LAMBERT,))]
+    return [Instance(cloud, matrix=affine(move=(-2.2, 0, 0)), materials=(MIRROR,)),
+            Instance(cloud, matrix=affine(move=(0, 0, 0)), materials=(GLASS,)),
+            Instance(uv_sphere(), matrix=affine(move=(2.2, 0, 0)), materials=(Material(roughness=0.4),)),
+            Instance(grid_mesh(10.0, 1, z=-1.0), materials=(LAMBERT,))]
 
 
 def test_a_scene_without_light_traces_no_secondary_ray():
     # No lamp, black world, no emission: mirror, glass, glossy and diffuse surfaces, yet no
     # shadow, reflection, refraction or diffuse ray, and a black image.
-    cam = core.Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=40.0, aspect=2.0)
+    cam = Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=40.0, aspect=2.0)
     fr = render(three_spheres(), [], world=BLACK, cam=cam, w=64, h=32, samples=2, diffuse_bounces=2)
     c = fr.counters
     assert c["camera_rays"] == 64 * 32 * 2
@@ -530,11 +534,11 @@ def test_far_phase_rejections_happen_on_closed_clouds_only():
     # The far phase applies to closed clouds: an open (closed=False) cloud never rejects a
     # layer; the same cloud marked closed does, at its silhouette (fringe discs).
     c, n, r = sphere_cloud(4000)
-    cam = core.Camera.look_at((0, -5, 0.5), (0, 0, 0), fov_y=30.0, aspect=1.0)
+    cam = Camera.look_at((0, -5, 0.5), (0, 0, 0), fov_y=30.0, aspect=1.0)
     counters = {}
     for closed in (False, True):
-        cloud = core.Scene(c, n, r, closed=closed)
-        counters[closed] = render([core.Instance(cloud)], [Light(type="SUN", power=3.0)], cam=cam, w=96,
+        cloud = SplatCloud(c, n, r, closed=closed)
+        counters[closed] = render([Instance(cloud)], [Light(type="SUN", power=3.0)], cam=cam, w=96,
                                   h=96).counters
     assert counters[False]["layer_queries"] > 0
     assert counters[False]["far_rejections"] == 0
@@ -551,8 +555,8 @@ def test_interpolation_counter_is_zero_when_discs_do_not_overlap():
     cam = ortho_down(width=8.0, height=8.0)
     result = {}
     for radius in (0.3, 0.8):
-        cloud = core.Scene(centres, normals, np.full(len(centres), radius))
-        fr = render([core.Instance(cloud)], [Light(type="SUN", power=3.0)], cam=cam, w=64, h=64,
+        cloud = SplatCloud(centres, normals, np.full(len(centres), radius))
+        fr = render([Instance(cloud)], [Light(type="SUN", power=3.0)], cam=cam, w=64, h=64,
                     passes=("Splat Count",))
         result[radius] = (fr.counters["interpolations"], fr.passes["Splat Count"].max())
     assert result[0.3] == (0, 1.0)
@@ -560,8 +564,8 @@ def test_interpolation_counter_is_zero_when_discs_do_not_overlap():
 
 
 def test_only_the_passes_asked_for_are_returned():
-    scene = core.RenderScene([core.Instance(uv_sphere())], [Light(type="SUN")], BLACK)
-    cam = core.Camera.look_at((0, -5, 0), (0, 0, 0), fov_y=40.0, aspect=1.0)
+    scene = RenderScene([Instance(uv_sphere())], [Light(type="SUN")], BLACK)
+    cam = Camera.look_at((0, -5, 0), (0, 0, 0), fov_y=40.0, aspect=1.0)
     assert set(scene.render(cam, 8, 8, RenderSettings(samples=1)).passes) == {"Combined"}
     fr = scene.render(cam, 8, 8, RenderSettings(samples=1), passes=("Depth", "Normal"))
     assert set(fr.passes) == {"Combined", "Depth", "Normal"}
@@ -577,10 +581,10 @@ def test_one_sample_is_the_pixel_centre_image(method):
     # samples = 1 traces exactly the pixel-centre rays: coverage (alpha, transparent film)
     # equals Scene.trace's (general method: plain nearest hit) or trace_surface's (full).
     cloud = cloud_sphere(4000)
-    cam = core.Camera.look_at((0.3, -4, 0.6), (0, 0, 0), fov_y=35.0, aspect=1.5)
+    cam = Camera.look_at((0.3, -4, 0.6), (0, 0, 0), fov_y=35.0, aspect=1.5)
     w, h = 72, 48
-    fr = render([core.Instance(cloud)], [Light(type="SUN", power=3.0)], world=World(transparent=True), cam=cam,
-                w=w, h=h, method=core.Method.preset(method))
+    fr = render([Instance(cloud)], [Light(type="SUN", power=3.0)], world=World(transparent=True), cam=cam,
+                w=w, h=h, method=Method.preset(method))
     o, d = cam.rays(w, h)
     if method == "GENERAL":
         hit = cloud.trace(o, d).id >= 0
@@ -599,7 +603,7 @@ def filtered_alpha():
     out = {}
     for geo_name, geo in (("mesh", uv_sphere()), ("cloud", cloud_sphere(8000))):
         for pixel_filter in ("BOX", "GAUSSIAN", "BLACKMAN_HARRIS"):
-            fr = render([core.Instance(geo)], [Light(type="SUN", power=3.0)], world=World(transparent=True),
+            fr = render([Instance(geo)], [Light(type="SUN", power=3.0)], world=World(transparent=True),
                         cam=cam, w=64, h=64, samples=16, pixel_filter=pixel_filter)
             out[geo_name, pixel_filter] = fr.passes["Combined"][..., 3]
     return out
@@ -636,9 +640,9 @@ def test_image_does_not_depend_on_threads_or_tiles():
     # Area lamp (soft shadows), glossy, mirror and glass, diffuse bounces, 4 samples: every
     # random number hashes (pixel, sample, dimension, seed), so threads=1, threads=2 and
     # another tile size give bit-identical images; another seed does not.
-    cam = core.Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=40.0, aspect=2.0)
+    cam = Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=40.0, aspect=2.0)
     lamp = Light(type="AREA", power=300.0, position=(0, -1, 4), direction=(0, 0, -1), size=1.5)
-    scene = core.RenderScene(three_spheres(), [lamp], World(colour=(0.1, 0.1, 0.1)))
+    scene = RenderScene(three_spheres(), [lamp], World(colour=(0.1, 0.1, 0.1)))
     settings = RenderSettings(samples=4, diffuse_bounces=2)
     one = scene.render(cam, 64, 32, settings, threads=1, passes=("Shadow",))
     two = scene.render(cam, 64, 32, settings, threads=2, passes=("Shadow",))
@@ -675,8 +679,8 @@ def ball_over_floor():
     sun = Light(type="SUN", power=3.0, direction=(0.5, 0.0, -1.0))
 
     def frame(**options):
-        instances = [core.Instance(cloud, pass_index=1, **options), core.Instance(floor, materials=(LAMBERT,),
-                                                                                  pass_index=2)]
+        instances = [Instance(cloud, pass_index=1, **options), Instance(floor, materials=(LAMBERT,),
+                                                                        pass_index=2)]
         return render(instances, [sun], world=World(colour=(0.1, 0.1, 0.1)), cam=cam, w=60, h=60,
                       passes=("Combined", "Shadow", "IndexOB")).passes
 
@@ -729,11 +733,11 @@ def test_object_hidden_from_glossy_rays_is_not_in_the_mirror():
     mirror_disc = np.hypot(xy[..., 0] + 1.2, xy[..., 1]) < 0.95
     red_disc = np.hypot(xy[..., 0] - 1.2, xy[..., 1]) < 0.95
     counts = {}
-    for name, visibility in (("all", frozenset(core.RAY_VISIBILITY)),
-                             ("no glossy", frozenset(core.RAY_VISIBILITY) - {"glossy"})):
-        instances = [core.Instance(cloud_sphere(4000), matrix=affine(move=(-1.2, 0, 0)), materials=(MIRROR,)),
-                     core.Instance(uv_sphere(), matrix=affine(move=(1.2, 0, 0)), materials=(red,),
-                                   visibility=visibility)]
+    for name, visibility in (("all", frozenset(RAY_VISIBILITY)),
+                             ("no glossy", frozenset(RAY_VISIBILITY) - {"glossy"})):
+        instances = [Instance(cloud_sphere(4000), matrix=affine(move=(-1.2, 0, 0)), materials=(MIRROR,)),
+                     Instance(uv_sphere(), matrix=affine(move=(1.2, 0, 0)), materials=(red,),
+                              visibility=visibility)]
         rgb = render(instances, [Light(type="SUN", power=3.0, direction=(0, 0, -1))],
                      world=World(colour=(0.3, 0.3, 0.3)), cam=cam, w=w, h=h).passes["Combined"][..., :3]
         is_red = (rgb[..., 0] > 0.05) & (rgb[..., 0] > 3 * rgb[..., 1])
@@ -750,7 +754,7 @@ def test_object_hidden_from_glossy_rays_is_not_in_the_mirror():
 def native_scene_args(**changes):
     """Arguments of a valid _core.RenderScene (one mesh instance, one material, one lamp),
     with some replaced."""
-    mesh = core.Mesh(np.eye(3), [[0, 1, 2]])
+    mesh = Mesh(np.eye(3), [[0, 1, 2]])
     eye = np.eye(4)[:3].ravel().astype(np.float32)
     args = dict(geometries=[mesh._mesh], geometry_index=np.zeros(1, np.int32), to_world=eye[None].copy(),
                 to_object=eye[None].copy(), material_range=np.array([[0, 1]], np.int32),
@@ -789,25 +793,25 @@ def test_bad_native_scene_arguments_are_refused(change):
 def test_bad_scene_input_is_refused():
     mesh = uv_sphere(segments=8, rings=4)
     with pytest.raises(ValueError):  # not invertible
-        core.RenderScene([core.Instance(mesh, matrix=affine(scale=(1.0, 0.0, 1.0)))])
+        RenderScene([Instance(mesh, matrix=affine(scale=(1.0, 0.0, 1.0)))])
     with pytest.raises(ValueError):  # not finite
-        core.RenderScene([core.Instance(mesh, matrix=np.full((4, 4), np.nan))])
+        RenderScene([Instance(mesh, matrix=np.full((4, 4), np.nan))])
     with pytest.raises(ValueError):  # not 4 x 4
-        core.RenderScene([core.Instance(mesh, matrix=np.eye(3))])
+        RenderScene([Instance(mesh, matrix=np.eye(3))])
     with pytest.raises(ValueError):
-        core.RenderScene([core.Instance(mesh, visibility=frozenset({"camera", "reflection"}))])
+        RenderScene([Instance(mesh, visibility=frozenset({"camera", "reflection"}))])
     with pytest.raises(TypeError):
-        core.RenderScene([core.Instance("not a geometry")])
+        RenderScene([Instance("not a geometry")])
     # Wrong types fail as TypeError when the scene is built (they were AttributeErrors, the
     # world's only at render time).
     with pytest.raises(TypeError):
-        core.RenderScene([core.Instance(mesh, materials=((0.8, 0.8, 0.8),))])
+        RenderScene([Instance(mesh, materials=((0.8, 0.8, 0.8),))])
     with pytest.raises(TypeError):
-        core.RenderScene([core.Instance(mesh)], lights=["SUN"])
+        RenderScene([Instance(mesh)], lights=["SUN"])
     with pytest.raises(TypeError):
-        core.RenderScene([core.Instance(mesh)], world=(0.1, 0.1, 0.1))
+        RenderScene([Instance(mesh)], world=(0.1, 0.1, 0.1))
     with pytest.raises(TypeError):
-        core.RenderScene([mesh])
+        RenderScene([mesh])
     with pytest.raises(ValueError):
         Material(roughness=2.0)
     with pytest.raises(ValueError):
@@ -815,12 +819,12 @@ def test_bad_scene_input_is_refused():
     with pytest.raises(ValueError):
         RenderSettings(samples=0)
     with pytest.raises(ValueError):
-        core.Mesh(np.eye(3), [[0, 1, 3]])
+        Mesh(np.eye(3), [[0, 1, 3]])
 
 
 def test_bad_render_arguments_are_refused():
-    scene = core.RenderScene([core.Instance(uv_sphere(segments=8, rings=4))], [Light(type="SUN")], BLACK)
-    cam = core.Camera.look_at((0, -5, 0), (0, 0, 0))
+    scene = RenderScene([Instance(uv_sphere(segments=8, rings=4))], [Light(type="SUN")], BLACK)
+    cam = Camera.look_at((0, -5, 0), (0, 0, 0))
     with pytest.raises(ValueError):
         scene.render(cam, 8, 8, passes=("Combined", "Bogus"))
     with pytest.raises(TypeError):
@@ -839,9 +843,9 @@ def test_bad_render_arguments_are_refused():
         scene.render(cam, 8, 8, tile_size=0)
     # Out-of-range material slots fall back to the first slot instead of reading past the
     # instance's materials; an empty scene renders the world.
-    slots = core.Mesh(np.eye(3), [[0, 1, 2]], material_index=[5])
-    core.RenderScene([core.Instance(slots)]).render(cam, 4, 4, RenderSettings(samples=1))
-    empty = core.RenderScene([], [], World(colour=(0.25, 0.5, 1.0))).render(cam, 4, 4, RenderSettings(samples=1))
+    slots = Mesh(np.eye(3), [[0, 1, 2]], material_index=[5])
+    RenderScene([Instance(slots)]).render(cam, 4, 4, RenderSettings(samples=1))
+    empty = RenderScene([], [], World(colour=(0.25, 0.5, 1.0))).render(cam, 4, 4, RenderSettings(samples=1))
     np.testing.assert_array_equal(empty.passes["Combined"].reshape(-1, 4), np.tile([0.25, 0.5, 1.0, 1.0], (16, 1)))
 
 
@@ -858,14 +862,16 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
 
     code = textwrap.dedent(f"""
         import importlib.util, sys
-        sys.path.insert(0, {str(Path(core.__file__).resolve().parent.parent)!r})
+        sys.path.insert(0, {str(Path(_core.__file__).resolve().parent.parent)!r})
         import numpy as np
-        from splat_tracer import _core, core
+        from splat_tracer import _core
+        from splat_tracer.scene import Instance, Mesh, RenderScene
+        from splat_tracer.splats import SplatCloud
         spec = importlib.util.spec_from_file_location("elsewhere._core", _core.__file__)
         spec.loader.exec_module(importlib.util.module_from_spec(spec))
-        mesh = core.Mesh(np.eye(3), [[0, 1, 2]])
-        cloud = core.Scene(np.zeros((1, 3)), [[0.0, 0.0, 1.0]], [1.0])
-        print(core.RenderScene([core.Instance(mesh), core.Instance(cloud)]).geometry_count)
+        mesh = Mesh(np.eye(3), [[0, 1, 2]])
+        cloud = SplatCloud(np.zeros((1, 3)), [[0.0, 0.0, 1.0]], [1.0])
+        print(RenderScene([Instance(mesh), Instance(cloud)]).geometry_count)
     """)
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
@@ -889,13 +895,13 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
 def test_lamps_seen_by_the_camera_have_cycles_radiance(lamp, expected):
     """A camera below the lamp looking up at it (nothing else in the scene) sees its radiance;
     hidden from the camera (its ray visibility), it shows the black world."""
-    cam = core.Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
-    scene = core.RenderScene([], [lamp], BLACK)
+    cam = Camera.look_at((0, 0, 0), (0, 0, 1), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
+    scene = RenderScene([], [lamp], BLACK)
     img = scene.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"]
     np.testing.assert_allclose(img[..., 0], expected, rtol=1e-5)
     import dataclasses
 
-    hidden = core.RenderScene([], [dataclasses.replace(lamp, visible_camera=False)], BLACK)
+    hidden = RenderScene([], [dataclasses.replace(lamp, visible_camera=False)], BLACK)
     assert hidden.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., :3].max() == 0.0
 
 
@@ -906,12 +912,12 @@ def test_area_lamp_is_one_sided_and_seen_in_a_mirror_not_after_a_diffuse_bounce(
     lamp = Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, 1), size=2.0)  # faces up
     mirror = Material(base_colour=(0.5, 0.5, 0.5), metallic=1.0, roughness=0.0)
     plane = grid_mesh(20.0, 1)
-    cam = core.Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
-    behind = core.RenderScene([core.Instance(plane, materials=(mirror,))], [lamp], BLACK)
+    cam = Camera.look_at((0, 0, 1), (0, 0, 0), up=(0, 1, 0), fov_y=5.0, aspect=1.0)
+    behind = RenderScene([Instance(plane, materials=(mirror,))], [lamp], BLACK)
     assert behind.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., 0].max() == 0.0
-    facing = core.RenderScene([core.Instance(plane, materials=(mirror,))],
-                              [Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, -1), size=2.0)],
-                              BLACK)
+    facing = RenderScene([Instance(plane, materials=(mirror,))],
+                         [Light(type="AREA", power=100.0, position=(0, 0, 3), direction=(0, 0, -1), size=2.0)],
+                         BLACK)
     img = facing.render(cam, 4, 4, RenderSettings(samples=1)).passes["Combined"][..., 0]
     np.testing.assert_allclose(img, 0.5 * 100.0 / (np.pi * 4.0), rtol=1e-3)
 
@@ -925,10 +931,10 @@ def test_camera_inside_a_closed_cloud_sees_its_inner_wall(preset):
     render nothing with the full method: every hit is back-facing, and a ray from outside
     ignores those. The scene finds the clouds around the camera and starts its rays inside."""
     c, n, r = sphere_cloud(20_000, radius=2.0, seed=3)
-    cloud = core.Scene(c, n, r, closed=True)
-    cam = core.Camera.look_at((0.2, -0.3, 0.1), (1.0, 2.0, 0.5), fov_y=70.0)
-    fr = render([core.Instance(cloud)], [], World(colour=(0.2, 0.2, 0.2)), cam=cam, w=48, h=36,
-                passes=("Depth",), method=core.Method.preset(preset), headlight=True)
+    cloud = SplatCloud(c, n, r, closed=True)
+    cam = Camera.look_at((0.2, -0.3, 0.1), (1.0, 2.0, 0.5), fov_y=70.0)
+    fr = render([Instance(cloud)], [], World(colour=(0.2, 0.2, 0.2)), cam=cam, w=48, h=36,
+                passes=("Depth",), method=Method.preset(preset), headlight=True)
     depth = fr.passes["Depth"]
     assert (depth < 1e9).all()  # the wall everywhere
     assert depth.max() < 2.5  # and the near wall: the sphere's radius is 2, the camera near its centre
@@ -941,9 +947,9 @@ def test_a_stopped_render_finishes_only_the_tiles_in_flight():
     tiles finished meanwhile (with tiles of a few microseconds, under load) were more than
     the workers' count."""
     c, n, r = sphere_cloud(20_000, seed=5)
-    cloud = core.Scene(c, n, r, closed=True)
-    cam = core.Camera.look_at((0, -3, 0.5), (0, 0, 0))
-    scene = core.RenderScene([core.Instance(cloud)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)))
+    cloud = SplatCloud(c, n, r, closed=True)
+    cam = Camera.look_at((0, -3, 0.5), (0, 0, 0))
+    scene = RenderScene([Instance(cloud)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)))
     seen = []
 
     def stop(done, total):
@@ -959,14 +965,14 @@ def test_a_stopped_render_finishes_only_the_tiles_in_flight():
     assert tiles_done < (256 // tile) * (192 // tile)  # it did stop early
 
 
-def plane_cloud(half: float, n: int, z: float, alpha=None) -> core.Scene:
+def plane_cloud(half: float, n: int, z: float, alpha=None) -> SplatCloud:
     """A square of n x n overlapping discs at height z facing +Z, with optional alphas."""
     g = (np.arange(n) + 0.5) / n * 2 * half - half
     xs, ys = np.meshgrid(g, g)
     c = np.column_stack([xs.ravel(), ys.ravel(), np.full(xs.size, z)])
     nrm = np.tile([0.0, 0.0, 1.0], (len(c), 1))
     alphas = None if alpha is None else np.full(len(c), alpha)
-    return core.Scene(c, nrm, np.full(len(c), 1.5 * 2 * half / n), alphas=alphas)
+    return SplatCloud(c, nrm, np.full(len(c), 1.5 * 2 * half / n), alphas=alphas)
 
 
 def test_point_alpha_makes_a_cloud_see_through_to_camera_and_shadow_rays():
@@ -980,24 +986,24 @@ def test_point_alpha_makes_a_cloud_see_through_to_camera_and_shadow_rays():
     cam = ortho_down(width=2.0, height=2.0)
     sun = [Light(type="SUN", power=np.pi, direction=(0, 0, -1))]
     glow = Material(base_colour=(0.0, 0.0, 0.0), emission=(0.0, 0.0, 1.0), specular_level=0.0)
-    seen = render([core.Instance(floor, materials=(glow,)), core.Instance(cloud, materials=(veil,))], (), cam=cam,
+    seen = render([Instance(floor, materials=(glow,)), Instance(cloud, materials=(veil,))], (), cam=cam,
                   w=8, h=8, samples=256).passes["Combined"]
     np.testing.assert_allclose(seen[..., 0].mean(), 0.25, atol=0.02)  # the veil's own white
     np.testing.assert_allclose(seen[..., 2].mean(), 0.25 + 0.75, atol=0.02)  # plus the blue floor behind it
     lit = lambda instances: render(instances, sun, cam=cam, w=4, h=4).passes["Combined"][..., 0]  # noqa: E731
-    shadowed = core.Instance(cloud, materials=(Material(use_point_alpha=True, specular_level=0.0),),
-                             visibility=frozenset({"shadow"}))
-    open_floor = lit([core.Instance(floor, materials=(LAMBERT,))])
-    under_veil = lit([core.Instance(floor, materials=(LAMBERT,)), shadowed])
+    shadowed = Instance(cloud, materials=(Material(use_point_alpha=True, specular_level=0.0),),
+                        visibility=frozenset({"shadow"}))
+    open_floor = lit([Instance(floor, materials=(LAMBERT,))])
+    under_veil = lit([Instance(floor, materials=(LAMBERT,)), shadowed])
     np.testing.assert_allclose(under_veil / open_floor, 0.75, rtol=1e-5)
-    opaque = core.Instance(plane_cloud(3.0, 60, 1.0, alpha=0.25), materials=(Material(specular_level=0.0),),
-                           visibility=frozenset({"shadow"}))  # material ignores the points' alpha
-    assert lit([core.Instance(floor, materials=(LAMBERT,)), opaque]).max() == 0.0
+    opaque = Instance(plane_cloud(3.0, 60, 1.0, alpha=0.25), materials=(Material(specular_level=0.0),),
+                      visibility=frozenset({"shadow"}))  # material ignores the points' alpha
+    assert lit([Instance(floor, materials=(LAMBERT,)), opaque]).max() == 0.0
 
 
 def test_point_alphas_are_checked():
     with pytest.raises(ValueError, match="splat 1: alpha must be in 0..1"):
-        core.Scene([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, [1.0, 1.0], alphas=[0.5, 1.5])
+        SplatCloud([[0, 0, 0], [1, 0, 0]], [[0, 0, 1]] * 2, [1.0, 1.0], alphas=[0.5, 1.5])
 
 
 def test_an_open_cloud_is_seen_from_behind_and_shadows_what_is_beneath():
@@ -1005,13 +1011,13 @@ def test_an_open_cloud_is_seen_from_behind_and_shadows_what_is_beneath():
     shadow on what lies under it (the shadow ray meets it from behind): an open object seen
     from behind is a real surface, and the ray takes its back-facing layer."""
     roof = plane_cloud(3.0, 60, 1.0)
-    looking_up = core.Camera.look_at((0, 0, -5), (0, 0, 0), up=(0, 1, 0), ortho_height=2.0, aspect=1.0)
-    depth = render([core.Instance(roof)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)),
+    looking_up = Camera.look_at((0, 0, -5), (0, 0, 0), up=(0, 1, 0), ortho_height=2.0, aspect=1.0)
+    depth = render([Instance(roof)], [Light(type="SUN", power=3.0)], World(colour=(0.1, 0.1, 0.1)),
                    cam=looking_up, w=8, h=8, passes=("Depth",), headlight=True).passes["Depth"]
     np.testing.assert_allclose(depth, 6.0, rtol=1e-5)  # the roof, from below
     sun = [Light(type="SUN", power=np.pi, direction=(0, 0, -1))]
-    floor = core.Instance(grid_mesh(50.0, 1), materials=(LAMBERT,))
-    under = render([floor, core.Instance(roof, visibility=frozenset({"shadow"}))], sun, cam=ortho_down(), w=4, h=4)
+    floor = Instance(grid_mesh(50.0, 1), materials=(LAMBERT,))
+    under = render([floor, Instance(roof, visibility=frozenset({"shadow"}))], sun, cam=ortho_down(), w=4, h=4)
     assert under.passes["Combined"][..., 0].max() == 0.0
 
 
@@ -1022,11 +1028,11 @@ def test_no_wrong_shadows_on_the_lit_side_of_open_or_closed_clouds(closed):
     back-facing hits removes them -- also on an open cloud, where back-facing layers are
     otherwise surfaces (rays from elsewhere see an open cloud from both sides)."""
     c, n, r = sphere_cloud(20_000, seed=7)
-    cloud = core.Scene(c, n, r, closed=closed)
+    cloud = SplatCloud(c, n, r, closed=closed)
     direction = np.array([0.3, 0.5, -0.8])
     sun = [Light(type="SUN", power=3.0, direction=tuple(direction))]
-    cam = core.Camera.look_at((0, -4, 1), (0, 0, 0), fov_y=35.0)
-    fr = render([core.Instance(cloud, materials=(LAMBERT,))], sun, cam=cam, w=96, h=72,
+    cam = Camera.look_at((0, -4, 1), (0, 0, 0), fov_y=35.0)
+    fr = render([Instance(cloud, materials=(LAMBERT,))], sun, cam=cam, w=96, h=72,
                 passes=("Normal", "Shadow"))
     to_sun = -direction / np.linalg.norm(direction)
     lit_side = (fr.passes["Normal"] @ to_sun) > 0.1
@@ -1045,28 +1051,28 @@ def packets_scene():
     a glass cloud; a UV sphere; a floor; and a closed cloud around all of it."""
     ball = cloud_sphere(3000)
     open_ball = cloud_sphere(2000, closed=False)
-    return [core.Instance(ball, matrix=affine(move=(-2.2, 0, 0)), materials=(LAMBERT,)),
-            core.Instance(ball, matrix=affine(move=(-2.2, 0, 0)), materials=(Material(base_colour=(1, 0, 0)),)),
-            core.Instance(ball, matrix=affine(scale=(1.4, 0.5, 0.8), move=(0, 1.5, 0.3), rotate_z_deg=30),
-                          materials=(MIRROR,)),
-            core.Instance(open_ball, matrix=affine(move=(0, -0.5, 0)), materials=(GLASS,)),
-            core.Instance(ball, matrix=affine(scale=(0.5, 0.5, 0.5), move=(1.0, -2.0, 0.5)), holdout=True),
-            core.Instance(ball, matrix=affine(move=(0.5, -3.0, 0)), visibility=frozenset({"shadow", "diffuse"})),
-            core.Instance(uv_sphere(0.8, 48, 24), matrix=affine(move=(2.2, 0, 0)), materials=(Material(roughness=0.4),)),
-            core.Instance(grid_mesh(10.0, 4, z=-1.0), materials=(LAMBERT,)),
-            core.Instance(cloud_sphere(6000, radius=9.0), materials=(LAMBERT,))]
+    return [Instance(ball, matrix=affine(move=(-2.2, 0, 0)), materials=(LAMBERT,)),
+            Instance(ball, matrix=affine(move=(-2.2, 0, 0)), materials=(Material(base_colour=(1, 0, 0)),)),
+            Instance(ball, matrix=affine(scale=(1.4, 0.5, 0.8), move=(0, 1.5, 0.3), rotate_z_deg=30),
+                     materials=(MIRROR,)),
+            Instance(open_ball, matrix=affine(move=(0, -0.5, 0)), materials=(GLASS,)),
+            Instance(ball, matrix=affine(scale=(0.5, 0.5, 0.5), move=(1.0, -2.0, 0.5)), holdout=True),
+            Instance(ball, matrix=affine(move=(0.5, -3.0, 0)), visibility=frozenset({"shadow", "diffuse"})),
+            Instance(uv_sphere(0.8, 48, 24), matrix=affine(move=(2.2, 0, 0)), materials=(Material(roughness=0.4),)),
+            Instance(grid_mesh(10.0, 4, z=-1.0), materials=(LAMBERT,)),
+            Instance(cloud_sphere(6000, radius=9.0), materials=(LAMBERT,))]
 
 
 @pytest.mark.parametrize("view", ["perspective", "orthographic", "inside a closed cloud"])
 def test_camera_packets_give_the_same_image_as_single_rays(view):
-    cam = {"perspective": core.Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=45.0, aspect=1.5),
-           "orthographic": core.Camera.look_at((3, -7, 4), (0, 0, 0), ortho_height=7.0, aspect=1.5),
-           "inside a closed cloud": core.Camera.look_at((0, -6, 1), (0, 0, 0), fov_y=80.0, aspect=1.5)}[view]
+    cam = {"perspective": Camera.look_at((0, -8, 3), (0, 0, 0), fov_y=45.0, aspect=1.5),
+           "orthographic": Camera.look_at((3, -7, 4), (0, 0, 0), ortho_height=7.0, aspect=1.5),
+           "inside a closed cloud": Camera.look_at((0, -6, 1), (0, 0, 0), fov_y=80.0, aspect=1.5)}[view]
     lamp = Light(type="AREA", power=300.0, position=(0, -1, 4), direction=(0, 0, -1), size=1.5)
-    scene = core.RenderScene(packets_scene(), [lamp], World(colour=(0.1, 0.1, 0.1)))
+    scene = RenderScene(packets_scene(), [lamp], World(colour=(0.1, 0.1, 0.1)))
     settings = RenderSettings(samples=2, diffuse_bounces=1)
     passes = ("Depth", "Normal", "Shadow", "IndexOB", "Splat Count")
-    for method in (FULL, core.Method.preset("GENERAL"), core.Method.preset("NEAREST_CENTRE")):
+    for method in (FULL, Method.preset("GENERAL"), Method.preset("NEAREST_CENTRE")):
         a = scene.render(cam, 60, 40, settings, method=method, passes=passes, tile_size=7)
         b = scene.render(cam, 60, 40, settings, method=method, passes=passes, tile_size=7, packets=False)
         for name in ("Combined", *passes):

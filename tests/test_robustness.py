@@ -11,7 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from splat_tracer import _core, core
+from splat_tracer import _core
+from splat_tracer.camera import Camera
+from splat_tracer.method import Method
+from splat_tracer.scene import Instance, Mesh, RenderScene
+from splat_tracer.splats import SplatCloud
 
 from geometry import sphere_cloud
 
@@ -21,14 +25,16 @@ ROOT = Path(__file__).resolve().parent.parent
 def run_isolated(code: str) -> subprocess.CompletedProcess:
     """Runs `code` in a fresh interpreter, so that a crash fails this test instead of killing
     the whole test session."""
-    prelude = f"import sys; sys.path.insert(0, {str(ROOT)!r})\nimport numpy as np\nfrom splat_tracer import core\n"
+    prelude = (f"import sys; sys.path.insert(0, {str(ROOT)!r})\nimport numpy as np\n"
+               "from splat_tracer.camera import Camera\nfrom splat_tracer.method import Method\n"
+               "from splat_tracer.scene import Instance, Mesh, RenderScene\nfrom splat_tracer.splats import SplatCloud\n")
     return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], capture_output=True, text=True,
                           timeout=120)
 
 
 def test_empty_scene_statistics_do_not_crash():
     result = run_isolated("""
-        s = core.Scene(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+        s = SplatCloud(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
         print(s.bvh_stats())
     """)
     assert result.returncode == 0, result.stderr
@@ -40,7 +46,7 @@ def test_centres_beyond_the_safe_range_are_refused_not_crashed(coordinate):
     result = run_isolated(f"""
         c = np.array([[{coordinate}, 0, 0], [-{coordinate}, 0, 0], [{coordinate}, 1, 0]], np.float32)
         try:
-            core.Scene(c, np.tile([0, 0, 1.0], (3, 1)), np.ones(3))
+            SplatCloud(c, np.tile([0, 0, 1.0], (3, 1)), np.ones(3))
         except ValueError as e:
             print("refused:", e)
     """)
@@ -53,7 +59,7 @@ def test_largest_accepted_coordinates_still_trace():
     rng = np.random.default_rng(3)
     c = (rng.uniform(-1, 1, (200, 3)) * 1e18).astype(np.float32)
     n = rng.normal(size=(200, 3))
-    scene = core.Scene(c, n, np.full(200, 1e16))
+    scene = SplatCloud(c, n, np.full(200, 1e16))
     o = np.zeros((64, 3), np.float32)
     d = rng.normal(size=(64, 3)).astype(np.float32)
     a, b = scene.trace(o, d), scene.trace(o, d, brute_force=True)
@@ -63,7 +69,7 @@ def test_largest_accepted_coordinates_still_trace():
 
 def test_huge_radius_is_refused():
     with pytest.raises(ValueError, match="splat 0: radius must be > 0 and at most 1e18"):
-        core.Scene([[0, 0, 0]], [[0, 0, 1]], [1e30])
+        SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1e30])
 
 
 @pytest.mark.parametrize("budget", [0, 1])
@@ -71,14 +77,14 @@ def test_refused_threads_degrade_to_fewer_threads(budget):
     """When the system refuses a worker thread (after `budget` were started), the build,
     trace and render finish with the threads they got, and give the same answer."""
     c, n, r = sphere_cloud(40_000, seed=2)  # big enough for a parallel BVH build
-    reference_scene = core.Scene(c, n, r, closed=True, threads=2)
-    cam = core.Camera.look_at((0, -3, 0.5), (0, 0, 0))
+    reference_scene = SplatCloud(c, n, r, closed=True, threads=2)
+    cam = Camera.look_at((0, -3, 0.5), (0, 0, 0))
     reference = reference_scene.render(cam, 64, 48, threads=2)
     o, d = cam.rays(64, 48)
     reference_hits = reference_scene.trace(o, d, threads=2)
     _core._set_thread_budget(budget)
     try:
-        scene = core.Scene(c, n, r, closed=True, threads=2)
+        scene = SplatCloud(c, n, r, closed=True, threads=2)
         image = scene.render(cam, 64, 48, threads=2)
         hits = scene.trace(o, d, threads=2)
     finally:
@@ -90,8 +96,8 @@ def test_refused_threads_degrade_to_fewer_threads(budget):
 
 def test_render_with_no_thread_at_all_still_reports_progress_and_stops():
     c, n, r = sphere_cloud(20_000, seed=4)
-    scene = core.Scene(c, n, r, threads=1)
-    cam = core.Camera.look_at((0, -3, 0.5), (0, 0, 0))
+    scene = SplatCloud(c, n, r, threads=1)
+    cam = Camera.look_at((0, -3, 0.5), (0, 0, 0))
     calls = []
     _core._set_thread_budget(0)
     try:
@@ -107,12 +113,12 @@ def test_axis_aligned_orthographic_views_cost_what_oblique_ones_cost(axis):
     """Rays parallel to a box's slab used to make the slab test NaN, so no box was ever
     rejected: axis-aligned orthographic views traced the whole tree (500-1000x slower)."""
     c, n, r = sphere_cloud(20_000, seed=1)
-    scene = core.Scene(c, n, r, closed=True)
+    scene = SplatCloud(c, n, r, closed=True)
     direction = np.eye(3)[axis]
     up = np.eye(3)[(axis + 1) % 3]
-    aligned = core.Camera.look_at(5 * direction, (0, 0, 0), up=up, ortho_height=3.0)
-    tilted = core.Camera.look_at(5 * direction + 0.2 * up + 0.1 * np.eye(3)[(axis + 2) % 3], (0, 0, 0), up=up,
-                                 ortho_height=3.0)
+    aligned = Camera.look_at(5 * direction, (0, 0, 0), up=up, ortho_height=3.0)
+    tilted = Camera.look_at(5 * direction + 0.2 * up + 0.1 * np.eye(3)[(axis + 2) % 3], (0, 0, 0), up=up,
+                            ortho_height=3.0)
     cost_aligned = scene.traversal_cost(*aligned.rays(80, 60))
     cost_tilted = scene.traversal_cost(*tilted.rays(80, 60))
     assert cost_aligned["nodes"] < 2.0 * cost_tilted["nodes"], (cost_aligned, cost_tilted)
@@ -123,15 +129,15 @@ def test_axis_aligned_orthographic_views_cost_what_oblique_ones_cost(axis):
 
 
 def test_very_long_and_very_short_directions_are_normalised():
-    scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
+    scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
     for length in (1e-30, 1e20, 3e38):
         res = scene.trace([[0, 0, 5]], np.array([[0, 0, -length]], np.float32))
         assert res.id[0] == 0 and res.t[0] == pytest.approx(5.0), length
 
 
 def test_render_window_near_int_range_is_refused_not_overflowed():
-    scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
-    cam = core.Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
+    scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
+    cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
     with pytest.raises(ValueError, match="window"):
         scene._scene.render(cam.local_from_ndc, cam.position, cam.forward, 100, 100,
                             (2**31 - 10, 0, 20, 1), (0, 0, 0, 0), np.empty((1, 20, 4), np.float32))
@@ -144,7 +150,7 @@ def test_render_window_near_int_range_is_refused_not_overflowed():
     (np.array([[0.5]]), TypeError),
 ])
 def test_exclude_ids_are_checked_not_cast(exclude, error):
-    scene = core.Scene([[0, 0, 0], [0, 0, 1]], [[0, 0, 1]] * 2, [1.0, 1.0])
+    scene = SplatCloud([[0, 0, 0], [0, 0, 1]], [[0, 0, 1]] * 2, [1.0, 1.0])
     with pytest.raises(error):
         scene.trace_surface([[0, 0, 5]], [[0, 0, -1]], exclude=exclude)
 
@@ -154,7 +160,7 @@ def test_native_exclude_check():
     out = [np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8), np.empty((1, 3), np.float32),
            np.empty((1, 3), np.float32)]
     with pytest.raises(ValueError, match="exclude"):
-        scene.trace_surface(np.float32([[0, 0, 5]]), np.float32([[0, 0, -1]]), 0.0, 10.0, core.Method().as_tuple(),
+        scene.trace_surface(np.float32([[0, 0, 5]]), np.float32([[0, 0, -1]]), 0.0, 10.0, Method().as_tuple(),
                             *out, None, None, np.int32([[5]]))
 
 
@@ -165,12 +171,12 @@ def test_native_exclude_check():
 ])
 def test_look_at_rejects_unusable_cameras(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        core.Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0), **kwargs)
+        Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0), **kwargs)
 
 
 def test_look_at_rejects_eye_on_target():
     with pytest.raises(ValueError, match="same point"):
-        core.Camera.look_at((1, 2, 3), (1, 2, 3))
+        Camera.look_at((1, 2, 3), (1, 2, 3))
 
 
 @pytest.mark.parametrize("window", [(-1, -1, 1, 2**31 - 1), (0, 0, 2**20, 2**20), (3, 0, 8, 6)])
@@ -178,12 +184,12 @@ def test_render_window_is_checked_before_its_buffers_are_allocated(window):
     """Found by the property tests' degenerate inputs: Scene.render and RenderScene.render
     allocated the window's buffers before the core checked the window, so a bad one asked
     numpy for up to 34 GB (MemoryError) instead of being refused."""
-    scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
-    cam = core.Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
+    scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
+    cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
     with pytest.raises(ValueError, match="window"):
         scene.render(cam, 8, 6, window=window)
     with pytest.raises(ValueError, match="window"):
-        core.RenderScene([core.Instance(scene)]).render(cam, 8, 6, window=window)
+        RenderScene([Instance(scene)]).render(cam, 8, 6, window=window)
 
 
 def test_objects_of_an_earlier_module_initialisation_stay_usable():
@@ -195,8 +201,8 @@ def test_objects_of_an_earlier_module_initialisation_stay_usable():
     result = run_isolated(f"""
         import importlib, os, sys, tempfile
         from splat_tracer import _core
-        mesh = core.Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
-        scene = core.Scene([[0, 0, 0]], [[0, 0, 1]], [1.0])
+        mesh = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
+        scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
         d = tempfile.mkdtemp()
         os.makedirs(os.path.join(d, "other"))
         open(os.path.join(d, "other", "__init__.py"), "w").close()
@@ -205,7 +211,7 @@ def test_objects_of_an_earlier_module_initialisation_stay_usable():
         other = importlib.import_module("other._core")
         assert other is not _core
         print("mesh size", len(mesh))
-        print("instances", core.RenderScene([core.Instance(scene), core.Instance(mesh)])._scene.instances)
+        print("instances", RenderScene([Instance(scene), Instance(mesh)])._scene.instances)
         new_scene = other.Scene(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
         print("new scene", len(new_scene.bvh_stats()))
     """)

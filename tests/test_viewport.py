@@ -81,7 +81,8 @@ def _camera_view_window(window, zoom: float, offset: tuple):
 
 
 def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blender, empty_scene):
-    from splat_tracer import core, export, viewport
+    from splat_tracer import export, viewport
+    from splat_tracer.camera import Camera
     scene = empty_scene
     scene.render.resolution_x, scene.render.resolution_y = 160, 120  # the region's aspect
     cam, window, view = _view_camera(blender, scene, "PERSP", shift=(0.05, 0.0), lens=40)
@@ -105,7 +106,7 @@ def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blende
     fx, fy = np.meshgrid(np.linspace(0.1, 0.9, 5), np.linspace(0.1, 0.9, 5))
     u, v = x0 + fx * (x1 - x0), y0 + fy * (y1 - y0)  # region pixels, bottom-left origin
 
-    def directions(cam_: core.Camera, ndc_x, ndc_y):
+    def directions(cam_: Camera, ndc_x, ndc_y):
         pts = lambda z: np.column_stack([ndc_x.ravel(), ndc_y.ravel(), np.full(ndc_x.size, z),
                                          np.ones(ndc_x.size)]) @ cam_.local_from_ndc.T
         a, b = pts(-1.0), pts(1.0)

@@ -1,0 +1,158 @@
+"""Scenes of several objects for the core: meshes beside splat clouds, instances, materials,
+lamps, a world."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, NamedTuple, Optional, Sequence
+
+import numpy as np
+
+from . import _core, matrices
+from .arrays import as_f32
+from .camera import Camera, window_rect
+from .method import Method
+from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
+from .splats import SplatCloud
+
+RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
+
+
+class Mesh:
+    """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
+    corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
+    normals express them; None: flat) and material_index (T,) slots. Immutable; share one
+    Mesh between any number of instances."""
+
+    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0):
+        v = as_f32(vertices, "vertices", (-1, 3))
+        t = np.asarray(triangles)
+        if t.size and not np.issubdtype(t.dtype, np.integer):
+            raise TypeError(f"triangles must hold integer vertex indices, got dtype {t.dtype}")
+        if t.size and (t.min() < 0 or t.max() >= len(v)):
+            raise ValueError(f"triangles index vertices outside 0..{len(v) - 1}")
+        t = np.ascontiguousarray(t.reshape(-1, 3), dtype=np.int32)
+        n = None if corner_normals is None else as_f32(np.asarray(corner_normals).reshape(-1, 3, 3), "corner_normals",
+                                                     (len(t), 3, 3))
+        m = None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32)
+        self._mesh = _core.Mesh(v, t, n, m, threads)
+
+    def __len__(self) -> int:
+        return self._mesh.size
+
+
+@dataclass(frozen=True)
+class Instance:
+    """One placement of a geometry (a SplatCloud or a Mesh) in the scene's local frame.
+
+    matrix: 4x4 object-to-local transform (any affine: scale, shear, mirror). materials: the
+    object's slots (a cloud uses the first). visibility: ray kinds that see it (keys of
+    RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
+    pass_index: the Object Index pass value."""
+
+    geometry: object
+    matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+    materials: tuple = (Material(),)
+    visibility: frozenset = frozenset(RAY_VISIBILITY)
+    holdout: bool = False
+    pass_index: int = 0
+
+
+class FrameResult(NamedTuple):
+    passes: dict      # pass name -> (h, w[, c]) float32 array, top row first
+    completed: bool   # False when progress() asked to stop
+    counters: dict    # rays traced by kind, and the queries' work
+
+
+class RenderScene:
+    """Instances of clouds and meshes with their materials, the lamps and the world: what a
+    Blender frame is, for the core. Geometry is referenced, not copied: a hundred instances
+    of one cloud cost one BVH. Build a new RenderScene when instances, materials or lamps
+    change (cheap: only the top-level tree over the instances is built)."""
+
+    def __init__(self, instances: Sequence[Instance], lights: Sequence[Light] = (), world: World = World(),
+                 threads: int = 0):
+        # Wrong types are refused here with a TypeError naming them, not left to fail later
+        # as an AttributeError deep in pack() (or, for the world, only at render time).
+        if not isinstance(world, World):
+            raise TypeError(f"world must be a shading.World, got {type(world).__name__}")
+        for light in lights:
+            if not isinstance(light, Light):
+                raise TypeError(f"lights must be shading.Light objects, got {type(light).__name__}")
+        geometries, index_of = [], {}
+        rows = []
+        materials = []
+        for inst in instances:
+            if not isinstance(inst, Instance):
+                raise TypeError(f"instances must be scene.Instance objects, got {type(inst).__name__}")
+            geo = inst.geometry
+            native = geo._scene if isinstance(geo, SplatCloud) else geo._mesh if isinstance(geo, Mesh) else None
+            if native is None:
+                raise TypeError(f"instance geometry must be a splats.SplatCloud or scene.Mesh, got {type(geo).__name__}")
+            if id(native) not in index_of:
+                index_of[id(native)] = len(geometries)
+                geometries.append(native)
+            m = np.asarray(inst.matrix, np.float64).reshape(4, 4)
+            if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-300:
+                raise ValueError("instance matrix must be finite and invertible")
+            inv = matrices.inverse(m)
+            unknown = set(inst.visibility) - set(RAY_VISIBILITY)
+            if unknown:
+                raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")
+            mats = tuple(inst.materials) or (Material(),)
+            for mat in mats:
+                if not isinstance(mat, Material):
+                    raise TypeError(f"instance materials must be shading.Material objects, got {type(mat).__name__}")
+            rows.append((index_of[id(native)], m[:3].ravel(), inv[:3].ravel(), (len(materials), len(mats)),
+                         sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index))
+            materials.extend(mats)
+        n = len(rows)
+        col = lambda k, dtype: np.array([r[k] for r in rows], dtype).reshape((n,) + np.shape(rows[0][k]) if n else (0,))
+        self.world = world
+        self.lights = tuple(lights)
+        self._scene = _core.RenderScene(
+            geometries,
+            np.ascontiguousarray(col(0, np.int32)),
+            np.ascontiguousarray(col(1, np.float32).reshape(n, 12)),
+            np.ascontiguousarray(col(2, np.float32).reshape(n, 12)),
+            np.ascontiguousarray(col(3, np.int32).reshape(n, 2)),
+            np.ascontiguousarray(col(4, np.int32)),
+            np.ascontiguousarray(col(5, np.uint8)),
+            np.ascontiguousarray(col(6, np.float32)),
+            np.ascontiguousarray(np.array([m.pack() for m in materials], np.float32).reshape(-1, len(MATERIAL_FIELDS))),
+            np.ascontiguousarray(np.array([l.pack() for l in lights], np.float32).reshape(-1, len(LIGHT_FIELDS))),
+            threads)
+        self.geometry_count = len(geometries)
+
+    def render(self, camera: Camera, width: int, height: int, settings: RenderSettings = RenderSettings(),
+               method: Method = Method(), passes: Sequence[str] = ("Combined",),
+               window: Optional[Sequence[int]] = None, threads: int = 0,
+               progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
+               packets: bool = True) -> FrameResult:
+        """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
+        image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
+        packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
+        ray; the same image)."""
+        for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
+                                  (method, Method, "method")):
+            if not isinstance(value, kind):
+                raise TypeError(f"{name} must be a {kind.__name__}, got {type(value).__name__}")
+        if isinstance(passes, str):
+            raise TypeError("passes must be a sequence of pass names, not one string")
+        unknown = set(passes) - set(PASSES)
+        if unknown:
+            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
+        x0, y0, w, h = window_rect(window, width, height)
+        buffers = {}
+        for name in ("Combined", *passes):
+            c = PASSES[name]
+            buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
+        key = {"Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit", "Shadow": "shadow",
+               "IndexOB": "index", "Splat Count": "splat_count"}
+        optional = {key[name]: buf for name, buf in buffers.items() if name != "Combined"}
+        done, counters = self._scene.render(
+            np.ascontiguousarray(camera.local_from_ndc, np.float64), np.ascontiguousarray(camera.position, np.float64),
+            np.ascontiguousarray(camera.forward, np.float64), int(width), int(height),
+            (int(x0), int(y0), int(w), int(h)), settings.pack(), method.as_tuple(), self.world.radiance(),
+            bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
+            tile_size=tile_size, packets=packets, **optional)
+        return FrameResult(buffers, bool(done), counters)

@@ -1,0 +1,156 @@
+"""Text point clouds: XYZ/PTS/TXT/CSV (anything else that decodes as UTF-8 text), see read_text."""
+from __future__ import annotations
+
+import re
+import warnings
+
+import numpy as np
+
+from .cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
+from .columns import finite_rows
+
+# Column names a header line may use (lower case), to the roles below.
+_NAMES = {
+    "x": "x", "y": "y", "z": "z", "//x": "x",
+    "r": "r", "red": "r", "g": "g", "green": "g", "b": "b", "blue": "b",
+    "nx": "nx", "ny": "ny", "nz": "nz", "normal_x": "nx", "normal_y": "ny", "normal_z": "nz",
+    "normalx": "nx", "normaly": "ny", "normalz": "nz",
+    "i": "i", "intensity": "i", "scalar_intensity": "i", "a": "a", "alpha": "a",
+}
+ROLES = ("x", "y", "z", "r", "g", "b", "a", "nx", "ny", "nz", "i", "_")
+_SEPARATORS = str.maketrans({",": " ", ";": " ", "\t": " "})
+_HEADER_LINES = 100  # at most this many lines before the data are taken as a header
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
+
+
+def _is_numbers(tokens) -> bool:
+    return bool(tokens) and all(_NUMBER.match(t) for t in tokens)
+
+
+def _parse_columns(path: str, spec: str, count: int) -> list[str]:
+    roles = spec.replace(",", " ").lower().split()
+    unknown = [r for r in roles if r not in ROLES and r != "-"]
+    if unknown:
+        raise CloudFileError(f"{path}: the column mapping '{spec}' has unknown names {', '.join(unknown)} "
+                             f"(known: {' '.join(ROLES)}; '_' or '-' skips a column)")
+    roles = ["_" if r == "-" else r for r in roles]
+    if len(roles) != count:
+        raise CloudFileError(f"{path}: the column mapping '{spec}' names {len(roles)} columns but the file's rows "
+                             f"have {count}")
+    return roles
+
+
+def _guess_columns(path: str, table: np.ndarray) -> list[str]:
+    """Roles of the columns by their count and values: x y z first; then a triplet of
+    unit-length rows is a normal, a triplet within a colour range (0..1, 0..255, 0..65535)
+    a colour (the last such, as PTS writes x y z intensity r g b), one column left intensity."""
+    count = table.shape[1]
+    roles = ["x", "y", "z"] + ["?"] * (count - 3)
+    free = lambda s: all(roles[c] == "?" for c in range(s, s + 3))  # noqa: E731
+    for s in range(3, count - 2):
+        t = table[:, s:s + 3]
+        length = np.linalg.norm(t, axis=1)
+        if free(s) and np.isfinite(t).all() and np.abs(t).max() <= 1 + 1e-3 and np.median(np.abs(length - 1)) < 1e-2:
+            roles[s:s + 3] = ["nx", "ny", "nz"]
+            break
+    for s in reversed(range(3, count - 2)):
+        t = table[:, s:s + 3]
+        if free(s) and np.isfinite(t).all() and t.min() >= 0 and (t.max() <= 1 or (
+                t.max() <= 65535 and np.all(t == np.round(t)))):
+            roles[s:s + 3] = ["r", "g", "b"]
+            break
+    left = [c for c in range(count) if roles[c] == "?"]
+    if len(left) == 1:
+        roles[left[0]] = "i"
+    elif left:
+        raise CloudFileError(
+            f"{path}: cannot tell what its {count} columns are (guessed: {' '.join(roles)}; '?' unknown); import "
+            "with the Columns option naming each, e.g. 'x y z i r g b' (names: x y z r g b a nx ny nz i, '_' to skip)")
+    return roles
+
+
+def read_text(path: str, columns: str = "") -> PointCloud:
+    """x y z rows separated by whitespace, commas or semicolons, with optional colour
+    (0..255, 0..65535 or 0..1), alpha, intensity and normal columns. Lines before the first
+    row of numbers are a header (its last line may name the columns; a PTS file's first
+    line is its point count, which must match). Columns come from `columns` (e.g.
+    'x y z i r g b', '_' skips one), else the header's names, else a guess."""
+    with open(path, "rb") as f:
+        data = f.read()
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
+                             "other point-cloud format; save it as UTF-8 or ASCII") from None
+    text = text.translate(_SEPARATORS)
+    # The header: lines before the first one made of numbers only.
+    offset, header, first = 0, [], None
+    for _ in range(_HEADER_LINES + 1):
+        end = text.find("\n", offset)
+        line = text[offset:] if end < 0 else text[offset:end]
+        tokens = line.split()
+        if tokens and _is_numbers(tokens) and len(tokens) >= 3:
+            first = tokens
+            break
+        if tokens:
+            header.append(tokens)
+        if end < 0:
+            break
+        offset = end + 1
+    if first is None:
+        if not text.strip():
+            raise CloudFileError(f"{path}: the file is empty")
+        raise CloudFileError(f"{path}: no row of at least three numbers (x y z) within its first "
+                             f"{_HEADER_LINES} lines; not a point-cloud text file")
+    count = len(first)
+    body = text[offset:]
+    rows = len(re.findall(r"^[ \r]*\S", body, re.MULTILINE))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            values = np.fromstring(body, sep=" ")
+        except (DeprecationWarning, ValueError):
+            values = None
+    if values is None or values.size != rows * count:
+        for k, line in enumerate(body.splitlines()):  # the error path only: find the row to name
+            tokens = line.split()
+            if tokens and (len(tokens) != count or not _is_numbers(tokens)):
+                what = (f"has {len(tokens)} values where the first row has {count}" if _is_numbers(tokens)
+                        else f"is not all numbers ('{line.strip()[:60]}')")
+                raise CloudFileError(f"{path}: data line {k + 1} (after {len(header)} header lines) {what}")
+        raise CloudFileError(f"{path}: the rows could not be read as {count} numbers each")
+    table = values.reshape(rows, count)
+    # A PTS file's first line is its point count: it must not lie.
+    if len(header) == 1 and len(header[0]) == 1 and header[0][0].isdigit() and int(header[0][0]) != rows:
+        raise CloudFileError(f"{path}: its first line declares {int(header[0][0]):,} points but {rows:,} rows "
+                             "follow (the count is wrong or the file is truncated)")
+    named = [_NAMES.get(t.lower()) for t in header[-1]] if header else []
+    if columns.strip():
+        roles = _parse_columns(path, columns, count)
+    elif named and len(named) == count and all(named) and {"x", "y", "z"} <= set(named):
+        roles = named
+    else:
+        roles = _guess_columns(path, table)
+    for role in ROLES[:-1]:
+        if roles.count(role) > 1:
+            raise CloudFileError(f"{path}: the column '{role}' is given {roles.count(role)} times")
+    for group in (("x", "y", "z"), ("r", "g", "b"), ("nx", "ny", "nz")):
+        present = [r for r in group if r in roles]
+        if present and len(present) != 3 or (group[0] == "x" and not present):
+            raise CloudFileError(f"{path}: the columns need all of {' '.join(group)} (have: {' '.join(roles)})")
+    col = {r: table[:, c] for c, r in enumerate(roles) if r != "_"}
+    pos = np.column_stack([col["x"], col["y"], col["z"]])
+    finite = finite_rows(pos)
+    colours = None
+    if "r" in col:
+        rgb = unit_colours(path, {"red": col["r"][finite], "green": col["g"][finite], "blue": col["b"][finite]},
+                            ("red", "green", "blue"))
+        alpha = (unit_colours(path, {"alpha": col["a"][finite]}, ("alpha",))[:, 0] if "a" in col
+                 else np.ones(len(rgb), np.float32))
+        colours = np.zeros((rows, 4), np.float32)
+        colours[finite] = np.column_stack([srgb_to_linear(rgb), alpha])
+    normals = np.column_stack([col["nx"], col["ny"], col["nz"]]) if "nx" in col else None
+    attributes = {"intensity": col["i"].astype(np.float32)} if "i" in col else {}
+    return make_cloud(path, pos, normals, colours, None, attributes, drop_non_finite=True, format="TEXT",
+                      notes=[f"columns read as: {' '.join(roles)}"])
