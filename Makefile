@@ -71,7 +71,8 @@ sanitize-tree: $(STAMP)
 	SPLAT_SANITIZE=1 $(VPY) setup.py --quiet build_ext --build-lib $(SAN)/lib --build-temp $(SAN)/tmp
 	rm -rf $(SAN)/tree $(SAN)/logs
 	mkdir -p $(SAN)/tree/splat_tracer $(SAN)/logs
-	cp splat_tracer/*.py $(SAN)/tree/splat_tracer/
+	tar -C splat_tracer --exclude=native --exclude='_core*' --exclude=__pycache__ -cf - . \
+	    | tar -C $(SAN)/tree/splat_tracer -xf -  # the package tree, without the sources and the in-place core
 	cp $(SAN)/lib/splat_tracer/_core.abi3.so $(SAN)/tree/splat_tracer/
 	cp -r tests tools fuzz $(SAN)/tree/
 	ldd $(SAN)/tree/splat_tracer/_core.abi3.so | grep -q libasan  # really the sanitized build

@@ -41,11 +41,12 @@ import meshes  # noqa: E402
 import scoring  # noqa: E402
 import synthetic  # noqa: E402
 import truth as truth_mod  # noqa: E402
-from splat_tracer import ply, spacing  # noqa: E402
-from splat_tracer.camera import Camera  # noqa: E402
-from splat_tracer.method import PRESETS, Method  # noqa: E402
-from splat_tracer.neighbours import local_frame  # noqa: E402
-from splat_tracer.splats import SplatCloud  # noqa: E402
+from splat_tracer.pointcloud import spacing  # noqa: E402
+from splat_tracer.pointcloud.neighbours import local_frame  # noqa: E402
+from splat_tracer.pointcloud.readers import ply  # noqa: E402
+from splat_tracer.render.camera import Camera  # noqa: E402
+from splat_tracer.render.method import PRESETS, Method  # noqa: E402
+from splat_tracer.render.splats import SplatCloud  # noqa: E402
 
 PAPER = {"model": "stanford-bunny", "cloud": "vertices", "renderer": "paper (Beddiaf & Babahenini)",
          "method": "full", "points": 35945, "seconds": 8.5, "seconds_range": "7-10", "cores": None}

@@ -126,9 +126,9 @@ def main(argv=None) -> int:
 
     dev_extension.enable_from_source(work)
     from blender_helpers import extension_module
-    from splat_tracer import ply
+    from splat_tracer.pointcloud.readers import ply
 
-    session = extension_module("session")
+    session = extension_module("blender.session")
     name, centres, normals = bunny_cloud()
     ply_path = work / "cloud.ply"
     ply.write_ply(str(ply_path), centres, normals)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from splat_tracer.camera import Camera
+from splat_tracer.render.camera import Camera
 
 SHARED_MESHES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "meshes"
 

@@ -37,8 +37,8 @@ def inputs(n: int) -> Path:
     if (folder / "graph.npy").is_file():
         return folder
     from import_speed import terrain
-    from splat_tracer import normals
-    from splat_tracer.neighbours import PointIndex
+    from splat_tracer.pointcloud import normals
+    from splat_tracer.pointcloud.neighbours import PointIndex
 
     pos, nrm, _ = terrain(n)
     rng = np.random.default_rng(1)
@@ -57,7 +57,7 @@ def inputs(n: int) -> Path:
 
 
 def run(folder: Path) -> dict:
-    from splat_tracer import normals
+    from splat_tracer.pointcloud import normals
 
     from import_speed import _peak_since, _start_peak
 

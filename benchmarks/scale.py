@@ -39,11 +39,11 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
-from splat_tracer.camera import Camera  # noqa: E402
-from splat_tracer.method import Method  # noqa: E402
-from splat_tracer.scene import Instance, Mesh, RenderScene  # noqa: E402
-from splat_tracer.splats import SplatCloud, simd_path  # noqa: E402
-from splat_tracer.shading import Light, Material, RenderSettings, World  # noqa: E402
+from splat_tracer.render.camera import Camera  # noqa: E402
+from splat_tracer.render.method import Method  # noqa: E402
+from splat_tracer.render.scene import Instance, Mesh, RenderScene  # noqa: E402
+from splat_tracer.render.shading import Light, Material, RenderSettings, World  # noqa: E402
+from splat_tracer.render.splats import SplatCloud, simd_path  # noqa: E402
 
 R_MAJOR, R_MINOR = 1.0, 0.4
 AREA = 4 * math.pi ** 2 * R_MAJOR * R_MINOR
@@ -92,10 +92,10 @@ def kept_rss(n_splats: int) -> float:
 import ctypes, gc, sys
 sys.path.insert(0, {str(HERE)!r}); sys.path.insert(0, {str(HERE.parent)!r})
 import scale
-from splat_tracer.camera import Camera
-from splat_tracer.method import Method
-from splat_tracer.scene import Instance, Mesh, RenderScene
-from splat_tracer.splats import SplatCloud, simd_path
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import Method
+from splat_tracer.render.scene import Instance, Mesh, RenderScene
+from splat_tracer.render.splats import SplatCloud, simd_path
 before = scale.rss_bytes()
 c, n, r = scale.torus_cloud({n_splats})
 s = SplatCloud(c, n, r, closed=True)

@@ -123,11 +123,11 @@ def scenes(n_samples: int = 50000) -> list[SyntheticScene]:
 def score_methods(sc: SyntheticScene, methods: dict, width: int, height: int, radius_factor: float = 1.0) -> dict:
     """{label: scoring.score(...)} for each Method in `methods`, rendering the scene's
     cloud (k-NN radii, the importer's closed guess) from its view with pixel-centre rays."""
-    from splat_tracer import spacing
-    from splat_tracer.camera import Camera
-    from splat_tracer.method import Method
-    from splat_tracer.neighbours import local_frame
-    from splat_tracer.splats import SplatCloud
+    from splat_tracer.pointcloud import spacing
+    from splat_tracer.pointcloud.neighbours import local_frame
+    from splat_tracer.render.camera import Camera
+    from splat_tracer.render.method import Method
+    from splat_tracer.render.splats import SplatCloud
 
     origin, local = local_frame(sc.points)
     hood = spacing.analyse(local, sc.normals)

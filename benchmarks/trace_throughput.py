@@ -37,11 +37,12 @@ sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
 
 from meshes import SHARED_MESHES, area_samples, fit_camera, icosphere, read_obj, vertex_cloud  # noqa: E402
-from splat_tracer import _core, spacing  # noqa: E402
-from splat_tracer.camera import PACKET_RAYS, packet_order  # noqa: E402
-from splat_tracer.method import PRESETS, Method  # noqa: E402
-from splat_tracer.neighbours import local_frame  # noqa: E402
-from splat_tracer.splats import SplatCloud, hardware_threads, simd_path  # noqa: E402
+from splat_tracer import _core  # noqa: E402
+from splat_tracer.pointcloud import spacing  # noqa: E402
+from splat_tracer.pointcloud.neighbours import local_frame  # noqa: E402
+from splat_tracer.render.camera import PACKET_RAYS, packet_order  # noqa: E402
+from splat_tracer.render.method import PRESETS, Method  # noqa: E402
+from splat_tracer.render.splats import SplatCloud, hardware_threads, simd_path  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
 PAPER_SECONDS = (7.0, 10.0)  # Beddiaf & Babahenini, sec. IV: 35,945 points at 640x480

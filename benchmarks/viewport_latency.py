@@ -47,7 +47,7 @@ def main(argv=None) -> int:
     dev_extension.enable_from_source(BUILD)
     import demo
 
-    viewport = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.viewport"]
+    viewport = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.blender.viewport"]
     scene, n_splats = demo.build_scene(bpy, 3, width, height)
     scene.splat_tracer.samples = 16
     bpy.context.view_layer.update()

@@ -2,7 +2,7 @@
 
     python fuzz/fuzz_ply.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
 
-Each input is a file's bytes: splat_tracer.ply.read_ply reads it from a temporary file.
+Each input is a file's bytes: splat_tracer.pointcloud.readers.ply.read_ply reads it from a temporary file.
 The contract: a file is imported or refused with CloudFileError, nothing else. When it is
 read, what it gives must be sane (finite positions, unit normals, colours in 0..1, positive
 radii, distinct positions) and prepare.prepare (frame, outliers, radii) must accept it or
@@ -21,8 +21,9 @@ import numpy as np  # imported before instrumenting: coverage is wanted for our 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
     import plyfile  # noqa: F401  (instrumented: its parser is half of the reader)
-    from splat_tracer import ply, prepare
-    from splat_tracer.cloud import CloudFileError, PointCloud
+    from splat_tracer.pointcloud import prepare
+    from splat_tracer.pointcloud.cloud import CloudFileError, PointCloud
+    from splat_tracer.pointcloud.readers import ply
 
 PATH = os.path.join(tempfile.mkdtemp(prefix="fuzz_ply_"), "input.ply")
 

@@ -22,9 +22,10 @@ import numpy as np  # imported before instrumenting: coverage is wanted for our 
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
-    from splat_tracer import ply, prepare
-    from splat_tracer.cloud import CloudFileError, PointCloud
-    from splat_tracer.neighbours import first_of_duplicates
+    from splat_tracer.pointcloud import prepare
+    from splat_tracer.pointcloud.cloud import CloudFileError, PointCloud
+    from splat_tracer.pointcloud.neighbours import first_of_duplicates
+    from splat_tracer.pointcloud.readers import ply
 
 SPECIAL = [0.0, -0.0, 1.0, -1.0, 1e-300, 1e-45, 1e7, -1e7, 1e15, 1e16, 1e300, -1e300, 3.4e38, 0.1, 1e-7]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import bpy
 
-from ..splat_tracer import ab
+from ..splat_tracer.render import ab
 
 FLIP_KEY = dict(type="B", value="PRESS", shift=True, alt=True)  # Shift+Alt+B in the 3D View
 

@@ -13,9 +13,9 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..splat_tracer import ab, difference
-from ..splat_tracer.method import PRESETS, Method
-from ..splat_tracer.session import render_frame
+from ..splat_tracer.blender.session import render_frame
+from ..splat_tracer.render import ab, difference
+from ..splat_tracer.render.method import PRESETS, Method
 
 _CHOICES = tuple((p, p.replace("_", " ").title(), f"The {p.replace('_', ' ').lower()} preset")
                  for p in PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)

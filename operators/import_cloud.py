@@ -18,10 +18,11 @@ import os
 import bpy
 from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
 
-from ..splat_tracer import importer, normals, ply, prepare, readers, spacing
-from ..splat_tracer.cloud import CloudFileError
-from ..splat_tracer.cloud_object import NORMAL, RADIUS, create_cloud_object, mesh_positions
-from ..splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress, scaled
+from ..splat_tracer.blender.cloud_object import NORMAL, RADIUS, create_cloud_object, mesh_positions
+from ..splat_tracer.pointcloud import importer, normals, prepare, readers, spacing
+from ..splat_tracer.pointcloud.cloud import CloudFileError
+from ..splat_tracer.pointcloud.readers import ply
+from ..splat_tracer.util.progress import Cancelled, Job, Steps, TerminalProgress, scaled
 
 SCANNER = "scanner_position"  # point attribute: the scanner that saw the point (object-local)
 ORIENTATION_HINT = "splat_tracer_orientation"  # custom property: the file's own orientation mode

@@ -1,13 +1,17 @@
-"""splat_tracer: the renderer package.
+"""splat_tracer: the renderer package, in three layers.
 
-Importing this package (or `splat_tracer.core`, `splat_tracer.ply`, `splat_tracer.spacing`)
-needs no Blender: tests and benchmarks use the core from plain Python. The Blender-facing
-modules (engine, export, properties, cloud_object) are imported only by register().
+- pointcloud/: the point-cloud pipeline (readers, preparation, the import), no Blender;
+- render/: the render API over the compiled core (_core), no Blender;
+- blender/: the render engine, the scene export, properties and the cloud object (bpy);
+- util/: helpers the two Blender-free layers share.
+The rule is blender -> {pointcloud, render} -> native core; pointcloud and render never
+import each other, and neither imports bpy, so tests and benchmarks use them from plain
+Python. The Blender layer is imported only by register().
 """
 
 
 def _blender_modules():
-    from . import engine, properties
+    from .blender import engine, properties
     return (properties, engine)
 
 

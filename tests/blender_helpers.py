@@ -55,7 +55,7 @@ def read_exr(path) -> dict:
 
 
 def extension_module(name: str):
-    """A module of the enabled extension (e.g. 'session'), as Blender loaded it: the
+    """A module of the enabled extension (e.g. 'blender.session'), as Blender loaded it: the
     extension's package is bl_ext.<repo>.<id>, not the source tree's `splat_tracer`."""
     import sys
 

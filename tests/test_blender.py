@@ -8,7 +8,7 @@ import pytest
 
 from blender_helpers import add_camera, extension_module, render_to_exr
 from geometry import angle_deg, blender_camera_rays, fibonacci_sphere, sphere_truth
-from splat_tracer import ply
+from splat_tracer.pointcloud.readers import ply
 
 N_SPHERE = 20000
 # The cloud object is placed with this transform: the render must apply world matrices.
@@ -279,7 +279,7 @@ def test_hidden_clouds_are_not_rendered_and_skipped_clouds_warn(blender, empty_s
 def test_bad_points_are_left_out_and_reported_not_fatal(blender, empty_scene, sphere_ply, tmp_path):
     """A point with a negative radius or a zero normal (a vertex added in Edit Mode) is left
     out and counted in the render report; the rest of the cloud renders."""
-    session = extension_module("session")
+    session = extension_module("blender.session")
     bpy = blender
     scene = empty_scene
     obj = import_sphere(bpy, sphere_ply)
@@ -370,7 +370,7 @@ def test_a_scene_that_cannot_fit_in_memory_is_refused_before_building(blender, e
     import_sphere(bpy, sphere_ply)
     add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
     scene.render.resolution_x, scene.render.resolution_y = 64, 48
-    resources = extension_module("resources")
+    resources = extension_module("util.resources")
     resources.override(1_000_000)  # 1 MB free: 20,000 splats need about 5 MB
     try:
         with pytest.raises(RuntimeError, match=r"point cloud 'sphere' \(20,000 splats\) needs about 0.00 GB to build"):
@@ -390,7 +390,7 @@ dev_extension.enable_from_source(home)
 bpy.ops.wm.read_homefile(use_empty=True)
 from blender_helpers import add_camera, extension_module
 from geometry import fibonacci_sphere
-from splat_tracer import ply
+from splat_tracer.pointcloud.readers import ply
 p, n = fibonacci_sphere(5000)
 ply.write_ply({ply_path!r}, p, n)
 bpy.ops.splat_tracer.import_cloud(filepath={ply_path!r})
@@ -399,7 +399,7 @@ add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.
 scene.render.engine = "SPLAT_TRACER"
 scene.render.resolution_x, scene.render.resolution_y = 320, 240
 scene.splat_tracer.samples = 64
-session = extension_module("session")
+session = extension_module("blender.session")
 real = session.render_frame
 def stopping(depsgraph, method, passes=("Combined",), progress=None, **kw):
     # What Esc does: the progress callback answers "stop" (after the first report).
@@ -449,7 +449,7 @@ def test_a_cloud_without_its_points_modifier_still_renders_and_says_why(blender,
     """Removing the Mesh to Points modifier (or its node group) used to make the cloud vanish
     from renders without a word: the object is a vertex-only mesh carrying splats, and is
     still rendered as splats, with a report line."""
-    session = extension_module("session")
+    session = extension_module("blender.session")
     bpy = blender
     scene = empty_scene
     obj = import_sphere(bpy, sphere_ply)
@@ -466,12 +466,12 @@ def test_points_own_alpha_renders_through_the_importer_material(blender, empty_s
     """A coloured cloud whose points have alpha 0.25 gets the importer's material (Attribute
     node: colour into Base Color, alpha into Alpha): with a transparent film, the cloud covers
     its pixels a quarter (the alpha channel), and its colour is the points' colour."""
-    from splat_tracer.shading import Report
+    from splat_tracer.render.shading import Report
 
     bpy = blender
     scene = empty_scene
-    export_shading = extension_module("export_shading")
-    cloud_object = extension_module("cloud_object")
+    export_shading = extension_module("blender.export.shading")
+    cloud_object = extension_module("blender.cloud_object")
     p, n = fibonacci_sphere(8000)
     radii = np.full(len(p), 2.2 * np.sqrt(4 * np.pi / len(p)), np.float32)
     colours = np.tile(np.float32([0.9, 0.2, 0.1, 0.25]), (len(p), 1))

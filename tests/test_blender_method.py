@@ -9,8 +9,8 @@ from scipy.ndimage import distance_transform_edt
 
 from blender_helpers import add_camera
 from geometry import blender_camera_rays, cube_cloud, fibonacci_sphere, ray_box
-from splat_tracer import ply
-from splat_tracer.method import Method
+from splat_tracer.pointcloud.readers import ply
+from splat_tracer.render.method import Method
 
 SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
             "use_nearest_centre")

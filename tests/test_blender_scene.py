@@ -80,7 +80,7 @@ def cube(bpy, name, size, location, material, **kw):
 def cloud_sphere(bpy, name, n, radius, location, material=None, colours=None, collection=None):
     """A closed splat-cloud sphere (the importer's kind of object), splat radius 1.5x the
     mean spacing."""
-    from splat_tracer import cloud_object
+    from splat_tracer.blender import cloud_object
 
     p, nrm = fibonacci_sphere(n, radius)
     radii = np.full(n, 1.5 * math.sqrt(4 * math.pi * radius ** 2 / n))
@@ -164,7 +164,7 @@ def keep_png(name: str, out: dict) -> None:
 
 def stats():
     """The last frame's stats of the enabled extension's session."""
-    return extension_module("session").HISTORY[-1]
+    return extension_module("blender.session").HISTORY[-1]
 
 
 def pixel_of(bpy, scene, world_point) -> tuple:
@@ -371,7 +371,7 @@ def test_point_colours_render_and_a_texture_falls_back_with_one_report_line(blen
     scene = empty_scene
     g = np.stack(np.meshgrid(np.linspace(-1, 1, 41), np.linspace(-1, 1, 41)), -1).reshape(-1, 2)
     colours = np.array([(*RED, 1.0) if x < 0 else (*BLUE, 1.0) for x, _ in g])
-    from splat_tracer import cloud_object
+    from splat_tracer.blender import cloud_object
     cloud = cloud_object.create_cloud_object("Painted", np.column_stack([g, np.zeros(len(g))]),
                                              np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.full(len(g), 0.08),
                                              colours, location=(-1.2, 0, 0))
@@ -495,7 +495,7 @@ def test_an_animation_where_only_the_camera_moves_builds_its_geometry_once(blend
     (it kept the BVHs until the next render before)."""
     bpy = blender
     scene = empty_scene
-    session = extension_module("session")
+    session = extension_module("blender.session")
     small_scene(bpy, scene)
     scene.render.image_settings.file_format = "PNG"
     scene.render.filepath = str(tmp_path / "frame_")
@@ -516,7 +516,7 @@ def test_persistent_data_keeps_the_geometry_between_renders(blender, empty_scene
     it, the cache is empty after a render, and the next render builds again."""
     bpy = blender
     scene = empty_scene
-    session = extension_module("session")
+    session = extension_module("blender.session")
     small_scene(bpy, scene)
     scene.render.use_persistent_data = True
     bpy.ops.render.render()
@@ -564,7 +564,7 @@ def test_view_layers_render_each_into_its_own_layer(blender, empty_scene, tmp_pa
     left[:, : W // 2] = True
     assert (alpha_a[~left] == 0).all() and (alpha_b[left] == 0).all()  # nothing of the other
     assert (alpha_a > 0).sum() > 500 and (alpha_b > 0).sum() > 500
-    history = extension_module("session").HISTORY
+    history = extension_module("blender.session").HISTORY
     assert sorted((h["view_layer"], h["instances"]) for h in history[-2:]) == [("A", 1), ("B", 1)]
 
 

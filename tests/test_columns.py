@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from splat_tracer import columns
+from splat_tracer.util import columns
 
 RNG = np.random.default_rng(5)
 

@@ -7,8 +7,8 @@ import pytest
 
 from test_blender_method import cube_in_blender, image_pixels  # noqa: F401 - a fixture
 
-from splat_tracer import ab, difference
-from splat_tracer.method import Method
+from splat_tracer.render import ab, difference
+from splat_tracer.render.method import Method
 
 IMAGES = ("Splat Compare A", "Splat Compare B", "Splat Compare Difference")
 

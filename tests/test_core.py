@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from splat_tracer import _core
-from splat_tracer.camera import Camera
-from splat_tracer.method import Method
-from splat_tracer.splats import SplatCloud, TraceResult
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import Method
+from splat_tracer.render.splats import SplatCloud, TraceResult
 
 
 def random_discs(n, rng, spread=1.0, offset=0.0):

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
 from geometry import fibonacci_sphere
-from splat_tracer import ply
+from splat_tracer.pointcloud.readers import ply
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -17,7 +17,10 @@ ROOT = Path(__file__).resolve().parent.parent
 def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
     names = set(zipfile.ZipFile(dist_zip).namelist())
     assert {"blender_manifest.toml", "__init__.py", "LICENSE", "splat_tracer/_core.abi3.so",
-            "splat_tracer/engine.py", "operators/import_cloud.py", "ui/__init__.py"} <= names
+            "operators/import_cloud.py", "ui/__init__.py"} <= names
+    modules = {p.relative_to(ROOT).as_posix() for p in (ROOT / "splat_tracer").rglob("*.py") if "native" not in p.parts}
+    assert "splat_tracer/blender/engine.py" in modules and modules <= names, sorted(modules - names)
+    assert not any(n.startswith("splat_tracer/native/") for n in names)  # the sources stay out
     assert not any(n.endswith(".pyd") for n in names)
     # The Zig build of tools/build_native.py (glibc 2.28), not the development build.
     shipped = zipfile.ZipFile(dist_zip).read("splat_tracer/_core.abi3.so")

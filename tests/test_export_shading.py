@@ -12,13 +12,13 @@ from blender_helpers import add_camera, render_to_exr
 
 @pytest.fixture
 def es(blender):
-    from splat_tracer import export_shading
+    from splat_tracer.blender.export import shading as export_shading
     return export_shading
 
 
 @pytest.fixture
 def report():
-    from splat_tracer import shading
+    from splat_tracer.render import shading
     return shading.Report()
 
 
@@ -199,7 +199,7 @@ def test_the_cycles_output_is_read_where_outputs_differ_per_engine(blender, empt
 
 
 def test_no_material_no_output_and_ignored_outputs(blender, empty_scene, es, report):
-    from splat_tracer import shading
+    from splat_tracer.render import shading
     assert es.material_of(None, report) == shading.Material() and report.lines == []
     empty = blender.data.materials.new("Empty")
     empty.node_tree.nodes.clear()
@@ -430,7 +430,7 @@ def cloud_materials(bpy, obj):
 
 def test_imported_clouds_show_their_colours_in_cycles(blender, empty_scene, es, report, tmp_path):
     bpy = blender
-    from splat_tracer import cloud_object
+    from splat_tracer.blender import cloud_object
     scene = empty_scene
     positions, normals, radii = grid_cloud()
     red = np.tile([0.9, 0.1, 0.05, 1.0], (len(positions), 1))
@@ -459,7 +459,7 @@ def test_imported_clouds_show_their_colours_in_cycles(blender, empty_scene, es, 
 
 def test_a_file_with_the_version_1_node_group_still_renders(blender, empty_scene, tmp_path):
     bpy = blender
-    from splat_tracer import cloud_object
+    from splat_tracer.blender import cloud_object
     scene = empty_scene
     positions, normals, radii = grid_cloud()
     colours = np.tile([0.2, 0.9, 0.1, 1.0], (len(positions), 1))

@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 
 import synthetic  # noqa: E402
-from splat_tracer.method import Method  # noqa: E402
+from splat_tracer.render.method import Method  # noqa: E402
 
 W, H = 320, 240
 N_SAMPLES = 40000
@@ -56,7 +56,7 @@ def test_the_closed_guess_of_each_scene():
     """The importer's guess decides whether the far phase runs: the open-faced cube is open,
     every other scene closed."""
     for sc in synthetic.scenes(N_SAMPLES):
-        from splat_tracer import spacing
+        from splat_tracer.pointcloud import spacing
 
         guess = spacing.analyse(sc.points, sc.normals).closed_guess
         assert guess == (sc.name != "open-face cube"), sc.name
@@ -70,7 +70,7 @@ def test_gap_closing_radii_cover_most_pinholes_of_a_random_sample():
     import numpy as np
     from scipy.spatial import cKDTree
 
-    from splat_tracer import spacing
+    from splat_tracer.pointcloud import spacing
 
     rng = np.random.default_rng(5)
     points = np.column_stack([rng.uniform(size=(4000, 2)), np.zeros(4000)])

@@ -10,10 +10,11 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import breadth_first_order, connected_components, minimum_spanning_tree
 from scipy.spatial import cKDTree
 
-from splat_tracer import _core, normals
-from splat_tracer.graph import chain_flips, forest_traversal, graph_weights, spanning_forest
-from splat_tracer.neighbours import first_of_duplicates, permute_table, spatial_order, take_rows
-from splat_tracer.progress import Cancelled
+from splat_tracer import _core
+from splat_tracer.pointcloud import normals
+from splat_tracer.pointcloud.graph import chain_flips, forest_traversal, graph_weights, spanning_forest
+from splat_tracer.pointcloud.neighbours import first_of_duplicates, permute_table, spatial_order, take_rows
+from splat_tracer.util.progress import Cancelled
 
 
 def random_table(rng, n, k, ties=False):

@@ -12,10 +12,12 @@ import numpy as np
 import pytest
 
 from geometry import fibonacci_sphere
-from splat_tracer import importer, ply, prepare, readers, resources, spacing
-from splat_tracer import las as las_reader
-from splat_tracer.cloud import CloudFileError, make_cloud
-from splat_tracer.progress import Cancelled, Job, Steps, TerminalProgress
+from splat_tracer.pointcloud import importer, prepare, readers, spacing
+from splat_tracer.pointcloud.cloud import CloudFileError, make_cloud
+from splat_tracer.pointcloud.readers import ply
+from splat_tracer.pointcloud.readers import las as las_reader
+from splat_tracer.util import resources
+from splat_tracer.util.progress import Cancelled, Job, Steps, TerminalProgress
 
 # bpy_extras.io_utils.axis_conversion(from_forward="-Z", from_up="Y"): a Y-up file into
 # Blender's Z-up (x, y, z) -> (x, -z, y); written out so that these tests need no Blender.
@@ -373,7 +375,7 @@ def test_a_cancel_while_creating_objects_leaves_nothing(blender, empty_scene, tm
 
     bpy = blender
     ops = extension_module("operators.import_cloud")
-    ext_importer = extension_module("splat_tracer.importer")
+    ext_importer = extension_module("splat_tracer.pointcloud.importer")
     for group in list(bpy.data.node_groups):  # so that this import creates the shared group and material
         bpy.data.node_groups.remove(group)
     for material in list(bpy.data.materials):
@@ -387,7 +389,7 @@ def test_a_cancel_while_creating_objects_leaves_nothing(blender, empty_scene, tm
 
     def cancel_after_the_first(fraction, message):
         if fraction >= 0.5:
-            raise extension_module("splat_tracer.progress").Cancelled("cancelled")
+            raise extension_module("splat_tracer.util.progress").Cancelled("cancelled")
     with pytest.raises(Exception, match="cancelled"):
         ops.create_objects(bpy.context, loaded, lambda prep: [], cancel_after_the_first)
     assert _counts(bpy) == before
@@ -402,7 +404,7 @@ def test_objects_made_consuming_the_prepared_clouds_are_the_same(blender, empty_
 
     bpy = blender
     ops = extension_module("operators.import_cloud")
-    ext_importer = extension_module("splat_tracer.importer")
+    ext_importer = extension_module("splat_tracer.pointcloud.importer")
     p, n = fibonacci_sphere(2000, centre=(0.0, 0.0, 0.0))
     path = _write(tmp_path / "c.ply", p + [4e5, 5e6, 20.0], n, colours=RNG.random((2000, 3)))
     kept, consumed = ext_importer.load_many([path]), ext_importer.load_many([path])
@@ -439,7 +441,8 @@ def test_a_job_cancelled_midway_in_blender_leaves_nothing(blender, empty_scene, 
     from blender_helpers import extension_module
 
     bpy = blender
-    progress, ext_importer = extension_module("splat_tracer.progress"), extension_module("splat_tracer.importer")
+    progress = extension_module("splat_tracer.util.progress")
+    ext_importer = extension_module("splat_tracer.pointcloud.importer")
     path = _bare_sphere(tmp_path, 20000)
     before = _counts(bpy)
     reached, cancelled = threading.Event(), threading.Event()

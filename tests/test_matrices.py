@@ -8,9 +8,11 @@ import time
 import numpy as np
 import pytest
 
-from splat_tracer import difference, importer, matrices
-from splat_tracer.camera import Camera
-from splat_tracer.cloud import PointCloud
+from splat_tracer.pointcloud import importer
+from splat_tracer.pointcloud.cloud import PointCloud
+from splat_tracer.render import difference
+from splat_tracer.render.camera import Camera
+from splat_tracer.util import matrices
 
 RNG = np.random.default_rng(11)
 

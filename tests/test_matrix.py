@@ -25,7 +25,7 @@ import pytest
 
 from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
 from geometry import fibonacci_sphere
-from splat_tracer import ply
+from splat_tracer.pointcloud.readers import ply
 
 ROOT = Path(__file__).resolve().parent.parent
 MATRIX_DIR = ROOT / "build" / "matrix"

@@ -6,10 +6,10 @@ import pytest
 from scipy.ndimage import distance_transform_edt
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere, ray_box, ray_sphere
-from splat_tracer import spacing
-from splat_tracer.camera import Camera
-from splat_tracer.method import POSITION_RULES, Method
-from splat_tracer.splats import SplatCloud
+from splat_tracer.pointcloud import spacing
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import POSITION_RULES, Method
+from splat_tracer.render.splats import SplatCloud
 
 W, H = 320, 240
 FULL = Method.preset("FULL")

@@ -3,8 +3,9 @@ and against numpy versions of the rules it computes (the gap-closing radius, PCA
 import numpy as np
 import pytest
 
-from splat_tracer import _core, spacing
-from splat_tracer.neighbours import PointIndex
+from splat_tracer import _core
+from splat_tracer.pointcloud import spacing
+from splat_tracer.pointcloud.neighbours import PointIndex
 
 RNG = np.random.default_rng(7)
 

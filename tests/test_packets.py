@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 
 from geometry import cube_cloud, fibonacci_sphere
-from splat_tracer import _core, spacing
-from splat_tracer.camera import Camera, packet_order
-from splat_tracer.method import PRESETS, Method
-from splat_tracer.splats import SplatCloud, SurfaceResult, TraceResult, simd_path
+from splat_tracer import _core
+from splat_tracer.pointcloud import spacing
+from splat_tracer.render.camera import Camera, packet_order
+from splat_tracer.render.method import PRESETS, Method
+from splat_tracer.render.splats import SplatCloud, SurfaceResult, TraceResult, simd_path
 
 W, H = 96, 72  # not multiples of 16 rays per row: packets straddle rows and the last is short
 

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from geometry import cube_cloud, fibonacci_sphere
-from splat_tracer import ply, spacing
-from splat_tracer.cloud import CloudFileError, srgb_to_linear
-from splat_tracer.neighbours import first_of_duplicates
+from splat_tracer.pointcloud import spacing
+from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
+from splat_tracer.pointcloud.neighbours import first_of_duplicates
+from splat_tracer.pointcloud.readers import ply
 
 
 @pytest.mark.parametrize("binary, order", [(False, "="), (True, "<"), (True, ">")])
@@ -346,7 +347,7 @@ def test_one_stray_point_changes_nothing_but_the_warning(tmp_path, drop):
     """Georeferenced scan with one stray (0,0,0): same origin, same radii for the sphere's
     points, same closed guess as without it; the stray point is found, reported (count and
     row), kept with a bounded radius or dropped."""
-    from splat_tracer import prepare
+    from splat_tracer.pointcloud import prepare
 
     clean_path, stray_path = _utm_sphere(tmp_path, False), _utm_sphere(tmp_path, True)
     clean = prepare.prepare(ply.read_ply(str(clean_path)), str(clean_path))
@@ -370,7 +371,7 @@ def test_one_stray_point_changes_nothing_but_the_warning(tmp_path, drop):
 
 def test_genuine_sparse_parts_are_not_outliers():
     """A scan's thinning tail (points farther out, fewer of them) stays in the bulk."""
-    from splat_tracer import prepare
+    from splat_tracer.pointcloud import prepare
 
     rng = np.random.default_rng(4)
     r = np.exp(rng.uniform(0, np.log(100), 50000))  # ranges 1..100 m, log-uniform as a scanner sees them
@@ -386,7 +387,7 @@ def test_genuine_sparse_parts_are_not_outliers():
 def test_clouds_beyond_safe_float32_offsets_are_refused(tmp_path, case):
     """Double coordinates near the top of float32's range imported and later crashed the
     renderer, which squares distances in float32."""
-    from splat_tracer import prepare
+    from splat_tracer.pointcloud import prepare
 
     p, n = fibonacci_sphere(400)
     if case == "two clusters at +-2.5e38":
@@ -416,7 +417,7 @@ def test_coordinates_near_the_float64_limit_are_refused_not_a_numpy_error(tmp_pa
     """Found by fuzz/fuzz_prepare.py: the bulk's percentiles overflowed on one axis, every
     point counted as an outlier and prepare() raised numpy's 'zero-size array' ValueError
     instead of refusing the file."""
-    from splat_tracer import prepare
+    from splat_tracer.pointcloud import prepare
 
     p = np.array(rows)
     assert prepare.bulk_mask(p).all()

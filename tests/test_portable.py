@@ -83,8 +83,8 @@ import json, sys
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 from splat_tracer import _core
-from splat_tracer.camera import Camera
-from splat_tracer.splats import SplatCloud
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.splats import SplatCloud
 p, n = np.load(sys.argv[2])["p"], np.load(sys.argv[2])["n"]
 scene = SplatCloud(p, n, np.full(len(p), 0.05))
 res = scene.render(Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60, threads=2)
@@ -95,9 +95,7 @@ print(json.dumps({"module": _core.__file__}))
 
 def test_linux_module_loads_and_renders_like_the_development_build(native, tmp_path):
     package = tmp_path / "tree" / "splat_tracer"
-    package.mkdir(parents=True)
-    for py in (ROOT / "splat_tracer").glob("*.py"):
-        shutil.copy2(py, package / py.name)
+    shutil.copytree(ROOT / "splat_tracer", package, ignore=shutil.ignore_patterns("native", "_core*", "__pycache__"))
     shutil.copy2(native["linux-x64"], package / "_core.abi3.so")
     p, n = fibonacci_sphere(5000)
     np.savez(tmp_path / "cloud.npz", p=p, n=n)
@@ -107,8 +105,8 @@ def test_linux_module_loads_and_renders_like_the_development_build(native, tmp_p
     assert Path(json.loads(proc.stdout)["module"]) == package / "_core.abi3.so"
     portable = np.load(tmp_path / "out.npz")
 
-    from splat_tracer.camera import Camera  # the development build (make build, gcc)
-    from splat_tracer.splats import SplatCloud
+    from splat_tracer.render.camera import Camera  # the development build (make build, gcc)
+    from splat_tracer.render.splats import SplatCloud
 
     dev = SplatCloud(p, n, np.full(len(p), 0.05)).render(Camera.look_at((0, -5, 0), (0, 0, 0)), 80, 60)
     hit = dev.depth < 1e9

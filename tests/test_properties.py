@@ -51,12 +51,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere
-from splat_tracer.camera import Camera
-from splat_tracer.method import KERNELS, POSITION_RULES, Method
-from splat_tracer.neighbours import local_frame
-from splat_tracer.scene import Instance, RenderScene
-from splat_tracer.shading import Light, RenderSettings
-from splat_tracer.splats import SplatCloud
+from splat_tracer.pointcloud.neighbours import local_frame
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import KERNELS, POSITION_RULES, Method
+from splat_tracer.render.scene import Instance, RenderScene
+from splat_tracer.render.shading import Light, RenderSettings
+from splat_tracer.render.splats import SplatCloud
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

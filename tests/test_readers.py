@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere
-from splat_tracer import gaussians, normals, ply, prepare, readers
-from splat_tracer.cloud import CloudFileError, srgb_to_linear
+from splat_tracer.pointcloud import normals, prepare, readers
+from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
+from splat_tracer.pointcloud.readers import gaussians, ply
 
 RNG = np.random.default_rng(7)
 

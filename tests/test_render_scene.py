@@ -17,11 +17,11 @@ from numpy.polynomial.legendre import leggauss
 from scipy.ndimage import binary_dilation, binary_erosion, maximum_filter, minimum_filter, uniform_filter
 
 from splat_tracer import _core
-from splat_tracer.camera import Camera
-from splat_tracer.method import Method
-from splat_tracer.scene import RAY_VISIBILITY, FrameResult, Instance, Mesh, RenderScene
-from splat_tracer.splats import SplatCloud
-from splat_tracer.shading import Light, Material, RenderSettings, World
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import Method
+from splat_tracer.render.scene import RAY_VISIBILITY, FrameResult, Instance, Mesh, RenderScene
+from splat_tracer.render.shading import Light, Material, RenderSettings, World
+from splat_tracer.render.splats import SplatCloud
 
 from geometry import ray_sphere, sphere_cloud
 
@@ -865,8 +865,8 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
         sys.path.insert(0, {str(Path(_core.__file__).resolve().parent.parent)!r})
         import numpy as np
         from splat_tracer import _core
-        from splat_tracer.scene import Instance, Mesh, RenderScene
-        from splat_tracer.splats import SplatCloud
+        from splat_tracer.render.scene import Instance, Mesh, RenderScene
+        from splat_tracer.render.splats import SplatCloud
         spec = importlib.util.spec_from_file_location("elsewhere._core", _core.__file__)
         spec.loader.exec_module(importlib.util.module_from_spec(spec))
         mesh = Mesh(np.eye(3), [[0, 1, 2]])

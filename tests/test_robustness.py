@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from splat_tracer import _core
-from splat_tracer.camera import Camera
-from splat_tracer.method import Method
-from splat_tracer.scene import Instance, Mesh, RenderScene
-from splat_tracer.splats import SplatCloud
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import Method
+from splat_tracer.render.scene import Instance, Mesh, RenderScene
+from splat_tracer.render.splats import SplatCloud
 
 from geometry import sphere_cloud
 
@@ -26,8 +26,10 @@ def run_isolated(code: str) -> subprocess.CompletedProcess:
     """Runs `code` in a fresh interpreter, so that a crash fails this test instead of killing
     the whole test session."""
     prelude = (f"import sys; sys.path.insert(0, {str(ROOT)!r})\nimport numpy as np\n"
-               "from splat_tracer.camera import Camera\nfrom splat_tracer.method import Method\n"
-               "from splat_tracer.scene import Instance, Mesh, RenderScene\nfrom splat_tracer.splats import SplatCloud\n")
+               "from splat_tracer.render.camera import Camera\n"
+               "from splat_tracer.render.method import Method\n"
+               "from splat_tracer.render.scene import Instance, Mesh, RenderScene\n"
+               "from splat_tracer.render.splats import SplatCloud\n")
     return subprocess.run([sys.executable, "-c", prelude + textwrap.dedent(code)], capture_output=True, text=True,
                           timeout=120)
 

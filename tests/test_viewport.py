@@ -65,7 +65,7 @@ def _view_camera(bpy, scene, kind="PERSP", shift=(0.0, 0.0), **settings):
 
 @pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
 def test_view_rays_are_blenders_for_perspective_and_orthographic_views(blender, empty_scene, kind):
-    from splat_tracer import viewport
+    from splat_tracer.blender import viewport
     cam, window, view = _view_camera(blender, empty_scene, kind, shift=(0.1, -0.05), lens=35, ortho_scale=5)
     region, rv3d = _stand_ins(window, view, kind == "PERSP", kind)
     _assert_same_rays(viewport.camera_from_view(window, view), region, rv3d)
@@ -81,8 +81,8 @@ def _camera_view_window(window, zoom: float, offset: tuple):
 
 
 def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blender, empty_scene):
-    from splat_tracer import export, viewport
-    from splat_tracer.camera import Camera
+    from splat_tracer.blender import export, viewport
+    from splat_tracer.render.camera import Camera
     scene = empty_scene
     scene.render.resolution_x, scene.render.resolution_y = 160, 120  # the region's aspect
     cam, window, view = _view_camera(blender, scene, "PERSP", shift=(0.05, 0.0), lens=40)
@@ -124,7 +124,7 @@ def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blende
 
 
 def test_border_window():
-    from splat_tracer import viewport
+    from splat_tracer.blender import viewport
     assert viewport.border_window(100, 50) == (0, 0, 100, 50)
     # A view's render border: fractions of the region, rows counted from the top.
     assert viewport.border_window(100, 50, None, (0.1, 0.2, 0.5, 1.0)) == (10, 0, 40, 40)
@@ -132,7 +132,7 @@ def test_border_window():
 
 
 def test_pass_schedule_ends_with_the_scenes_samples():
-    from splat_tracer import viewport
+    from splat_tracer.blender import viewport
     assert viewport.pass_schedule(16) == [(4, 1), (1, 1), (1, 4), (1, 16)]
     assert viewport.pass_schedule(1) == [(4, 1), (1, 1)]
     assert viewport.pass_schedule(20)[-1] == (1, 20)
@@ -172,7 +172,7 @@ class _Recorder:
         self.bpy.app.handlers.depsgraph_update_post.remove(self)
 
     def __call__(self, scene, depsgraph):
-        viewport = extension_module("viewport")
+        viewport = extension_module("blender.viewport")
         found = viewport.classify(depsgraph.updates)
         if self.changes is None:
             self.changes = found
@@ -192,7 +192,7 @@ class _Recorder:
             # test_a_scene_setting_is_a_settings_change shows with a built-in property); a
             # script's setattr of an add-on property tags nothing in Blender 5.0, and
             # scene.update_tag() would tag every object too. So: what the UI's update gives.
-            changes = extension_module("viewport").Changes(settings=True, reasons=["scene settings"])
+            changes = extension_module("blender.viewport").Changes(settings=True, reasons=["scene settings"])
         before = dict(session.counters)
         session.update(self.bpy.context.evaluated_depsgraph_get(), changes)
         session.refine()
@@ -200,7 +200,7 @@ class _Recorder:
 
 
 def _f12_view(bpy, scene, width, height):
-    viewport = extension_module("viewport")
+    viewport = extension_module("blender.viewport")
     depsgraph = bpy.context.evaluated_depsgraph_get()
     cam = scene.camera.evaluated_get(depsgraph)
     window = cam.calc_matrix_camera(depsgraph, x=width, y=height)
@@ -209,7 +209,7 @@ def _f12_view(bpy, scene, width, height):
 
 
 def test_each_change_rebuilds_only_what_it_must(blender, empty_scene):
-    viewport = extension_module("viewport")
+    viewport = extension_module("blender.viewport")
     bpy, scene = blender, empty_scene
     grey, ball, box, sun = _scene(bpy, scene)
     session = viewport.ViewportSession()
@@ -281,7 +281,7 @@ def test_each_change_rebuilds_only_what_it_must(blender, empty_scene):
 
 
 def test_progressive_passes_converge_to_the_f12_image(blender, empty_scene):
-    viewport, session_module = extension_module("viewport"), extension_module("session")
+    viewport, session_module = extension_module("blender.viewport"), extension_module("blender.session")
     bpy, scene = blender, empty_scene
     _scene(bpy, scene)
     scene.splat_tracer.samples = 8
@@ -309,7 +309,7 @@ def test_progressive_passes_converge_to_the_f12_image(blender, empty_scene):
 
 
 def test_a_border_renders_only_its_window(blender, empty_scene):
-    viewport = extension_module("viewport")
+    viewport = extension_module("blender.viewport")
     bpy, scene = blender, empty_scene
     _scene(bpy, scene)
     bpy.context.view_layer.update()
@@ -329,7 +329,7 @@ def test_a_border_renders_only_its_window(blender, empty_scene):
 
 def test_the_thread_renders_the_passes_and_a_new_view_restarts_them(blender, empty_scene):
     import time
-    viewport = extension_module("viewport")
+    viewport = extension_module("blender.viewport")
     bpy, scene = blender, empty_scene
     _scene(bpy, scene)
     bpy.context.view_layer.update()
@@ -355,7 +355,7 @@ def test_the_thread_renders_the_passes_and_a_new_view_restarts_them(blender, emp
 # Live A/B: the split buffer, both renders, and what changing A/B costs.
 
 def test_the_split_buffer_shows_a_left_b_right_with_a_divider_and_the_difference_overlay():
-    from splat_tracer import ab, difference
+    from splat_tracer.render import ab, difference
     h, w = 40, 200
     a = np.zeros((h, w, 4), np.float32)
     a[..., 0], a[..., 3] = 0.5, 1.0            # A: red
@@ -398,14 +398,14 @@ def test_the_split_buffer_shows_a_left_b_right_with_a_divider_and_the_difference
 
 
 def test_split_position_from_the_mouse():
-    from splat_tracer import ab
+    from splat_tracer.render import ab
     assert ab.split_at(100, 100, 400) == 0.0
     assert ab.split_at(300, 100, 400) == 0.5
     assert ab.split_at(900, 100, 400) == 1.0 and ab.split_at(0, 100, 400) == 0.0  # clamped
 
 
 def test_ab_renders_both_settings_and_changing_only_them_rebuilds_nothing(blender, empty_scene):
-    viewport, session_module = extension_module("viewport"), extension_module("session")
+    viewport, session_module = extension_module("blender.viewport"), extension_module("blender.session")
     bpy, scene = blender, empty_scene
     _scene(bpy, scene)
     props = scene.splat_tracer.ab

@@ -76,7 +76,7 @@ def checker_floor(bpy, size: float, tiles: int):
 
 
 def build_scene(bpy, levels: int, width: int, height: int):
-    from splat_tracer import ply
+    from splat_tracer.pointcloud.readers import ply
 
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene

@@ -59,7 +59,7 @@ def main(argv=None) -> int:
     args, bpy = dev_extension.start_docs_tool(BUILD, __doc__, dev_extension.REPO_ROOT / "docs" / "switches", argv)
     import demo
     import geometry
-    from splat_tracer import ply
+    from splat_tracer.pointcloud.readers import ply
 
     out_root = Path(args.output_dir).resolve()
     for switch, scene_name in SWITCHES.items():

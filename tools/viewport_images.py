@@ -29,9 +29,9 @@ def main(argv=None) -> int:
     import numpy as np
     import switch_images
 
-    addon = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.viewport"]
-    ab = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.ab"]
-    from splat_tracer import ply
+    addon = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.blender.viewport"]
+    ab = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.render.ab"]
+    from splat_tracer.pointcloud.readers import ply
     import demo
 
     bpy.ops.wm.read_homefile(use_empty=True)

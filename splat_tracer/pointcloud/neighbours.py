@@ -6,9 +6,9 @@ from typing import Optional
 
 import numpy as np
 
-from . import _core
-from .arrays import as_f32, as_indices
-from .columns import bounds, in_blocks
+from .. import _core
+from ..util.arrays import as_f32, as_indices
+from ..util.columns import bounds, in_blocks
 
 
 def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
@@ -119,8 +119,8 @@ class PointIndex:
         if normals is None:
             self._index.radii(rows, spacing_k, spacing, threads=self.threads, by_row=by_row)
         else:
-            self._index.radii(rows, spacing_k, spacing, as_f32(normals, "normals", (len(self), 3)), cover_k, float(hole),
-                              float(max_gap), cover, self.threads, by_row, float(cover_cap))
+            self._index.radii(rows, spacing_k, spacing, as_f32(normals, "normals", (len(self), 3)), cover_k,
+                              float(hole), float(max_gap), cover, self.threads, by_row, float(cover_cap))
         return spacing, cover
 
     def widest_gaps(self, rows, normals: np.ndarray, k: int) -> np.ndarray:

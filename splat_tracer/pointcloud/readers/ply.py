@@ -12,10 +12,10 @@ import re
 
 import numpy as np
 
+from ...util.columns import finite_rows, in_blocks
+from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, linear_colours, make_cloud,
+                     srgb_to_linear, unit_colours)
 from . import gaussians
-from .cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, linear_colours, make_cloud,
-                    srgb_to_linear, unit_colours)
-from .columns import finite_rows, in_blocks
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few

@@ -3,8 +3,8 @@ import math
 
 import bpy
 
-from . import shading
-from .method import PRESETS, Method
+from ..render import shading
+from ..render.method import PRESETS, Method
 
 # Hard limits are the ones shading.RenderSettings accepts.
 _MAX_SAMPLES = 1 << 16

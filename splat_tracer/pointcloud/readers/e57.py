@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cloud import CloudFileError, PointCloud, colour_channels, make_cloud
+from ..cloud import CloudFileError, PointCloud, colour_channels, make_cloud
 
 
 def read_e57(path: str) -> PointCloud:

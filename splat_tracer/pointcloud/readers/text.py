@@ -6,8 +6,8 @@ import warnings
 
 import numpy as np
 
-from .cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
-from .columns import finite_rows
+from ...util.columns import finite_rows
+from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
 
 # Column names a header line may use (lower case), to the roles below.
 _NAMES = {

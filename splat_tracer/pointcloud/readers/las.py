@@ -12,9 +12,9 @@ import os
 
 import numpy as np
 
-from .cloud import CloudFileError, PointCloud, colour_channels, make_cloud
-from .columns import in_blocks
-from .progress import Cancelled
+from ...util.columns import in_blocks
+from ...util.progress import Cancelled
+from ..cloud import CloudFileError, PointCloud, colour_channels, make_cloud
 
 # LAS/LAZ points read at a time (about 0.05-0.25 s each). laspy reads a chunk's records into
 # a new buffer (36 MB per 2^20 points of format 7): beyond glibc's largest mmap threshold

@@ -40,10 +40,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..util.progress import chunks, nothing, scaled
+from . import spacing as spacing_mod
 from .graph import chain_flips, forest_traversal, graph_weights, spanning_forest
 from .neighbours import PointIndex, permute_table, spatial_order, take_rows
-from . import spacing as spacing_mod
-from .progress import chunks, nothing, scaled
 from .spacing import neighbour_tree
 
 DEFAULT_K = 16          # PCA neighbours: enough for a stable plane fit with noise, small enough for creases

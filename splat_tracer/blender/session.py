@@ -15,8 +15,10 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from . import export, export_shading, shading
-from .method import Method
+from ..render import shading
+from ..render.method import Method
+from . import export
+from .export import shading as export_shading
 
 
 class GeometryCache:

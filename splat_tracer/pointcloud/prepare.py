@@ -22,11 +22,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..util.columns import bounds, rows_outside
+from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
-from .neighbours import local_frame
-from .columns import bounds, rows_outside
 from .cloud import CloudFileError, PointCloud
-from .progress import Steps, scaled
+from .neighbours import local_frame
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
 BULK_PERCENTILES = (1.0, 99.0)

@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from .columns import compress, finite_rows, in_blocks, kept_rows
+from ..util.columns import compress, finite_rows, in_blocks, kept_rows
 from .neighbours import first_of_duplicates
 
 

@@ -1,8 +1,8 @@
 """The splat-cloud renderer over the compiled core, usable from plain Python (no Blender needed).
 
-    from splat_tracer.camera import Camera
-    from splat_tracer.method import Method
-    from splat_tracer.splats import SplatCloud
+    from splat_tracer.render.camera import Camera
+    from splat_tracer.render.method import Method
+    from splat_tracer.render.splats import SplatCloud
     cloud = SplatCloud(centres, normals, radii, closed=True)   # (N,3), (N,3), (N,) arrays
     surf = cloud.trace_surface(origins, directions)           # the paper's visibility method
     hits = cloud.trace(origins, directions)                   # plain nearest hit per ray
@@ -20,8 +20,8 @@ from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from . import _core
-from .arrays import as_f32
+from .. import _core
+from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
 

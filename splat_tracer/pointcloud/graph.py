@@ -12,8 +12,8 @@ from typing import Callable, NamedTuple, Optional
 
 import numpy as np
 
-from . import _core
-from .arrays import as_f32, as_indices
+from .. import _core
+from ..util.arrays import as_f32, as_indices
 
 
 class SpanningForest(NamedTuple):

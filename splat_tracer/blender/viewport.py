@@ -20,10 +20,11 @@ from typing import Iterable, Optional
 
 import numpy as np
 
-from . import ab, matrices, shading
-from .camera import Camera
-from .method import Method
-from .scene import RenderScene
+from ..render import ab, shading
+from ..render.camera import Camera
+from ..render.method import Method
+from ..render.scene import RenderScene
+from ..util import matrices
 
 # --------------------------------------------------------------------------------------
 # The view
@@ -361,7 +362,8 @@ class ViewportSession:
     # -- main thread ------------------------------------------------------------------
     def update(self, depsgraph, changes: Optional[Changes] = None) -> None:
         """Reads what `changes` says changed (everything when None or on the first call)."""
-        from . import export, export_shading
+        from . import export
+        from .export import shading as export_shading
         from .session import lit_settings
         if changes is None or self.exported is None:
             changes = Changes.everything()

@@ -19,12 +19,14 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from . import export_shading, resources, shading
-from .camera import Camera
-from .scene import RAY_VISIBILITY, Instance, Mesh, RenderScene
-from .splats import SplatCloud
-from .cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
-from .columns import finite_rows, nonzero_rows
+from ...render import shading
+from ...render.camera import Camera
+from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene
+from ...render.splats import SplatCloud
+from ...util import resources
+from ...util.columns import finite_rows, nonzero_rows
+from ..cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
+from . import shading as export_shading
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
 _MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear
+from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear
 
 C0 = 0.28209479177387814
 GAUSSIAN_FIELDS = ("f_dc_0", "f_dc_1", "f_dc_2", "opacity", "rot_0", "rot_1", "rot_2", "rot_3",

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-from .cloud import CloudFileError, PointCloud
+from ..cloud import CloudFileError, PointCloud
 from .e57 import read_e57
 from .las import read_las
 from .ply import read_ply

@@ -34,7 +34,7 @@ import zlib
 import bpy
 import numpy as np
 
-from . import shading
+from ...render import shading
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"

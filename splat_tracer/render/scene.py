@@ -7,8 +7,9 @@ from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
-from . import _core, matrices
-from .arrays import as_f32
+from .. import _core
+from ..util import matrices
+from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
 from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
@@ -87,7 +88,8 @@ class RenderScene:
             geo = inst.geometry
             native = geo._scene if isinstance(geo, SplatCloud) else geo._mesh if isinstance(geo, Mesh) else None
             if native is None:
-                raise TypeError(f"instance geometry must be a splats.SplatCloud or scene.Mesh, got {type(geo).__name__}")
+                raise TypeError(f"instance geometry must be a splats.SplatCloud or scene.Mesh, "
+                                f"got {type(geo).__name__}")
             if id(native) not in index_of:
                 index_of[id(native)] = len(geometries)
                 geometries.append(native)

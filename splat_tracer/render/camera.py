@@ -7,7 +7,8 @@ from typing import Optional
 
 import numpy as np
 
-from . import _core, matrices
+from .. import _core
+from ..util import matrices
 
 PACKET_RAYS = _core.PACKET_RAYS  # rays SplatCloud.trace / trace_surface take through the tree at once
 

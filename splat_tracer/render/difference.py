@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import matrices
+from ..util import matrices
 
 # ΔE breakpoints and the ramp's colour at each (display sRGB). Chosen to be read at a
 # glance: black = identical; dark blue = below the ~1 of a just-visible patch difference;

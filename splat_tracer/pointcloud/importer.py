@@ -24,11 +24,12 @@ from typing import Optional
 
 import numpy as np
 
-from . import matrices, normals, prepare, readers, resources, spacing
-from .columns import bounds
+from ..util import matrices, resources
+from ..util.columns import bounds
+from ..util.progress import ProgressFn, nothing, scaled
+from . import normals, prepare, readers, spacing
 from .cloud import CloudFileError, PointCloud
-from .ply import read_header
-from .progress import ProgressFn, nothing, scaled
+from .readers.ply import read_header
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
 # (peak RSS above the process's RSS before the import, Blender object included): 78 bytes

@@ -23,8 +23,8 @@ from typing import Optional
 
 import numpy as np
 
+from ..util.progress import chunks
 from .neighbours import PointIndex
-from .progress import chunks
 
 DEFAULT_K = 6
 # A splat's size comes from its distance to other points: a cloud needs at least one

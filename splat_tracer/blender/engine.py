@@ -11,7 +11,8 @@ import traceback
 import bpy
 import numpy as np
 
-from . import ab, session, viewport
+from ..render import ab
+from . import session, viewport
 
 # Blender 5.0 renamed three passes (Cycles and EEVEE write "Diffuse Color", "Emission" and
 # "Object Index" there, "DiffCol", "Emit" and "IndexOB" before). A pass must carry the name
