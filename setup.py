@@ -2,7 +2,7 @@
 
     python setup.py build_ext --inplace      (what `make build` runs)
 
-One binary for every Blender from 4.2 to 5.1: it is compiled against the CPython limited
+One binary for every Blender from 4.2 to 5.2 (blender_manifest.toml's range): it is compiled against the CPython limited
 API of Python 3.11 (abi3), which Python 3.11 to 3.13 all load. This file is only a build
 script; the project is installed as a Blender extension, not as a Python package.
 

@@ -3,7 +3,8 @@ differencing, Figs. 13-14): images A, B and their difference, in the UI or headl
 
 A and B are rendered like F12 (the render border honoured, cropped when the scene crops) and
 saved through the scene's colour management; the Difference image is the fixed perceptual
-scale of splat_tracer/difference.py between what A and B show, with its legend below it."""
+scale of splat_tracer/render/difference.py between what A and B show, with its legend
+below it."""
 from __future__ import annotations
 
 import contextlib
@@ -90,8 +91,8 @@ def difference_of(display_a: np.ndarray, display_b: np.ndarray, linear_a: np.nda
                   threshold: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(RGBA difference image with its legend, ΔE per pixel, mask of differing pixels).
 
-    The image is the fixed perceptual scale (splat_tracer/difference.py) of the ΔE between
-    the display values of A and B seen over black; a pixel *differs* when any scene-linear
+    The image is the fixed perceptual scale (splat_tracer/render/difference.py) of the ΔE
+    between the display values of A and B seen over black; a pixel *differs* when any scene-linear
     channel, alpha included, changes by more than `threshold` (which also counts differences
     too small to see)."""
     over_black = lambda d: d[..., :3] * d[..., 3:4]  # noqa: E731 - straight alpha in a PNG

@@ -1,12 +1,12 @@
 """File > Import > Splat Point Cloud, and drag-and-drop of point-cloud files into the 3D
 viewport (PLY incl. Gaussian-splatting PLY, LAS/LAZ, E57, XYZ/PTS/TXT/CSV: the reader is
-chosen by the file's content, splat_tracer/readers.py); and Estimate Splat Normals, which
-(re)estimates the normals and radii of existing cloud objects.
+chosen by the file's content, splat_tracer/pointcloud/readers/); and Estimate Splat
+Normals, which (re)estimates the normals and radii of existing cloud objects.
 
-Both do their work (splat_tracer/importer.py, normals.py: no Blender data) before they touch
-Blender's data, in one step at the end; an error or a cancel before then leaves nothing,
-and one during it removes what it made. Run from the interface (the file browser,
-drag-and-drop, the button), the work runs on a worker thread while a modal timer shows its
+Both do their work (splat_tracer/pointcloud/importer.py, normals.py: no Blender data)
+before they touch Blender's data, in one step at the end; an error or a cancel before then
+leaves nothing, and one during it removes what it made. Run from the interface (the file
+browser, drag-and-drop, the button), the work runs on a worker thread while a modal timer shows its
 progress in the status bar and Esc cancels it. Run from a script (`bpy.ops...(filepath=...)`)
 it runs synchronously: a progress bar on the cursor, or lines on the terminal in background
 mode (`blender -b`).
@@ -392,8 +392,8 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
         return self.execute(context)
 
 
-class SPLAT_TRACER_FH_ply(bpy.types.FileHandler):
-    bl_idname = "SPLAT_TRACER_FH_ply"
+class SPLAT_TRACER_FH_point_cloud(bpy.types.FileHandler):
+    bl_idname = "SPLAT_TRACER_FH_point_cloud"
     bl_label = "Splat point cloud"
     bl_import_operator = SPLAT_TRACER_OT_import_cloud.bl_idname
     bl_file_extensions = ";".join(readers.EXTENSIONS)

@@ -35,7 +35,7 @@ def test_extension_registers_everything(blender):
     bpy = blender
     assert "SPLAT_TRACER" in {getattr(e, "bl_idname", None) for e in bpy.types.RenderEngine.__subclasses__()}
     assert hasattr(bpy.ops.splat_tracer, "import_cloud")
-    assert hasattr(bpy.types, "SPLAT_TRACER_FH_ply")
+    assert hasattr(bpy.types, "SPLAT_TRACER_FH_point_cloud")
     assert hasattr(bpy.types, "SPLAT_TRACER_PT_render")
     assert bpy.types.Scene.bl_rna.properties.get("splat_tracer") is not None
 

@@ -1,4 +1,4 @@
-"""splat_tracer/columns.py: the column-wise and blockwise passes give numpy's own answers."""
+"""splat_tracer/util/columns.py: the column-wise and blockwise passes give numpy's own answers."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""splat_tracer/matrices.py: numpy's answers without BLAS, and no OpenBLAS thread left spinning
+"""splat_tracer/util/matrices.py: numpy's answers without BLAS, and no OpenBLAS thread left spinning
 by the per-frame matrix work (camera, instances, import axes, the A/B difference)."""
 import os
 import sys

@@ -47,11 +47,6 @@ def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> Came
     return Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin)
 
 
-def view_position(view_matrix) -> np.ndarray:
-    """The world position of the view (its eye; for an orthographic view, its centre)."""
-    return matrices.inverse(_matrix(view_matrix))[:3, 3]
-
-
 def region_rect(perspective_matrix, world_points, width: int, height: int) -> tuple[float, float, float, float]:
     """(xmin, ymin, xmax, ymax) in region pixels (origin bottom left, as Blender's region
     coordinates) of world points projected by `perspective_matrix` (window @ view): used for
@@ -236,8 +231,12 @@ def _window_pixels(view: View) -> int:
     return 0 if view.window is None else int(view.window[2]) * int(view.window[3])
 
 
+# One variant's progressive render as the render thread takes it: immutable inputs built on
+# the main thread (the thread never touches bpy) and the passes' schedule. Not a
+# progress.Job, which runs one piece of work on a thread of its own that the main thread
+# polls: the session's single render thread works through these, a pass at a time.
 @dataclass(frozen=True)
-class _Job:
+class _VariantRender:
     generation: int
     variant: str
     render_scene: RenderScene
@@ -257,7 +256,7 @@ def _scaled_window(window, width, height, lw, lh):
     return a0, b0, a1 - a0, b1 - b0
 
 
-def render_pass(job: _Job, index: int, progress=None) -> Optional[np.ndarray]:
+def render_pass(job: _VariantRender, index: int, progress=None) -> Optional[np.ndarray]:
     """Pass `index` of the job as a (height, width, 4) region buffer, top row first,
     transparent outside the window; None when progress() stopped it."""
     scale, samples = job.schedule[index]
@@ -339,7 +338,7 @@ class ViewportSession:
         self._view: Optional[View] = None
         self._camera: Optional[Camera] = None
         self._cond = threading.Condition()
-        self._jobs: dict = {}       # variant name -> _Job
+        self._jobs: dict = {}       # variant name -> _VariantRender
         self._next: dict = {}       # variant name -> its next pass
         self._generation = 0
         self._images: dict = {}     # variant name -> its latest Image
@@ -455,15 +454,15 @@ class ViewportSession:
             for name in names if names is not None else list(self._states):
                 variant, settings, threads, _ = self._states[name]
                 self._generation += 1
-                self._jobs[name] = _Job(self._generation, name, self.exports[variant.radius_factor].render_scene,
-                                        self._camera, self._view, settings, variant.method, threads,
-                                        tuple(pass_schedule(settings.samples, self.coarse_scale,
-                                                            _window_pixels(self._view))))
+                self._jobs[name] = _VariantRender(
+                    self._generation, name, self.exports[variant.radius_factor].render_scene, self._camera,
+                    self._view, settings, variant.method, threads,
+                    tuple(pass_schedule(settings.samples, self.coarse_scale, _window_pixels(self._view))))
                 self._next[name] = 0
                 self.counters["restarts"] += 1
             self._cond.notify_all()
 
-    def _work(self) -> Optional[tuple[_Job, int]]:
+    def _work(self) -> Optional[tuple[_VariantRender, int]]:
         """The next pass to render: the variant furthest behind (in variant order on a tie)."""
         with self._cond:
             order = [v.name for v in self._variants if v.name in self._jobs]
@@ -474,10 +473,10 @@ class ViewportSession:
             _, _, name = min(pending)
             return self._jobs[name], self._next[name]
 
-    def _current(self, job: _Job) -> bool:
+    def _current(self, job: _VariantRender) -> bool:
         return self._jobs.get(job.variant) is job
 
-    def _run(self, job: _Job, index: int) -> None:
+    def _run(self, job: _VariantRender, index: int) -> None:
         def stop(done, total):
             return self._closed or not self._current(job)
         pixels = render_pass(job, index, stop)

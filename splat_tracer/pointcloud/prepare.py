@@ -1,7 +1,7 @@
 """From a cloud read from a file to what the importer stores (no Blender needed).
 
 The bulk of a scan decides the frame and the analysis, never a few stray points: scanners
-write invalid returns as (0, 0, 0) into georeferenced scans, and one such point used to
+write invalid returns as (0, 0, 0) into georeferenced scans, and one such point would
 move the origin halfway to it, degrade every other point's float32 offset, flip the
 closed guess and get a disc millions of metres wide.
 

@@ -4,7 +4,7 @@ Walks `depsgraph.object_instances` (modifiers, collection and Geometry Nodes ins
 world matrices, the view layer's collections all honoured) and turns:
 - point clouds carrying splat normals into splat geometry (SplatCloud),
 - meshes (and curves, text, surfaces, metaballs through their evaluated mesh) into Mesh,
-- lamps into shading.Light, materials into shading.Material (export_shading.py),
+- lamps into shading.Light, materials into shading.Material (export/shading.py),
 into instances: each unique geometry is read and built once and shared by all its
 instances, and kept across frames by the session's cache (session.py), keyed by content.
 

@@ -1,6 +1,6 @@
 """The viewport's live A/B comparison: flip between A and B, copy settings between the scene
 and a slot, and drag the split wipe. The settings live in scene.splat_tracer.ab
-(properties.py); what the viewport draws of them is splat_tracer/ab.py."""
+(blender/properties.py); what the viewport draws of them is splat_tracer/render/ab.py."""
 from __future__ import annotations
 
 import bpy
