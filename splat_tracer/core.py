@@ -129,7 +129,7 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
 
 class PointIndex:
     """k nearest neighbours among float32 points: a k-d tree in the compiled core
-    (native/neighbours.h), for the import's neighbourhood work (spacing.py, normals.py).
+    (native/pointcloud/neighbours.h), for the import's neighbourhood work (spacing.py, normals.py).
 
         index = core.PointIndex(points)           # (N,3)
         dist, ids = index.knn(index.order[:1000], k=6)
@@ -239,7 +239,7 @@ class PointIndex:
         return normals, graph, spacing, cover
 
 
-# --- neighbour graphs (normals.orient's propagation; native/graph.h) ----------------------
+# --- neighbour graphs (normals.orient's propagation; native/pointcloud/graph.h) -----------
 # `progress` here is None or a callable taking the fraction done (0..1) of the call, run on
 # the calling thread between chunks of work; an exception from it stops the work and
 # propagates (progress.Cancelled). `threads`: 0 for all cores.
@@ -270,7 +270,7 @@ def _indices(a, name: str, shape: tuple) -> np.ndarray:
 def spatial_order(points, threads: int = 0) -> np.ndarray:
     """(n,) int32: the indices of the (n,3) points (as float64, finite) in Morton order over
     their bounding box: a renumbering under which the graph functions below read memory
-    mostly in cache (see native/graph.h)."""
+    mostly in cache (see native/pointcloud/graph.h)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
     out = np.empty(len(pts), np.int32)
     _core.spatial_order(pts, out, threads=threads)
@@ -282,7 +282,7 @@ def first_of_duplicates(points, threads: int = 0) -> np.ndarray:
     earlier row has. Positions are equal when their coordinates are equal as numbers: -0.0
     equals 0.0, an infinity equals itself, and a row with a NaN coordinate equals no row
     (it is always True). Hashing, bucketing and sorting in the compiled core (see
-    native/duplicates.h), on `threads` threads (0: all cores; the result does not depend on
+    native/pointcloud/duplicates.h), on `threads` threads (0: all cores; the result does not depend on
     them). 10M random float32-sourced points on two threads: 0.08 s against 1.0 s for the
     numpy version it replaced, and 0.17 s against 11 s when they are 1M positions ten times
     each (spacing.first_of_duplicates says why it matters)."""
