@@ -4,7 +4,7 @@
 #include <cstdlib>
 #include <cstring>
 
-#include "splats/disc.h"
+#include "base/config.h"
 
 #ifdef SPLAT_AVX2_KERNELS
 #include <cpuid.h>

@@ -1,15 +1,16 @@
 // Four floats in one SSE register where the target has SSE2 (every x86-64), else four
 // plain floats with the same semantics: the code that uses it stays portable (the macOS
 // arm64 build is compiled without SSE) and gives the same results on both paths.
-// -DSPLAT_NO_SIMD builds the plain path on x86-64 too (how it was tested).
+// Which path is compiled: base/config.h (SPLAT_SSE2, SPLAT_NO_SIMD).
 #pragma once
 
 #include <cstdint>
 #include <cstring>
 
-#if (defined(__SSE2__) || defined(_M_X64) || defined(_M_AMD64)) && !defined(SPLAT_NO_SIMD)
+#include "base/config.h"
+
+#ifdef SPLAT_SSE2
 #include <emmintrin.h>
-#define SPLAT_SSE2 1
 #endif
 
 namespace splat {

@@ -29,6 +29,7 @@
 #include <utility>
 
 #include "base/buffer.h"
+#include "base/config.h"
 #include "base/parallel.h"
 #include "base/simd.h"
 

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cstdint>
 
+#include "base/config.h"
 #include "bvh/bvh.h"
 #include "splats/disc.h"
 

@@ -10,7 +10,7 @@
 
 #include "base/buffer.h"
 #include "base/parallel.h"
-#include "splats/splat_scene.h"  // InputError
+#include "base/errors.h"
 
 namespace splat {
 namespace {

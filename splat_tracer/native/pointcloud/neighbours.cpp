@@ -7,10 +7,11 @@
 #include <string>
 
 #include "base/buffer.h"
+#include "base/config.h"
+#include "base/errors.h"
 #include "base/parallel.h"
 #include "base/ray.h"
-#include "base/simd.h"  // SPLAT_SSE2
-#include "splats/splat_scene.h"
+#include "base/simd.h"
 
 namespace splat {
 

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "base/config.h"
 #include "base/parallel.h"
 #include "base/simd.h"
 #include "bvh/packet.h"

@@ -11,6 +11,7 @@
 #include <new>
 #include <string>
 
+#include "base/errors.h"
 #include "base/parallel.h"
 #include "scene/camera.h"
 #include "splats/splat_scene.h"

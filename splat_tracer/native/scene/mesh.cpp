@@ -3,7 +3,7 @@
 #include <cmath>
 #include <string>
 
-#include "splats/splat_scene.h"  // InputError
+#include "base/errors.h"
 
 namespace splat {
 namespace {

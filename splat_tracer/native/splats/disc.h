@@ -4,10 +4,11 @@
 
 #include <cmath>
 
+#include "base/config.h"
 #include "base/ray.h"
 #include "base/simd.h"
 
-#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__)) && defined(SPLAT_SSE2)
+#ifdef SPLAT_AVX2_KERNELS
 #include <immintrin.h>
 #endif
 
@@ -120,13 +121,12 @@ inline void intersect_disc_rays(const PacketRays &r, uint32_t mask, const float 
     }
 }
 
-#if defined(__GNUC__) && (defined(__x86_64__) || defined(__i386__))
+#ifdef SPLAT_AVX2_KERNELS
 // intersect_disc_rays() eight rays at a time, for CPUs with AVX2 (simd.cpp decides at run
 // time; the shipped binaries' baseline stays SSE2). The same operations in the same order
 // (no fused multiply-add: the function enables AVX2 only, not FMA), so the same hits. A
 // second copy rather than one template over the lane width: AVX2 intrinsics only inline
 // into functions that carry the target attribute themselves.
-#define SPLAT_AVX2_KERNELS 1
 template <class OnHit>
 __attribute__((target("avx2"))) void intersect_disc_rays_avx2(const PacketRays &r, uint32_t mask, const float *s0,
                                                                 uint32_t count, OnHit &&hit) {

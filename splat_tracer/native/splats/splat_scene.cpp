@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "base/config.h"
 #include "base/parallel.h"
 #include "bvh/packet.h"
 

@@ -4,11 +4,11 @@
 #pragma once
 
 #include <cstddef>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "base/buffer.h"
+#include "base/errors.h"
 #include "bvh/bvh.h"
 #include "splats/disc.h"
 #include "splats/layer.h"
@@ -24,11 +24,6 @@ struct PackedSplat {
 };
 static_assert(sizeof(PackedSplat) == 32 && offsetof(PackedSplat, r) == 12 && offsetof(PackedSplat, n) == 16,
               "the disc tests read a splat as 8 floats: c.x, c.y, c.z, r, n.x, n.y, n.z, id");
-
-// Raised for input that cannot be a splat scene; the bindings turn it into ValueError.
-struct InputError : std::runtime_error {
-    using std::runtime_error::runtime_error;
-};
 
 class SplatScene {
   public:
