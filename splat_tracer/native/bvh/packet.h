@@ -16,7 +16,6 @@
 // axis where only some rays run parallel, or the signs differ, is not tested (only looser).
 #pragma once
 
-#include <algorithm>
 #include <cstdint>
 
 #include "base/config.h"
@@ -30,22 +29,6 @@ namespace splat {
 // bounds). A 4x4 tile of camera rays is well inside both, even at 160x120; scattered rays
 // would make the packet's bounds cover much of the scene, and are traced one by one.
 bool packet_coherent(const PacketRays &rays, int n, float scene_size);
-
-// The pixels of the rectangle [x0, x1) x [y0, y1) in blocks of 4x4, rows of blocks from
-// the top (cut short at its edges): block(cols, rows, n) with each of the block's n pixels'
-// column and row, row by row -- one camera-ray packet each.
-template <class Block>
-void for_each_block(int x0, int y0, int x1, int y1, Block &&block) {
-    constexpr int kBlock = 4;
-    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
-    for (int by = y0; by < y1; by += kBlock)
-        for (int bx = x0; bx < x1; bx += kBlock) {
-            int cols[kPacketRays], rows[kPacketRays], n = 0;
-            for (int row = by; row < std::min(by + kBlock, y1); ++row)
-                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) cols[n] = col, rows[n] = row;
-            block(cols, rows, n);
-        }
-}
 
 // The bounds of a packet's rays, broadcast for the four lanes of a wide node.
 struct PacketBounds {

@@ -299,7 +299,7 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "progress", "tile_size", "method", "packets", nullptr};
     PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None,
              *ometh = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = 32, packets = 1;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, packets = 1;
     float bg[4];
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOiOp", const_cast<char **>(kwlist), &om,
                                      &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
@@ -317,17 +317,17 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     for (float v : bg)
         if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "background must be finite");
 
-    RenderTarget target;
-    target.width = width, target.height = height, target.x0 = x0, target.y0 = y0, target.w = w, target.h = h;
-    target.rgba = rgba.data<float>();
-    target.depth = depth.held ? depth.data<float>() : nullptr;
-    target.normal = normal.held ? normal.data<float>() : nullptr;
+    Film film;
+    film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
+    film.combined = rgba.data<float>();
+    film.depth = depth.held ? depth.data<float>() : nullptr;
+    film.normal = normal.held ? normal.data<float>() : nullptr;
     RenderSettings settings;
     if (!parse_method(ometh, settings.method)) return nullptr;
     std::copy(bg, bg + 4, settings.background);
     settings.tile_size = tile_size;
     settings.packets = packets != 0;
-    Renderer renderer(scene_of(self), cam, target, settings);
+    Renderer renderer(scene_of(self), cam, film, settings);
     const size_t tiles = renderer.tile_count();
 
     const int completed = run_tiles(tiles, threads_arg(self, threads), progress,

@@ -205,7 +205,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     PyObject *om, *opos, *ofwd, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = 32, transparent = 0, packets = 1;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0, packets = 1;
     float world[3];
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
                                      &om, &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &osettings, &ometh,

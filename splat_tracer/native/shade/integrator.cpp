@@ -3,8 +3,6 @@
 #include <algorithm>
 #include <cmath>
 
-#include "bvh/packet.h"
-
 namespace splat {
 
 // Paths deeper than this are cut whatever the settings say: each level is a stack frame of
@@ -127,18 +125,10 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
 
-size_t Integrator::tile_count() const {
-    const int64_t ts = settings_.tile_size;
-    return size_t((film_.w + ts - 1) / ts) * size_t((film_.h + ts - 1) / ts);
-}
-
 void Integrator::render_tile(size_t tile) const {
-    const int ts = settings_.tile_size;
-    const int tiles_x = int((int64_t(film_.w) + ts - 1) / ts);
-    const int tx = int(tile % size_t(tiles_x)) * ts, ty = int(tile / size_t(tiles_x)) * ts;
     Tally tally;
     // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
-    for_each_block(tx, ty, std::min(tx + ts, film_.w), std::min(ty + ts, film_.h),
+    for_each_block(film_, settings_.tile_size, tile,
                    [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally); });
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
@@ -163,9 +153,7 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         r2_point(uint32_t(s), &ux, &uy);
         const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
         Ray rays[kPacketRays];
-        for (int k = 0; k < n; ++k)
-            rays[k] = camera_.ray(film_.x0 + cols[k] + 0.5 + fx, film_.y0 + rows[k] + 0.5 + fy, film_.width,
-                                  film_.height);
+        block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
         SurfacePoint hits[kPacketRays];
         if (settings_.packets) scene_.intersect_camera(rays, n, settings_.method, hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
@@ -199,7 +187,7 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.emit, a.emit * inv);
         put3(film_.shadow, a.shadow * inv);
         put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
-        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : settings_.background_depth;
+        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
         if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
         if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
     }

@@ -8,11 +8,12 @@
 
 #include "scene/camera.h"
 #include "scene/render_scene.h"
+#include "shade/film.h"
 #include "shade/sampling.h"
 
 namespace splat {
 
-struct IntegratorSettings {
+struct IntegratorSettings : FrameSettings {
     int samples = 1;
     int filter_type = PixelFilter::BlackmanHarris;
     float filter_width = 1.5f;
@@ -20,7 +21,6 @@ struct IntegratorSettings {
     int max_bounces = 12, diffuse_bounces = 1, glossy_bounces = 4, transmission_bounces = 12,
         transparent_bounces = 8;
     uint32_t seed = 0;
-    Method method;
     Vec3 world;  // background radiance
     bool film_transparent = false;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
@@ -30,17 +30,6 @@ struct IntegratorSettings {
     // occlusion rays bring the world's radiance where they escape; no diffuse bounce rays.
     bool sky_ao = false;
     int ao_samples = 1;
-    int tile_size = 32;
-    float background_depth = 1e10f;  // what Cycles writes in Z where nothing is hit
-    bool packets = true;  // camera rays of 4x4 pixels as one packet (packet.h); the same image
-};
-
-// Output buffers of the rendered window (w x h, top row first); any may be null (not wanted,
-// and then not computed). Channels: combined 4, normal/diffcol/emit/shadow 3, others 1.
-struct Film {
-    int width = 0, height = 0, x0 = 0, y0 = 0, w = 0, h = 0;
-    float *combined = nullptr, *depth = nullptr, *normal = nullptr, *diffcol = nullptr, *emit = nullptr,
-          *shadow = nullptr, *index = nullptr, *splat_count = nullptr;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -55,7 +44,7 @@ class Integrator {
     Integrator(const RenderScene &scene, const Camera &camera, const Film &film, const IntegratorSettings &settings,
                RenderCounters &counters);
 
-    size_t tile_count() const;
+    size_t tile_count() const { return splat::tile_count(film_, settings_.tile_size); }
     void render_tile(size_t tile) const;
 
   private:
