@@ -7,7 +7,7 @@ VENV   := .venv
 VPY    := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
-NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
+NATIVE := $(shell find splat_tracer/native -name '*.cpp' -o -name '*.h')
 
 .PHONY: all venv build native demo test test-matrix test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
 

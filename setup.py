@@ -22,8 +22,10 @@ NATIVE = Path("splat_tracer") / "native"
 
 core = Extension(
     "splat_tracer._core",
-    sources=sorted(str(p) for p in NATIVE.glob("*.cpp")),
-    depends=sorted(str(p) for p in NATIVE.glob("*.h")),
+    sources=sorted(str(p) for p in NATIVE.rglob("*.cpp")),
+    depends=sorted(str(p) for p in NATIVE.rglob("*.h")),
+    # Includes are written from the native root ("base/vec3.h"), one folder per idea.
+    include_dirs=[str(NATIVE)],
     language="c++",
     define_macros=[("Py_LIMITED_API", "0x030B0000")],
     py_limited_api=True,

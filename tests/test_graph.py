@@ -304,7 +304,7 @@ def test_rows_one_bit_apart_are_distinct():
     assert keep[:len(p)].all() and not keep[len(p):].any()
 
 
-# The core's row hash (native/duplicates.cpp), restated to build rows that all have one hash.
+# The core's row hash (native/pointcloud/duplicates.cpp), restated to build rows that all have one hash.
 _MULTIPLIERS = [0x9E3779B97F4A7C15, 0xBF58476D1CE4E5B9, 0x94D049BB133111EB]
 
 

@@ -1,4 +1,4 @@
-"""The compiled neighbour search (PointIndex, native/neighbours.cpp) against brute force
+"""The compiled neighbour search (PointIndex, native/pointcloud/neighbours.cpp) against brute force
 and against numpy versions of the rules it computes (the gap-closing radius, PCA normals)."""
 import numpy as np
 import pytest

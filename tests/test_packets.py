@@ -1,4 +1,4 @@
-"""Ray packets (native/packet.h): 16 coherent rays through the BVH together give exactly the
+"""Ray packets (native/bvh/packet.h): 16 coherent rays through the BVH together give exactly the
 answers each ray gets alone -- for the nearest hit, for every visibility method, for rays
 inside objects and with exclusions, for perspective and orthographic cameras and for views
 along an axis -- and incoherent rays fall back to one ray at a time."""

@@ -187,7 +187,9 @@ def build(platform: str, out_dir: Path) -> Path:
             # The host pyconfig.h (Linux) sets _POSIX_C_SOURCE/_XOPEN_SOURCE that glibc's
             # features.h has already set to newer values: harmless.
             "-Wno-macro-redefined",
-            f"-I{include}", *sorted(str(p) for p in NATIVE.glob("*.cpp")), "-o", str(out), "-s", *link]
+            # Includes are written from the native root ("base/vec3.h").
+            f"-I{include}", f"-I{NATIVE}", *sorted(str(p) for p in NATIVE.rglob("*.cpp")),
+            "-o", str(out), "-s", *link]
     system = platform.split("-")[0]
     if system == "linux":
         # Only the module's entry point is exported: none of the statically linked libc++.

@@ -1,4 +1,4 @@
-"""Neighbour graphs in the compiled core (native/graph.h): edge weights, the minimum
+"""Neighbour graphs in the compiled core (native/pointcloud/graph.h): edge weights, the minimum
 spanning forest and its traversal, and the sign chain along it -- normals.orient's
 propagation.
 

@@ -41,7 +41,7 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
 
 class PointIndex:
     """k nearest neighbours among float32 points: a k-d tree in the compiled core
-    (native/neighbours.h), for the import's neighbourhood work (spacing.py, normals.py).
+    (native/pointcloud/neighbours.h), for the import's neighbourhood work (spacing.py, normals.py).
 
         index = PointIndex(points)                # (N,3)
         dist, ids = index.knn(index.order[:1000], k=6)
@@ -154,7 +154,7 @@ class PointIndex:
 def spatial_order(points, threads: int = 0) -> np.ndarray:
     """(n,) int32: the indices of the (n,3) points (as float64, finite) in Morton order over
     their bounding box: a renumbering under which the graph functions below read memory
-    mostly in cache (see native/graph.h)."""
+    mostly in cache (see native/pointcloud/graph.h)."""
     pts = np.ascontiguousarray(points, dtype=np.float64)
     out = np.empty(len(pts), np.int32)
     _core.spatial_order(pts, out, threads=threads)
@@ -168,7 +168,7 @@ def first_of_duplicates(points, threads: int = 0) -> np.ndarray:
     (it is always True). Coincident points make the k-NN query pathological (every neighbour
     at distance 0: 200k copies of one point took 90 s), so the importer finds them first
     (cloud.make_cloud). Rows are bucketed and sorted by a hash of their coordinates in the
-    compiled core (see native/duplicates.h), and only rows sharing a hash are compared by
+    compiled core (see native/pointcloud/duplicates.h), and only rows sharing a hash are compared by
     value, in about linear time however many copies there are; on `threads` threads (0: all
     cores; the result does not depend on them). 10M random float32-sourced points on two
     threads: 0.08 s against 1.0 s for the numpy's hash and sort, and 0.17 s against 11 s

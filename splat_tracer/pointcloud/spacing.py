@@ -215,7 +215,7 @@ def knn_spacing(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1) -> tu
 # spacing: on the benchmark's randomly sampled clouds 1.3 leaves few pinholes at 640x480,
 # and a larger cap fattens silhouettes. A circle counts when it is empty: no neighbour
 # strictly inside (a long thin triangle's circle is not a gap). The compiled core computes
-# the rule (native/neighbours.cpp, covering_radius), beside the neighbour search.
+# the rule (native/pointcloud/neighbours.cpp, covering_radius), beside the neighbour search.
 COVER_K = 12
 COVER_MAX_GAP = np.radians(162.0)  # 0.9 pi: a near-straight boundary still counts as one
 COVER_CAP = 1.3

@@ -1,6 +1,6 @@
 """What a scene looks like, as the native core consumes it: materials, lights, the world and
 the render settings. Plain dataclasses (no Blender needed); `pack()` turns each into the flat
-float32 row the core reads, whose layout is mirrored in `native/shading.h` (keep both in step:
+float32 row the core reads, whose layout is mirrored in `native/shade/shading.h` (keep both in step:
 the `*_FIELDS` tuples below are the single list of columns).
 
 Units are Blender's, so that a scene lit for Cycles renders at the same brightness:

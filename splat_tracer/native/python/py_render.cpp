@@ -1,0 +1,334 @@
+// Python bindings of the scene renderer: `_core.Mesh` (a triangle mesh and its BVH) and
+// `_core.RenderScene` (instances of clouds and meshes, materials, lamps; render()).
+// splat_tracer/core.py wraps both; every input is validated here too.
+#include <atomic>
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "python/py_util.h"
+#include "shade/integrator.h"
+
+namespace splat::py {
+namespace {
+
+// ---------------------------------------------------------------------------------------
+// Mesh
+
+struct MeshObject {
+    PyObject_HEAD
+    TriangleMesh *mesh;
+};
+
+PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOi", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads))
+        return nullptr;
+    if (!check_threads(threads)) return nullptr;
+    View v, t, n, m;
+    Py_ssize_t s3[2] = {-1, 3};
+    if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
+    if (!get_array(ot, "triangles", 'i', 2, s3, false, t)) return nullptr;
+    const Py_ssize_t nt = t.dim(0);
+    Py_ssize_t sn[3] = {nt, 3, 3}, s1[1] = {nt};
+    if (on != Py_None && !get_array(on, "corner_normals", 'f', 3, sn, false, n)) return nullptr;
+    if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
+    TriangleMesh *mesh = nullptr;
+    if (!without_gil([&] {
+            mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
+                                    n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
+                                    threads);
+        }))
+        return nullptr;
+    auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
+    PyObject *self = alloc(type, 0);
+    if (!self) {
+        delete mesh;
+        return nullptr;
+    }
+    reinterpret_cast<MeshObject *>(self)->mesh = mesh;
+    return self;
+}
+
+void Mesh_dealloc(PyObject *self) {
+    delete reinterpret_cast<MeshObject *>(self)->mesh;
+    PyTypeObject *type = Py_TYPE(self);
+    reinterpret_cast<freefunc>(PyType_GetSlot(type, Py_tp_free))(self);
+    Py_DECREF(type);
+}
+
+const TriangleMesh *as_mesh(PyObject *obj) {
+    // Identified by its deallocator, not by a stored type: a second import of this binary
+    // under another module name (the add-on as bl_ext.*.splat_tracer) makes a new Mesh type,
+    // and Meshes of the first import were refused -- or, through a null type pointer, len()
+    // segfaulted (see as_splat_scene).
+    if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Mesh_dealloc)) return nullptr;
+    return reinterpret_cast<MeshObject *>(obj)->mesh;
+}
+
+PyObject *Mesh_size(PyObject *self, void *) { return PyLong_FromSize_t(as_mesh(self)->size()); }
+
+PyGetSetDef Mesh_getset[] = {
+    {"size", Mesh_size, nullptr, "Number of triangles.", nullptr},
+    {nullptr, nullptr, nullptr, nullptr, nullptr},
+};
+
+PyType_Slot Mesh_slots[] = {
+    {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
+    {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
+    {Py_tp_getset, Mesh_getset},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0)")},
+    {0, nullptr},
+};
+
+PyType_Spec Mesh_spec = {"splat_tracer._core.Mesh", sizeof(MeshObject), 0, Py_TPFLAGS_DEFAULT, Mesh_slots};
+
+// ---------------------------------------------------------------------------------------
+// RenderScene
+
+struct RenderSceneObject {
+    PyObject_HEAD
+    RenderScene *scene;
+    PyObject *geometries;  // a tuple holding every Scene/Mesh the instances point into
+    int threads;
+};
+
+Affine affine_of(const float *row) {
+    Affine a;
+    std::copy(row, row + 12, a.m);
+    return a;
+}
+
+PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
+                                   "visibility", "holdout", "pass_index", "materials", "lights", "threads",
+                                   nullptr};
+    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|i", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads))
+        return nullptr;
+    if (!check_threads(threads)) return nullptr;
+    PyObject *geometries = PySequence_Tuple(ogeo);
+    if (!geometries) return nullptr;
+    std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
+    const Py_ssize_t n_geo = PyTuple_Size(geometries);
+    View idx, w, o, range, vis, holdout, pass, mat, light;
+    Py_ssize_t s1[1] = {-1};
+    if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
+    const Py_ssize_t n = idx.dim(0);
+    Py_ssize_t s12[2] = {n, 12}, s2[2] = {n, 2}, sn[1] = {n}, sm[2] = {-1, kMaterialFields},
+               sl[2] = {-1, kLightFields};
+    if (!get_array(ow, "to_world", 'f', 2, s12, false, w) || !get_array(oo, "to_object", 'f', 2, s12, false, o) ||
+        !get_array(orange, "material_range", 'i', 2, s2, false, range) ||
+        !get_array(ovis, "visibility", 'i', 1, sn, false, vis) ||
+        !get_array(ohold, "holdout", 'B', 1, sn, false, holdout) ||
+        !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
+        !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light))
+        return nullptr;
+    const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
+
+    std::vector<Instance> instances(static_cast<size_t>(n));
+    for (Py_ssize_t i = 0; i < n; ++i) {
+        const int32_t g = idx.data<int32_t>()[i];
+        if (g < 0 || g >= n_geo) return PyErr_Format(PyExc_ValueError, "instance %zd: geometry index %d out of range", i, g);
+        PyObject *geo = PyTuple_GetItem(geometries, g);
+        Instance &inst = instances[size_t(i)];
+        inst.splats = as_splat_scene(geo);
+        inst.mesh = inst.splats ? nullptr : as_mesh(geo);
+        if (!inst.splats && !inst.mesh)
+            return PyErr_Format(PyExc_TypeError, "geometry %d is neither a Scene (splats) nor a Mesh", g);
+        for (int k = 0; k < 12; ++k)
+            if (!within_range(w.data<float>()[12 * i + k]) || !within_range(o.data<float>()[12 * i + k]))
+                return PyErr_Format(PyExc_ValueError, "instance %zd: transform is not finite or beyond 1e18", i);
+        inst.to_world = affine_of(w.data<float>() + 12 * i);
+        inst.to_object = affine_of(o.data<float>() + 12 * i);
+        const int32_t first = range.data<int32_t>()[2 * i], count = range.data<int32_t>()[2 * i + 1];
+        if (first < 0 || count < 1 || int64_t(first) + count > n_mat)
+            return PyErr_Format(PyExc_ValueError, "instance %zd: material range (%d, %d) is not inside the %zd materials",
+                                i, first, count, n_mat);
+        inst.material_offset = first, inst.material_count = count;
+        inst.visibility = uint32_t(vis.data<int32_t>()[i]) & kVisAll;
+        inst.holdout = holdout.data<uint8_t>()[i] != 0;
+        inst.pass_index = pass.data<float>()[i];
+    }
+    std::vector<Material> materials(static_cast<size_t>(n_mat));
+    for (Py_ssize_t i = 0; i < n_mat; ++i) {
+        const float *r = mat.data<float>() + kMaterialFields * i;
+        for (int k = 0; k < kMaterialFields; ++k)
+            if (!std::isfinite(r[k])) return PyErr_Format(PyExc_ValueError, "material %zd: value %d is not finite", i, k);
+        materials[size_t(i)] = Material::from_row(r);
+        if (!(materials[size_t(i)].ior > 0.f)) return PyErr_Format(PyExc_ValueError, "material %zd: ior must be > 0", i);
+    }
+    std::vector<Light> lights(static_cast<size_t>(n_light));
+    for (Py_ssize_t i = 0; i < n_light; ++i) {
+        const float *r = light.data<float>() + kLightFields * i;
+        for (int k = 0; k < kLightFields; ++k)
+            if (!within_range(r[k])) return PyErr_Format(PyExc_ValueError, "light %zd: value %d is not finite", i, k);
+        if (r[0] < 0 || r[0] > 3 || r[16] < 0 || r[16] > 3)
+            return PyErr_Format(PyExc_ValueError, "light %zd: unknown type or shape", i);
+        lights[size_t(i)] = Light::from_row(r);
+    }
+    RenderScene *scene = nullptr;
+    if (!without_gil([&] { scene = new RenderScene(std::move(instances), std::move(materials), std::move(lights), threads); }))
+        return nullptr;
+    auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
+    PyObject *self = alloc(type, 0);
+    if (!self) {
+        delete scene;
+        return nullptr;
+    }
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    obj->scene = scene;
+    obj->geometries = hold.release();  // keeps the geometry alive as long as the scene
+    obj->threads = threads;
+    return self;
+}
+
+void RenderScene_dealloc(PyObject *self) {
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    delete obj->scene;
+    Py_XDECREF(obj->geometries);
+    PyTypeObject *type = Py_TYPE(self);
+    reinterpret_cast<freefunc>(PyType_GetSlot(type, Py_tp_free))(self);
+    Py_DECREF(type);
+}
+
+PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window", "settings",
+                                   "method", "world", "film_transparent", "combined", "depth", "normal", "diffcol",
+                                   "emit", "shadow", "index", "splat_count", "threads", "progress", "tile_size",
+                                   "packets", nullptr};
+    PyObject *om, *opos, *ofwd, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
+             *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
+             *progress = Py_None;
+    int width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0, packets = 1;
+    float world[3];
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
+                                     &om, &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &osettings, &ometh,
+                                     &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
+                                     &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
+                                     &packets))
+        return nullptr;
+    if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
+    for (float v : world)
+        if (!(std::isfinite(v) && v >= 0.f)) return PyErr_Format(PyExc_ValueError, "world radiance must be finite, >= 0");
+
+    IntegratorSettings cfg;
+    unsigned int seed = 0;
+    int headlight = 0, sky_ao = 0;
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppi;settings must be RenderSettings.pack()", &cfg.samples,
+                          &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
+                          &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
+                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples))
+        return nullptr;
+    if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
+    cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
+    if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
+        cfg.filter_type < 0 || cfg.filter_type > 2 || !(cfg.filter_width >= 0.01f && cfg.filter_width <= 10.f))
+        return PyErr_Format(PyExc_ValueError, "settings out of range (see shading.RenderSettings)");
+    for (int b : {cfg.max_bounces, cfg.diffuse_bounces, cfg.glossy_bounces, cfg.transmission_bounces,
+                  cfg.transparent_bounces})
+        if (b < 0 || b > 1024) return PyErr_Format(PyExc_ValueError, "bounce limits must be in 0..1024");
+    cfg.seed = seed;
+    if (!parse_method(ometh, cfg.method)) return nullptr;
+    cfg.world = Vec3(world[0], world[1], world[2]);
+    cfg.film_transparent = transparent != 0;
+    cfg.tile_size = tile_size;
+    cfg.packets = packets != 0;
+
+    Camera cam;
+    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+
+    Film film;
+    film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
+    struct Out {
+        PyObject *obj;
+        const char *name;
+        int channels;
+        float **target;
+        View view;
+    } outs[] = {{ocomb, "combined", 4, &film.combined, {}},   {odepth, "depth", 1, &film.depth, {}},
+                {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
+                {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
+                {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}}};
+    for (Out &out : outs) {
+        if (out.obj == Py_None) continue;
+        Py_ssize_t shape[3] = {h, w, out.channels};
+        if (!get_array(out.obj, out.name, 'f', out.channels == 1 ? 2 : 3, shape, true, out.view)) return nullptr;
+        *out.target = out.view.data<float>();
+    }
+    if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    RenderScene &scene = *obj->scene;
+    const Vec3 eye(float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
+    scene.locate_camera(eye);  // renders of one RenderScene are not concurrent: the GIL is held here
+    RenderCounters counters;
+    Integrator integrator(scene, cam, film, cfg, counters);
+    const int done = run_tiles(integrator.tile_count(), threads > 0 ? threads : obj->threads, progress,
+                               [&](size_t t) { integrator.render_tile(t); });
+    if (done < 0) return nullptr;
+    auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
+    return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,
+                         "camera_rays", n(counters.camera), "shadow_rays", n(counters.shadow), "reflection_rays",
+                         n(counters.reflection), "refraction_rays", n(counters.refraction), "diffuse_rays",
+                         n(counters.diffuse), "transparent_rays", n(counters.transparent), "nodes", n(counters.nodes),
+                         "disc_tests", n(counters.discs), "triangle_tests", n(counters.triangles), "layer_queries",
+                         n(counters.layer_queries), "far_rejections", n(counters.far_rejections), "interpolations",
+                         n(counters.interpolations));
+}
+
+PyObject *RenderScene_instances(PyObject *self, void *) {
+    return PyLong_FromSize_t(reinterpret_cast<RenderSceneObject *>(self)->scene->instance_count());
+}
+
+PyMethodDef RenderScene_methods[] = {
+    {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(RenderScene_render)),
+     METH_VARARGS | METH_KEYWORDS,
+     "render(local_from_ndc, position, forward, width, height, window, settings, method, world, film_transparent, "
+     "combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
+     "threads=0, progress=None, tile_size=32, packets=True)\n--\n\nRenders a window; returns (completed, counters)."},
+    {nullptr, nullptr, 0, nullptr},
+};
+
+PyGetSetDef RenderScene_getset[] = {
+    {"instances", RenderScene_instances, nullptr, "Number of instances.", nullptr},
+    {nullptr, nullptr, nullptr, nullptr, nullptr},
+};
+
+PyType_Slot RenderScene_slots[] = {
+    {Py_tp_new, reinterpret_cast<void *>(RenderScene_new)},
+    {Py_tp_dealloc, reinterpret_cast<void *>(RenderScene_dealloc)},
+    {Py_tp_methods, RenderScene_methods},
+    {Py_tp_getset, RenderScene_getset},
+    {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
+                                   "visibility, holdout, pass_index, materials, lights, threads=0)")},
+    {0, nullptr},
+};
+
+PyType_Spec RenderScene_spec = {"splat_tracer._core.RenderScene", sizeof(RenderSceneObject), 0, Py_TPFLAGS_DEFAULT,
+                                RenderScene_slots};
+
+}  // namespace
+
+int add_render_types(PyObject *module) {
+    PyObject *mesh = PyType_FromSpec(&Mesh_spec);
+    if (!mesh) return -1;
+    if (PyModule_AddObject(module, "Mesh", mesh) < 0) {
+        Py_DECREF(mesh);
+        return -1;
+    }
+    PyObject *rs = PyType_FromSpec(&RenderScene_spec);
+    if (!rs) return -1;
+    if (PyModule_AddObject(module, "RenderScene", rs) < 0) {
+        Py_DECREF(rs);
+        return -1;
+    }
+    return 0;
+}
+
+}  // namespace splat::py

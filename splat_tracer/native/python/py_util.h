@@ -1,0 +1,255 @@
+// Shared by the binding files: buffer-protocol views with checked dtype, layout and shape,
+// running C++ without the GIL, and the method tuple. Built against the limited API.
+#pragma once
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <new>
+#include <string>
+
+#include "base/errors.h"
+#include "base/parallel.h"
+#include "scene/camera.h"
+#include "splats/splat_scene.h"
+#include "splats/visibility.h"
+
+namespace splat::py {
+
+// ---------------------------------------------------------------------------------------
+// Buffers
+
+// A buffer view that releases itself.
+struct View {
+    Py_buffer buf{};
+    bool held = false;
+    ~View() {
+        if (held) PyBuffer_Release(&buf);
+    }
+    template <class T>
+    T *data() const { return static_cast<T *>(buf.buf); }
+    Py_ssize_t dim(int i) const { return buf.shape[i]; }
+};
+
+// Element kinds accepted, by struct-module format letter.
+inline bool format_matches(const char *format, Py_ssize_t itemsize, char kind) {
+    if (!format) format = "B";
+    char order = '@';
+    if (*format == '@' || *format == '=' || *format == '<' || *format == '>' || *format == '!') order = *format++;
+    const bool little = [] { uint16_t one = 1; return *reinterpret_cast<uint8_t *>(&one) == 1; }();
+    if ((order == '>' || order == '!') && little) return false;
+    if (order == '<' && !little) return false;
+    if (std::strlen(format) != 1) return false;
+    const char f = format[0];
+    switch (kind) {
+        case 'f': return f == 'f' && itemsize == 4;
+        case 'd': return f == 'd' && itemsize == 8;
+        case 'i': return (f == 'i' || f == 'l') && itemsize == 4;
+        case 'B': return (f == 'B' || f == '?') && itemsize == 1;
+        case 'q': return (f == 'q' || f == 'l' || f == 'Q' || f == 'L') && itemsize == 8;
+    }
+    return false;
+}
+
+inline const char *kind_name(char kind) {
+    switch (kind) {
+        case 'f': return "float32";
+        case 'd': return "float64";
+        case 'i': return "int32";
+        case 'B': return "uint8 or bool";
+        case 'q': return "int64";
+    }
+    return "?";
+}
+
+// Gets a C-contiguous buffer of `kind` with `ndim` dimensions; a positive entry of
+// `shape` must match exactly, -1 means any. Sets a Python exception and returns false
+// otherwise.
+inline bool get_array(PyObject *obj, const char *name, char kind, int ndim, const Py_ssize_t *shape,
+               bool writable, View &view) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, &view.buf, flags) != 0) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous%s %s array", name,
+                     writable ? " writable" : "", kind_name(kind));
+        return false;
+    }
+    view.held = true;
+    if (!format_matches(view.buf.format, view.buf.itemsize, kind)) {
+        PyErr_Format(PyExc_TypeError, "%s must have dtype %s (got format '%s')", name, kind_name(kind),
+                     view.buf.format ? view.buf.format : "B");
+        return false;
+    }
+    if (view.buf.ndim != ndim) {
+        PyErr_Format(PyExc_ValueError, "%s must have %d dimension(s), got %d", name, ndim, view.buf.ndim);
+        return false;
+    }
+    for (int i = 0; i < ndim; ++i) {
+        if (shape[i] >= 0 && view.buf.shape[i] != shape[i]) {
+            PyErr_Format(PyExc_ValueError, "%s has size %zd along axis %d, expected %zd", name,
+                         view.buf.shape[i], i, shape[i]);
+            return false;
+        }
+    }
+    return true;
+}
+
+// Runs `fn`, turning a C++ exception into the Python exception type to raise and its
+// message: InputError (the caller's bad input) ValueError, bad_alloc MemoryError, anything
+// else RuntimeError. Returns nullptr when fn returned. Touches no Python object: it may run
+// without the GIL.
+template <class F>
+PyObject *run_native(F &&fn, std::string &message) {
+    try {
+        fn();
+    } catch (const InputError &e) {
+        return message = e.what(), PyExc_ValueError;
+    } catch (const std::bad_alloc &) {
+        return message = "out of memory", PyExc_MemoryError;
+    } catch (const std::exception &e) {
+        return message = e.what(), PyExc_RuntimeError;
+    }
+    return nullptr;
+}
+
+// Runs `fn` without the GIL, turning C++ exceptions into Python ones (run_native). Returns
+// false with a Python exception set when `fn` threw.
+template <class F>
+bool without_gil(F &&fn) {
+    std::string message;
+    PyObject *type = nullptr;
+    Py_BEGIN_ALLOW_THREADS
+    type = run_native(fn, message);
+    Py_END_ALLOW_THREADS
+    if (type) PyErr_SetString(type, message.c_str());
+    return type == nullptr;
+}
+
+// threads: 0 for all cores, else that many. Sets ValueError and returns false when negative.
+inline bool check_threads(int threads) {
+    if (threads < 0) return PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all cores)"), false;
+    return true;
+}
+
+// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon[,
+// crease_angle in degrees]), as core.Method.as_tuple() builds it. Returns false with an
+// exception set when invalid.
+inline bool parse_method(PyObject *obj, Method &m) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj)) return PyErr_Format(PyExc_TypeError, "method must be a tuple (see core.Method)"), false;
+    int elim, interp, far, position, kernel;
+    float eps, crease = 180.f;
+    if (!PyArg_ParseTuple(obj,
+                          "pppiif|f;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon"
+                          "[, crease_angle])",
+                          &elim, &interp, &far, &position, &kernel, &eps, &crease))
+        return false;
+    if (position < 0 || position > 2) return PyErr_Format(PyExc_ValueError, "method position must be 0, 1 or 2"), false;
+    if (kernel < 0 || kernel > 1) return PyErr_Format(PyExc_ValueError, "method kernel must be 0 or 1"), false;
+    if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
+    if (!(crease >= 0.f && crease <= 180.f))
+        return PyErr_Format(PyExc_ValueError, "crease angle must be between 0 and 180 degrees"), false;
+    m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
+    m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
+    m.crease_cos = crease >= 180.f ? -2.f : std::cos(crease * float(M_PI) / 180.f);
+    return true;
+}
+
+// Runs task(t) for the `tiles` tiles on `threads` threads without the GIL. `progress`
+// (None or a callable) runs on this (the calling) thread, with the GIL, between waits, as
+// progress(done, total); it returns True to stop. An exception from it stops the work and
+// is re-raised. Returns 1 when every tile was done, 0 when stopped, -1 with an exception set.
+template <class Task>
+int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
+    bool callback_failed = false, completed = false;
+    PyThreadState *saved = nullptr;
+    auto poll = [&](size_t done) {
+        if (progress == Py_None) return true;
+        PyEval_RestoreThread(saved);
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
+        bool go_on = false;
+        if (!res) {
+            callback_failed = true;
+        } else {
+            int stop = PyObject_IsTrue(res);
+            Py_DECREF(res);
+            if (stop < 0) callback_failed = true;
+            go_on = stop == 0;
+        }
+        saved = PyEval_SaveThread();
+        return go_on;
+    };
+    std::string message;
+    PyObject *error_type = nullptr;
+    saved = PyEval_SaveThread();
+    try {
+        completed = parallel_for(tiles, threads, task, poll);
+    } catch (const std::bad_alloc &) {
+        error_type = PyExc_MemoryError, message = "out of memory";
+    } catch (const std::exception &e) {
+        error_type = PyExc_RuntimeError, message = e.what();
+    }
+    PyEval_RestoreThread(saved);
+    if (callback_failed) return -1;  // the callback's exception is still set
+    if (error_type) {
+        PyErr_SetString(error_type, message.c_str());
+        return -1;
+    }
+    if (progress != Py_None && completed) {  // a last report, so that callers see 100 %
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
+        if (!res) return -1;
+        Py_DECREF(res);
+    }
+    return completed ? 1 : 0;
+}
+
+// The scalar arguments of a render call: image size, window, tile size, threads, progress.
+// Sets an exception and returns false when unusable.
+inline bool check_render_args(int width, int height, int x0, int y0, int w, int h, int tile_size, int threads,
+                              PyObject *progress) {
+    if (width <= 0 || height <= 0) return PyErr_Format(PyExc_ValueError, "image size must be positive"), false;
+    // In 64 bits: x0 + w may overflow int for a window near 2^31.
+    if (x0 < 0 || y0 < 0 || w <= 0 || h <= 0 || int64_t(x0) + w > width || int64_t(y0) + h > height)
+        return PyErr_Format(PyExc_ValueError, "window (%d, %d, %d, %d) is not inside the %dx%d image", x0, y0, w, h,
+                            width, height),
+               false;
+    if (tile_size <= 0 || tile_size > 4096)
+        return PyErr_Format(PyExc_ValueError, "tile_size must be in 1..4096"), false;
+    if (!check_threads(threads)) return false;
+    if (progress != Py_None && !PyCallable_Check(progress))
+        return PyErr_Format(PyExc_TypeError, "progress must be callable or None"), false;
+    return true;
+}
+
+// A camera from its three arrays (core.Camera): local_from_ndc 4x4, position and forward 3,
+// all float64 and finite. Sets an exception and returns false otherwise.
+inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &cam) {
+    View m, pos, fwd;
+    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3};
+    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m) || !get_array(opos, "position", 'd', 1, s3, false, pos) ||
+        !get_array(ofwd, "forward", 'd', 1, s3, false, fwd))
+        return false;
+    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
+    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
+    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
+    for (double v : cam.local_from_ndc)
+        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite"), false;
+    for (int k = 0; k < 3; ++k)
+        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
+            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite"), false;
+    return true;
+}
+
+// The splat scene inside a `_core.Scene` object, or null (no exception set) for anything else.
+const SplatScene *as_splat_scene(PyObject *obj);
+// Adds `Mesh` and `RenderScene` to the module (py_render.cpp).
+int add_render_types(PyObject *module);
+// Adds `PointIndex` to the module (py_neighbours.cpp).
+int add_neighbour_types(PyObject *module);
+// Adds the neighbour-graph functions (py_graph.cpp).
+int add_graph_functions(PyObject *module);
+
+}  // namespace splat::py

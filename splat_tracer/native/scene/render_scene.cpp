@@ -1,0 +1,279 @@
+#include "scene/render_scene.h"
+
+#include <cmath>
+#include <new>
+
+#include "bvh/packet.h"
+
+namespace splat {
+
+RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
+                         int threads)
+    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
+    if (materials_.empty()) materials_.push_back(Material());
+    for (const Material &m : materials_)
+        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha, any_emission_ |= m.emits();
+    std::vector<AABB> boxes(instances_.size());
+    for (size_t i = 0; i < instances_.size(); ++i) {
+        Instance &inst = instances_[i];
+        const AABB local = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
+        AABB world;
+        if (!local.empty()) {
+            for (int c = 0; c < 8; ++c)
+                world.grow(inst.to_world.point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
+                                                    c & 4 ? local.hi.z : local.lo.z)));
+            // The corners went through float arithmetic: widen by a few ulps of their size.
+            const Vec3 pad = (vabs(world.lo) + vabs(world.hi)) * 4e-7f;
+            world.lo = world.lo - pad, world.hi = world.hi + pad;
+        }
+        inst.bounds = world;
+        // An empty geometry gets a degenerate box far away from nothing: never entered.
+        boxes[i] = world.empty() ? AABB{Vec3(0, 0, 0), Vec3(0, 0, 0)} : world;
+    }
+    top_.build(boxes, threads);
+}
+
+Ray RenderScene::to_object(const Instance &inst, const Ray &ray, float *scale) {
+    Ray r;
+    r.o = inst.to_object.point(ray.o);
+    const Vec3 d = inst.to_object.vector(ray.d);
+    const float s = length(d);
+    r.d = d * (1.f / s);
+    r.tmin = ray.tmin * s;
+    r.tmax = ray.tmax * s;  // inf stays inf
+    *scale = s;
+    return r;
+}
+
+void RenderScene::locate_camera(Vec3 eye) {
+    // A point is inside a closed surface when rays from it in every direction first meet the
+    // surface from behind. Six axis rays, five of which must agree: one may slip through a
+    // gap between discs or graze an edge.
+    for (Instance &inst : instances_) {
+        inst.camera_inside = false;
+        if (!inst.splats || !inst.splats->any_closed()) continue;
+        const Vec3 o = inst.to_object.point(eye);
+        int behind = 0;
+        for (int k = 0; k < 6; ++k) {
+            Ray r;
+            r.o = o;
+            r.d = Vec3(k == 0 ? 1.f : k == 1 ? -1.f : 0.f, k == 2 ? 1.f : k == 3 ? -1.f : 0.f,
+                       k == 4 ? 1.f : k == 5 ? -1.f : 0.f);
+            const Hit h = inst.splats->intersect(r);
+            behind += h.valid() && !h.front && inst.splats->closed(h.id);
+        }
+        inst.camera_inside = behind >= 5;
+    }
+}
+
+// Visits, front to back, each instance visible to `ray_kind` whose box the ray enters before
+// `limit`: visit(index, instance, ray in object space, distance scale, starts on it?)
+// returns true to stop (an occluder found).
+template <class Visit>
+void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
+                                    TraversalStats *stats, Visit &&visit) const {
+    if (instances_.empty()) return;
+    const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
+    traverse_bvh(
+        top_, ray, limit,
+        [&](uint32_t first, uint32_t count) {
+            for (uint32_t k = first; k < first + count; ++k) {
+                const int index = int(top_.prim_order[k]);
+                const Instance &inst = instances_[index];
+                if (!(inst.visibility & ray_kind)) continue;
+                // A leaf holds several instances: the ray's entering the leaf's box does not
+                // mean it enters each one's (a layer query where it does not finds nothing,
+                // at a traversal's cost: a quarter of a bunny-on-a-floor frame's queries).
+                if (intersect_box(inst.bounds, ray.o, inv_d, ray.tmin, limit) == kInfinity) continue;
+                float s;
+                Ray local = to_object(inst, ray, &s);
+                if (visit(index, inst, local, s, from.instance == index)) return true;
+            }
+            return false;
+        },
+        stats ? &stats->nodes : nullptr);
+}
+
+// Which of two surfaces at one distance a ray sees: the instance with the smaller index, so
+// that the answer does not depend on the order the instances are visited in (the packet
+// query visits them in another order than a ray alone).
+inline bool nearer(float t, int index, const SurfacePoint &best) {
+    return t < best.t || (t == best.t && index < best.instance);
+}
+
+// A mesh hit `h` of instance `index` (ray in object space, `s` its distance scale) becomes
+// `best` when nearer.
+void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const {
+    if (!h.valid() || !nearer(h.t / s, index, best)) return;
+    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+    best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
+    const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
+    const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+    best.ng = ng, best.ns = ns;
+    // The point is the triangle's own (barycentric interpolation, then the instance
+    // transform), not ray.o + t d: that one carries the rounding of t and of the ray's
+    // origin -- about an ulp of the camera's distance, not of p -- and a shadow ray from a
+    // point that fell below the surface met the neighbouring triangle (black pixels on a UV
+    // sphere near its pole).
+    const Vec3 po = inst.mesh->point(h);
+    best.p = inst.to_world.point(po);
+    // Start secondary rays off the surface by the interpolation's error bound carried into
+    // the scene frame, plus the transform's own rounding (gamma(3) (|M| |po| +
+    // |translation|), per axis).
+    const Vec3 obj_err = inst.mesh->point_error(h);
+    const Affine &M = inst.to_world;
+    const Vec3 abs_po = vabs(po);
+    auto abs_row = [&](int r, Vec3 v) {
+        return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y + std::fabs(M.m[4 * r + 2]) * v.z;
+    };
+    constexpr float kGamma3 = rounding_gamma(3);
+    float err = 0.f;
+    for (int r = 0; r < 3; ++r)
+        err = std::fmax(err, abs_row(r, obj_err) + kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
+    best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
+    const int slot = inst.mesh->material(h.tri);
+    best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
+}
+
+// A splat surface `h` of instance `index` met by `ray` (scene frame) becomes `best` when nearer.
+void RenderScene::take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
+                                 SurfacePoint &best) const {
+    if (!h.valid() || !nearer(h.t / s, index, best)) return;
+    best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
+    best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
+    best.ns = normalize(inst.to_object.transposed_vector(h.normal));
+    best.p = ray.o + ray.d * best.t;
+    best.offset = 0;  // splat rays leave by excluding the members instead
+    best.radius = inst.splats->radius(h.id) / s;
+    best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
+    best.point_alpha = h.alpha;
+    best.material = inst.material_offset;
+    best.n_members = h.n_members;
+    for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];
+}
+
+// How far a mesh query needs to look behind the nearest surface so far (scene distance
+// `limit`, object scale `s`): a little past it, so that a hit at the same distance -- which
+// the smaller instance index may win -- is still found whatever the rounding of limit x s
+// and of t / s (fl(t / s) <= limit allows t up to limit x s x (1 + 2^-24); 8 half-ulps of
+// slack, taken on the magnitude so that it also points away for a negative limit).
+inline float mesh_reach(float limit, float s) {
+    const float r = limit * s;
+    return r + std::fabs(r) * (8 * kUnitRoundoff);
+}
+
+SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
+                                    bool camera_ray, TraversalStats *stats) const {
+    SurfacePoint best;
+    float limit = ray.tmax;
+    for_each_instance(ray, limit, ray_kind, from, stats,
+                      [&](int index, const Instance &inst, Ray &local, float s, bool self) {
+                          if (inst.mesh) {
+                              local.tmax = std::fmin(local.tmax, mesh_reach(limit, s));
+                              take_mesh_hit(index, inst, inst.mesh->intersect(local, self ? from.triangle : -1, stats),
+                                            s, best);
+                          } else {
+                              // The whole ray, not cut at the nearest surface so far: the layer's
+                              // window may reach past it (its members, and the far phase's exit),
+                              // and what the ray sees must not depend on the instances' order.
+                              const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
+                              take_splat_hit(index, inst, ray,
+                                             find_surface(*inst.splats, local, method, inside,
+                                                          self ? from.members : nullptr, self ? from.n_members : 0,
+                                                          false, stats),
+                                             s, best);
+                          }
+                          limit = std::fmin(best.t, ray.tmax);  // as the packet query bounds it
+                          return false;
+                      });
+    return best;
+}
+
+void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
+                                   TraversalStats *stats) const {
+    for (int i = 0; i < n; ++i) new (&out[i]) SurfacePoint;
+    // The camera-visible instances each ray enters (its own box test, through the top-level
+    // tree as a packet), then each instance's rays together.
+    struct Entered {
+        int index;
+        uint32_t rays;
+    };
+    constexpr int kMaxEntered = 64;  // instances one packet meets; more go ray by ray
+    Entered entered[kMaxEntered];
+    int n_entered = 0;
+    bool overflow = false;
+    const PacketRays soa(rays, n);
+    traverse_packet(
+        top_, soa, n,
+        [&](uint32_t mask, uint32_t first, uint32_t count, float *) {
+            for (uint32_t k = first; k < first + count; ++k) {
+                const int index = int(top_.prim_order[k]);
+                if (!(instances_[index].visibility & kVisCamera)) continue;
+                int e = 0;
+                while (e < n_entered && entered[e].index != index) ++e;
+                if (e == n_entered) {
+                    if (n_entered == kMaxEntered) {
+                        overflow = true;
+                        continue;
+                    }
+                    entered[n_entered++] = Entered{index, 0};
+                }
+                entered[e].rays |= mask;
+            }
+        },
+        stats ? &stats->nodes : nullptr);
+    if (overflow) {  // a packet crossing more than kMaxEntered instances' boxes: ray by ray
+        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), true, stats);
+        return;
+    }
+    for (int e = 0; e < n_entered; ++e) {
+        const int index = entered[e].index;
+        const Instance &inst = instances_[index];
+        Ray local[kPacketRays];
+        float scale[kPacketRays];
+        int ray_of[kPacketRays], m = 0;
+        for (uint32_t bits = entered[e].rays; bits; bits &= bits - 1) {
+            const int i = __builtin_ctz(bits);
+            // Behind the ray's nearest surface so far (instances come roughly front to back):
+            // skipped, as the ray alone skips it.
+            const Vec3 inv(soa.inv_d[0][i], soa.inv_d[1][i], soa.inv_d[2][i]);
+            const float limit = std::fmin(out[i].t, rays[i].tmax);  // as intersect() bounds it
+            if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, limit) == kInfinity) continue;
+            ray_of[m] = i;
+            local[m] = to_object(inst, rays[i], &scale[m]);
+            ++m;
+        }
+        if (inst.mesh) {
+            for (int j = 0; j < m; ++j) {
+                SurfacePoint &best = out[ray_of[j]];
+                const float limit = std::fmin(best.t, rays[ray_of[j]].tmax);
+                local[j].tmax = std::fmin(local[j].tmax, mesh_reach(limit, scale[j]));
+                take_mesh_hit(index, inst, inst.mesh->intersect(local[j], -1, stats), scale[j], best);
+            }
+        } else {
+            bool inside[kPacketRays];
+            for (int j = 0; j < m; ++j) inside[j] = inst.camera_inside;
+            SurfaceHit hits[kPacketRays];
+            find_surfaces(*inst.splats, local, m, method, inside, nullptr, 0, hits, stats);
+            for (int j = 0; j < m; ++j) take_splat_hit(index, inst, rays[ray_of[j]], hits[j], scale[j], out[ray_of[j]]);
+        }
+    }
+}
+
+bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {
+    bool blocked = false;
+    const float limit = ray.tmax;
+    for_each_instance(ray, limit, kVisShadow, from, stats,
+                      [&](int index, const Instance &inst, Ray &local, float, bool self) {
+                          if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
+                          // Splats block only where the visibility rules put a surface: a fringe
+                          // disc (far phase) or the splats the ray starts from never cast a shadow.
+                          const SurfaceHit h = find_surface(*inst.splats, local, method, from.inside == index,
+                                                            self ? from.members : nullptr,
+                                                            self ? from.n_members : 0, false, stats);
+                          return blocked = h.valid() && h.t < local.tmax;
+                      });
+    return blocked;
+}
+
+}  // namespace splat

@@ -1,0 +1,129 @@
+// A renderable scene: geometry (splat clouds and triangle meshes, each with its own BVH,
+// built once and shared) placed by instances (transform, materials, ray visibility), a
+// top-level BVH over the instances, the materials and the lamps.
+//
+// Every query is in the scene's local frame (the caller subtracts a float64 origin). A ray
+// enters an instance by the inverse transform and is renormalised there, so discs are
+// intersected in object space: exact for any affine transform, non-uniform scale included.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "bvh/bvh.h"
+#include "scene/mesh.h"
+#include "shade/shading.h"
+#include "splats/splat_scene.h"
+#include "splats/visibility.h"
+
+namespace splat {
+
+// Ray kinds an instance may be hidden from (Blender's Object > Visibility > Ray Visibility).
+enum RayVisibility : uint32_t {
+    kVisCamera = 1,
+    kVisDiffuse = 2,
+    kVisGlossy = 4,
+    kVisTransmission = 8,
+    kVisShadow = 16,
+    kVisAll = 31,
+};
+
+struct Affine {  // row-major 3x4: p' = M p + t
+    float m[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
+    Vec3 point(Vec3 p) const {
+        return {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]};
+    }
+    Vec3 vector(Vec3 v) const {
+        return {m[0] * v.x + m[1] * v.y + m[2] * v.z, m[4] * v.x + m[5] * v.y + m[6] * v.z,
+                m[8] * v.x + m[9] * v.y + m[10] * v.z};
+    }
+    Vec3 transposed_vector(Vec3 v) const {  // M^T v: normals go object -> world by to_object^T
+        return {m[0] * v.x + m[4] * v.y + m[8] * v.z, m[1] * v.x + m[5] * v.y + m[9] * v.z,
+                m[2] * v.x + m[6] * v.y + m[10] * v.z};
+    }
+};
+
+struct Instance {
+    const SplatScene *splats = nullptr;  // exactly one of these two
+    const TriangleMesh *mesh = nullptr;
+    Affine to_world, to_object;
+    int material_offset = 0, material_count = 1;  // the instance's slots in the material table
+    uint32_t visibility = kVisAll;
+    bool holdout = false;        // camera rays that see it get alpha 0
+    float pass_index = 0;        // Object Index pass
+    bool camera_inside = false;  // a closed cloud around the camera: its camera rays start inside
+    AABB bounds;                 // in the scene frame
+};
+
+// Where a secondary ray starts, so that it does not meet that surface again.
+struct Origin {
+    int instance = -1;
+    int32_t triangle = -1;              // the mesh triangle it leaves
+    const int32_t *members = nullptr;  // or the splats that formed its point
+    int n_members = 0;
+    int inside = -1;  // the splat cloud a refracted ray travels inside (the swapped-facing rule)
+};
+
+struct SurfacePoint {
+    float t = kInfinity;
+    int instance = -1;
+    int32_t prim = -1;   // splat or triangle id within the instance's geometry
+    bool front = false;  // the side the normal points to faces the ray
+    Vec3 p, ng, ns;      // point, geometric and shading normal (scene frame, unit)
+    float offset = 0;    // how far a secondary ray must start off the surface (triangles always;
+                         // splats only without wrong-hit elimination, see the integrator)
+    float radius = 0;    // splats: the chosen splat's radius in the scene frame
+    Vec3 point_colour;
+    float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
+    bool has_point_colour = false;
+    int material = 0;    // index in the material table
+    int n_members = 0;   // splats that formed the point
+    int32_t members[kMaxLayerHits];
+
+    bool valid() const { return instance >= 0; }
+};
+
+class RenderScene {
+  public:
+    RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
+                int threads);
+
+    const Instance &instance(int i) const { return instances_[i]; }
+    size_t instance_count() const { return instances_.size(); }
+    const Material &material(int i) const { return materials_[i]; }
+    const std::vector<Light> &lights() const { return lights_; }
+    bool any_transparent() const { return any_transparent_; }
+    bool any_emission() const { return any_emission_; }  // a material emits light
+
+    // Marks the closed clouds that enclose `eye`: their camera rays start inside them.
+    void locate_camera(Vec3 eye);
+
+    // The nearest surface along the ray among the instances visible to `ray_kind`.
+    SurfacePoint intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
+                           bool camera_ray, TraversalStats *stats) const;
+    // intersect() for n <= kPacketRays camera rays (a 4x4 pixel block): the same answers,
+    // each instance's rays traced together as a packet (packet.h).
+    void intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
+                          TraversalStats *stats) const;
+    // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
+    bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
+
+  private:
+    template <class Visit>
+    void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
+                           TraversalStats *stats, Visit &&visit) const;
+    void take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const;
+    void take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
+                        SurfacePoint &best) const;
+    // The ray in an instance's object space: unit direction, distances scaled by `scale`.
+    static Ray to_object(const Instance &inst, const Ray &ray, float *scale);
+
+    std::vector<Instance> instances_;
+    std::vector<Material> materials_;
+    std::vector<Light> lights_;
+    BVH top_;
+    bool any_transparent_ = false, any_emission_ = false;
+};
+
+}  // namespace splat

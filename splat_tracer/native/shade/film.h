@@ -1,0 +1,78 @@
+// The film: the rendered window of an image and its output buffers, cut into square tiles
+// (the unit of work a thread takes, and of progress) and each tile into blocks of 4x4
+// pixels (one camera-ray packet, packet.h). One definition for both renderers: the
+// integrator (integrator.h) and the headlight preview of one splat cloud (render.h).
+#pragma once
+
+#include <algorithm>
+#include <cstddef>
+#include <cstdint>
+
+#include "base/ray.h"
+#include "scene/camera.h"
+#include "splats/visibility.h"
+
+namespace splat {
+
+// What Cycles writes in Z where nothing is hit.
+constexpr float kBackgroundDepth = 1e10f;
+// A tile's side in pixels when the caller does not choose one (the bindings' default).
+constexpr int kDefaultTileSize = 32;
+
+// Where the pixels go. The image is width x height; the rendered window is the w x h
+// rectangle whose top-left pixel is (x0, y0) (column, row from the top), so a border render
+// fills only part of the frame. Buffers are w x h, row-major, top row first; any but
+// `combined` may be null (not wanted, and then not computed). The headlight renderer writes
+// combined, depth and normal only.
+struct Film {
+    int width = 0, height = 0, x0 = 0, y0 = 0, w = 0, h = 0;
+    float *combined = nullptr;  // 4 floats a pixel: scene-linear colour and alpha
+    float *depth = nullptr;     // planar depth along the view axis (Cycles' Z); kBackgroundDepth on a miss
+    float *normal = nullptr;    // 3 floats: the surface normal, world orientation
+    float *diffcol = nullptr, *emit = nullptr, *shadow = nullptr;  // 3 floats each
+    float *index = nullptr, *splat_count = nullptr;                // 1 float each
+};
+
+// What both renderers take the same way.
+struct FrameSettings {
+    Method method;  // which surface each pixel shows (visibility.h)
+    int tile_size = kDefaultTileSize;
+    bool packets = true;  // each block's camera rays found as one packet (packet.h); the same image
+};
+
+// The film's tiles: tile_size pixels a side, row by row from the window's top left, cut short
+// at its right and bottom edges.
+inline size_t tile_count(const Film &film, int tile_size) {
+    const int64_t ts = tile_size;
+    return size_t((film.w + ts - 1) / ts) * size_t((film.h + ts - 1) / ts);
+}
+
+// The pixels of tile `tile` in blocks of 4x4, rows of blocks from the top (cut short at the
+// tile's edges): block(cols, rows, n) with each of the block's n pixels' column and row in
+// the window, row by row -- one camera-ray packet each.
+template <class Block>
+void for_each_block(const Film &film, int tile_size, size_t tile, Block &&block) {
+    const int ts = tile_size;
+    const int tiles_x = int((int64_t(film.w) + ts - 1) / ts);
+    const int x0 = int(tile % size_t(tiles_x)) * ts, y0 = int(tile / size_t(tiles_x)) * ts;
+    const int x1 = std::min(x0 + ts, film.w), y1 = std::min(y0 + ts, film.h);
+    constexpr int kBlock = 4;
+    static_assert(kBlock * kBlock == kPacketRays, "a block is one packet");
+    for (int by = y0; by < y1; by += kBlock)
+        for (int bx = x0; bx < x1; bx += kBlock) {
+            int cols[kPacketRays], rows[kPacketRays], n = 0;
+            for (int row = by; row < std::min(by + kBlock, y1); ++row)
+                for (int col = bx; col < std::min(bx + kBlock, x1); ++col, ++n) cols[n] = col, rows[n] = row;
+            block(cols, rows, n);
+        }
+}
+
+// The camera rays of a block's n pixels (window column and row), each through its pixel's
+// centre moved by (dx, dy) pixels (a sample's offset).
+inline void block_rays(const Camera &camera, const Film &film, const int *cols, const int *rows, int n, double dx,
+                       double dy, Ray *rays) {
+    for (int k = 0; k < n; ++k)
+        rays[k] = camera.ray(film.x0 + cols[k] + 0.5 + dx, film.y0 + rows[k] + 0.5 + dy, film.width, film.height);
+}
+
+}  // namespace splat

@@ -1,0 +1,449 @@
+#include "shade/integrator.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace splat {
+
+// Paths deeper than this are cut whatever the settings say: each level is a stack frame of
+// the recursion (about 1 KB), and a worker thread's stack must hold them all.
+constexpr int kMaxDepth = 64;
+// Below this throughput (luminance) a path continues only by Russian roulette, with the
+// survivors weighted up: unbiased, and branching mirror/glass paths stop multiplying.
+constexpr float kRouletteThroughput = 0.02f;
+// The origin offset of secondary rays from splats in plain splat ray tracing (no wrong-hit
+// elimination), in radii of the splat: the usual epsilon of that method, small enough not to
+// skip thin features and large enough to clear the disc it starts on.
+constexpr float kPlainSplatOffset = 1e-3f;
+
+struct Integrator::Tally {
+    TraversalStats stats;
+    uint64_t camera = 0, shadow = 0, reflection = 0, refraction = 0, diffuse = 0, transparent = 0;
+};
+
+struct Integrator::PathState {
+    int bounces = 0, diffuse = 0, glossy = 0, transmission = 0, transparent = 0;
+    uint32_t kind = kVisCamera;  // which ray visibility applies
+    bool camera = true;
+    Origin from;
+    float throughput = 1.f;
+    bool specular = true;  // camera, mirror or clear-glass ray: it may see the lamps themselves
+};
+
+struct Integrator::Primary {
+    bool hit = false;
+    float t = 0;
+    Vec3 normal, diffcol, emit;
+    float index = 0;
+    int splats = 0;
+    float alpha = 1.f;
+    float lit = 0, unshadowed = 0;  // direct light with and without shadows (luminance)
+};
+
+namespace {
+
+Vec3 reflect(Vec3 wo, Vec3 n) { return n * (2.f * dot(wo, n)) - wo; }
+
+// Refraction of wo (pointing away from the surface, on n's side) with eta = n_t / n_i.
+bool refract(Vec3 wo, Vec3 n, float eta, Vec3 *wt) {
+    const float c = dot(wo, n);
+    const float s2 = (1.f - c * c) / (eta * eta);
+    if (s2 >= 1.f) return false;
+    *wt = normalize(wo * (-1.f / eta) + n * (c / eta - std::sqrt(1.f - s2)));
+    return true;
+}
+
+Vec3 schlick(Vec3 f0, float c) { return f0 + (Vec3(1, 1, 1) - f0) * schlick_weight(c); }
+
+}  // namespace
+
+// The lobes of a material at one point, as energy weights.
+struct Integrator::Lobes {
+    float metal, glass, plastic;  // metallic, transmissive, opaque dielectric shares (sum 1)
+    float f0;                     // opaque dielectric's normal-incidence reflectance
+    float spec_eta;               // the IOR whose exact Fresnel has that f0 (1: none)
+    float eta;                    // n_transmitted / n_incident for the glass lobe
+    float alpha;                  // GGX roughness
+    bool delta;                   // mirror-smooth: specular lobes are traced, not sampled
+    Vec3 base;
+
+    Lobes(const Material &m, Vec3 base_colour, bool entering) : base(base_colour) {
+        metal = m.metallic;
+        glass = (1.f - m.metallic) * m.transmission;
+        plastic = (1.f - m.metallic) * (1.f - m.transmission);
+        const float r = (m.ior - 1.f) / (m.ior + 1.f);
+        f0 = std::clamp(r * r * 2.f * m.specular_level, 0.f, 0.9999f);  // level 0.5: the IOR's own
+        // As Cycles does, the specular level changes the layer's IOR, and its Fresnel is the
+        // exact dielectric one: level 0 gives eta 1, no reflection at any angle, so the
+        // diffuse lobe is pure Lambert. (Schlick's f0 + (1 - f0)(1 - c)^5 kept a grazing
+        // reflection and dimmed the diffuse by it even at f0 = 0.)
+        const float sf0 = std::sqrt(f0);
+        spec_eta = (1.f + sf0) / (1.f - sf0);
+        eta = entering ? m.ior : 1.f / m.ior;
+        alpha = ggx_alpha(m.roughness);
+        delta = m.roughness < kDeltaRoughness;
+    }
+    // Reflectance towards the mirror direction, for a half-vector cosine c.
+    float plastic_fresnel(float c) const { return f0 > 0.f ? fresnel_dielectric(c, spec_eta) : 0.f; }
+    Vec3 specular(float c) const {
+        return schlick(base, c) * metal + Vec3(1, 1, 1) * (plastic * plastic_fresnel(c) +
+                                                             glass * fresnel_dielectric(c, eta));
+    }
+    // The diffuse under the specular layer keeps what the layer does not reflect: 1 minus the
+    // layer's directional albedo E(cos_o, roughness, f0) -- Cycles' albedo scaling -- not 1
+    // minus the macro-surface Fresnel, which reaches 1 at grazing views and made floors seen
+    // at a low angle 6 % darker than Cycles (measured, benchmarks/frame_time.py).
+    Vec3 diffuse(float cos_o) const { return base * (plastic * (1.f - specular_albedo(cos_o))); }
+    // E of a GGX layer with Fresnel, by Karis' analytic fit of the split-sum table ("Physically
+    // Based Shading on Mobile", 2014): f0 A + B. B, the grazing part, belongs to a reflecting
+    // layer only: it fades out with f0 below a common dielectric's 0.04, so level 0 stays
+    // pure Lambert.
+    float specular_albedo(float cos_o) const {
+        if (!(f0 > 0.f)) return 0.f;
+        const float rough = std::sqrt(alpha);  // back to the Principled roughness
+        const float r0 = -rough + 1.f, r1 = -0.0275f * rough + 0.0425f, r2 = -0.572f * rough + 1.04f,
+                    r3 = 0.022f * rough - 0.04f;
+        const float a004 = std::fmin(r0 * r0, std::exp2(-9.28f * cos_o)) * r0 + r1;
+        const float a = -1.04f * a004 + r2, b = 1.04f * a004 + r3;
+        return std::clamp(f0 * a + b * std::fmin(1.f, f0 / 0.04f), 0.f, 1.f);
+    }
+    Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
+};
+
+// The cloud a ray travels inside once it has crossed the surface at `sp` (refracted, or
+// passed through a see-through point): entering a splat cloud it is inside it, and its next
+// layer there is the exit (the swapped-facing rule); leaving, it is outside again. Meshes
+// need no flag: their triangles' winding tells in and out.
+int Integrator::inside_after_crossing(const SurfacePoint &sp, int inside_before) const {
+    if (!scene_.instance(sp.instance).splats) return inside_before;
+    return sp.front ? sp.instance : -1;
+}
+
+Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Film &film,
+                       const IntegratorSettings &settings, RenderCounters &counters)
+    : scene_(scene), camera_(camera), film_(film), settings_(settings), counters_(counters),
+      filter_(settings.filter_type, settings.filter_width),
+      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
+
+void Integrator::render_tile(size_t tile) const {
+    Tally tally;
+    // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
+    for_each_block(film_, settings_.tile_size, tile,
+                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally); });
+    counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
+    counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
+    counters_.transparent += tally.transparent;
+    const TraversalStats &s = tally.stats;
+    counters_.nodes += s.nodes, counters_.discs += s.discs, counters_.triangles += s.triangles;
+    counters_.layer_queries += s.layer_queries, counters_.far_rejections += s.far_rejections;
+    counters_.interpolations += s.interpolations;
+}
+
+// Every sample of n pixels (cols[k], rows[k]): sample by sample, the n camera rays' first
+// hits in one packet query (settings.packets), then each pixel's path.
+void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally) const {
+    const int samples = settings_.samples;
+    struct Pixel {
+        Vec3 sum, diffcol, emit, shadow;
+        float alpha = 0;
+        Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
+    } acc[kPacketRays];
+    for (int s = 0; s < samples; ++s) {
+        float ux, uy;
+        r2_point(uint32_t(s), &ux, &uy);
+        const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
+        Ray rays[kPacketRays];
+        block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
+        SurfacePoint hits[kPacketRays];
+        if (settings_.packets) scene_.intersect_camera(rays, n, settings_.method, hits, &tally.stats);
+        for (int k = 0; k < n; ++k) {
+            const uint32_t pixel_id =
+                uint32_t(film_.y0 + rows[k]) * uint32_t(film_.width) + uint32_t(film_.x0 + cols[k]);
+            Sampler rng(pixel_id, uint32_t(s), settings_.seed);
+            Primary prim;
+            ++tally.camera;
+            const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
+            Pixel &a = acc[k];
+            a.sum = a.sum + c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
+            a.alpha += prim.alpha;
+            a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
+            const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
+            a.shadow = a.shadow + Vec3(lit, lit, lit);
+            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.planar_depth(rays[k], prim.t)) : 0.f;
+        }
+    }
+    const float inv = 1.f / float(samples);
+    for (int k = 0; k < n; ++k) {
+        const Pixel &a = acc[k];
+        const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
+        if (film_.combined) {
+            float *o = film_.combined + 4 * p;
+            o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+        }
+        auto put3 = [&](float *buf, Vec3 v) {
+            if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
+        };
+        put3(film_.diffcol, a.diffcol * inv);
+        put3(film_.emit, a.emit * inv);
+        put3(film_.shadow, a.shadow * inv);
+        put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
+        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
+        if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
+        if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
+    }
+}
+
+Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+                          const SurfacePoint *first) const {
+    const IntegratorSettings &cfg = settings_;
+    SurfacePoint sp, passed;  // `passed`: the last surface passed through, which st.from points into
+    Material mat;
+    Vec3 base;
+    float opacity = 1.f;
+    // Surfaces with alpha < 1 are passed through stochastically (transparent bounces).
+    Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
+    for (;;) {
+        if (first) sp = *first, first = nullptr;  // the camera packet's answer for this ray
+        else sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
+        if (st.specular && !cfg.headlight)
+            for (const Light &light : scene_.lights())
+                if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
+        if (!sp.valid()) {
+            if (st.camera && cfg.film_transparent) {
+                if (primary) primary->alpha = 0.f;
+                return Vec3();
+            }
+            return cfg.world + lamps;
+        }
+        if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
+            if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
+            return Vec3();
+        }
+        mat = scene_.material(sp.material);
+        base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
+        opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
+        if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces || rng.next() < opacity) break;
+        ++st.transparent, ++tally.transparent;
+        passed = sp;
+        st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
+                         inside_after_crossing(passed, st.from.inside)};
+        const float travelled = sp.t;
+        ray.o = sp.p + ray.d * sp.offset;
+        ray.tmin = 0.f;
+        ray.tmax = ray.tmax - travelled;
+        if (!(ray.tmax > 0.f)) return cfg.world;
+    }
+
+    const Vec3 wo = ray.d * -1.f;
+    // Which side the ray arrived on: for splats the layer's facing, for triangles the winding.
+    const bool entering = sp.front;
+    Vec3 n = sp.ns, ng = sp.ng;
+    if (dot(ng, wo) < 0.f) ng = ng * -1.f;
+    if (dot(n, wo) < 0.f) n = n * -1.f;  // two-sided shading
+    const Lobes lobes(mat, base, entering);
+    const float cos_o = std::fmax(dot(n, wo), 1e-6f);
+    const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
+
+    if (primary && st.camera) {
+        primary->hit = true, primary->t = sp.t, primary->normal = sp.ns;
+        primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
+        primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
+    }
+    Vec3 L = mat.emission + lamps;  // emission is two-sided, like Cycles' Emission shader
+    if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
+
+    // Where rays leave this point from: the splats that formed it are excluded (the paper's
+    // wrong-reflection rule), and a triangle's point is moved off the surface on the side
+    // the new ray goes. Without wrong-hit elimination (the general method, the baseline of
+    // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
+    // the origin moved off the disc by a small fraction of its radius -- and they do hit the
+    // neighbouring discs, which is what the paper's wrong shadows and reflections are.
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
+    if (!cfg.method.eliminate_wrong_hits && sp.n_members > 0) {
+        here.members = nullptr, here.n_members = 0;
+        sp.offset = kPlainSplatOffset * sp.radius;
+    }
+    auto spawn = [&](Vec3 dir) {
+        Ray r;
+        const Vec3 side = (dot(dir, ng) >= 0.f) ? ng : ng * -1.f;
+        r.o = sp.p + side * sp.offset;
+        r.d = dir;
+        r.tmin = 0.f;
+        r.tmax = kInfinity;
+        return r;
+    };
+
+    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, rng, st.camera ? primary : nullptr, tally);
+
+    // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
+    // can bring any back, so none is traced.
+    if (!lit_scene_) return L;
+    if (st.bounces >= cfg.max_bounces || st.bounces >= kMaxDepth) return L;
+
+    // Continues the path with `weight`, by Russian roulette when its throughput is small.
+    auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
+                      uint64_t Tally::*count, bool specular) {
+        PathState next = st;
+        next.camera = false;
+        next.kind = kind;
+        next.bounces += 1;
+        next.*counter += 1;
+        next.from = here;
+        next.from.inside = inside;
+        next.throughput = st.throughput * luminance(weight);
+        // Lamps are seen only along a chain of mirror/glass rays from the camera: after a
+        // diffuse or rough bounce, a lamp seen through a mirror is a caustic, which light
+        // sampling cannot find and which would only add fireflies (not traced, like the
+        // glass's shadow).
+        next.specular = st.specular && specular;
+        if (next.throughput < kRouletteThroughput) {
+            const float survive = next.throughput / kRouletteThroughput;
+            if (!(rng.next() < survive)) return;
+            weight = weight * (1.f / survive);
+            next.throughput = kRouletteThroughput;
+        }
+        ++(tally.*count);
+        L = L + weight * radiance(spawn(dir), next, rng, nullptr, tally);
+    };
+    const int inside_after = inside_after_crossing(sp, st.from.inside);
+
+    // Mirror and clear glass: both rays, each weighted by its Fresnel term.
+    if (lobes.delta) {
+        const Vec3 spec = lobes.specular(cos_o);
+        if (luminance(spec) > 0.f && st.glossy < cfg.glossy_bounces)
+            follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside,
+                   &Tally::reflection, true);
+        Vec3 wt;
+        const Vec3 trans = lobes.transmission(cos_o);
+        if (luminance(trans) > 0.f && st.transmission < cfg.transmission_bounces && refract(wo, n, lobes.eta, &wt))
+            follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true);
+    }
+
+    // Sky light by ambient occlusion replaces the diffuse bounce.
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(cfg.world) > 0.f)
+        L = L + diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally);
+
+    // One sampled continuation among the lobes that are not traced exactly.
+    const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
+    const float w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
+    const float w_trans =
+        !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
+    const float w_sum = w_diffuse + w_glossy + w_trans;
+    if (w_sum > 0.f) {
+        float u = rng.next() * w_sum;
+        const float u1 = rng.next(), u2 = rng.next();
+        if (u < w_diffuse) {
+            const Vec3 wi = sample_cosine(n, u1, u2);
+            if (dot(wi, ng) > 0.f)
+                follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse,
+                       st.from.inside, &Tally::diffuse, false);
+        } else if ((u -= w_diffuse) < w_glossy) {
+            const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
+            const Vec3 wi = reflect(wo, m);
+            if (dot(wi, n) > 0.f && dot(wi, ng) > 0.f) {
+                // VNDF sampling: the estimator is F(wo.m) G1(wi).
+                const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
+                follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
+                       &Tally::reflection, false);
+            }
+        } else {
+            const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
+            Vec3 wt;
+            if (refract(wo, m, lobes.eta, &wt) && dot(wt, n) < 0.f) {
+                const Vec3 w = lobes.transmission(std::fmax(dot(wo, m), 0.f)) * ggx_g1(-dot(wt, n), lobes.alpha);
+                follow(wt, w * (w_sum / w_trans), kVisTransmission, &PathState::transmission, inside_after,
+                       &Tally::refraction, false);
+            }
+        }
+    }
+    return L;
+}
+
+Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                              const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const {
+    const std::vector<Light> &lights = scene_.lights();
+    if (lights.empty()) return Vec3();  // no lamp: no shadow ray, no work
+    const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
+    const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
+    if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
+    const int k = settings_.shadow_samples;
+    const float share = 1.f / float(k);
+    Vec3 L;
+    for (const Light &light : lights) {
+        for (int s = 0; s < k; ++s) {
+            const float u1 = rng.next(), u2 = rng.next();
+            const LightSample ls = sample_light(light, sp.p, u1, u2);
+            if (!ls.valid) continue;
+            const float cos_i = dot(n, ls.wi);
+            if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
+            Vec3 f = diffuse;
+            if (glossy) {
+                const Vec3 h = normalize(wo + ls.wi);
+                const float ch = std::fmax(dot(n, h), 0.f);
+                const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+                f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
+                            (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
+            }
+            const Vec3 c = f * ls.irradiance * (cos_i * share);
+            if (!(luminance(c) > 0.f)) continue;
+            Vec3 visible(1, 1, 1);
+            if (light.cast_shadow) {
+                Ray r;
+                r.o = sp.p + ng * sp.offset;
+                r.d = ls.wi;
+                r.tmin = 0.f;
+                // Stop just short of the lamp's surface: a lamp is not geometry here.
+                r.tmax = std::isinf(ls.distance) ? kInfinity : ls.distance * (1.f - 1e-4f);
+                ++tally.shadow;
+                visible = shadow_transmittance(r, from, tally);
+            }
+            L = L + c * visible;
+            if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
+        }
+    }
+    return L;
+}
+
+// The fraction of the sky the point sees, by cosine-distributed occlusion rays: with the
+// cosine in the pdf, the diffuse integral of a uniform sky is albedo x world x that fraction.
+Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng,
+                               Tally &tally) const {
+    Vec3 open;
+    const int k = settings_.ao_samples;
+    for (int i = 0; i < k; ++i) {
+        const float u1 = rng.next(), u2 = rng.next();
+        const Vec3 wi = sample_cosine(n, u1, u2);
+        if (dot(wi, ng) <= 0.f) continue;
+        Ray r;
+        r.o = sp.p + ng * sp.offset;
+        r.d = wi;
+        ++tally.diffuse;
+        open = open + shadow_transmittance(r, from, tally);
+    }
+    return open * (1.f / float(k));
+}
+
+Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const {
+    const Method &method = settings_.method;
+    if (!scene_.any_transparent()) return scene_.occluded(ray, method, from, &tally.stats) ? Vec3() : Vec3(1, 1, 1);
+    // Some materials are partly transparent: walk the blockers, attenuating by their alpha.
+    Vec3 t(1, 1, 1);
+    SurfacePoint sp, previous;  // `from` points into `previous` while `sp` is being found
+    for (int k = 0; k <= settings_.transparent_bounces; ++k) {
+        sp = scene_.intersect(ray, method, kVisShadow, from, false, &tally.stats);
+        if (!sp.valid()) return t;
+        const Material &m = scene_.material(sp.material);
+        const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);
+        if (a >= 1.f) return Vec3();
+        t = t * (1.f - a);
+        previous = sp;
+        from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
+                      inside_after_crossing(previous, from.inside)};
+        ray.o = sp.p + ray.d * sp.offset;
+        ray.tmax -= sp.t;
+        if (!(ray.tmax > 0.f)) return t;
+    }
+    return Vec3();
+}
+
+}  // namespace splat

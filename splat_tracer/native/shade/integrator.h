@@ -1,0 +1,76 @@
+// Rendering a frame of a RenderScene: camera samples spread by the pixel filter, a path per
+// sample (lamps with shadow rays, recursive mirror and glass rays, sampled rough and diffuse
+// bounces, the world as background and sky light), passes and counters.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+
+#include "scene/camera.h"
+#include "scene/render_scene.h"
+#include "shade/film.h"
+#include "shade/sampling.h"
+
+namespace splat {
+
+struct IntegratorSettings : FrameSettings {
+    int samples = 1;
+    int filter_type = PixelFilter::BlackmanHarris;
+    float filter_width = 1.5f;
+    int shadow_samples = 1;
+    int max_bounces = 12, diffuse_bounces = 1, glossy_bounces = 4, transmission_bounces = 12,
+        transparent_bounces = 8;
+    uint32_t seed = 0;
+    Vec3 world;  // background radiance
+    bool film_transparent = false;
+    // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
+    // eye), no lamps, no secondary rays. What a scene without any light source renders with.
+    bool headlight = false;
+    // World light by ambient occlusion: at each diffuse point `ao_samples` cosine-distributed
+    // occlusion rays bring the world's radiance where they escape; no diffuse bounce rays.
+    bool sky_ao = false;
+    int ao_samples = 1;
+};
+
+// Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
+struct RenderCounters {
+    std::atomic<uint64_t> camera{0}, shadow{0}, reflection{0}, refraction{0}, diffuse{0}, transparent{0};
+    std::atomic<uint64_t> nodes{0}, discs{0}, triangles{0}, layer_queries{0}, far_rejections{0},
+        interpolations{0};
+};
+
+class Integrator {
+  public:
+    Integrator(const RenderScene &scene, const Camera &camera, const Film &film, const IntegratorSettings &settings,
+               RenderCounters &counters);
+
+    size_t tile_count() const { return splat::tile_count(film_, settings_.tile_size); }
+    void render_tile(size_t tile) const;
+
+  private:
+    struct Tally;       // per-tile ray counts
+    struct PathState;   // bounce counters, where the ray starts, its throughput
+    struct Primary;     // what the passes want from the camera ray's first hit
+    struct Lobes;       // a material's lobes at one point
+
+    // `first`: the ray's first hit, already found (the camera packet's), else null.
+    Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+                  const SurfacePoint *first = nullptr) const;
+    // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`.
+    Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                      const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
+    Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
+    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
+    void shade_block(const int *cols, const int *rows, int n, Tally &tally) const;
+    int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
+
+    const RenderScene &scene_;
+    const Camera &camera_;
+    const Film &film_;
+    const IntegratorSettings &settings_;
+    RenderCounters &counters_;
+    PixelFilter filter_;
+    bool lit_scene_;  // something emits light: secondary rays can matter
+};
+
+}  // namespace splat

@@ -1,0 +1,42 @@
+#include "shade/render.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace splat {
+
+void Renderer::render_tile(size_t tile) const {
+    for_each_block(film_, settings_.tile_size, tile, [&](const int *cols, const int *rows, int n) {
+        Ray rays[kPacketRays];
+        block_rays(camera_, film_, cols, rows, n, 0.0, 0.0, rays);
+        const bool inside[kPacketRays] = {};
+        SurfaceHit hits[kPacketRays];
+        if (settings_.packets) find_surfaces(scene_, rays, n, settings_.method, inside, nullptr, 0, hits);
+        else
+            for (int k = 0; k < n; ++k) hits[k] = find_surface(scene_, rays[k], settings_.method);
+        for (int k = 0; k < n; ++k) shade_pixel(cols[k], rows[k], rays[k], hits[k]);
+    });
+}
+
+// A headlight (a light at the eye): radiance = base colour x |cos| between the ray and the
+// splat normal.
+void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &hit) const {
+    const size_t p = size_t(row) * film_.w + col;
+    float *rgba = film_.combined + 4 * p;
+    if (!hit.valid()) {
+        std::copy(settings_.background, settings_.background + 4, rgba);
+        if (film_.depth) film_.depth[p] = kBackgroundDepth;
+        if (film_.normal) std::fill(film_.normal + 3 * p, film_.normal + 3 * p + 3, 0.f);
+        return;
+    }
+    const Vec3 n = hit.normal;
+    const Vec3 c = hit.colour * std::fabs(dot(n, ray.d));
+    rgba[0] = c.x, rgba[1] = c.y, rgba[2] = c.z, rgba[3] = 1.f;
+    if (film_.depth) film_.depth[p] = float(camera_.planar_depth(ray, hit.t));
+    if (film_.normal) {
+        float *out = film_.normal + 3 * p;
+        out[0] = n.x, out[1] = n.y, out[2] = n.z;
+    }
+}
+
+}  // namespace splat
