@@ -1,8 +1,9 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Splat Tracer: render point-cloud scans as splats with a native ray tracer.
 
-Layout: `splat_tracer/` holds the renderer (native core, engine, export, properties,
-readers), `operators/` the importer, `ui/` the panels. Each package has register().
+Layout (docs/architecture.md): `splat_tracer/` holds the renderer in layers (blender/ over
+the Blender-free pointcloud/ and render/, over util/ and the native core), `operators/` the
+importer and the A/B operators, `ui/` the panels. Each package has register().
 """
 from . import operators, ui
 from . import splat_tracer as renderer
