@@ -1,6 +1,8 @@
 # splat_tracer: one entry point for set-up, build, demo, tests, packaging and benchmarks.
 # Every target sets up what it needs: a virtual environment with the pinned packages
-# (.venv) and the native core (splat_tracer/_core.abi3.so).
+# (.venv) and the native core (splat_tracer/_core.abi3.so). Tools, benchmarks and fuzz
+# harnesses run as modules from the root (`python -m tools.demo`), where splat_tracer, tools
+# and benchmarks import as packages.
 
 PYTHON ?= python3
 VENV   := .venv
@@ -30,10 +32,10 @@ build: $(CORE)
 # cross-compiled with Zig (the ziglang package) into build/native/<platform>/. `make build`
 # (gcc, in place) stays the development build: the sanitizer build and the tests use it.
 native: $(STAMP)
-	$(VPY) tools/build_native.py
+	$(VPY) -m tools.build_native
 
 demo: build
-	$(VPY) tools/demo.py --output demo.png
+	$(VPY) -m tools.demo --output demo.png
 
 test: build
 	$(VPY) -m pytest tests
@@ -89,24 +91,24 @@ test-sanitize: sanitize-tree
 FUZZ_SECONDS ?= 60
 
 fuzz: build sanitize-tree
-	$(VPY) fuzz/run.py --seconds $(FUZZ_SECONDS) --sanitized $(SAN)/tree
+	$(VPY) -m fuzz.run --seconds $(FUZZ_SECONDS) --sanitized $(SAN)/tree
 
 docs: build
-	$(VPY) tools/switch_images.py --output-dir docs/switches
-	$(VPY) tools/viewport_images.py --output-dir docs/viewport
-	$(VPY) tools/demo.py --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
+	$(VPY) -m tools.switch_images --output-dir docs/switches
+	$(VPY) -m tools.viewport_images --output-dir docs/viewport
+	$(VPY) -m tools.demo --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
 dist: $(STAMP)
-	$(VPY) tools/build_dist.py --output-dir dist
+	$(VPY) -m tools.build_dist --output-dir dist
 
 bench-quick: build
-	$(VPY) benchmarks/trace_throughput.py --quick
-	$(VPY) benchmarks/scale.py --quick
-	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
-	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
-	$(VPY) benchmarks/viewport_latency.py --quick
-	$(VPY) benchmarks/import_speed.py --quick --output build/bench-quick
+	$(VPY) -m benchmarks.trace_throughput --quick
+	$(VPY) -m benchmarks.scale --quick
+	$(VPY) -m benchmarks.accuracy --quick --output build/bench-quick
+	$(VPY) -m benchmarks.frame_time --quick --output build/bench-quick
+	$(VPY) -m benchmarks.viewport_latency --quick
+	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 
 # Open3D for the import benchmark's comparison rows, in its own environment (its wheel
 # brings dependencies the add-on's environment must not get); it needs libusb at load
@@ -119,12 +121,12 @@ $(O3D)/.installed-stamp:
 	  && touch $@
 
 bench: build $(O3D)/.installed-stamp
-	$(VPY) benchmarks/trace_throughput.py
-	$(VPY) benchmarks/scale.py
-	$(VPY) benchmarks/accuracy.py --output benchmarks/results
-	$(VPY) benchmarks/frame_time.py --output benchmarks/results
-	$(VPY) benchmarks/viewport_latency.py --output benchmarks/results/viewport_latency.md
-	$(VPY) benchmarks/import_speed.py --repeat 3 --output benchmarks/results
+	$(VPY) -m benchmarks.trace_throughput
+	$(VPY) -m benchmarks.scale
+	$(VPY) -m benchmarks.accuracy --output benchmarks/results
+	$(VPY) -m benchmarks.frame_time --output benchmarks/results
+	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
+	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache
