@@ -44,12 +44,13 @@ test: build
 # each Blender the manifest claims, as the bpy module, each in its own venv with the Python
 # and numpy that release ships (build/matrix/bpy-<series>/, made on first use: a ~370 MB
 # download and ~1 GB on disk each; 5.1 and 5.2 need a python3.13, from PATH or pyenv),
-# clouds of every format imported and one rendered and checked (tests/test_matrix.py).
-# MATRIX picks series (the keys of test_matrix.py's table).
+# clouds of every format imported and one rendered and checked
+# (tests/release/test_blender_versions.py). MATRIX picks series (the keys of its table).
 MATRIX ?= 4.2.13 4.2 4.3 4.4 4.5 5.0 5.1 5.2
 
 test-matrix: $(STAMP)
-	cd tests && ../$(VPY) -m pytest -q -p no:cacheprovider --durations=0 test_matrix.py $(MATRIX:%=--bpy %)
+	cd tests && ../$(VPY) -m pytest -q -p no:cacheprovider --durations=0 release/test_blender_versions.py \
+		$(MATRIX:%=--bpy %)
 
 # --- Sanitizers -------------------------------------------------------------------------
 # The native core built with AddressSanitizer + UndefinedBehaviorSanitizer (setup.py,
@@ -66,8 +67,8 @@ SAN_LIBS  = $(shell gcc -print-file-name=libasan.so) $(shell gcc -print-file-nam
 SAN_ENV   = LD_PRELOAD="$(SAN_LIBS)" \
             ASAN_OPTIONS=detect_leaks=0:log_path=$(abspath $(SAN))/logs/asan \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(abspath $(SAN))/logs/ubsan
-SAN_TESTS = test_core.py test_robustness.py test_method.py test_properties.py test_neighbours.py test_graph.py \
-            $(notdir $(wildcard tests/test_render_scene.py))
+SAN_TESTS = render/test_splats.py render/test_hostile_inputs.py render/test_method.py render/test_invariants.py \
+            render/test_scene.py pipeline/test_neighbours.py pipeline/test_graph.py
 
 sanitize-tree: $(STAMP)
 	SPLAT_SANITIZE=1 $(VPY) setup.py --quiet build_ext --build-lib $(SAN)/lib --build-temp $(SAN)/tmp

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from test_blender_method import cube_in_blender, image_pixels  # noqa: F401 - a fixture
+from test_method_settings import cube_in_blender, image_pixels  # noqa: F401 - a fixture
 
 from splat_tracer import ab, core, difference
 
