@@ -11,7 +11,8 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(wildcard splat_tracer/native/*.cpp splat_tracer/native/*.h)
 
-.PHONY: all venv build native demo test test-matrix test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
+.PHONY: all venv build native demo test test-release test-matrix test-sanitize sanitize-tree fuzz dist docs bench \
+        bench-quick clean
 
 all: build
 
@@ -37,8 +38,18 @@ native: $(STAMP)
 demo: build
 	$(VPY) -m tools.demo --output demo.png
 
+# The everyday loop: every test that needs no cross build and no other Blender release, that
+# is all but tests/release/: the Blender-free tests (pipeline/, render/; `-m "not blender"`
+# runs only those) and the ones in bpy 5.0.1 (blender/).
 test: build
-	$(VPY) -m pytest tests
+	$(VPY) -m pytest tests --ignore=tests/release
+
+# The release checks, which CI runs after `make test`: the shipped cores cross-built for the
+# four platforms (tests/release/test_portable.py: about 10 minutes on 2 cores when Zig's
+# cache is cold) and the Linux zip installed into bpy 5.0.1 (test_dist.py), the version
+# matrix, the core under the sanitizers and a short fuzz run.
+test-release: build test-matrix test-sanitize fuzz
+	$(VPY) -m pytest tests/release/test_portable.py tests/release/test_dist.py
 
 # The version matrix: the linux-x64 zip (`make dist`'s) installed from the command line into
 # each Blender the manifest claims, as the bpy module, each in its own venv with the Python
