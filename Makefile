@@ -1,6 +1,8 @@
 # splat_tracer: one entry point for set-up, build, demo, tests, packaging and benchmarks.
 # Every target sets up what it needs: a virtual environment with the pinned packages
-# (.venv) and the native core (splat_tracer/_core.abi3.so).
+# (.venv) and the native core (splat_tracer/_core.abi3.so). Tools, benchmarks and fuzz
+# harnesses run as modules from the root (`python -m tools.demo`), where splat_tracer, tools
+# and benchmarks import as packages.
 
 PYTHON ?= python3
 VENV   := .venv
@@ -9,7 +11,8 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(shell find splat_tracer/native -name '*.cpp' -o -name '*.h')
 
-.PHONY: all venv build native demo test test-matrix test-sanitize sanitize-tree fuzz dist docs bench bench-quick clean
+.PHONY: all venv build native demo test test-release test-matrix test-sanitize sanitize-tree fuzz dist docs bench \
+        bench-quick clean
 
 all: build
 
@@ -30,24 +33,35 @@ build: $(CORE)
 # cross-compiled with Zig (the ziglang package) into build/native/<platform>/. `make build`
 # (gcc, in place) stays the development build: the sanitizer build and the tests use it.
 native: $(STAMP)
-	$(VPY) tools/build_native.py
+	$(VPY) -m tools.build_native
 
 demo: build
-	$(VPY) tools/demo.py --output demo.png
+	$(VPY) -m tools.demo --output demo.png
 
+# The everyday loop: every test that needs no cross build and no other Blender release, that
+# is all but tests/release/: the Blender-free tests (pipeline/, render/; `-m "not blender"`
+# runs only those) and the ones in bpy 5.0.1 (blender/).
 test: build
-	$(VPY) -m pytest tests
+	$(VPY) -m pytest tests --ignore=tests/release
+
+# The release checks, which CI runs after `make test`: the shipped cores cross-built for the
+# four platforms (tests/release/test_portable.py: about 10 minutes on 2 cores when Zig's
+# cache is cold) and the Linux zip installed into bpy 5.0.1 (test_dist.py), the version
+# matrix, the core under the sanitizers and a short fuzz run.
+test-release: build test-matrix test-sanitize fuzz
+	$(VPY) -m pytest tests/release/test_portable.py tests/release/test_dist.py
 
 # The version matrix: the linux-x64 zip (`make dist`'s) installed from the command line into
 # each Blender the manifest claims, as the bpy module, each in its own venv with the Python
 # and numpy that release ships (build/matrix/bpy-<series>/, made on first use: a ~370 MB
 # download and ~1 GB on disk each; 5.1 and 5.2 need a python3.13, from PATH or pyenv),
-# clouds of every format imported and one rendered and checked (tests/test_matrix.py).
-# MATRIX picks series (the keys of test_matrix.py's table).
+# clouds of every format imported and one rendered and checked
+# (tests/release/test_blender_versions.py). MATRIX picks series (the keys of its table).
 MATRIX ?= 4.2.13 4.2 4.3 4.4 4.5 5.0 5.1 5.2
 
 test-matrix: $(STAMP)
-	cd tests && ../$(VPY) -m pytest -q -p no:cacheprovider --durations=0 test_matrix.py $(MATRIX:%=--bpy %)
+	cd tests && ../$(VPY) -m pytest -q -p no:cacheprovider --durations=0 release/test_blender_versions.py \
+		$(MATRIX:%=--bpy %)
 
 # --- Sanitizers -------------------------------------------------------------------------
 # The native core built with AddressSanitizer + UndefinedBehaviorSanitizer (setup.py,
@@ -64,8 +78,8 @@ SAN_LIBS  = $(shell gcc -print-file-name=libasan.so) $(shell gcc -print-file-nam
 SAN_ENV   = LD_PRELOAD="$(SAN_LIBS)" \
             ASAN_OPTIONS=detect_leaks=0:log_path=$(abspath $(SAN))/logs/asan \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(abspath $(SAN))/logs/ubsan
-SAN_TESTS = test_core.py test_robustness.py test_method.py test_properties.py test_neighbours.py test_graph.py \
-            $(notdir $(wildcard tests/test_render_scene.py))
+SAN_TESTS = render/test_splats.py render/test_hostile_inputs.py render/test_method.py render/test_invariants.py \
+            render/test_scene.py pipeline/test_neighbours.py pipeline/test_graph.py
 
 sanitize-tree: $(STAMP)
 	SPLAT_SANITIZE=1 $(VPY) setup.py --quiet build_ext --build-lib $(SAN)/lib --build-temp $(SAN)/tmp
@@ -90,24 +104,24 @@ test-sanitize: sanitize-tree
 FUZZ_SECONDS ?= 60
 
 fuzz: build sanitize-tree
-	$(VPY) fuzz/run.py --seconds $(FUZZ_SECONDS) --sanitized $(SAN)/tree
+	$(VPY) -m fuzz.run --seconds $(FUZZ_SECONDS) --sanitized $(SAN)/tree
 
 docs: build
-	$(VPY) tools/switch_images.py --output-dir docs/switches
-	$(VPY) tools/viewport_images.py --output-dir docs/viewport
-	$(VPY) tools/demo.py --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
+	$(VPY) -m tools.switch_images --output-dir docs/switches
+	$(VPY) -m tools.viewport_images --output-dir docs/viewport
+	$(VPY) -m tools.demo --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
 dist: $(STAMP)
-	$(VPY) tools/build_dist.py --output-dir dist
+	$(VPY) -m tools.build_dist --output-dir dist
 
 bench-quick: build
-	$(VPY) benchmarks/trace_throughput.py --quick
-	$(VPY) benchmarks/scale.py --quick
-	$(VPY) benchmarks/accuracy.py --quick --output build/bench-quick
-	$(VPY) benchmarks/frame_time.py --quick --output build/bench-quick
-	$(VPY) benchmarks/viewport_latency.py --quick
-	$(VPY) benchmarks/import_speed.py --quick --output build/bench-quick
+	$(VPY) -m benchmarks.trace_throughput --quick
+	$(VPY) -m benchmarks.scale --quick
+	$(VPY) -m benchmarks.accuracy --quick --output build/bench-quick
+	$(VPY) -m benchmarks.frame_time --quick --output build/bench-quick
+	$(VPY) -m benchmarks.viewport_latency --quick
+	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 
 # Open3D for the import benchmark's comparison rows, in its own environment (its wheel
 # brings dependencies the add-on's environment must not get); it needs libusb at load
@@ -120,12 +134,12 @@ $(O3D)/.installed-stamp:
 	  && touch $@
 
 bench: build $(O3D)/.installed-stamp
-	$(VPY) benchmarks/trace_throughput.py
-	$(VPY) benchmarks/scale.py
-	$(VPY) benchmarks/accuracy.py --output benchmarks/results
-	$(VPY) benchmarks/frame_time.py --output benchmarks/results
-	$(VPY) benchmarks/viewport_latency.py --output benchmarks/results/viewport_latency.md
-	$(VPY) benchmarks/import_speed.py --repeat 3 --output benchmarks/results
+	$(VPY) -m benchmarks.trace_throughput
+	$(VPY) -m benchmarks.scale
+	$(VPY) -m benchmarks.accuracy --output benchmarks/results
+	$(VPY) -m benchmarks.frame_time --output benchmarks/results
+	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
+	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

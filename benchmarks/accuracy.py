@@ -1,8 +1,8 @@
 """Run time against error: every method preset, a sweep of ε and radius factor, the real
 Blender render, Cycles, and the paper, scored against the true surface in one run.
 
-    python benchmarks/accuracy.py            (`make bench`: every model, 640x480)
-    python benchmarks/accuracy.py --quick    (`make bench-quick`: sphere and cube, 320x240)
+    python -m benchmarks.accuracy            (`make bench`: every model, 640x480)
+    python -m benchmarks.accuracy --quick    (`make bench-quick`: sphere and cube, 320x240)
 
 Inputs: each mesh of ../shared/data/meshes (when present) and analytic shapes (sphere,
 cube, torus) become two clouds: the mesh's vertices with area-weighted normals (for the
@@ -34,13 +34,9 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE))
 
-import meshes  # noqa: E402
-import scoring  # noqa: E402
-import synthetic  # noqa: E402
-import truth as truth_mod  # noqa: E402
+from benchmarks import meshes, scoring, synthetic  # noqa: E402
+from benchmarks import truth as truth_mod  # noqa: E402
 from splat_tracer.pointcloud import spacing  # noqa: E402
 from splat_tracer.pointcloud.neighbours import local_frame  # noqa: E402
 from splat_tracer.pointcloud.readers import ply  # noqa: E402
@@ -145,7 +141,7 @@ def run(args) -> list[dict]:
             rows.append({**base, "renderer": "splat_tracer core", "method": label, "epsilon": method.epsilon,
                          "radius_factor": rf, "closed": closed_flag, "seconds": wall, "cores": cores, **s})
         if args.blender:
-            import blender_runs
+            from benchmarks import blender_runs
 
             ply_path = workdir / f"{model.replace(' ', '_')}_{cloud_name.split()[0]}.ply"
             ply.write_ply(str(ply_path), points, normals, radii=covering)
@@ -171,7 +167,7 @@ def run(args) -> list[dict]:
 
 
 def write_reports(rows: list[dict], out_dir: Path) -> None:
-    import report
+    from benchmarks import report
 
     out_dir.mkdir(parents=True, exist_ok=True)
     keys = sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k) if k in rows[0] else 99)
@@ -194,7 +190,7 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     rows = run(args)
     write_reports(rows, Path(args.output))
-    import report
+    from benchmarks import report
 
     print()
     print(report.summary(rows))

@@ -4,22 +4,17 @@ users do today (the importer's Mesh to Points spheres, 1 sample)."""
 from __future__ import annotations
 
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tools"))
-sys.path.insert(0, str(HERE.parent / "tests"))
 
 _ready = False
 
 
 def _blender(workdir: Path):
     global _ready
-    import dev_extension
+    from tools import dev_extension
 
     if not _ready:
         dev_extension.isolate_user_dirs(str(workdir / "blender_user"))
@@ -37,7 +32,7 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
     camera `view` (Camera.look_at arguments). Returns wall seconds of the render call,
     the threads Blender was told to use, and top-row-first coverage, depth and normals."""
     bpy = _blender(workdir)
-    from blender_helpers import render_to_exr
+    from tests.support.blender_helpers import render_to_exr
     from mathutils import Matrix
 
     bpy.ops.wm.read_homefile(use_empty=True)

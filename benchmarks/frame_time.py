@@ -1,6 +1,6 @@
 """Frame time of a lit scene, beside Cycles in the same run, and what each skip saves.
 
-    python benchmarks/frame_time.py [--quick] [--output DIR]
+    python -m benchmarks.frame_time [--quick] [--output DIR]
 
 The scene: the bunny's 35,947-point vertex cloud (the paper's cloud; a 36k-point sphere when
 ../shared is absent) standing on a mesh floor, one sun lamp with shadows, a grey sky. Both
@@ -24,13 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tools"))
-sys.path.insert(0, str(HERE.parent / "tests"))
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE))
+from benchmarks import meshes
 
-import meshes  # noqa: E402
+HERE = Path(__file__).resolve().parent
 
 
 def bunny_cloud():
@@ -81,7 +77,7 @@ def build(bpy, ply_path: Path, centres: np.ndarray):
 
 
 def frame(bpy, scene, engine: str, samples: int, path: Path, session) -> dict:
-    from blender_helpers import render_to_exr
+    from tests.support.blender_helpers import render_to_exr
 
     scene.render.engine = engine
     scene.cycles.samples = samples
@@ -119,13 +115,13 @@ def main(argv=None) -> int:
     work = HERE.parent / "build" / "frame_time"
     work.mkdir(parents=True, exist_ok=True)
 
-    import dev_extension
+    from tools import dev_extension
 
     dev_extension.isolate_user_dirs(str(work / "blender_user"))
     import bpy
 
     dev_extension.enable_from_source(work)
-    from blender_helpers import extension_module
+    from tests.support.blender_helpers import extension_module
     from splat_tracer.pointcloud.readers import ply
 
     session = extension_module("blender.session")

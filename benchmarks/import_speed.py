@@ -1,7 +1,7 @@
 """Import speed and memory: Splat Tracer's importer beside Blender's own PLY importer and
 Open3D, in the same run, on files this script writes.
 
-    python benchmarks/import_speed.py [--quick] [--points N] [--output DIR] [--open3d-python PY]
+    python -m benchmarks.import_speed [--quick] [--points N] [--output DIR] [--open3d-python PY]
 
 The cloud: N points sampled uniformly at random over a wavy 1 km x 1 km terrain (a height
 field, its true normals known), with colours and, for LAS, intensity and classification.
@@ -45,8 +45,6 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT / "tools"))
-sys.path.insert(0, str(ROOT))
 
 FULL_POINTS = 10_000_000
 QUICK_POINTS = 20_000
@@ -165,7 +163,7 @@ def run_case(case: str, path: str) -> dict:
     """One measurement in this process: wall seconds and peak memory beyond the start."""
     out = {"case": case}
     if case in ("ours", "ours_given_normals", "ours_normals", "blender"):
-        import dev_extension
+        from tools import dev_extension
 
         home = dev_extension.isolate_user_dirs()
         import bpy
@@ -243,7 +241,7 @@ def run_case(case: str, path: str) -> dict:
 
 
 def spawn(python: str, case: str, path: Path) -> dict:
-    cmd = [python, str(Path(__file__).resolve()), "--case", case, "--file", str(path)]
+    cmd = [python, "-m", "benchmarks.import_speed", "--case", case, "--file", str(path)]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=str(ROOT))
     lines = [line for line in proc.stdout.splitlines() if line.startswith("{")]
     if proc.returncode != 0 or not lines:
@@ -318,7 +316,7 @@ def main(argv=None) -> int:
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "import_speed.json").write_text(json.dumps(report, indent=1))
     lines = [f"# Import speed: {n:,} points", "",
-             f"`benchmarks/import_speed.py`{' --quick' if args.quick else ''}"
+             f"`python -m benchmarks.import_speed`{' --quick' if args.quick else ''}"
              f"{f' --repeat {repeat}' if repeat > 1 else ''}: "
              + ("one run of each case" if repeat == 1 else f"{repeat} runs of each case, in rounds; the median run")
              + f", each in a fresh process, {os.cpu_count()} CPUs (shared with other work: timings vary by tens of "

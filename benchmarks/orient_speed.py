@@ -1,7 +1,7 @@
 """Speed and peak memory of the normals' consistent orientation (normals.orient, PROPAGATE)
 alone, on import_speed.py's terrain, without Blender.
 
-    python benchmarks/orient_speed.py [--points N] [--root DIR]
+    python -m benchmarks.orient_speed [--points N] [--root DIR]
 
 The inputs are made once per N and cached in build/orient_bench/ (positions, the 8-nearest
 neighbour table as estimate() fills it, and the terrain's true normals with a little noise
@@ -26,8 +26,6 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(HERE))
 
 NOISE = 0.02  # radians-ish: the spread of PCA normals about the truth on a clean scan
 
@@ -36,7 +34,7 @@ def inputs(n: int) -> Path:
     folder = ROOT / "build" / "orient_bench" / str(n)
     if (folder / "graph.npy").is_file():
         return folder
-    from import_speed import terrain
+    from benchmarks.import_speed import terrain
     from splat_tracer.pointcloud import normals
     from splat_tracer.pointcloud.neighbours import PointIndex
 
@@ -59,7 +57,7 @@ def inputs(n: int) -> Path:
 def run(folder: Path) -> dict:
     from splat_tracer.pointcloud import normals
 
-    from import_speed import _peak_since, _start_peak
+    from benchmarks.import_speed import _peak_since, _start_peak
 
     pos, nrm, graph = (np.load(folder / f"{name}.npy") for name in ("pos", "nrm", "graph"))
     base = _start_peak()
@@ -85,13 +83,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.case:
         if args.root:
-            sys.path.insert(0, args.root)
+            sys.path.insert(0, args.root)  # the other version's splat_tracer before this checkout's
         print(json.dumps(run(Path(args.case))), flush=True)
         return 0
     folder = inputs(args.points)
     load = os.getloadavg()
-    cmd = [sys.executable, __file__, "--case", str(folder)] + (["--root", args.root] if args.root else [])
-    out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1])
+    cmd = [sys.executable, "-m", "benchmarks.orient_speed", "--case", str(folder)]
+    cmd += ["--root", args.root] if args.root else []
+    out = json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True, cwd=ROOT)
+                     .stdout.strip().splitlines()[-1])
     out["load_before"] = load
     out["load_after"] = os.getloadavg()
     print(json.dumps(out, indent=1))

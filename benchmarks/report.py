@@ -100,7 +100,7 @@ def per_method(rows) -> str:
 
 
 def markdown(rows) -> str:
-    return ("# Run time against error\n\nMade by `python benchmarks/accuracy.py` (see its docstring for what "
+    return ("# Run time against error\n\nMade by `python -m benchmarks.accuracy` (see its docstring for what "
             "each column measures).\n\n## Per method, over every model\n\n" + per_method(rows) +
             "\n## Summary\n\n" + summary(rows) + "\n## Every configuration\n\n" + table(rows))
 

@@ -1,6 +1,6 @@
 """Scale: building and rendering millions of splats (issue #12's scale targets).
 
-    python benchmarks/scale.py [--quick] [--sizes 1M,10M,100M] [--no-embree]
+    python -m benchmarks.scale [--quick] [--sizes 1M,10M,100M] [--no-embree]
                                (`make bench`: 1M and 10M; `make bench-quick`: 1M, --quick)
 
 A closed torus (major radius 1, minor 0.4) sampled uniformly by area -- no external data --
@@ -36,8 +36,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE))
+ROOT = HERE.parent
 
 from splat_tracer.render.camera import Camera  # noqa: E402
 from splat_tracer.render.method import Method  # noqa: E402
@@ -89,9 +88,8 @@ def kept_rss(n_splats: int) -> float:
     after the build with the input arrays freed (and freed heap handed back to the system)
     minus RSS before the input was made; and the peak (input included) the same way."""
     code = f"""
-import ctypes, gc, sys
-sys.path.insert(0, {str(HERE)!r}); sys.path.insert(0, {str(HERE.parent)!r})
-import scale
+import ctypes, gc
+from benchmarks import scale
 from splat_tracer.render.camera import Camera
 from splat_tracer.render.method import Method
 from splat_tracer.render.scene import Instance, Mesh, RenderScene
@@ -106,7 +104,7 @@ import resource
 peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 print((scale.rss_bytes() - before) / {n_splats}, (peak - before) / {n_splats})
 """
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     if run.returncode:
         return float("nan"), float("nan")
     kept, peak = run.stdout.strip().splitlines()[-1].split()
@@ -127,8 +125,7 @@ def timed_builds(c, n, r, rounds: int) -> dict:
 
 
 def embree_build(c, n, r, work: Path) -> float | None:
-    sys.path.insert(0, str(HERE))
-    import trace_throughput as tt
+    from benchmarks import trace_throughput as tt
     if tt.embree_available(install=False):
         return None
     work.mkdir(parents=True, exist_ok=True)

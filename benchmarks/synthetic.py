@@ -1,6 +1,6 @@
 """Synthetic scenes with exact truth, one per failure class of the visibility method
 (issue 8): each is a triangle mesh (the truth, ray-cast exactly) and the point cloud made
-from it. Used by benchmarks/accuracy.py and by tests/test_failure_classes.py.
+from it. Used by benchmarks/accuracy.py and by tests/render/test_method_failure_classes.py.
 
 - `sphere+band`:    two closed shells that intersect (a belt through a body): a torus whose
                     tube is centred on the sphere's equator, so half of it is inside.
@@ -20,9 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import meshes
-import scoring
-import truth as truth_mod
+from benchmarks import meshes, scoring
+from benchmarks import truth as truth_mod
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Ray throughput of the core on the paper's experiment: nearest hit and each method preset.
 
-    python benchmarks/trace_throughput.py [--quick]     (`make bench`, `make bench-quick`)
+    python -m benchmarks.trace_throughput [--quick]     (`make bench`, `make bench-quick`)
 
 The Stanford bunny's 35,947 vertices with area-weighted normals and k-NN radii (the
 paper's 35,945-point cloud), one ray per pixel at 640x480. Prints one table: BVH build
@@ -33,10 +33,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))
-sys.path.insert(0, str(HERE))
 
-from meshes import SHARED_MESHES, area_samples, fit_camera, icosphere, read_obj, vertex_cloud  # noqa: E402
+from benchmarks.meshes import SHARED_MESHES, area_samples, fit_camera, icosphere, read_obj, vertex_cloud  # noqa: E402
 from splat_tracer import _core  # noqa: E402
 from splat_tracer.pointcloud import spacing  # noqa: E402
 from splat_tracer.pointcloud.neighbours import local_frame  # noqa: E402

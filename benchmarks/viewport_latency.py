@@ -1,8 +1,8 @@
 """How soon the Rendered viewport shows something after a change (issue 13's "a coarse
 pass within ~100 ms"), measured with the viewport's own session code, headless:
 
-    python benchmarks/viewport_latency.py            (`make bench`: the demo scene, 1280x720 view)
-    python benchmarks/viewport_latency.py --quick    (`make bench-quick`: 480x270)
+    python -m benchmarks.viewport_latency            (`make bench`: the demo scene, 1280x720 view)
+    python -m benchmarks.viewport_latency --quick    (`make bench-quick`: 480x270)
 
 The scene is `make demo`'s (a 31,500-point scan, two sphere clouds, a mesh floor, a sun),
 seen from its camera in a view the size of a typical 3D viewport. For each change, the time
@@ -25,9 +25,7 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent / "tools"))
-import dev_extension  # noqa: E402
+from tools import dev_extension
 
 BUILD = dev_extension.REPO_ROOT / "build" / "viewport_latency"
 
@@ -43,9 +41,8 @@ def main(argv=None) -> int:
     import bpy
     import numpy as np
 
-    sys.path.insert(0, str(dev_extension.REPO_ROOT))
     dev_extension.enable_from_source(BUILD)
-    import demo
+    from tools import demo
 
     viewport = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.blender.viewport"]
     scene, n_splats = demo.build_scene(bpy, 3, width, height)

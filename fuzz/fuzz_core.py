@@ -1,6 +1,6 @@
 """Fuzz harness: the native core's entry points, called directly (splat_tracer._core).
 
-    python fuzz/fuzz_core.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
+    python -m fuzz.fuzz_core [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
 
 The input bytes are decoded (atheris.FuzzedDataProvider) into float32 splat arrays mixing
 ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extremes
@@ -26,13 +26,11 @@ silent memory errors and undefined behaviour into findings.
 Seed corpus: fuzz/corpus/core/.
 """
 import sys
-from pathlib import Path
 
 import atheris
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from splat_tracer import _core  # noqa: E402
+from splat_tracer import _core
 
 ALLOWED = (ValueError, TypeError, MemoryError)
 SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-45, 1.1754942e-38, 1e18, -1e18, 1.0000001e18, 1e19, -1e19,

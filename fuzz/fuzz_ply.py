@@ -1,6 +1,6 @@
 """Fuzz harness: the PLY reader and the import preparation behind it.
 
-    python fuzz/fuzz_ply.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
+    python -m fuzz.fuzz_ply [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
 
 Each input is a file's bytes: splat_tracer.pointcloud.readers.ply.read_ply reads it from a temporary file.
 The contract: a file is imported or refused with CloudFileError, nothing else. When it is
@@ -13,12 +13,10 @@ Seed corpus: fuzz/corpus/ply/ (small valid and broken files).
 import os
 import sys
 import tempfile
-from pathlib import Path
 
 import atheris
 import numpy as np  # imported before instrumenting: coverage is wanted for our code, not numpy's
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
     import plyfile  # noqa: F401  (instrumented: its parser is half of the reader)
     from splat_tracer.pointcloud import prepare

@@ -1,6 +1,6 @@
 """Fuzz harness: the import preparation on fuzzed point arrays.
 
-    python fuzz/fuzz_prepare.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
+    python -m fuzz.fuzz_prepare [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
 
 The input bytes are decoded (atheris.FuzzedDataProvider) into a point cloud as
 ply.read_ply hands it over -- finite float64 positions of any magnitude (clusters,
@@ -15,12 +15,10 @@ radii -- and passed to:
 Seed corpus: fuzz/corpus/prepare/ (raw byte strings; any bytes decode to some cloud).
 """
 import sys
-from pathlib import Path
 
 import atheris
 import numpy as np  # imported before instrumenting: coverage is wanted for our code, not numpy's
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 with atheris.instrument_imports():
     from splat_tracer.pointcloud import prepare
     from splat_tracer.pointcloud.cloud import CloudFileError, PointCloud

@@ -1,6 +1,6 @@
 """Runs every fuzz harness for a share of a time budget (what `make fuzz` calls).
 
-    python fuzz/run.py --seconds 60 [--sanitized build/sanitize/tree]
+    python -m fuzz.run --seconds 60 [--sanitized build/sanitize/tree]
 
 Harnesses (one per entry point, each documented in its file): fuzz_ply.py (the PLY reader
 and the import preparation behind it), fuzz_prepare.py (the import preparation on fuzzed
@@ -11,7 +11,7 @@ harness's whole corpus (seeds and learnt) is then replayed, once each, against t
 UBSan build in that tree: under the preloaded ASan runtime atheris gets no coverage
 signal, so the coverage-guided search runs on the normal build and the sanitizers judge
 what it found. A finding stops its harness; its input is written to build/fuzz/<name>-crash-*
-(replay: python fuzz/fuzz_<name>.py FILE) and this script exits 1. It prints the executions
+(replay: python -m fuzz.fuzz_<name> FILE) and this script exits 1. It prints the executions
 of each harness.
 """
 from __future__ import annotations
@@ -38,10 +38,10 @@ def sanitizer_env() -> dict:
 def run(name: str, harness_root: Path, args: list[str], env=None, label: str = "") -> tuple[bool, int]:
     out = ROOT / "build" / "fuzz"
     log = out / f"{name}{label}.log"
-    cmd = [sys.executable, str(harness_root / "fuzz" / f"fuzz_{name}.py"), *args,
+    cmd = [sys.executable, "-m", f"fuzz.fuzz_{name}", *args,
            f"-artifact_prefix={out}/{name}-", "-rss_limit_mb=8192", "-timeout=60", "-print_final_stats=1"]
-    with open(log, "w") as f:
-        code = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env, cwd=ROOT).returncode
+    with open(log, "w") as f:  # run from harness_root: its splat_tracer is the one fuzzed
+        code = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, env=env, cwd=harness_root).returncode
     text = log.read_text(errors="replace")
     runs = re.findall(r"stat::number_of_executed_units:\s*(\d+)", text)
     executions = int(runs[-1]) if runs else 0

@@ -2,16 +2,14 @@
 extension is enabled from this source tree, in throwaway Blender user directories."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+from tools import dev_extension
 
-import dev_extension  # noqa: E402
+BLENDER_TESTS = Path(__file__).resolve().parent / "blender"
+BLENDER_FIXTURES = {"blender", "empty_scene"}
 
 # Must happen before the first `import bpy` anywhere in the session.
 BLENDER_HOME = dev_extension.isolate_user_dirs()
@@ -35,22 +33,17 @@ def empty_scene(blender):
     return scene
 
 
+def pytest_collection_modifyitems(config, items):
+    """The `blender` marker (pytest.ini), so that `pytest -m "not blender"` needs no bpy: every
+    test under blender/, and elsewhere every test using a fixture that imports bpy (directly
+    or through another fixture: fixturenames is the closure)."""
+    for item in items:
+        if BLENDER_TESTS in item.path.parents or BLENDER_FIXTURES & set(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.blender)
+
+
 def pytest_addoption(parser):
     parser.addoption("--bpy", action="append", default=[], metavar="SERIES",
-                     help="test_matrix.py: a Blender series to install the zip into (4.2, 4.5, 5.0; repeatable); "
-                          "without it those tests are skipped (make test-matrix passes them)")
-
-
-@pytest.fixture(scope="session")
-def dist_zip(tmp_path_factory):
-    """The Linux zip only (the platform this machine can install and render); `make dist`
-    builds the other three the same way, their binaries are checked by test_portable.py."""
-    import subprocess
-
-    out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, str(ROOT / "tools" / "build_dist.py"), "--platform", "linux-x64",
-                    "--output-dir", str(out)], check=True)
-    (zip_path,) = out.glob("splat_tracer-*.zip")
-    assert zip_path.name.endswith("-linux_x64.zip")  # blender_ext.py --split-platforms naming
-    return zip_path
+                     help="release/test_blender_versions.py: a Blender series to install the zip into (4.2, 4.5, "
+                          "5.0; repeatable); without it those tests are skipped (make test-matrix passes them)")
 

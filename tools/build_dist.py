@@ -1,6 +1,6 @@
 """Builds the installable extension zips, one per platform (what `make dist` runs).
 
-    python tools/build_dist.py [--platform linux-x64 ...] --output-dir dist
+    python -m tools.build_dist [--platform linux-x64 ...] --output-dir dist
 
 writes dist/splat_tracer-<version>-<platform>.zip for linux-x64, windows-x64, macos-arm64
 and macos-x64 (default: all four). For each platform:
@@ -35,6 +35,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from tools import build_native
+
 ROOT = Path(__file__).resolve().parent.parent
 STAGE_ROOT = ROOT / "build" / "dist_stage"
 WHEEL_CACHE = ROOT / "build" / "wheels"
@@ -61,9 +63,6 @@ PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 # The development core (make build) is never shipped: each stage gets its platform's.
 SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "native", "_core*.so", "_core*.pyd")
-
-sys.path.insert(0, str(ROOT / "tools"))
-import build_native  # noqa: E402
 
 
 def blender_ext() -> Path:

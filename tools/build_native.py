@@ -1,7 +1,7 @@
 """Builds the shipped native core for each platform with Zig's C/C++ compiler (clang + its
 own libc/libc++), from this Linux machine (what `make dist` and `make native` run).
 
-    python tools/build_native.py [--platform linux-x64 ...] [--output-dir build/native]
+    python -m tools.build_native [--platform linux-x64 ...] [--output-dir build/native]
 
 writes build/native/<platform>/<module> for each Blender platform:
 

@@ -1,8 +1,8 @@
 """Renders the demo: a scan on a floor, lit by a lamp, beside a mirror and a glass sphere,
 through the real add-on and Blender's render pipeline.
 
-    python tools/demo.py --output demo.png              (what `make demo` runs)
-    python tools/demo.py --output demo.png --cycles docs/demo_cycles.png
+    python -m tools.demo --output demo.png              (what `make demo` runs)
+    python -m tools.demo --output demo.png --cycles docs/demo_cycles.png
                                                         (also renders the same scene with Cycles)
 
 Everything comes from Blender itself (no file outside the repository is needed): the "scan"
@@ -19,8 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import dev_extension  # noqa: E402
+from tools import dev_extension
 
 BUILD = dev_extension.REPO_ROOT / "build" / "demo"
 
@@ -156,7 +155,6 @@ def main(argv=None) -> int:
     dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
     import bpy
 
-    sys.path.insert(0, str(dev_extension.REPO_ROOT))
     dev_extension.enable_from_source(BUILD)
     scene, n_splats = build_scene(bpy, args.levels, args.width, args.height)
     scene.splat_tracer.samples = args.samples

@@ -50,10 +50,9 @@ def enable_from_source(workdir: Path) -> str:
 
 def start_docs_tool(build: Path, description: str, default_output: Path, argv=None):
     """The start of a tool that renders the README's images: its --output-dir argument, bpy
-    with throwaway user directories under `build`, the repository and tests/ importable, and
-    the extension enabled from source. Returns (args, bpy)."""
+    with throwaway user directories under `build`, and the extension enabled from source.
+    Returns (args, bpy)."""
     import argparse
-    import sys
 
     ap = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--output-dir", default=str(default_output))
@@ -62,7 +61,5 @@ def start_docs_tool(build: Path, description: str, default_output: Path, argv=No
     isolate_user_dirs(str(build / "blender_user"))
     import bpy
 
-    sys.path.insert(0, str(REPO_ROOT))
-    sys.path.insert(0, str(REPO_ROOT / "tests"))
     enable_from_source(build)
     return args, bpy

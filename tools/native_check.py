@@ -1,7 +1,7 @@
 """Reads what a built native module needs from the system it is loaded on, for each of the
-three executable formats, without the target's tools (used by tests/test_portable.py).
+three executable formats, without the target's tools (used by tests/release/test_portable.py).
 
-    python tools/native_check.py FILE...     prints each file's facts
+    python -m tools.native_check FILE...     prints each file's facts
 
 - ELF (Linux): the NEEDED libraries, the newest GLIBC_ symbol version required, the
   exported dynamic symbols, as binutils' readelf and objdump report them.

@@ -1,6 +1,6 @@
 """Renders the README's off/on image pairs, one per visibility switch (what `make docs` runs).
 
-    python tools/switch_images.py --output-dir docs/switches
+    python -m tools.switch_images --output-dir docs/switches
 
 For each switch, the full method with that switch off (A) and on (B), and their
 difference, rendered through the add-on's own A/B compare operator (toggle) in real Blender:
@@ -15,8 +15,7 @@ import math
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import dev_extension  # noqa: E402
+from tools import dev_extension
 
 BUILD = dev_extension.REPO_ROOT / "build" / "switch_images"
 SWITCHES = {  # property -> (scene, what to look at)
@@ -57,8 +56,8 @@ def suzanne_scene(bpy, ply, demo):
 
 def main(argv=None) -> int:
     args, bpy = dev_extension.start_docs_tool(BUILD, __doc__, dev_extension.REPO_ROOT / "docs" / "switches", argv)
-    import demo
-    import geometry
+    from tools import demo
+    from tests.support import geometry
     from splat_tracer.pointcloud.readers import ply
 
     out_root = Path(args.output_dir).resolve()

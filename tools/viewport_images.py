@@ -1,6 +1,6 @@
 """Renders the README's viewport screenshots (what `make docs` runs):
 
-    python tools/viewport_images.py --output-dir docs/viewport
+    python -m tools.viewport_images --output-dir docs/viewport
 
 A headless render of what the Rendered viewport draws, made by the viewport's own code: a
 3D view's matrices (a perspective view of Suzanne's surface as splats, lit by a sun) are
@@ -16,8 +16,7 @@ import math
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import dev_extension  # noqa: E402
+from tools import dev_extension
 
 BUILD = dev_extension.REPO_ROOT / "build" / "viewport_images"
 WIDTH, HEIGHT = 480, 270   # small PNGs for the README
@@ -27,12 +26,12 @@ SPLIT = 0.5
 def main(argv=None) -> int:
     args, bpy = dev_extension.start_docs_tool(BUILD, __doc__, dev_extension.REPO_ROOT / "docs" / "viewport", argv)
     import numpy as np
-    import switch_images
+    from tools import switch_images
 
     addon = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.blender.viewport"]
     ab = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.render.ab"]
     from splat_tracer.pointcloud.readers import ply
-    import demo
+    from tools import demo
 
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene

@@ -58,8 +58,7 @@ from splat_tracer.render.scene import Instance, RenderScene
 from splat_tracer.render.shading import Light, RenderSettings
 from splat_tracer.render.splats import SplatCloud
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 settings.register_profile("splat", derandomize=True, database=None, deadline=None, print_blob=True,
                           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -391,13 +390,13 @@ def degenerate_inputs_body(centres, normals, radii, closed, origins, directions,
 
 def test_degenerate_inputs_are_refused_or_handled_never_crash(tmp_path):
     last = tmp_path / "last_example.txt"
-    code = textwrap.dedent(f"""
-        import sys
-        sys.path[:0] = [{str(HERE)!r}, {str(ROOT)!r}]
-        import test_properties
-        test_properties.degenerate_inputs_body()
+    code = textwrap.dedent("""
+        from tests.render import test_invariants
+        test_invariants.degenerate_inputs_body()
     """)
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600,
-                            env={**os.environ, "SPLAT_LAST_EXAMPLE": str(last)})
+    # From the root, with support/ importable: the imports pytest.ini's pythonpath gives the tests.
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600, cwd=ROOT,
+                            env={**os.environ, "SPLAT_LAST_EXAMPLE": str(last),
+                                 "PYTHONPATH": str(ROOT / "tests" / "support")})
     example = last.read_text() if last.exists() else "?"
     assert result.returncode == 0, f"exit {result.returncode}\n{result.stderr[-4000:]}\nlast example: {example}"

@@ -17,13 +17,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tools"))
-import build_native  # noqa: E402
-import native_check  # noqa: E402
+from tools import build_native, native_check
 
-from geometry import fibonacci_sphere  # noqa: E402
+from geometry import fibonacci_sphere
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 # What a system provides itself and every Blender install can rely on.
 LINUX_SYSTEM = {"libc.so.6", "libm.so.6", "libpthread.so.0", "libdl.so.2", "librt.so.1", "ld-linux-x86-64.so.2"}
@@ -33,7 +31,7 @@ MACOS_SYSTEM = {"/usr/lib/libSystem.B.dylib"}
 
 @pytest.fixture(scope="session")
 def native(tmp_path_factory) -> dict[str, Path]:
-    subprocess.run([sys.executable, str(ROOT / "tools" / "build_native.py")], check=True, timeout=3600)
+    subprocess.run([sys.executable, "-m", "tools.build_native"], check=True, timeout=3600, cwd=ROOT)
     out = ROOT / "build" / "native"
     return {p: out / p / name for p, (_, name, _) in build_native.TARGETS.items()}
 
@@ -78,6 +76,8 @@ def test_macos_module_loads_libsystem_only_and_finds_python_at_load_time(native,
     assert set(f.imports) <= MACOS_SYSTEM, f.imports
 
 
+# Runs in a copy of the package holding the cross-built module, first on the path: what is
+# tested is that build, never the repository's development build.
 RENDER = r"""
 import json, sys
 import numpy as np

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 README_MAX_LINES = 200  # issue 21: a README a newcomer reads in five minutes
 
 _FENCE = re.compile(r"^\s*(```|~~~)")

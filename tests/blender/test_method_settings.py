@@ -117,7 +117,7 @@ def test_compare_operator_headless_differs_exactly_at_edges_and_fringe(blender, 
     delta = np.abs(a - b).max(axis=2)
     differs = delta > 1e-3
     assert bpy.data.images["Splat Compare Difference"]["splat_tracer_differing_pixels"] == differs.sum()
-    # The difference image is the fixed scale of ΔE between what A and B show (test_compare.py
+    # The difference image is the fixed scale of ΔE between what A and B show (test_compare_operator.py
     # checks the colours); its legend strip lies below the 240 rows of the image.
     assert diff.shape[0] > 240 and diff.shape[1] == 320
     shown = diff[:240][..., :3].max(axis=2) > 0

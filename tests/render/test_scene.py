@@ -862,7 +862,6 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
 
     code = textwrap.dedent(f"""
         import importlib.util, sys
-        sys.path.insert(0, {str(Path(_core.__file__).resolve().parent.parent)!r})
         import numpy as np
         from splat_tracer import _core
         from splat_tracer.render.scene import Instance, Mesh, RenderScene
@@ -873,7 +872,8 @@ def test_geometry_is_accepted_after_the_core_is_imported_under_a_second_name():
         cloud = SplatCloud(np.zeros((1, 3)), [[0.0, 0.0, 1.0]], [1.0])
         print(RenderScene([Instance(mesh), Instance(cloud)]).geometry_count)
     """)
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                            cwd=Path(__file__).resolve().parents[2])
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "2"
 

@@ -381,9 +381,7 @@ def test_a_scene_that_cannot_fit_in_memory_is_refused_before_building(blender, e
 
 
 STOPPED_RENDER = """
-import sys
-sys.path[:0] = [{tests!r}, {root!r}, {tools!r}]
-import dev_extension
+from tools import dev_extension
 home = dev_extension.isolate_user_dirs()
 import bpy, math, numpy as np
 dev_extension.enable_from_source(home)
@@ -431,14 +429,16 @@ def test_a_stopped_render_never_crashes_the_exr_writer_and_says_it_is_incomplete
     result the engine ended with cancel=True, and a PNG got the partial frame as if it were
     finished. Now nothing is written and the render reports the frame incomplete. Run in a
     fresh Blender process (a crash must fail this test, not kill the test session)."""
+    import os
     import subprocess
     import sys
     from pathlib import Path
 
-    here = Path(__file__).resolve().parent
-    code = STOPPED_RENDER.format(tests=str(here), root=str(here.parent), tools=str(here.parent / "tools"),
-                                 ply_path=str(tmp_path / "s.ply"), exr=str(tmp_path / "stopped.exr"))
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    root = Path(__file__).resolve().parents[2]
+    code = STOPPED_RENDER.format(ply_path=str(tmp_path / "s.ply"), exr=str(tmp_path / "stopped.exr"))
+    # From the root, with support/ importable: the imports pytest.ini's pythonpath gives the tests.
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=root,
+                         env={**os.environ, "PYTHONPATH": str(root / "tests" / "support")})
     assert run.returncode == 0, run.stderr[-2000:]
     for fmt in ("OPEN_EXR_MULTILAYER", "OPEN_EXR", "PNG"):
         assert f"{fmt} completed: False written: False" in run.stdout, run.stdout  # never saved as finished

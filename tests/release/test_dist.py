@@ -11,7 +11,7 @@ from blender_helpers import blender_user_env, check_lit_sphere_render, check_sph
 from geometry import fibonacci_sphere
 from splat_tracer.pointcloud.readers import ply
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
@@ -41,13 +41,14 @@ def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
 
 def test_zip_installs_into_blender_and_renders(dist_zip, tmp_path):
     """Installed as a user does (Install from Disk), in the development venv's bpy 5.0.1;
-    test_matrix.py installs it the farm's way into each Blender series."""
+    test_blender_versions.py installs it the farm's way into each Blender series."""
     p, n = fibonacci_sphere(5000)
     ply_path = tmp_path / "sphere.ply"
     ply.write_ply(str(ply_path), p, n)
     output = tmp_path / "render.exr"
-    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "install_and_render.py"), "--install", str(dist_zip),
-                           "--output", str(output), str(ply_path)], cwd=tmp_path, env=blender_user_env(tmp_path),
+    proc = subprocess.run([sys.executable, str(ROOT / "tests" / "release" / "install_and_render.py"), "--install",
+                           str(dist_zip), "--output", str(output), str(ply_path)], cwd=tmp_path,
+                          env=blender_user_env(tmp_path),
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     # The reader came from the extensions' site-packages, not the venv's (install_and_render.py

@@ -19,7 +19,7 @@ from splat_tracer.render.splats import SplatCloud
 
 from geometry import sphere_cloud
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def run_isolated(code: str) -> subprocess.CompletedProcess:

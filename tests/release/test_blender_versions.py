@@ -5,7 +5,7 @@ farm node installs it; then clouds of every format whose reader needs a bundled 
 imported, the sphere is rendered twice (headlight; sun and world), and the renders are read
 back and checked.
 
-    cd tests && python -m pytest test_matrix.py --bpy 4.2 --bpy 5.2
+    cd tests && python -m pytest release/test_blender_versions.py --bpy 4.2 --bpy 5.2
 
 Skipped without --bpy (a plain `make test` does not download eight Blenders); the check
 that the manifest's range is the matrix's always runs.
@@ -27,7 +27,7 @@ from blender_helpers import blender_user_env, check_lit_sphere_render, check_sph
 from geometry import fibonacci_sphere
 from splat_tracer.pointcloud.readers import ply
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 MATRIX_DIR = ROOT / "build" / "matrix"
 # Blender series -> (its Python, the packages of its venv, pinned): the newest bpy of the
 # series on PyPI, and the numpy that Blender release bundles (nothing else of Blender's own
@@ -50,7 +50,7 @@ MATRIX = {
     "5.1": ("3.13", "bpy==5.1.2", "numpy==2.3.4"),
     "5.2": ("3.13", "bpy==5.2.3", "numpy==2.3.4"),
 }
-INSTALLER = ROOT / "tests" / "install_and_render.py"
+INSTALLER = ROOT / "tests" / "release" / "install_and_render.py"
 TIMEOUT = 900  # seconds for one bpy process: the first import of a bpy is slow on a busy machine
 
 

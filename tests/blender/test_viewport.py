@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import add_camera, extension_module
-from test_blender_scene import cloud_sphere, cube, lamp, principled
+from test_scene_export import cloud_sphere, cube, lamp, principled
 
 RW, RH = 64, 48  # region size
 

@@ -1,8 +1,11 @@
-"""Run in a fresh Python with bpy (test_dist.py, test_matrix.py): installs the zip the way a
+"""Run in a fresh Python with bpy (test_dist.py, test_blender_versions.py): installs the zip the way a
 user or a farm does, imports clouds with the installed add-on and renders.
 
     python install_and_render.py --install ZIP [--via operator|cli]      install only
     python install_and_render.py [--install ZIP] --output OUT.exr CLOUD [CLOUD ...]
+
+Run by its path from outside the repository (never `python -m` from the root): the process
+must find only the add-on the zip installed, not this checkout's splat_tracer.
 
 --via operator (default): Preferences > Install from Disk (`extensions.package_install_files`).
 --via cli: what `blender --command extension install-file -r user_default -e ZIP` runs (the
@@ -21,7 +24,7 @@ import runpy
 import sys
 from pathlib import Path
 
-TOOLS = Path(__file__).resolve().parent.parent / "tools"
+TOOLS = Path(__file__).resolve().parents[2] / "tools"
 # What the zip bundles (its wheels' modules). The caller's site-packages may have them too
 # (the development venv has all): they are hidden, so that the add-on can only find what
 # the zip installed into the extensions' site-packages.

@@ -4,15 +4,10 @@ open face, a concave notch, 10x density changes), scored against the exact mesh:
 method is no worse on any metric and, where edges exist, better on silhouettes."""
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
-
-import synthetic  # noqa: E402
-from splat_tracer.render.method import Method  # noqa: E402
+from benchmarks import synthetic
+from splat_tracer.render.method import Method
 
 W, H = 320, 240
 N_SAMPLES = 40000
