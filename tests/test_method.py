@@ -42,7 +42,7 @@ def test_ε_window_query_matches_brute_force():
     dirs = rng.normal(size=(6000, 3))
     inside = rng.uniform(size=6000) < 0.3
     for method in (FULL, Method.preset("NEAREST_CENTRE"), Method.preset("GENERAL"),
-                   Method.preset("FULL", eliminate_wrong_hits=False, epsilon=2.5)):
+                   Method.preset("FULL", wrong_hit_elimination=False, epsilon=2.5)):
         a = scene.trace_surface(origins, dirs, method, inside=inside, members=True)
         b = scene.trace_surface(origins, dirs, method, inside=inside, members=True, brute_force=True)
         for x, y in zip(a, b):
@@ -79,7 +79,7 @@ def test_sphere_interpolated_normals_are_smooth_and_flat_ones_are_not():
     hit = np.isfinite(t_true)
     truth = o + d * np.where(hit, t_true, 0)[:, None]
     smooth = scene.trace_surface(o, d, FULL)
-    flat = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
+    flat = scene.trace_surface(o, d, Method.preset("FULL", normal_interpolation=False))
     both = hit & (smooth.id >= 0)
     assert both.sum() > 0.99 * hit.sum()
     err_smooth = angle_deg(smooth.normal[both], truth[both])
@@ -118,7 +118,7 @@ def test_cube_full_method_puts_the_surface_on_the_cube(cube):
     """Depth: the full method's surface points lie on the cube's faces (flat normals are
     then exactly the face normals); the general method's fringe and edge hits do not."""
     scene, o, d, truth, t_true, n_true = cube
-    flat_full = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
+    flat_full = scene.trace_surface(o, d, Method.preset("FULL", normal_interpolation=False))
     both = (flat_full.id >= 0) & np.isfinite(t_true)
     np.testing.assert_allclose(flat_full.t[both], t_true[both], atol=1e-4)
     np.testing.assert_array_equal(flat_full.normal[both], n_true[both])
@@ -178,7 +178,7 @@ def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
     """The core decides omega > pi without acos (visibility.cpp, near_phase_convex): on
     random pairs of discs in one layer, the pick is the paper's rule computed with arccos."""
     rng = np.random.default_rng(8)
-    method = Method(position="NEAR_PHASE", far_phase=False, interpolate_normals=False, epsilon=1000.0)
+    method = Method(position="NEAR_PHASE", far_phase=False, normal_interpolation=False, epsilon=1000.0)
     o, d = np.array([[0.0, 0.0, 5.0]]), np.array([[0.0, 0.0, -1.0]])
     checked = 0
     for _ in range(400):

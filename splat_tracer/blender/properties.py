@@ -30,15 +30,15 @@ def method_from_switches(switches: dict, epsilon: float, kernel: str, crease_ang
         position = "NEAR_PHASE"
     else:
         position = "NEAREST_CENTRE" if switches["use_nearest_centre"] else "FIRST"
-    return Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
-                  interpolate_normals=switches["use_normal_interpolation"],
+    return Method(wrong_hit_elimination=switches["use_wrong_hit_elimination"],
+                  normal_interpolation=switches["use_normal_interpolation"],
                   far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon,
                   crease_angle=min(180.0, max(0.0, math.degrees(crease_angle))))
 
 
 def _switches_of(preset: str) -> dict:
     m = Method.preset(preset)
-    return dict(use_wrong_hit_elimination=m.eliminate_wrong_hits, use_normal_interpolation=m.interpolate_normals,
+    return dict(use_wrong_hit_elimination=m.wrong_hit_elimination, use_normal_interpolation=m.normal_interpolation,
                 use_far_phase=m.far_phase, use_near_phase=m.position == "NEAR_PHASE",
                 use_nearest_centre=m.position == "NEAREST_CENTRE")
 

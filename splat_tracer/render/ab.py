@@ -102,13 +102,13 @@ def ineffective_differences(a: Method, b: Method, *, clouds: int, closed_clouds:
 
     clouds / closed_clouds: cloud instances in the view layer / those marked Closed Surface.
     headlight: the images are lit by the headlight (base colour x |cos|, no secondary rays)."""
-    differing = [k for k in ("eliminate_wrong_hits", "interpolate_normals", "far_phase", "position", "kernel",
+    differing = [k for k in ("wrong_hit_elimination", "normal_interpolation", "far_phase", "position", "kernel",
                              "crease_angle", "epsilon") if getattr(a, k) != getattr(b, k)]
     if radius_a != radius_b:
         differing.append("radius_factor")
     if not differing:
         return ["A and B are the same settings: the images cannot differ"]
-    labels = {"eliminate_wrong_hits": "Wrong Hit Elimination", "interpolate_normals": "Normal Interpolation",
+    labels = {"wrong_hit_elimination": "Wrong Hit Elimination", "normal_interpolation": "Normal Interpolation",
               "far_phase": "Far Phase", "position": "the surface position rule (Near Phase / Nearest Centre)",
               "kernel": "Kernel", "crease_angle": "Crease Angle", "epsilon": "Epsilon",
               "radius_factor": "Radius Factor"}
@@ -122,21 +122,21 @@ def ineffective_differences(a: Method, b: Method, *, clouds: int, closed_clouds:
         elif key == "far_phase" and closed_clouds == 0:
             notes[key] = (f"{label} changes nothing here: it acts only on clouds marked Closed Surface (Object "
                           "Properties > Splat Cloud), and none is")
-        elif key in ("kernel", "crease_angle") and both(lambda m: not m.interpolate_normals):
+        elif key in ("kernel", "crease_angle") and both(lambda m: not m.normal_interpolation):
             notes[key] = f"{label} changes nothing here: it weights interpolated normals, and Normal Interpolation " \
                          "is off in A and B"
         elif key == "position" and both(lambda m: m.epsilon == 0):
             notes[key] = (f"{label} changes nothing here: with Epsilon 0 a layer holds only its first disc (and "
                           "discs hit at exactly the same depth), so there is nothing to choose between")
-        elif key == "position" and headlight and both(lambda m: m.interpolate_normals and m.crease_angle >= 180):
+        elif key == "position" and headlight and both(lambda m: m.normal_interpolation and m.crease_angle >= 180):
             notes[key] = (f"{label} changes nothing here: it moves the surface point within its layer, but with "
                           "Normal Interpolation on the normal and colour blend every disc of the layer wherever the "
                           "point is, and the headlight shades only those (turn interpolation off, or use the "
                           "scene's lighting, to see it)")
-        elif key == "interpolate_normals" and both(lambda m: m.epsilon == 0):
+        elif key == "normal_interpolation" and both(lambda m: m.epsilon == 0):
             notes[key] = (f"{label} changes nothing here: with Epsilon 0 a layer holds only its first disc (and "
                           "discs hit at exactly the same depth), so there is nothing to blend")
-        elif key == "epsilon" and both(lambda m: not m.interpolate_normals and m.position == "FIRST"
+        elif key == "epsilon" and both(lambda m: not m.normal_interpolation and m.position == "FIRST"
                                        and (not m.far_phase or closed_clouds == 0)):
             notes[key] = (f"{label} changes nothing here: the layer's depth matters only to normal interpolation, "
                           "the near phase, nearest centre and the far phase on closed clouds, and A and B use none "

@@ -15,8 +15,8 @@ PRESETS = ("GENERAL", "NEAREST_CENTRE", "FULL")
 class Method:
     """Which surface a ray sees and how it is shaded (docs/ALGORITHM.md); each rule a switch.
 
-    eliminate_wrong_hits: hits of the wrong facing before the first layer are ignored.
-    interpolate_normals: normal and colour blended over the layer's splats, weighted by
+    wrong_hit_elimination: hits of the wrong facing before the first layer are ignored.
+    normal_interpolation: normal and colour blended over the layer's splats, weighted by
         `kernel` ('LINEAR': the paper's (r - d)/r; 'SMOOTH': (1 - (d/r)^2)^2); off: flat.
     far_phase: on closed objects, a layer counts only if the next hit after it leaves the
         object (has the other facing); otherwise the search goes on along the ray.
@@ -28,8 +28,8 @@ class Method:
         180: every splat blends (the paper's).
     """
 
-    eliminate_wrong_hits: bool = True
-    interpolate_normals: bool = True
+    wrong_hit_elimination: bool = True
+    normal_interpolation: bool = True
     far_phase: bool = True
     position: str = "NEAR_PHASE"
     kernel: str = "LINEAR"
@@ -52,11 +52,11 @@ class Method:
         wrong hits eliminated, interpolated normals, the layer hit nearest its disc centre.
         'FULL': every rule of the paper."""
         presets = {
-            "GENERAL": dict(eliminate_wrong_hits=False, interpolate_normals=False, far_phase=False,
+            "GENERAL": dict(wrong_hit_elimination=False, normal_interpolation=False, far_phase=False,
                             position="FIRST"),
-            "NEAREST_CENTRE": dict(eliminate_wrong_hits=True, interpolate_normals=True, far_phase=False,
+            "NEAREST_CENTRE": dict(wrong_hit_elimination=True, normal_interpolation=True, far_phase=False,
                                    position="NEAREST_CENTRE"),
-            "FULL": dict(eliminate_wrong_hits=True, interpolate_normals=True, far_phase=True,
+            "FULL": dict(wrong_hit_elimination=True, normal_interpolation=True, far_phase=True,
                          position="NEAR_PHASE"),
         }
         if name not in presets:
@@ -64,6 +64,6 @@ class Method:
         return cls(**{**presets[name], **overrides})
 
     def as_tuple(self) -> tuple:
-        return (self.eliminate_wrong_hits, self.interpolate_normals, self.far_phase,
+        return (self.wrong_hit_elimination, self.normal_interpolation, self.far_phase,
                 POSITION_RULES.index(self.position), KERNELS.index(self.kernel), float(self.epsilon),
                 float(self.crease_angle))

@@ -134,7 +134,7 @@ inline bool check_threads(int threads) {
     return true;
 }
 
-// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon[,
+// method = (wrong_hit_elimination, normal_interpolation, far_phase, position, kernel, epsilon[,
 // crease_angle in degrees]), as core.Method.as_tuple() builds it. Returns false with an
 // exception set when invalid.
 inline bool parse_method(PyObject *obj, Method &m) {
@@ -152,7 +152,7 @@ inline bool parse_method(PyObject *obj, Method &m) {
     if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
     if (!(crease >= 0.f && crease <= 180.f))
         return PyErr_Format(PyExc_ValueError, "crease angle must be between 0 and 180 degrees"), false;
-    m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
+    m.wrong_hit_elimination = elim, m.normal_interpolation = interp, m.far_phase = far;
     m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
     m.crease_cos = crease >= 180.f ? -2.f : std::cos(crease * float(M_PI) / 180.f);
     return true;
