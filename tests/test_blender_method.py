@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import astuple
 
 import numpy as np
 import pytest
@@ -18,20 +19,20 @@ SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_ph
 
 def test_presets_set_the_switches_and_switches_set_the_preset(blender, empty_scene):
     s = empty_scene.splat_tracer
-    # The add-on has its own copy of the core module (bl_ext.dev...): compare as tuples.
-    method = lambda: s.core_method().as_tuple()  # noqa: E731
-    assert s.method == "FULL" and method() == Method.preset("FULL").as_tuple()
+    # The add-on has its own copy of the method module (bl_ext.dev...): compare as tuples.
+    method = lambda: astuple(s.core_method())  # noqa: E731
+    assert s.method == "FULL" and method() == astuple(Method.preset("FULL"))
     s.method = "GENERAL"
     assert not any(getattr(s, k) for k in SWITCHES)
-    assert method() == Method.preset("GENERAL").as_tuple()
+    assert method() == astuple(Method.preset("GENERAL"))
     s.method = "NEAREST_CENTRE"
-    assert method() == Method.preset("NEAREST_CENTRE").as_tuple()
+    assert method() == astuple(Method.preset("NEAREST_CENTRE"))
     s.use_far_phase = True  # no preset has this combination
     assert s.method == "CUSTOM" and s.core_method().far_phase
     s.use_far_phase = False
     assert s.method == "NEAREST_CENTRE"
     s.epsilon, s.kernel = 2.5, "SMOOTH"
-    assert method() == Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
+    assert method() == astuple(Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH"))
     s.crease_angle = math.radians(45)  # Blender stores angles in radians, the core takes degrees
     assert s.core_method().crease_angle == pytest.approx(45)
 

@@ -1,6 +1,9 @@
 """The paper's visibility method in the core: each rule, and what breaks when it is off."""
 from __future__ import annotations
 
+from dataclasses import asdict
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
@@ -357,6 +360,25 @@ def test_method_validation():
         scene._scene.trace_surface(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), 0.0, 1.0, "FULL",
                                    np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8),
                                    np.empty((1, 3), np.float32), np.empty((1, 3), np.float32))
+
+
+def test_the_core_reads_the_method_by_field_name():
+    """The binding takes any object with Method's fields, and names a field it misses or
+    cannot use."""
+    cloud = SplatCloud(*cube_cloud(8), np.full(6 * 64, 0.2), closed=True)
+    o, d = camera_rays((2.5, -3.0, 2.0))
+    trace = lambda method: cloud.trace_surface(o, d, method)  # noqa: E731 - SplatCloud passes it as it is
+    for method in (FULL, Method.preset("GENERAL"), Method.preset("NEAREST_CENTRE", kernel="SMOOTH", epsilon=2.0)):
+        a, b = trace(method), trace(SimpleNamespace(**asdict(method)))
+        assert all(np.array_equal(x, y) for x, y in zip(a, b) if x is not None)
+    for name in asdict(FULL):
+        with pytest.raises(TypeError, match=f"method has no field '{name}'"):
+            trace(SimpleNamespace(**{k: v for k, v in asdict(FULL).items() if k != name}))
+    bad = {"epsilon": ("1.0", TypeError), "crease_angle": (None, TypeError), "position": ("MIDDLE", ValueError),
+           "kernel": (1, ValueError)}
+    for name, (value, error) in bad.items():
+        with pytest.raises(error, match=f"'{name}'"):
+            trace(SimpleNamespace(**{**asdict(FULL), name: value}))
 
 
 def test_render_uses_the_method_and_agrees_with_trace_surface(cube):

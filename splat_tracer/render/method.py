@@ -14,6 +14,7 @@ PRESETS = ("GENERAL", "NEAREST_CENTRE", "FULL")
 @dataclass(frozen=True)
 class Method:
     """Which surface a ray sees and how it is shaded (docs/ALGORITHM.md); each rule a switch.
+    The core reads these fields by name.
 
     wrong_hit_elimination: hits of the wrong facing before the first layer are ignored.
     normal_interpolation: normal and colour blended over the layer's splats, weighted by
@@ -62,8 +63,3 @@ class Method:
         if name not in presets:
             raise ValueError(f"preset must be one of {PRESETS}, got {name!r}")
         return cls(**{**presets[name], **overrides})
-
-    def as_tuple(self) -> tuple:
-        return (self.wrong_hit_elimination, self.normal_interpolation, self.far_phase,
-                POSITION_RULES.index(self.position), KERNELS.index(self.kernel), float(self.epsilon),
-                float(self.crease_angle))
