@@ -1,7 +1,7 @@
 """The paper's visibility method in the core: each rule, and what breaks when it is off."""
 from __future__ import annotations
 
-from dataclasses import asdict
+from dataclasses import asdict, fields, replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -11,7 +11,8 @@ from scipy.ndimage import distance_transform_edt
 from geometry import angle_deg, cube_cloud, fibonacci_sphere, ray_box, ray_sphere
 from splat_tracer.pointcloud import spacing
 from splat_tracer.render.camera import Camera
-from splat_tracer.render.method import POSITION_RULES, Method
+from splat_tracer.render import ab
+from splat_tracer.render.method import POSITION_RULES, PRESETS, SWITCHES, Method, switch_fields, switches_of
 from splat_tracer.render.splats import SplatCloud
 
 W, H = 320, 240
@@ -360,6 +361,30 @@ def test_method_validation():
         scene._scene.trace_surface(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), 0.0, 1.0, "FULL",
                                    np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8),
                                    np.empty((1, 3), np.float32), np.empty((1, 3), np.float32))
+
+
+def test_the_switch_table_names_the_method_fields_and_the_ab_notes():
+    """Every switch is a Method field of its name (or chooses the position rule), its Blender
+    property is use_<name>, the A/B notes have a label for every field, and switch values
+    and methods convert both ways."""
+    method_fields = {f.name: f for f in fields(Method)}
+    assert len({s.name for s in SWITCHES}) == len(SWITCHES)
+    for switch in SWITCHES:
+        assert switch.prop == "use_" + switch.name and switch.label and switch.description
+        assert switch.field in method_fields
+        assert switch.field == switch.name or switch.field == "position"
+        assert {switch.on, switch.off} <= ({True, False} if switch.field == switch.name else set(POSITION_RULES))
+    assert set(ab._LABELS) == set(method_fields) | {"radius_factor"}
+    for preset in PRESETS:
+        method = Method.preset(preset)
+        assert replace(method, **switch_fields(switches_of(method))) == method
+    # The near phase decides the position whenever it is on; the nearest centre only without it.
+    both_off = dict.fromkeys((s.name for s in SWITCHES), False)
+    assert switch_fields({**both_off, "near_phase": True, "nearest_centre": True})["position"] == "NEAR_PHASE"
+    assert switch_fields({**both_off, "nearest_centre": True})["position"] == "NEAREST_CENTRE"
+    assert switch_fields(both_off)["position"] == "FIRST"
+    with pytest.raises(KeyError, match="far_phase"):
+        switch_fields({k: v for k, v in both_off.items() if k != "far_phase"})
 
 
 def test_the_core_reads_the_method_by_field_name():
