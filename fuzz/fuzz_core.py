@@ -1,11 +1,11 @@
 """Fuzz harness: the native core's entry points, called directly (splat_tracer._core).
 
-    python -m fuzz.fuzz_core [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
+    python fuzz/fuzz_core.py [libFuzzer options] [corpus dirs]    (`make fuzz` runs it)
 
 The input bytes are decoded (atheris.FuzzedDataProvider) into float32 splat arrays mixing
 ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extremes
 (sometimes with a wrong dtype or shape), and then into calls of every native entry
-point on them: _core.Scene(...), trace, trace_surface (method tuples, exclude ids, inside
+point on them: _core.Scene(...), trace, trace_surface (methods read by field name, exclude ids, inside
 flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds,
 coherent rays (fans and parallel bundles) traced in packets and one by one, which must
 agree exactly; then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
@@ -26,11 +26,14 @@ silent memory errors and undefined behaviour into findings.
 Seed corpus: fuzz/corpus/core/.
 """
 import sys
+from pathlib import Path
+from types import SimpleNamespace
 
 import atheris
 import numpy as np
 
-from splat_tracer import _core
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from splat_tracer import _core  # noqa: E402
 
 ALLOWED = (ValueError, TypeError, MemoryError)
 SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-45, 1.1754942e-38, 1e18, -1e18, 1.0000001e18, 1e19, -1e19,
@@ -61,11 +64,21 @@ def array(fdp, shape, dtype=np.float32):
 
 @atheris.instrument_func
 def method(fdp):
+    """A method object as the core reads it (by field name), its fields fuzzed past what
+    render.method.Method would accept; now and then not a method at all or one missing a field."""
     if fdp.ConsumeIntInRange(0, 20) == 0:
-        return [None, "FULL", (1, 2), (True, True, True, 9, 0, 1.0), (True,) * 5 + (float("nan"),)][
-            fdp.ConsumeIntInRange(0, 4)]
-    return (fdp.ConsumeBool(), fdp.ConsumeBool(), fdp.ConsumeBool(), fdp.ConsumeIntInRange(-1, 3),
-            fdp.ConsumeIntInRange(-1, 2), value(fdp))
+        return [None, "FULL", (True, True, True, 1, 0, 1.0), SimpleNamespace(far_phase=True),
+                SimpleNamespace(**{**FULL, "epsilon": "1"})][fdp.ConsumeIntInRange(0, 4)]
+    positions = ("FIRST", "NEAR_PHASE", "NEAREST_CENTRE", "MIDDLE", 1)
+    kernels = ("LINEAR", "SMOOTH", "", None)
+    return SimpleNamespace(wrong_hit_elimination=fdp.ConsumeBool(), normal_interpolation=fdp.ConsumeBool(),
+                           far_phase=fdp.ConsumeBool(), position=positions[fdp.ConsumeIntInRange(0, 4)],
+                           kernel=kernels[fdp.ConsumeIntInRange(0, 3)], epsilon=value(fdp),
+                           crease_angle=[180.0, 45.0, value(fdp)][fdp.ConsumeIntInRange(0, 2)])
+
+
+FULL = dict(wrong_hit_elimination=True, normal_interpolation=True, far_phase=True, position="NEAR_PHASE",
+            kernel="LINEAR", epsilon=1.0, crease_angle=180.0)
 
 
 def small_int(fdp):

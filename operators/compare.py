@@ -16,17 +16,14 @@ import numpy as np
 
 from ..splat_tracer.blender.session import render_frame
 from ..splat_tracer.render import ab, difference
-from ..splat_tracer.render.method import PRESETS, Method
+from ..splat_tracer.render.method import PRESETS, SWITCHES, Method
 
 _CHOICES = tuple((p, p.replace("_", " ").title(), f"The {p.replace('_', ' ').lower()} preset")
                  for p in PRESETS) + (("SCENE", "Scene Settings", "The scene's current visibility settings"),)
 IMAGE_NAMES = ("Splat Compare A", "Splat Compare B", "Splat Compare Difference")
-_TOGGLES = (("NONE", "None", "Compare the A and B settings"),
-            ("use_wrong_hit_elimination", "Wrong Hit Elimination", "The scene's settings without and with it"),
-            ("use_normal_interpolation", "Normal Interpolation", "The scene's settings without and with it"),
-            ("use_far_phase", "Far Phase", "The scene's settings without and with it"),
-            ("use_near_phase", "Near Phase", "The scene's settings without and with it"),
-            ("use_nearest_centre", "Nearest Centre", "The scene's settings without and with it"))
+# One item per switch of the switch table; the identifiers are the switches' properties.
+_TOGGLES = (("NONE", "None", "Compare the A and B settings"),) + tuple(
+    (switch.prop, switch.label, "The scene's settings without and with it") for switch in SWITCHES)
 
 
 def _method(choice: str, scene) -> Method:

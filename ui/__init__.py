@@ -229,6 +229,8 @@ def _draw_slot(layout, settings, name: str) -> None:
     op.slot, op.direction = name, "TO_SCENE"
     col = box.column(align=True)
     col.prop(settings, "method", text="")
+    # The switches of render.method.SWITCHES in the order the rules act along a ray, as the
+    # Visibility panel shows them (a test checks that both draw every switch).
     for key in ("use_wrong_hit_elimination", "use_far_phase", "use_near_phase", "use_nearest_centre",
                 "use_normal_interpolation"):
         col.prop(settings, key)

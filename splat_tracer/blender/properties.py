@@ -4,7 +4,7 @@ import math
 import bpy
 
 from ..render import shading
-from ..render.method import PRESETS, Method
+from ..render.method import PRESETS, SWITCH, SWITCHES, Method, switch_fields, switches_of
 
 # Hard limits are the ones shading.RenderSettings accepts.
 _MAX_SAMPLES = 1 << 16
@@ -17,30 +17,22 @@ _PRESET_ITEMS = (
     ("FULL", "Full", "The paper's method: every visibility rule and normal interpolation"),
     ("CUSTOM", "Custom", "The switches below do not match a preset"),
 )
-# Switch values of each preset (Method.preset is the single source of truth).
-_SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
-             "use_nearest_centre")
+# The switches' properties, one per entry of the switch table (their names, labels and
+# descriptions come from it).
+_SWITCHES = tuple(switch.prop for switch in SWITCHES)
 _syncing = False  # set while one property's update writes the others
 
 
 def method_from_switches(switches: dict, epsilon: float, kernel: str, crease_angle: float = math.pi) -> Method:
-    """The core method for a set of switch values (keys as in _SWITCHES); crease_angle in
-    radians, as Blender stores angles."""
-    if switches["use_near_phase"]:
-        position = "NEAR_PHASE"
-    else:
-        position = "NEAREST_CENTRE" if switches["use_nearest_centre"] else "FIRST"
-    return Method(eliminate_wrong_hits=switches["use_wrong_hit_elimination"],
-                  interpolate_normals=switches["use_normal_interpolation"],
-                  far_phase=switches["use_far_phase"], position=position, kernel=kernel, epsilon=epsilon,
+    """The core method for a set of switch values (keys: the switches' property names, as in
+    _SWITCHES); crease_angle in radians, as Blender stores angles."""
+    return Method(**switch_fields({s.name: switches[s.prop] for s in SWITCHES}), kernel=kernel, epsilon=epsilon,
                   crease_angle=min(180.0, max(0.0, math.degrees(crease_angle))))
 
 
 def _switches_of(preset: str) -> dict:
-    m = Method.preset(preset)
-    return dict(use_wrong_hit_elimination=m.eliminate_wrong_hits, use_normal_interpolation=m.interpolate_normals,
-                use_far_phase=m.far_phase, use_near_phase=m.position == "NEAR_PHASE",
-                use_nearest_centre=m.position == "NEAREST_CENTRE")
+    """The switch properties' values of a preset (Method.preset is the single source of truth)."""
+    return {SWITCH[name].prop: on for name, on in switches_of(Method.preset(preset)).items()}
 
 
 def _on_method(self, context):
@@ -88,29 +80,6 @@ class _VisibilitySettings:
         description="Scales every splat radius at render time (1: each disc reaches its neighbours' centres)",
         default=1.0, min=0.01, soft_min=0.25, soft_max=4.0, precision=3,
     )
-    use_wrong_hit_elimination: bpy.props.BoolProperty(
-        name="Wrong Hit Elimination", default=True, update=_on_switch,
-        description="Ignore back-facing discs that poke out in front of the surface (and, for rays leaving a "
-                    "surface, the splats they start from)",
-    )
-    use_normal_interpolation: bpy.props.BoolProperty(
-        name="Normal Interpolation", default=True, update=_on_switch,
-        description="Blend the normals and colours of the overlapping splats for smooth shading (off: flat splats)",
-    )
-    use_far_phase: bpy.props.BoolProperty(
-        name="Far Phase", default=True, update=_on_switch,
-        description="On closed objects, accept a layer only if the ray leaves the object after it, which removes "
-                    "the fringe at silhouettes",
-    )
-    use_near_phase: bpy.props.BoolProperty(
-        name="Near Phase", default=True, update=_on_switch,
-        description="Place the surface point in a layer by the convex/concave rule, which keeps sharp edges sharp",
-    )
-    use_nearest_centre: bpy.props.BoolProperty(
-        name="Nearest Centre", default=False, update=_on_switch,
-        description="Without the near phase, take the layer hit closest to its splat centre (Linsen et al.) "
-                    "instead of the first one",
-    )
     kernel: bpy.props.EnumProperty(
         name="Kernel",
         items=(("LINEAR", "Linear", "The paper's weight (r - d) / r"),
@@ -144,6 +113,13 @@ class _VisibilitySettings:
         finally:
             _syncing = False
 
+
+# One property per switch, as the switch table describes it; the default is the switch's
+# value in the default Method (the Full preset, the `method` default).
+_VisibilitySettings.__annotations__.update({
+    s.prop: bpy.props.BoolProperty(name=s.label, description=s.description, default=s.of(Method()),
+                                   update=_on_switch)
+    for s in SWITCHES})
 
 _VISIBILITY_KEYS = ("method",) + _SWITCHES + ("epsilon", "kernel", "crease_angle", "radius_factor")
 

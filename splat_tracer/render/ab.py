@@ -13,7 +13,7 @@ from typing import Optional
 import numpy as np
 
 from . import difference
-from .method import Method
+from .method import SWITCH, SWITCHES, Method
 
 MODES = ("OFF", "A", "B", "SPLIT")
 DIVIDER = 2                       # the wipe's divider line, pixels wide
@@ -93,6 +93,23 @@ def display_buffer(mode: str, shape, scene: Optional[np.ndarray] = None, a: Opti
 # --------------------------------------------------------------------------------------
 # When A and B cannot differ
 
+def _switch_labels() -> dict:
+    """{Method field: label} of the switch table's fields; a field two switches share is the
+    rule they choose between."""
+    labels = {}
+    for switch in SWITCHES:
+        labels.setdefault(switch.field, []).append(switch.label)
+    return {field: names[0] if len(names) == 1 else f"the surface {field} rule ({' / '.join(names)})"
+            for field, names in labels.items()}
+
+
+# What the notes call each setting A and B may differ in (every Method field and the radius
+# factor: the Blender properties' labels), in the order the notes list them.
+_LABELS = {**_switch_labels(), "kernel": "Kernel", "crease_angle": "Crease Angle", "epsilon": "Epsilon",
+           "radius_factor": "Radius Factor"}
+_INTERPOLATION = SWITCH["normal_interpolation"].label
+
+
 def ineffective_differences(a: Method, b: Method, *, clouds: int, closed_clouds: int, headlight: bool,
                             radius_a: float = 1.0, radius_b: float = 1.0) -> list[str]:
     """Notes, one per setting in which A and B differ but which cannot change the Combined
@@ -102,41 +119,36 @@ def ineffective_differences(a: Method, b: Method, *, clouds: int, closed_clouds:
 
     clouds / closed_clouds: cloud instances in the view layer / those marked Closed Surface.
     headlight: the images are lit by the headlight (base colour x |cos|, no secondary rays)."""
-    differing = [k for k in ("eliminate_wrong_hits", "interpolate_normals", "far_phase", "position", "kernel",
-                             "crease_angle", "epsilon") if getattr(a, k) != getattr(b, k)]
+    differing = [k for k in _LABELS if k != "radius_factor" and getattr(a, k) != getattr(b, k)]
     if radius_a != radius_b:
         differing.append("radius_factor")
     if not differing:
         return ["A and B are the same settings: the images cannot differ"]
-    labels = {"eliminate_wrong_hits": "Wrong Hit Elimination", "interpolate_normals": "Normal Interpolation",
-              "far_phase": "Far Phase", "position": "the surface position rule (Near Phase / Nearest Centre)",
-              "kernel": "Kernel", "crease_angle": "Crease Angle", "epsilon": "Epsilon",
-              "radius_factor": "Radius Factor"}
     notes = {}
     both = lambda test: test(a) and test(b)  # noqa: E731
     for key in differing:
-        label = labels[key]
+        label = _LABELS[key]
         if clouds == 0:
             notes[key] = f"{label} changes nothing here: the view layer renders no point cloud, and the visibility " \
                          "settings act on splats only"
         elif key == "far_phase" and closed_clouds == 0:
             notes[key] = (f"{label} changes nothing here: it acts only on clouds marked Closed Surface (Object "
                           "Properties > Splat Cloud), and none is")
-        elif key in ("kernel", "crease_angle") and both(lambda m: not m.interpolate_normals):
-            notes[key] = f"{label} changes nothing here: it weights interpolated normals, and Normal Interpolation " \
+        elif key in ("kernel", "crease_angle") and both(lambda m: not m.normal_interpolation):
+            notes[key] = f"{label} changes nothing here: it weights interpolated normals, and {_INTERPOLATION} " \
                          "is off in A and B"
         elif key == "position" and both(lambda m: m.epsilon == 0):
             notes[key] = (f"{label} changes nothing here: with Epsilon 0 a layer holds only its first disc (and "
                           "discs hit at exactly the same depth), so there is nothing to choose between")
-        elif key == "position" and headlight and both(lambda m: m.interpolate_normals and m.crease_angle >= 180):
+        elif key == "position" and headlight and both(lambda m: m.normal_interpolation and m.crease_angle >= 180):
             notes[key] = (f"{label} changes nothing here: it moves the surface point within its layer, but with "
-                          "Normal Interpolation on the normal and colour blend every disc of the layer wherever the "
+                          f"{_INTERPOLATION} on the normal and colour blend every disc of the layer wherever the "
                           "point is, and the headlight shades only those (turn interpolation off, or use the "
                           "scene's lighting, to see it)")
-        elif key == "interpolate_normals" and both(lambda m: m.epsilon == 0):
+        elif key == "normal_interpolation" and both(lambda m: m.epsilon == 0):
             notes[key] = (f"{label} changes nothing here: with Epsilon 0 a layer holds only its first disc (and "
                           "discs hit at exactly the same depth), so there is nothing to blend")
-        elif key == "epsilon" and both(lambda m: not m.interpolate_normals and m.position == "FIRST"
+        elif key == "epsilon" and both(lambda m: not m.normal_interpolation and m.position == "FIRST"
                                        and (not m.far_phase or closed_clouds == 0)):
             notes[key] = (f"{label} changes nothing here: the layer's depth matters only to normal interpolation, "
                           "the near phase, nearest centre and the far phase on closed clouds, and A and B use none "

@@ -152,7 +152,7 @@ class SplatCloud:
             ex = np.ascontiguousarray(raw, dtype=np.int32)
             if ex.ndim != 2 or len(ex) != n:
                 raise ValueError(f"exclude must have shape ({n}, M), got {ex.shape}")
-        self._scene.trace_surface(o, d, float(tmin), float(tmax), method.as_tuple(), out.t, out.id, out.front,
+        self._scene.trace_surface(o, d, float(tmin), float(tmax), method, out.t, out.id, out.front,
                                   out.normal, out.colour, out.members, inside_arr, ex, threads, brute_force,
                                   packets)
         return out
@@ -177,6 +177,6 @@ class SplatCloud:
             np.ascontiguousarray(camera.position, np.float64),
             np.ascontiguousarray(camera.forward, np.float64),
             int(width), int(height), (int(x0), int(y0), int(w), int(h)),
-            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method.as_tuple(),
+            tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method,
             packets)
         return RenderResult(rgba, dep, nrm, done)

@@ -2,6 +2,9 @@
 from __future__ import annotations
 
 import math
+import sys
+from dataclasses import astuple
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -10,6 +13,7 @@ from scipy.ndimage import distance_transform_edt
 from blender_helpers import add_camera
 from geometry import blender_camera_rays, cube_cloud, fibonacci_sphere, ray_box
 from splat_tracer.pointcloud.readers import ply
+from splat_tracer.render.method import SWITCHES as SWITCH_TABLE
 from splat_tracer.render.method import Method
 
 SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_phase", "use_near_phase",
@@ -18,22 +22,57 @@ SWITCHES = ("use_wrong_hit_elimination", "use_normal_interpolation", "use_far_ph
 
 def test_presets_set_the_switches_and_switches_set_the_preset(blender, empty_scene):
     s = empty_scene.splat_tracer
-    # The add-on has its own copy of the core module (bl_ext.dev...): compare as tuples.
-    method = lambda: s.core_method().as_tuple()  # noqa: E731
-    assert s.method == "FULL" and method() == Method.preset("FULL").as_tuple()
+    # The add-on has its own copy of the method module (bl_ext.dev...): compare as tuples.
+    method = lambda: astuple(s.core_method())  # noqa: E731
+    assert s.method == "FULL" and method() == astuple(Method.preset("FULL"))
     s.method = "GENERAL"
     assert not any(getattr(s, k) for k in SWITCHES)
-    assert method() == Method.preset("GENERAL").as_tuple()
+    assert method() == astuple(Method.preset("GENERAL"))
     s.method = "NEAREST_CENTRE"
-    assert method() == Method.preset("NEAREST_CENTRE").as_tuple()
+    assert method() == astuple(Method.preset("NEAREST_CENTRE"))
     s.use_far_phase = True  # no preset has this combination
     assert s.method == "CUSTOM" and s.core_method().far_phase
     s.use_far_phase = False
     assert s.method == "NEAREST_CENTRE"
     s.epsilon, s.kernel = 2.5, "SMOOTH"
-    assert method() == Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH").as_tuple()
+    assert method() == astuple(Method.preset("NEAREST_CENTRE", epsilon=2.5, kernel="SMOOTH"))
     s.crease_angle = math.radians(45)  # Blender stores angles in radians, the core takes degrees
     assert s.core_method().crease_angle == pytest.approx(45)
+
+
+class _Layout:
+    """Stands in for a UI layout: records the properties drawn into it and its sub-layouts."""
+
+    def __init__(self, drawn: list):
+        self.drawn = drawn
+
+    def prop(self, data, key, **kwargs):
+        self.drawn.append(key)
+
+    def __getattr__(self, name):  # column(), row(), box(), label(), operator(), ...
+        return lambda *args, **kwargs: _Layout(self.drawn)
+
+
+def test_the_switch_table_makes_the_properties_the_compare_toggles_and_the_panels(blender, empty_scene):
+    """Each switch of the table is a property of its name with its label and description, a
+    toggle of the compare operator, and drawn once by the Visibility panel and an A/B slot."""
+    bpy = blender
+    assert SWITCHES == tuple(s.prop for s in SWITCH_TABLE)  # the names saved files and scripts use
+    group = bpy.types.Scene.bl_rna.properties["splat_tracer"].fixed_type
+    for switch in SWITCH_TABLE:
+        prop = group.properties[switch.prop]
+        assert (prop.name, prop.description) == (switch.label, switch.description)
+    toggle = bpy.ops.splat_tracer.compare.get_rna_type().properties["toggle"]
+    assert [(i.identifier, i.name) for i in toggle.enum_items] == [("NONE", "None")] + [
+        (s.prop, s.label) for s in SWITCH_TABLE]
+    panel = bpy.types.SPLAT_TRACER_PT_visibility
+    drawn = []
+    panel.draw(SimpleNamespace(layout=_Layout(drawn)), bpy.context)
+    switches = set(SWITCHES)
+    assert sorted(k for k in drawn if k in switches) == sorted(switches)
+    drawn = []
+    sys.modules[panel.__module__]._draw_slot(_Layout(drawn), empty_scene.splat_tracer.ab.a, "A")
+    assert sorted(k for k in drawn if k in switches) == sorted(switches)
 
 
 def test_panels_show_only_for_this_engine_and_every_setting_says_what_it_does(blender, empty_scene):

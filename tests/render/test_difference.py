@@ -57,7 +57,7 @@ def test_the_legend_shows_the_ramp_with_its_breakpoints():
 
 def test_ineffective_differences_follow_the_visibility_logic():
     full = Method.preset("FULL")
-    flat = Method.preset("FULL", interpolate_normals=False)
+    flat = Method.preset("FULL", normal_interpolation=False)
     from dataclasses import replace
     notes = lambda a, b, **kw: ab.ineffective_differences(a, b, **{"clouds": 1, "closed_clouds": 1,  # noqa: E731
                                                                     "headlight": False, **kw})
@@ -77,6 +77,6 @@ def test_ineffective_differences_follow_the_visibility_logic():
     assert "Epsilon" in notes(general, replace(general, epsilon=2.0))[0]
     assert notes(full, replace(full, epsilon=2.0)) == []
     # Two differences, one of which shows: no "cannot differ".
-    mixed = notes(full, replace(full, far_phase=False, eliminate_wrong_hits=False), closed_clouds=0)
+    mixed = notes(full, replace(full, far_phase=False, wrong_hit_elimination=False), closed_clouds=0)
     assert len(mixed) == 1 and "cannot differ" not in mixed[0]
     assert "same settings" in notes(full, full)[0]

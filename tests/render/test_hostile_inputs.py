@@ -162,7 +162,7 @@ def test_native_exclude_check():
     out = [np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8), np.empty((1, 3), np.float32),
            np.empty((1, 3), np.float32)]
     with pytest.raises(ValueError, match="exclude"):
-        scene.trace_surface(np.float32([[0, 0, 5]]), np.float32([[0, 0, -1]]), 0.0, 10.0, Method().as_tuple(),
+        scene.trace_surface(np.float32([[0, 0, 5]]), np.float32([[0, 0, -1]]), 0.0, 10.0, Method(),
                             *out, None, None, np.int32([[5]]))
 
 

@@ -1,6 +1,9 @@
 """The paper's visibility method in the core: each rule, and what breaks when it is off."""
 from __future__ import annotations
 
+from dataclasses import asdict, fields, replace
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
@@ -8,7 +11,8 @@ from scipy.ndimage import distance_transform_edt
 from geometry import angle_deg, cube_cloud, fibonacci_sphere, ray_box, ray_sphere
 from splat_tracer.pointcloud import spacing
 from splat_tracer.render.camera import Camera
-from splat_tracer.render.method import POSITION_RULES, Method
+from splat_tracer.render import ab
+from splat_tracer.render.method import POSITION_RULES, PRESETS, SWITCHES, Method, switch_fields, switches_of
 from splat_tracer.render.splats import SplatCloud
 
 W, H = 320, 240
@@ -42,7 +46,7 @@ def test_ε_window_query_matches_brute_force():
     dirs = rng.normal(size=(6000, 3))
     inside = rng.uniform(size=6000) < 0.3
     for method in (FULL, Method.preset("NEAREST_CENTRE"), Method.preset("GENERAL"),
-                   Method.preset("FULL", eliminate_wrong_hits=False, epsilon=2.5)):
+                   Method.preset("FULL", wrong_hit_elimination=False, epsilon=2.5)):
         a = scene.trace_surface(origins, dirs, method, inside=inside, members=True)
         b = scene.trace_surface(origins, dirs, method, inside=inside, members=True, brute_force=True)
         for x, y in zip(a, b):
@@ -79,7 +83,7 @@ def test_sphere_interpolated_normals_are_smooth_and_flat_ones_are_not():
     hit = np.isfinite(t_true)
     truth = o + d * np.where(hit, t_true, 0)[:, None]
     smooth = scene.trace_surface(o, d, FULL)
-    flat = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
+    flat = scene.trace_surface(o, d, Method.preset("FULL", normal_interpolation=False))
     both = hit & (smooth.id >= 0)
     assert both.sum() > 0.99 * hit.sum()
     err_smooth = angle_deg(smooth.normal[both], truth[both])
@@ -118,7 +122,7 @@ def test_cube_full_method_puts_the_surface_on_the_cube(cube):
     """Depth: the full method's surface points lie on the cube's faces (flat normals are
     then exactly the face normals); the general method's fringe and edge hits do not."""
     scene, o, d, truth, t_true, n_true = cube
-    flat_full = scene.trace_surface(o, d, Method.preset("FULL", interpolate_normals=False))
+    flat_full = scene.trace_surface(o, d, Method.preset("FULL", normal_interpolation=False))
     both = (flat_full.id >= 0) & np.isfinite(t_true)
     np.testing.assert_allclose(flat_full.t[both], t_true[both], atol=1e-4)
     np.testing.assert_array_equal(flat_full.normal[both], n_true[both])
@@ -178,7 +182,7 @@ def test_near_phase_decides_as_the_papers_omega_on_random_pairs():
     """The core decides omega > pi without acos (visibility.cpp, near_phase_convex): on
     random pairs of discs in one layer, the pick is the paper's rule computed with arccos."""
     rng = np.random.default_rng(8)
-    method = Method(position="NEAR_PHASE", far_phase=False, interpolate_normals=False, epsilon=1000.0)
+    method = Method(position="NEAR_PHASE", far_phase=False, normal_interpolation=False, epsilon=1000.0)
     o, d = np.array([[0.0, 0.0, 5.0]]), np.array([[0.0, 0.0, -1.0]])
     checked = 0
     for _ in range(400):
@@ -357,6 +361,49 @@ def test_method_validation():
         scene._scene.trace_surface(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), 0.0, 1.0, "FULL",
                                    np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8),
                                    np.empty((1, 3), np.float32), np.empty((1, 3), np.float32))
+
+
+def test_the_switch_table_names_the_method_fields_and_the_ab_notes():
+    """Every switch is a Method field of its name (or chooses the position rule), its Blender
+    property is use_<name>, the A/B notes have a label for every field, and switch values
+    and methods convert both ways."""
+    method_fields = {f.name: f for f in fields(Method)}
+    assert len({s.name for s in SWITCHES}) == len(SWITCHES)
+    for switch in SWITCHES:
+        assert switch.prop == "use_" + switch.name and switch.label and switch.description
+        assert switch.field in method_fields
+        assert switch.field == switch.name or switch.field == "position"
+        assert {switch.on, switch.off} <= ({True, False} if switch.field == switch.name else set(POSITION_RULES))
+    assert set(ab._LABELS) == set(method_fields) | {"radius_factor"}
+    for preset in PRESETS:
+        method = Method.preset(preset)
+        assert replace(method, **switch_fields(switches_of(method))) == method
+    # The near phase decides the position whenever it is on; the nearest centre only without it.
+    both_off = dict.fromkeys((s.name for s in SWITCHES), False)
+    assert switch_fields({**both_off, "near_phase": True, "nearest_centre": True})["position"] == "NEAR_PHASE"
+    assert switch_fields({**both_off, "nearest_centre": True})["position"] == "NEAREST_CENTRE"
+    assert switch_fields(both_off)["position"] == "FIRST"
+    with pytest.raises(KeyError, match="far_phase"):
+        switch_fields({k: v for k, v in both_off.items() if k != "far_phase"})
+
+
+def test_the_core_reads_the_method_by_field_name():
+    """The binding takes any object with Method's fields, and names a field it misses or
+    cannot use."""
+    cloud = SplatCloud(*cube_cloud(8), np.full(6 * 64, 0.2), closed=True)
+    o, d = camera_rays((2.5, -3.0, 2.0))
+    trace = lambda method: cloud.trace_surface(o, d, method)  # noqa: E731 - SplatCloud passes it as it is
+    for method in (FULL, Method.preset("GENERAL"), Method.preset("NEAREST_CENTRE", kernel="SMOOTH", epsilon=2.0)):
+        a, b = trace(method), trace(SimpleNamespace(**asdict(method)))
+        assert all(np.array_equal(x, y) for x, y in zip(a, b) if x is not None)
+    for name in asdict(FULL):
+        with pytest.raises(TypeError, match=f"method has no field '{name}'"):
+            trace(SimpleNamespace(**{k: v for k, v in asdict(FULL).items() if k != name}))
+    bad = {"epsilon": ("1.0", TypeError), "crease_angle": (None, TypeError), "position": ("MIDDLE", ValueError),
+           "kernel": (1, ValueError)}
+    for name, (value, error) in bad.items():
+        with pytest.raises(error, match=f"'{name}'"):
+            trace(SimpleNamespace(**{**asdict(FULL), name: value}))
 
 
 def test_render_uses_the_method_and_agrees_with_trace_surface(cube):

@@ -366,7 +366,7 @@ PyMethodDef Scene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
      "out_members=None, inside=None, exclude=None, threads=0, brute_force=False, packets=True)\n--\n\n"
-     "The surface each ray sees under the visibility method (see core.py)."},
+     "The surface each ray sees under the visibility method (a render.method.Method, read by field name)."},
     {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
     {nullptr, nullptr, 0, nullptr},
 };

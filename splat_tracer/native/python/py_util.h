@@ -1,5 +1,5 @@
 // Shared by the binding files: buffer-protocol views with checked dtype, layout and shape,
-// running C++ without the GIL, and the method tuple. Built against the limited API.
+// running C++ without the GIL, and the method read by field name. Built against the limited API.
 #pragma once
 
 #define PY_SSIZE_T_CLEAN
@@ -134,27 +134,88 @@ inline bool check_threads(int threads) {
     return true;
 }
 
-// method = (eliminate_wrong_hits, interpolate, far_phase, position, kernel, epsilon[,
-// crease_angle in degrees]), as core.Method.as_tuple() builds it. Returns false with an
-// exception set when invalid.
+// The names of the position rules and kernels as render.method.Method spells them
+// (POSITION_RULES, KERNELS), in the order of the enums.
+inline constexpr const char *kPositionRuleNames[] = {"FIRST", "NEAR_PHASE", "NEAREST_CENTRE"};
+inline constexpr const char *kKernelNames[] = {"LINEAR", "SMOOTH"};
+
+// Field `name` of the method object (a new reference), or null with a TypeError naming it.
+inline PyObject *method_field(PyObject *obj, const char *name) {
+    PyObject *value = PyObject_GetAttrString(obj, name);
+    if (!value) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "method has no field '%s' (see render.method.Method)", name);
+    }
+    return value;
+}
+
+// A switch: any object's truth value, as Python's bool() takes it.
+inline bool method_bool(PyObject *obj, const char *name, bool &out) {
+    PyObject *value = method_field(obj, name);
+    if (!value) return false;
+    const int truth = PyObject_IsTrue(value);
+    Py_DECREF(value);
+    if (truth < 0) return false;
+    out = truth != 0;
+    return true;
+}
+
+// A number (a float, or anything float() takes without parsing a string).
+inline bool method_float(PyObject *obj, const char *name, float &out) {
+    PyObject *value = method_field(obj, name);
+    if (!value) return false;
+    const double v = PyFloat_AsDouble(value);
+    Py_DECREF(value);
+    if (v == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        return PyErr_Format(PyExc_TypeError, "method field '%s' must be a number", name), false;
+    }
+    out = float(v);
+    return true;
+}
+
+// One of `names` (a str), as its index.
+template <size_t N>
+bool method_choice(PyObject *obj, const char *name, const char *const (&names)[N], int &out) {
+    PyObject *value = method_field(obj, name);
+    if (!value) return false;
+    const char *text = PyUnicode_Check(value) ? PyUnicode_AsUTF8AndSize(value, nullptr) : nullptr;
+    for (size_t i = 0; text && i < N; ++i) {
+        if (std::strcmp(text, names[i]) == 0) {
+            Py_DECREF(value);
+            out = int(i);
+            return true;
+        }
+    }
+    PyErr_Clear();
+    std::string choices;
+    for (const char *n : names) choices += (choices.empty() ? "" : ", ") + std::string(n);
+    PyErr_Format(PyExc_ValueError, "method field '%s' must be one of %s, got %R", name, choices.c_str(), value);
+    Py_DECREF(value);
+    return false;
+}
+
+// The method, read field by field by name from a render.method.Method (or any object with
+// its fields); None keeps `m`'s defaults. Returns false with an exception set when a field
+// is missing or invalid.
 inline bool parse_method(PyObject *obj, Method &m) {
     if (obj == Py_None) return true;
-    if (!PyTuple_Check(obj)) return PyErr_Format(PyExc_TypeError, "method must be a tuple (see core.Method)"), false;
-    int elim, interp, far, position, kernel;
-    float eps, crease = 180.f;
-    if (!PyArg_ParseTuple(obj,
-                          "pppiif|f;method must be (eliminate, interpolate, far_phase, position, kernel, epsilon"
-                          "[, crease_angle])",
-                          &elim, &interp, &far, &position, &kernel, &eps, &crease))
+    bool wrong_hit_elimination, normal_interpolation, far_phase;
+    int position, kernel;
+    float epsilon, crease_angle;
+    if (!method_bool(obj, "wrong_hit_elimination", wrong_hit_elimination) ||
+        !method_bool(obj, "normal_interpolation", normal_interpolation) || !method_bool(obj, "far_phase", far_phase) ||
+        !method_choice(obj, "position", kPositionRuleNames, position) ||
+        !method_choice(obj, "kernel", kKernelNames, kernel) || !method_float(obj, "epsilon", epsilon) ||
+        !method_float(obj, "crease_angle", crease_angle))
         return false;
-    if (position < 0 || position > 2) return PyErr_Format(PyExc_ValueError, "method position must be 0, 1 or 2"), false;
-    if (kernel < 0 || kernel > 1) return PyErr_Format(PyExc_ValueError, "method kernel must be 0 or 1"), false;
-    if (!(std::isfinite(eps) && eps >= 0.f)) return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
-    if (!(crease >= 0.f && crease <= 180.f))
+    if (!(std::isfinite(epsilon) && epsilon >= 0.f))
+        return PyErr_Format(PyExc_ValueError, "epsilon must be finite and >= 0"), false;
+    if (!(crease_angle >= 0.f && crease_angle <= 180.f))
         return PyErr_Format(PyExc_ValueError, "crease angle must be between 0 and 180 degrees"), false;
-    m.eliminate_wrong_hits = elim, m.interpolate = interp, m.far_phase = far;
-    m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = eps;
-    m.crease_cos = crease >= 180.f ? -2.f : std::cos(crease * float(M_PI) / 180.f);
+    m.wrong_hit_elimination = wrong_hit_elimination, m.normal_interpolation = normal_interpolation;
+    m.far_phase = far_phase, m.position = PositionRule(position), m.kernel = Kernel(kernel), m.epsilon = epsilon;
+    m.crease_cos = crease_angle >= 180.f ? -2.f : std::cos(crease_angle * float(M_PI) / 180.f);
     return true;
 }
 

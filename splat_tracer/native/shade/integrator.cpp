@@ -259,7 +259,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
     Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
-    if (!cfg.method.eliminate_wrong_hits && sp.n_members > 0) {
+    if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
     }

@@ -54,7 +54,7 @@ void resolve_layer(const SplatScene &scene, const LayerQuery &q, const Method &m
     s.normal = scene.splat(h.slot).n, s.colour = scene.colour(h.id), s.alpha = scene.alpha(h.id);
     s.n_members = n;
     for (int k = 0; k < n; ++k) s.members[k] = q.hits[idx[k]].id;
-    if (m.interpolate && n > 1) {
+    if (m.normal_interpolation && n > 1) {
         Vec3 nsum, csum;
         float wsum = 0.f, asum = 0.f;
         // At a crease the layer holds discs of both faces: blending them all rounds the edge
@@ -196,7 +196,7 @@ bool nearest_hit_suffices(const Method &m, bool inside, int n_exclude) {
 void begin_query(LayerQuery &q, const Method &m, bool inside, const int32_t *exclude, int n_exclude) {
     new (&q) LayerQuery;
     q.layer_front = !inside;
-    q.any_facing = !m.eliminate_wrong_hits;
+    q.any_facing = !m.wrong_hit_elimination;
     q.epsilon = m.epsilon;
     q.exclude = exclude, q.n_exclude = n_exclude;
 }
@@ -239,7 +239,7 @@ void resolve_surface(const SplatScene &scene, Ray ray, const Method &m, bool ins
             continue;
         }
         resolve_layer(scene, q, m, out);
-        if (stats && m.interpolate && out.n_members > 1) ++stats->interpolations;
+        if (stats && m.normal_interpolation && out.n_members > 1) ++stats->interpolations;
         return;
     }
 }

@@ -22,8 +22,8 @@ enum class Kernel : int {
 };
 
 struct Method {
-    bool eliminate_wrong_hits = true;
-    bool interpolate = true;
+    bool wrong_hit_elimination = true;
+    bool normal_interpolation = true;
     bool far_phase = true;  // applied to splats of closed objects only
     PositionRule position = PositionRule::NearPhase;
     Kernel kernel = Kernel::Linear;
@@ -37,7 +37,7 @@ struct Method {
 
     // Nearest hit, any facing, flat normal: no layer needs to be gathered.
     bool is_general() const {
-        return !eliminate_wrong_hits && !interpolate && !far_phase && position == PositionRule::First;
+        return !wrong_hit_elimination && !normal_interpolation && !far_phase && position == PositionRule::First;
     }
 };
 
