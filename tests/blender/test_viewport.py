@@ -107,10 +107,10 @@ def test_camera_view_with_zoom_and_offset_sees_the_f12_image_in_its_frame(blende
     u, v = x0 + fx * (x1 - x0), y0 + fy * (y1 - y0)  # region pixels, bottom-left origin
 
     def directions(cam_: Camera, ndc_x, ndc_y):
-        pts = lambda z: np.column_stack([ndc_x.ravel(), ndc_y.ravel(), np.full(ndc_x.size, z),
-                                         np.ones(ndc_x.size)]) @ cam_.local_from_ndc.T
-        a, b = pts(-1.0), pts(1.0)
-        d = b[:, :3] / b[:, 3:] - a[:, :3] / a[:, 3:]
+        left, right, bottom, top = cam_.frustum
+        u = left + (right - left) * (ndc_x.ravel() + 1) / 2
+        v = bottom + (top - bottom) * (ndc_y.ravel() + 1) / 2
+        d = np.column_stack([u, v, -np.ones_like(u)]) @ cam_.local_from_camera[:3, :3].T
         return d / np.linalg.norm(d, axis=1, keepdims=True)
 
     np.testing.assert_allclose(directions(camera, 2 * u / RW - 1, 2 * v / RH - 1),
