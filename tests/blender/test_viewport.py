@@ -214,7 +214,7 @@ def _f12_view(bpy, scene, width, height):
     cam = scene.camera.evaluated_get(depsgraph)
     window = cam.calc_matrix_camera(depsgraph, x=width, y=height)
     view = np.linalg.inv(np.array(cam.matrix_world.normalized(), np.float64))
-    return viewport.View.of(window, view, width, height)
+    return viewport.View.of(window, view, width, height, clip=(cam.data.clip_start, cam.data.clip_end))
 
 
 def test_each_change_rebuilds_only_what_it_must(blender, empty_scene):
