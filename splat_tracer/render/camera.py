@@ -35,7 +35,7 @@ def window_rect(window, width: int, height: int) -> tuple[int, int, int, int]:
     return x0, y0, w, h
 
 
-def _pair(values, name: str, count: int) -> tuple:
+def _numbers(values, name: str, count: int) -> tuple:
     try:
         out = tuple(float(v) for v in values)
     except (TypeError, ValueError):
@@ -71,10 +71,10 @@ class Camera:
             raise ValueError("local_from_camera must be a finite affine 4x4 matrix (last row 0 0 0 1)")
         if not np.linalg.norm(m[:3, 2]) > 0:
             raise ValueError("local_from_camera has no view axis (its -Z column is zero)")
-        left, right, bottom, top = _pair(self.frustum, "frustum", 4)
+        left, right, bottom, top = _numbers(self.frustum, "frustum", 4)
         if not (left < right and bottom < top):
             raise ValueError(f"frustum needs left < right and bottom < top, got {self.frustum!r}")
-        start, end = _pair(self.clip, "clip", 2)
+        start, end = _numbers(self.clip, "clip", 2)
         if not (start < end and (self.orthographic or start > 0)):
             raise ValueError(f"need clip start < clip end (and clip start > 0 for a perspective camera), "
                              f"got {self.clip!r}")
