@@ -38,13 +38,16 @@ def _matrix(m) -> np.ndarray:
     return a
 
 
-def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0)) -> Camera:
+def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=None) -> Camera:
     """The core camera of a 3D view: `window_matrix` is its projection (view space to clip
     space, RegionView3D.window_matrix) and `view_matrix` maps world to view space
     (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
     way: Blender folds the camera's lens, sensor fit, shift, the view's zoom and its offset
-    into window_matrix. `origin`: the scene's local-frame origin (float64 world position)."""
-    return Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin)
+    into window_matrix's x and y rows, which its float32 keeps to float precision. `clip`:
+    the view's clipping range (start, end) in double, which a float32 perspective matrix
+    loses for ranges of about 1e8 and more (None: read from window_matrix). `origin`: the
+    scene's local-frame origin (float64 world position)."""
+    return Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin, clip)
 
 
 def region_rect(perspective_matrix, world_points, width: int, height: int) -> tuple[float, float, float, float]:
@@ -85,21 +88,37 @@ def border_window(width: int, height: int, rect=None, fractions=None) -> Optiona
 
 @dataclass(frozen=True)
 class View:
-    """What the viewport shows: its matrices (nested tuples or arrays), region size and the
-    rendered window (None: an empty border, nothing rendered)."""
+    """What the viewport shows: its matrices (nested tuples or arrays), region size, the
+    rendered window (None: an empty border, nothing rendered) and the clipping range
+    (start, end) in double (None: read from window_matrix)."""
 
     window_matrix: tuple
     view_matrix: tuple
     width: int
     height: int
     window: Optional[tuple] = None
+    clip: Optional[tuple] = None
 
     @classmethod
-    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL") -> "View":
+    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None) -> "View":
         as_tuple = lambda m: tuple(tuple(float(v) for v in row) for row in _matrix(m))
         if window == "ALL":
             window = (0, 0, int(width), int(height))
-        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window)
+        clip = None if clip is None else (float(clip[0]), float(clip[1]))
+        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip)
+
+
+def view_clip(scene, depsgraph, rv3d, space) -> Optional[tuple]:
+    """The clipping range of a 3D view, from its parameters: the camera's in the camera
+    view, the View3D's in a perspective view. None for an orthographic view: Blender
+    centres its range on the view (-clip_end/2 to clip_end/2), and an orthographic
+    matrix keeps its range (it divides by no w), so window_matrix gives it."""
+    if rv3d.view_perspective == "CAMERA" and scene.camera is not None:
+        data = scene.camera.evaluated_get(depsgraph).data
+        return (data.clip_start, data.clip_end) if scene.camera.type == "CAMERA" else None
+    if rv3d.is_perspective:
+        return (space.clip_start, space.clip_end)
+    return None
 
 
 def view_of(scene, depsgraph, region, rv3d, space) -> View:
@@ -121,7 +140,8 @@ def view_of(scene, depsgraph, region, rv3d, space) -> View:
         rect = None
         fractions = ((space.render_border_min_x, space.render_border_min_y, space.render_border_max_x,
                       space.render_border_max_y) if space.use_render_border else None)
-    return View.of(window_matrix, view_matrix, width, height, border_window(width, height, rect, fractions))
+    return View.of(window_matrix, view_matrix, width, height, border_window(width, height, rect, fractions),
+                   view_clip(scene, depsgraph, rv3d, space))
 
 
 # --------------------------------------------------------------------------------------
@@ -449,7 +469,8 @@ class ViewportSession:
             return
         self.error = None
         if self._camera is None:
-            self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin)
+            self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin,
+                                            self._view.clip)
         with self._cond:
             for name in names if names is not None else list(self._states):
                 variant, settings, threads, _ = self._states[name]

@@ -35,31 +35,111 @@ def window_rect(window, width: int, height: int) -> tuple[int, int, int, int]:
     return x0, y0, w, h
 
 
+def _numbers(values, name: str, count: int) -> tuple:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be {count} numbers, got {values!r}") from None
+    if len(out) != count or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"{name} must be {count} finite numbers, got {values!r}")
+    return out
+
+
 @dataclass(frozen=True)
 class Camera:
-    """A pinhole or orthographic camera, as the core consumes it.
+    """A pinhole or orthographic camera, as the core consumes it: its parameters in double
+    precision. The core builds each ray from them; it never inverts a projection matrix,
+    which for clipping ranges of about 1e8 and more (0.001 to 1e5 m) unprojects the far
+    plane to w = 0 in float32 (Blender's) and, at the ranges Blender allows, in double too.
 
-    local_from_ndc: 4x4 float64 mapping OpenGL normalised device coordinates (z = -1 on the
-    near clipping plane, +1 on the far one) to points of the scene's local frame.
-    position / forward: camera centre and unit view axis, for planar depth.
+    local_from_camera: 4x4 float64 affine map from camera space (looking down -Z, +Y up) to
+    the scene's local frame. frustum: (left, right, bottom, top) of the image on the plane
+    at unit distance in front of a pinhole camera, or on the view plane of an orthographic
+    one (scene units). clip: (start, end) distances along the view axis between which rays
+    run (start may be negative for an orthographic camera). position / forward: camera
+    centre and unit view axis, for planar depth.
     """
 
-    local_from_ndc: np.ndarray
-    position: np.ndarray
-    forward: np.ndarray
+    local_from_camera: np.ndarray
+    frustum: tuple
+    clip: tuple
+    orthographic: bool = False
+
+    def __post_init__(self):
+        m = np.array(self.local_from_camera, dtype=np.float64)
+        if m.shape != (4, 4) or not np.isfinite(m).all() or tuple(m[3]) != (0.0, 0.0, 0.0, 1.0):
+            raise ValueError("local_from_camera must be a finite affine 4x4 matrix (last row 0 0 0 1)")
+        if not np.linalg.norm(m[:3, 2]) > 0:
+            raise ValueError("local_from_camera has no view axis (its -Z column is zero)")
+        left, right, bottom, top = _numbers(self.frustum, "frustum", 4)
+        if not (left < right and bottom < top):
+            raise ValueError(f"frustum needs left < right and bottom < top, got {self.frustum!r}")
+        start, end = _numbers(self.clip, "clip", 2)
+        if not (start < end and (self.orthographic or start > 0)):
+            raise ValueError(f"need clip start < clip end (and clip start > 0 for a perspective camera), "
+                             f"got {self.clip!r}")
+        object.__setattr__(self, "local_from_camera", np.ascontiguousarray(m))
+        object.__setattr__(self, "frustum", (left, right, bottom, top))
+        object.__setattr__(self, "clip", (start, end))
+        object.__setattr__(self, "orthographic", bool(self.orthographic))
+
+    @property
+    def position(self) -> np.ndarray:
+        return self.local_from_camera[:3, 3].copy()
+
+    @property
+    def forward(self) -> np.ndarray:
+        axis = self.local_from_camera[:3, 2]
+        return -axis / np.linalg.norm(axis)
+
+    def native(self) -> tuple:
+        """The arguments the core's render calls take for the camera."""
+        return self.local_from_camera, np.array([*self.frustum, *self.clip], np.float64), self.orthographic
 
     @classmethod
-    def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0)) -> "Camera":
-        """From a projection matrix (camera space to clip space, OpenGL convention, as
-        Blender's `Object.calc_matrix_camera` returns) and the camera's rigid world matrix
-        (looking down its local -Z); `origin` is the scene's local-frame origin."""
-        proj = np.asarray(projection, dtype=np.float64).reshape(4, 4)
-        w_c = np.asarray(world_from_camera, dtype=np.float64).reshape(4, 4)
-        local_from_world = np.eye(4)
-        local_from_world[:3, 3] = -np.asarray(origin, dtype=np.float64)
-        local_from_ndc = local_from_world @ w_c @ matrices.inverse(proj)
-        forward = -w_c[:3, 2] / np.linalg.norm(w_c[:3, 2])
-        return cls(np.ascontiguousarray(local_from_ndc), w_c[:3, 3] - np.asarray(origin, np.float64), forward)
+    def from_frustum(cls, world_from_camera, frustum, clip, orthographic: bool = False,
+                     origin=(0.0, 0.0, 0.0)) -> "Camera":
+        """From the camera's world matrix (looking down its local -Z; scale is not removed)
+        and its parameters (see the class); `origin` is the scene's local-frame origin."""
+        m = np.array(world_from_camera, dtype=np.float64).reshape(4, 4)
+        m[:3, 3] -= np.asarray(origin, dtype=np.float64)
+        return cls(m, frustum, clip, orthographic)
+
+    @classmethod
+    def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0), clip=None) -> "Camera":
+        """From a perspective or orthographic projection matrix (camera space to clip space,
+        OpenGL convention, as Blender's `Object.calc_matrix_camera` and a 3D view's
+        window_matrix are) and the camera's world matrix. The image rectangle is read from
+        the matrix's x and y rows, which float32 keeps to its precision; `clip` (start,
+        end) gives the clipping range, which a float32 matrix loses for ranges of about 1e8
+        and more. Without it, the range is read from the matrix."""
+        p = np.asarray(projection, dtype=np.float64).reshape(4, 4)
+        if not np.isfinite(p).all():
+            raise ValueError("the projection matrix must be finite")
+        scale = np.abs(p).max()
+        zero = lambda *cells: all(abs(p[c]) <= 1e-9 * scale for c in cells)
+        if not (zero((0, 1), (1, 0), (2, 0), (2, 1), (3, 0), (3, 1)) and p[0, 0] != 0 and p[1, 1] != 0):
+            raise ValueError("not a perspective or orthographic projection matrix")
+        # x_ndc = p00 u + c (u on the unit plane, or the view plane): u = (x_ndc - c) / p00
+        # at x_ndc = -1 and +1; c is the x row's constant, in column 2 for a perspective
+        # matrix (multiplied by -z = 1 on the unit plane) and column 3 for an orthographic one.
+        if zero((0, 3), (1, 3), (3, 3)) and p[3, 2] == -1.0:
+            orthographic, cx, cy = False, -p[0, 2], -p[1, 2]
+            a, b = p[2, 2], p[2, 3]
+            near_far = (b / (a - 1.0), b / (a + 1.0)) if a not in (1.0, -1.0) else None
+        elif zero((0, 2), (1, 2), (3, 2)) and p[3, 3] == 1.0:
+            orthographic, cx, cy = True, p[0, 3], p[1, 3]
+            near_far = ((p[2, 3] + 1.0) / p[2, 2], (p[2, 3] - 1.0) / p[2, 2]) if p[2, 2] != 0 else None
+        else:
+            raise ValueError("not a perspective or orthographic projection matrix")
+        x = ((-1.0 - cx) / p[0, 0], (1.0 - cx) / p[0, 0])
+        y = ((-1.0 - cy) / p[1, 1], (1.0 - cy) / p[1, 1])
+        if clip is None:
+            if near_far is None or not all(math.isfinite(v) for v in near_far):
+                raise ValueError("the projection matrix has lost its clipping range (a float32 matrix does for "
+                                 "ranges of about 1e8 and more): give clip=(start, end)")
+            clip = near_far
+        return cls.from_frustum(world_from_camera, (*x, *y), clip, orthographic, origin)
 
     @classmethod
     def look_at(cls, eye, target, up=(0.0, 0.0, 1.0), fov_y: float = 40.0, aspect: float = 4 / 3,
@@ -88,27 +168,27 @@ class Camera:
         cam_up = np.cross(right, fwd)
         w_c = np.eye(4)
         w_c[:3, 0], w_c[:3, 1], w_c[:3, 2], w_c[:3, 3] = right, cam_up, -fwd, eye
-        proj = np.zeros((4, 4))
-        if ortho_height is None:
-            f = 1.0 / np.tan(np.radians(fov_y) / 2)
-            proj[0, 0], proj[1, 1] = f / aspect, f
-            proj[2, 2], proj[2, 3] = (far + near) / (near - far), 2 * far * near / (near - far)
-            proj[3, 2] = -1.0
-        else:
-            proj[0, 0], proj[1, 1] = 2.0 / (ortho_height * aspect), 2.0 / ortho_height
-            proj[2, 2], proj[2, 3] = -2.0 / (far - near), -(far + near) / (far - near)
-            proj[3, 3] = 1.0
-        return cls.from_view_projection(proj, w_c)
+        half_h = np.tan(np.radians(fov_y) / 2) if ortho_height is None else ortho_height / 2
+        half_w = half_h * aspect
+        return cls.from_frustum(w_c, (-half_w, half_w, -half_h, half_h), (near, far), ortho_height is not None)
 
     def rays(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """Pixel-centre rays (origins on the near plane, unit directions), row-major from
-        the top row: the same rays `SplatCloud.render` traces, for use with `SplatCloud.trace`."""
+        the top row: the same rays `SplatCloud.render` traces (the core's Camera::ray), for
+        use with `SplatCloud.trace`."""
         j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-        ndc = np.stack([2 * j / width - 1, 1 - 2 * i / height], axis=-1).reshape(-1, 2)
-        def unproject(z):
-            p = matrices.transform_rows(np.column_stack([ndc, np.full(len(ndc), z), np.ones(len(ndc))]), self.local_from_ndc)
-            return p[:, :3] / p[:, 3:]
-        a, b = unproject(-1.0), unproject(1.0)
-        d = b - a
+        left, right, bottom, top = self.frustum
+        u = (left + (right - left) * (j / width)).ravel()
+        v = (bottom + (top - bottom) * (1.0 - i / height)).ravel()
+        start, _ = self.clip
+        one = np.ones_like(u)
+        if self.orthographic:
+            points = np.column_stack([u, v, -start * one, one])
+            dirs = np.column_stack([0 * one, 0 * one, -one, 0 * one])
+        else:
+            points = np.column_stack([u * start, v * start, -start * one, one])
+            dirs = np.column_stack([u, v, -one, 0 * one])
+        a = matrices.transform_rows(points, self.local_from_camera)[:, :3]
+        d = matrices.transform_rows(dirs, self.local_from_camera)[:, :3]
         d /= np.linalg.norm(d, axis=1, keepdims=True)
         return a.astype(np.float32), d.astype(np.float32)

@@ -152,8 +152,7 @@ class RenderScene:
                "IndexOB": "index", "Splat Count": "splat_count"}
         optional = {key[name]: buf for name, buf in buffers.items() if name != "Combined"}
         done, counters = self._scene.render(
-            np.ascontiguousarray(camera.local_from_ndc, np.float64), np.ascontiguousarray(camera.position, np.float64),
-            np.ascontiguousarray(camera.forward, np.float64), int(width), int(height),
+            *camera.native(), int(width), int(height),
             (int(x0), int(y0), int(w), int(h)), settings.pack(), method, self.world.radiance(),
             bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
             tile_size=tile_size, packets=packets, **optional)

@@ -173,10 +173,7 @@ class SplatCloud:
         dep = np.empty((h, w), np.float32) if depth else None
         nrm = np.empty((h, w, 3), np.float32) if normal else None
         done = self._scene.render(
-            np.ascontiguousarray(camera.local_from_ndc, np.float64),
-            np.ascontiguousarray(camera.position, np.float64),
-            np.ascontiguousarray(camera.forward, np.float64),
-            int(width), int(height), (int(x0), int(y0), int(w), int(h)),
+            *camera.native(), int(width), int(height), (int(x0), int(y0), int(w), int(h)),
             tuple(float(v) for v in background), rgba, dep, nrm, threads, progress, tile_size, method,
             packets)
         return RenderResult(rgba, dep, nrm, done)

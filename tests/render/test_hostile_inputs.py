@@ -141,7 +141,7 @@ def test_render_window_near_int_range_is_refused_not_overflowed():
     scene = SplatCloud([[0, 0, 0]], [[0, 0, 1]], [1.0])
     cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0))
     with pytest.raises(ValueError, match="window"):
-        scene._scene.render(cam.local_from_ndc, cam.position, cam.forward, 100, 100,
+        scene._scene.render(*cam.native(), 100, 100,
                             (2**31 - 10, 0, 20, 1), (0, 0, 0, 0), np.empty((1, 20, 4), np.float32))
 
 

@@ -315,22 +315,53 @@ def geometry_has_colours(obj) -> bool:
     return data is not None and hasattr(data, "attributes") and COLOUR in data.attributes
 
 
+def camera_frustum(data, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0) -> tuple:
+    """(left, right, bottom, top) of a Blender camera's image (render.camera.Camera's
+    frustum) at width x height pixels of pixel aspect aspect_x : aspect_y, in double, as
+    Blender's view plane (BKE_camera_params_compute_viewplane): the sensor fit chooses the
+    side the sensor (and the orthographic scale) spans, the shift moves the image by that
+    side's length, and the other side follows the image's aspect."""
+    size_x, size_y = width * aspect_x, height * aspect_y
+    fit = data.sensor_fit if data.sensor_fit != "AUTO" else ("HORIZONTAL" if size_x >= size_y else "VERTICAL")
+    # The sensor side is chosen by the camera's own setting (AUTO uses its width), even when
+    # AUTO fits it to the image's height.
+    sensor = data.sensor_height if data.sensor_fit == "VERTICAL" else data.sensor_width
+    span = data.ortho_scale if data.type == "ORTHO" else sensor / data.lens  # at unit distance
+    y_scale = aspect_y / aspect_x  # a pixel's height in units of its width
+    side = width if fit == "HORIZONTAL" else y_scale * height  # the fitted side, in pixel widths
+    pixel = span / side
+    half_w, half_h = 0.5 * width * pixel, 0.5 * y_scale * height * pixel
+    dx, dy = data.shift_x * span, data.shift_y * span
+    return (dx - half_w, dx + half_w, dy - half_h, dy + half_h)
+
+
 def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> Camera:
+    """The scene camera from its parameters, in double (not from calc_matrix_camera's
+    float32 projection, which loses clipping ranges of about 1e8 and more)."""
     scene = depsgraph.scene
     if scene.camera is None:
         raise RuntimeError("the scene has no active camera")
     cam = scene.camera.evaluated_get(depsgraph)
     if cam.type != "CAMERA":
         raise RuntimeError(f"the active camera '{cam.name}' is not a camera object")
-    if cam.data.type == "PANO":
+    data = cam.data
+    if data.type == "PANO":
         raise RuntimeError("panoramic cameras are not supported; use perspective or orthographic")
-    if not cam.data.clip_start < cam.data.clip_end:
-        raise RuntimeError(f"camera '{cam.name}': Clip Start ({cam.data.clip_start:g}) must be less than Clip End "
-                           f"({cam.data.clip_end:g})")
+    if not data.clip_start < data.clip_end:
+        raise RuntimeError(f"camera '{cam.name}': Clip Start ({data.clip_start:g}) must be less than Clip End "
+                           f"({data.clip_end:g})")
+    rigid = cam.matrix_world.normalized()
+    # A camera scaled to zero on an axis (itself, by a parent or by an animation) has no
+    # view direction or no image along it: normalized() leaves that axis zero. (mathutils'
+    # determinant, not numpy's: see util/matrices.py on BLAS threads.)
+    if not abs(rigid.to_3x3().determinant()) > 1e-6:
+        scale = tuple(round(v, 6) for v in cam.matrix_world.to_scale())
+        raise RuntimeError(f"camera '{cam.name}' is scaled to zero (world scale {scale}): it has no view "
+                           "direction or image there; give it a non-zero scale on every axis")
     r = scene.render
-    projection = cam.calc_matrix_camera(depsgraph, x=width, y=height, scale_x=r.pixel_aspect_x,
-                                        scale_y=r.pixel_aspect_y)
-    return Camera.from_view_projection(projection, cam.matrix_world.normalized(), origin)
+    frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
+    return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
+                               data.type == "ORTHO", origin)
 
 
 def camera_origin(depsgraph: bpy.types.Depsgraph) -> np.ndarray:

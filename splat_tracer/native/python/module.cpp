@@ -294,21 +294,21 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
 }
 
 PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window",
+    static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "background", "out_rgba", "out_depth", "out_normal", "threads",
                                    "progress", "tile_size", "method", "packets", nullptr};
-    PyObject *om, *opos, *ofwd, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None,
+    PyObject *om, *ofrustum, *orgba, *odepth = Py_None, *onormal = Py_None, *progress = Py_None,
              *ometh = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, packets = 1;
+    int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, packets = 1;
     float bg[4];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)(ffff)O|OOiOiOp", const_cast<char **>(kwlist), &om,
-                                     &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1], &bg[2],
-                                     &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)(ffff)O|OOiOiOp", const_cast<char **>(kwlist), &om,
+                                     &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &bg[0], &bg[1],
+                                     &bg[2], &bg[3], &orgba, &odepth, &onormal, &threads, &progress, &tile_size, &ometh,
                                      &packets))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     Camera cam;
-    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+    if (!parse_camera(om, ofrustum, orthographic, cam)) return nullptr;
     View rgba, depth, normal;
     Py_ssize_t sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
     if (!get_array(orgba, "out_rgba", 'f', 3, sr, true, rgba)) return nullptr;
@@ -359,7 +359,7 @@ PyMethodDef Scene_methods[] = {
      "trace(origins, directions, tmin, tmax, out_t, out_id, out_front, out_normal=None, threads=0, "
      "brute_force=False)\n--\n\nNearest hit per ray, written into the out_ arrays (see core.py)."},
     {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_render)), METH_VARARGS | METH_KEYWORDS,
-     "render(local_from_ndc, position, forward, width, height, window, background, out_rgba, "
+     "render(local_from_camera, frustum, orthographic, width, height, window, background, out_rgba, "
      "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32, method=None, packets=True)\n--\n\n"
      "Renders a window of an image; returns False when progress() asked to stop."},
     {"trace_surface", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace_surface)),

@@ -198,18 +198,19 @@ void RenderScene_dealloc(PyObject *self) {
 }
 
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"local_from_ndc", "position", "forward", "width", "height", "window", "settings",
-                                   "method", "world", "film_transparent", "combined", "depth", "normal", "diffcol",
-                                   "emit", "shadow", "index", "splat_count", "threads", "progress", "tile_size",
-                                   "packets", nullptr};
-    PyObject *om, *opos, *ofwd, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
+    static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
+                                   "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
+                                   "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
+                                   "tile_size", "packets", nullptr};
+    PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None;
-    int width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0, packets = 1;
+    int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
+        packets = 1;
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
-                                     &om, &opos, &ofwd, &width, &height, &x0, &y0, &w, &h, &osettings, &ometh,
-                                     &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
+                                     &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
+                                     &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets))
         return nullptr;
@@ -241,7 +242,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     cfg.packets = packets != 0;
 
     Camera cam;
-    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+    if (!parse_camera(om, ofrustum, orthographic, cam)) return nullptr;
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -289,8 +290,8 @@ PyObject *RenderScene_instances(PyObject *self, void *) {
 PyMethodDef RenderScene_methods[] = {
     {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(RenderScene_render)),
      METH_VARARGS | METH_KEYWORDS,
-     "render(local_from_ndc, position, forward, width, height, window, settings, method, world, film_transparent, "
-     "combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
+     "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
+     "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True)\n--\n\nRenders a window; returns (completed, counters)."},
     {nullptr, nullptr, 0, nullptr},
 };

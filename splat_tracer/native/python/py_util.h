@@ -285,22 +285,32 @@ inline bool check_render_args(int width, int height, int x0, int y0, int w, int 
     return true;
 }
 
-// A camera from its three arrays (core.Camera): local_from_ndc 4x4, position and forward 3,
-// all float64 and finite. Sets an exception and returns false otherwise.
-inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &cam) {
-    View m, pos, fwd;
-    Py_ssize_t s44[2] = {4, 4}, s3[1] = {3};
-    if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m) || !get_array(opos, "position", 'd', 1, s3, false, pos) ||
-        !get_array(ofwd, "forward", 'd', 1, s3, false, fwd))
+// A camera from its parameters (render.camera.Camera): local_from_camera 4x4 (an affine
+// matrix), frustum 6 (left, right, bottom, top, clip start, clip end), all float64 and
+// finite, and whether it is orthographic. Sets an exception and returns false otherwise.
+inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Camera &cam) {
+    View m, fr;
+    Py_ssize_t s44[2] = {4, 4}, s6[1] = {6};
+    if (!get_array(om, "local_from_camera", 'd', 2, s44, false, m) ||
+        !get_array(ofrustum, "frustum", 'd', 1, s6, false, fr))
         return false;
-    std::memcpy(cam.local_from_ndc, m.data<double>(), sizeof cam.local_from_ndc);
-    std::memcpy(cam.position, pos.data<double>(), sizeof cam.position);
-    std::memcpy(cam.forward, fwd.data<double>(), sizeof cam.forward);
-    for (double v : cam.local_from_ndc)
-        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "local_from_ndc must be finite"), false;
-    for (int k = 0; k < 3; ++k)
-        if (!std::isfinite(cam.position[k]) || !std::isfinite(cam.forward[k]))
-            return PyErr_Format(PyExc_ValueError, "camera position and forward must be finite"), false;
+    const double *a = m.data<double>(), *f = fr.data<double>();
+    for (int k = 0; k < 16; ++k)
+        if (!std::isfinite(a[k])) return PyErr_Format(PyExc_ValueError, "local_from_camera must be finite"), false;
+    if (a[12] != 0.0 || a[13] != 0.0 || a[14] != 0.0 || a[15] != 1.0)
+        return PyErr_Format(PyExc_ValueError, "local_from_camera must be affine (last row 0 0 0 1)"), false;
+    for (int k = 0; k < 6; ++k)
+        if (!std::isfinite(f[k])) return PyErr_Format(PyExc_ValueError, "frustum must be finite"), false;
+    if (!(f[0] < f[1] && f[2] < f[3]))
+        return PyErr_Format(PyExc_ValueError, "frustum must have left < right and bottom < top"), false;
+    if (!(f[4] < f[5]) || (!orthographic && !(f[4] > 0.0)))
+        return PyErr_Format(PyExc_ValueError, "need clip start < clip end (and clip start > 0 for a perspective "
+                                              "camera)"), false;
+    std::memcpy(cam.local_from_camera, a, sizeof cam.local_from_camera);
+    std::memcpy(cam.frustum, f, sizeof cam.frustum);
+    cam.clip_start = f[4], cam.clip_end = f[5];
+    cam.orthographic = orthographic != 0;
+    if (!cam.derive_axes()) return PyErr_Format(PyExc_ValueError, "local_from_camera has no view axis (-Z)"), false;
     return true;
 }
 

@@ -1,6 +1,9 @@
-// Camera rays from an inverse view-projection matrix: one model for perspective and
-// orthographic cameras, with sensor fit, lens shift and clipping already folded in by
-// whoever built the matrix (Blender's camera.calc_matrix_camera, or core.Camera).
+// Camera rays from the camera's own parameters, in double precision: a pinhole or an
+// orthographic camera, its image rectangle (sensor fit, lens shift and any view zoom
+// already folded in by whoever built it: render.camera.Camera) and its clipping range.
+// No projection matrix is inverted: with a clipping range of 1e8 or more, a float32
+// projection (Blender's) unprojects its far plane to w = 0, and even a double one loses
+// the far plane at the ranges Blender allows (1e-6 to 3.4e38).
 #pragma once
 
 #include <cmath>
@@ -10,17 +13,22 @@
 namespace splat {
 
 struct Camera {
-    // Row-major 4x4 taking normalised device coordinates (x, y in [-1, 1], y up; z = -1 on
-    // the near clipping plane, +1 on the far one, OpenGL convention) to homogeneous points
-    // of the scene's local frame.
-    double local_from_ndc[16];
+    // Row-major 3x4: camera space (looking down -Z, +Y up) to the scene's local frame.
+    double local_from_camera[12];
+    // The image rectangle (left, right, bottom, top) on the plane at unit distance in front
+    // of a pinhole camera, or on the view plane of an orthographic one (scene units).
+    double frustum[4];
+    double clip_start, clip_end;  // distances along the view axis; clip_start < clip_end
+    bool orthographic = false;
     double position[3];  // the camera's centre (local frame)
     double forward[3];   // unit view axis: planar depth = (p - position) . forward
 
-    void unproject(double x, double y, double z, double out[3]) const {
-        const double *m = local_from_ndc;
-        double w = m[12] * x + m[13] * y + m[14] * z + m[15];
-        for (int r = 0; r < 3; ++r) out[r] = (m[4 * r] * x + m[4 * r + 1] * y + m[4 * r + 2] * z + m[4 * r + 3]) / w;
+    // position and forward from local_from_camera; false when its view axis has no length.
+    bool derive_axes() {
+        const double *m = local_from_camera;
+        double len = std::sqrt(m[2] * m[2] + m[6] * m[6] + m[10] * m[10]);
+        for (int r = 0; r < 3; ++r) position[r] = m[4 * r + 3], forward[r] = len > 0 ? -m[4 * r + 2] / len : 0.0;
+        return len > 0 && std::isfinite(len);
     }
 
     // Ray through raster position (px, py) of a width x height image, raster y downwards
@@ -28,18 +36,27 @@ struct Camera {
     // starts on the near clipping plane and ends on the far one. Double precision here,
     // float from here on: the local frame keeps the coordinates small.
     Ray ray(double px, double py, int width, int height) const {
-        const double x = 2.0 * px / width - 1.0, y = 1.0 - 2.0 * py / height;
-        double a[3], b[3];
-        unproject(x, y, -1.0, a);
-        unproject(x, y, 1.0, b);
-        const double d[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+        const double fx = px / width, fy = 1.0 - py / height;
+        const double u = frustum[0] + (frustum[1] - frustum[0]) * fx;
+        const double v = frustum[2] + (frustum[3] - frustum[2]) * fy;
+        // Camera space: a pinhole's ray leaves its centre along (u, v, -1) and is clipped
+        // at clip_start and clip_end times that vector; an orthographic ray leaves (u, v)
+        // along -Z.
+        const double dir[3] = {orthographic ? 0.0 : u, orthographic ? 0.0 : v, -1.0};
+        const double start[3] = {orthographic ? u : u * clip_start, orthographic ? v : v * clip_start, -clip_start};
+        const double *m = local_from_camera;
+        double o[3], d[3];
+        for (int r = 0; r < 3; ++r) {
+            o[r] = m[4 * r] * start[0] + m[4 * r + 1] * start[1] + m[4 * r + 2] * start[2] + m[4 * r + 3];
+            d[r] = m[4 * r] * dir[0] + m[4 * r + 1] * dir[1] + m[4 * r + 2] * dir[2];
+        }
         const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        Ray r;
-        r.o = Vec3(float(a[0]), float(a[1]), float(a[2]));
-        r.d = Vec3(float(d[0] / len), float(d[1] / len), float(d[2] / len));
-        r.tmin = 0.f;
-        r.tmax = float(len);
-        return r;
+        Ray ray;
+        ray.o = Vec3(float(o[0]), float(o[1]), float(o[2]));
+        ray.d = Vec3(float(d[0] / len), float(d[1] / len), float(d[2] / len));
+        ray.tmin = 0.f;
+        ray.tmax = float((clip_end - clip_start) * len);  // inf beyond float's range: unclipped
+        return ray;
     }
 
     double planar_depth(const Ray &r, float t) const {
