@@ -2,11 +2,14 @@
 and the bad inputs of each; a 3DGS and a 2DGS capture rendered in real Blender."""
 from __future__ import annotations
 
+import re
+import struct
+
 import numpy as np
 import pytest
 
 from geometry import angle_deg, cube_cloud, fibonacci_sphere
-from splat_tracer.pointcloud import normals, prepare, readers
+from splat_tracer.pointcloud import importer, normals, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
 from splat_tracer.pointcloud.readers import gaussians, ply
 
@@ -133,6 +136,83 @@ def test_las_lying_count_truncation_and_laz_without_backend(tmp_path, monkeypatc
     with pytest.raises(CloudFileError, match="no LAZ backend") as err:
         readers.read_cloud(str(laz))
     assert str(laz) in str(err.value)
+
+
+def _write_las14_with_evlrs(path, compress=False):
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.001, 0.001, 0.001]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = RNG.uniform(0, 10, (200, 3)).T
+    las.evlrs = VLRList([laspy.VLR("test", 1, "one", b"x" * 100), laspy.VLR("test", 2, "two", b"y" * 10)])
+    las.write(str(path), laz_backend=laspy.LazBackend.Lazrs if compress else None)
+
+
+def _patched(path, out, fmt, at, *values):
+    data = bytearray(path.read_bytes())
+    struct.pack_into(fmt, data, at, *values)
+    out.write_bytes(bytes(data))
+    return out
+
+
+# (file, struct format, header offset, value, what the message names): the LAS public
+# header's fields (offset to point data 96, number of VLRs 100, scales 131.., offsets 155..,
+# LAS 1.4's start of the first EVLR 235 and number of EVLRs 243)
+_CORRUPT_HEADERS = [
+    ("las12", "<I", 100, 0xFFFFFFF0, "number of VLRs (4,294,967,280) cannot fit"),
+    ("las12", "<I", 100, 1, "number of VLRs (1) cannot fit"),  # one more than fit: none
+    ("laz14", "<I", 100, 3, "number of VLRs (3) cannot fit"),
+    ("las14", "<I", 243, 0xFFFFFFF0, "number of EVLRs (4,294,967,280) cannot fit"),
+    ("laz14", "<I", 243, 1 << 20, "number of EVLRs (1,048,576) cannot fit"),
+    ("las14", "<I", 243, 3, "EVLR 3 of 3 would start"),  # fits by count, not after the real two's data
+    ("las14", "<Q", 235, 1 << 40, "start of the first EVLR"),
+    ("las14", "<Q", 235, 0, "start of the first EVLR"),
+    ("las12", "<I", 96, 1 << 31, "offset to point data"),
+    ("las12", "<d", 131, 0.0, "x scale is 0.0"),
+    ("las14", "<d", 147, float("nan"), "z scale is nan"),
+    ("laz14", "<d", 139, 0.0, "y scale is 0.0"),
+    ("las12", "<d", 163, float("inf"), "y offset is inf"),
+]
+
+
+@pytest.mark.parametrize("kind, fmt, at, value, message", _CORRUPT_HEADERS)
+def test_las_header_counts_and_scales_are_checked_before_laspy_reads(tmp_path, monkeypatch, kind, fmt, at, value,
+                                                                      message):
+    """laspy loops over the header's VLR and EVLR counts past the end of the file (a count of
+    4 billion: hours, memory growing, no progress call): the counts are checked against the
+    file first, and laspy never sees such a file. A zero or NaN scale is refused too (it
+    would flatten or erase an axis)."""
+    import laspy
+
+    good = tmp_path / f"good_{kind}.las"
+    if kind == "las12":
+        _write_las(good, np.column_stack([RNG.uniform(0, 10, (300, 2)), np.zeros(300)]))
+    else:
+        _write_las14_with_evlrs(good, compress=kind == "laz14")
+    assert len(readers.read_cloud(str(good))) > 0  # unpatched, each imports
+    path = _patched(good, tmp_path / f"bad_{kind}.las", fmt, at, value)
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a file whose header cannot be right")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    for read in (readers.read_cloud, importer.load):  # the importer's memory check reads the header too
+        with pytest.raises(CloudFileError, match=re.escape(message)) as err:
+            read(str(path))
+        assert str(path) in str(err.value)
+
+
+def test_las_evlr_lengths_are_checked_against_the_file(tmp_path):
+    good = tmp_path / "good.las"
+    _write_las14_with_evlrs(good)
+    start = struct.unpack_from("<Q", good.read_bytes(), 235)[0]
+    for at, value, message in ((start + 20, 1 << 62, "EVLR 1 of 2 declares 4,611,686,018,427,387,904 bytes"),
+                               (start + 20, 160, "EVLR 2 of 2 would start")):  # the second moved to the end
+        path = _patched(good, tmp_path / "bad.las", "<Q", at, value)
+        with pytest.raises(CloudFileError, match=re.escape(message)):
+            readers.read_cloud(str(path))
 
 
 # --- E57 ---------------------------------------------------------------------------------
