@@ -79,6 +79,58 @@ def test_text_column_mapping_when_guessing_fails(tmp_path):
         readers.read_cloud(str(path), columns="x y z")
 
 
+def _grid_900():
+    """A 30 x 30 grid with two decimals, as European exports write it."""
+    x, y = np.meshgrid(10.0 + 0.5 * np.arange(30), 20.25 + 0.25 * np.arange(30))
+    return np.column_stack([x.ravel(), y.ravel(), np.full(900, 1.25)])
+
+
+@pytest.mark.parametrize("name, separator, header, colours", [
+    ("grid.csv", ";", "", False),            # the example: 10,50;20,25;1,25
+    ("grid.txt", "\t", "", False),
+    ("grid.csv", ";", "X;Y;Z;R;G;B\n", True),
+    ("grid.xyz", " ", "// exported\n", True),
+    ("grid.csv", "; ", "x; y; z\n", False),
+])
+def test_decimal_comma_text_is_read_with_decimal_commas(tmp_path, name, separator, header, colours):
+    p = _grid_900()
+    rgb = RNG.integers(0, 256, size=(900, 3))
+    rows = [[f"{v:.2f}".replace(".", ",") for v in row] + ([str(c) for c in rgb[i]] if colours else [])
+            for i, row in enumerate(p)]
+    path = tmp_path / name
+    path.write_text(header + "".join(separator.join(r) + "\n" for r in rows))
+    cloud = readers.read_cloud(str(path))
+    assert len(cloud) == 900
+    np.testing.assert_array_equal(cloud.positions, p)  # every digit after the comma kept
+    if colours:
+        np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
+    else:
+        assert cloud.colours is None
+    assert "numbers read with decimal commas" in cloud.notes
+
+
+@pytest.mark.parametrize("content, message", [
+    ("1,5;2,5;3,5\n1,2,3\n", "line 1 ('1,5;2,5;3,5') and line 2 ('1,2,3') use ',' differently"),
+    ("x y z\n1.5,2.5,3.5\n1,5 2,5 3,5\n", "line 2 ('1.5,2.5,3.5') and line 3 ('1,5 2,5 3,5')"),
+    ("1,5;2.5;3\n", "line 1 ('1,5;2.5;3') has both '.' and ','"),
+    ("1.234,5\t2.345,5\t7\n", "has both '.' and ','"),  # thousands separators
+])
+def test_undecidable_decimal_marks_are_refused_naming_the_lines(tmp_path, content, message):
+    path = tmp_path / "mixed.csv"
+    path.write_text(content)
+    with pytest.raises(CloudFileError, match=re.escape(message)) as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value)
+
+
+def test_commas_between_values_are_still_separators(tmp_path):
+    path = tmp_path / "plain.csv"
+    path.write_text("x, y, z\n1.5, 2.5, 3.5\n4,5,6\n7.25,8,9\n")
+    cloud = readers.read_cloud(str(path))
+    np.testing.assert_array_equal(cloud.positions, [[1.5, 2.5, 3.5], [4, 5, 6], [7.25, 8, 9]])
+    assert "numbers read with decimal commas" not in cloud.notes
+
+
 # --- LAS / LAZ ---------------------------------------------------------------------------
 
 def _write_las(path, p, rgb=None, compress=False, point_format=3):
