@@ -57,7 +57,7 @@ def sniff(path: str) -> str:
 
 def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
     """Reads any supported file; `columns` maps a text file's columns (see read_text).
-    progress: progress.ProgressFn, called while reading LAS/LAZ (others read in one call)."""
+    progress: progress.ProgressFn, called while reading LAS/LAZ and E57 (others read in one call)."""
     path = os.fspath(path)
     kind = sniff(path)
     if kind == "PLY":
@@ -65,7 +65,7 @@ def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
     if kind == "LAS":
         return read_las(path, progress)
     if kind == "E57":
-        return read_e57(path)
+        return read_e57(path, progress)
     try:
         return read_text(path, columns)
     except CloudFileError as e:
