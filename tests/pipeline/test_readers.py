@@ -624,6 +624,61 @@ def test_bad_inputs_are_refused_naming_the_file(tmp_path, name, content, message
     assert str(path) in str(err.value) and message in str(err.value), str(err.value)
 
 
+def _not_a_file(tmp_path, kind):
+    import os
+
+    path = tmp_path / f"scan_{kind}.ply"
+    if kind == "folder":
+        path.mkdir()
+    elif kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "loop":
+        os.symlink(tmp_path / "other.ply", path)
+        os.symlink(path, tmp_path / "other.ply")
+    elif kind == "self_loop":
+        os.symlink(path, path)
+    elif kind == "dangling":
+        os.symlink(tmp_path / "gone.ply", path)
+    elif kind == "in_a_file":  # a path through a file, as if it were a folder
+        (tmp_path / "plain.ply").write_text("ply\n")
+        path = tmp_path / "plain.ply" / "scan.ply"
+    return path
+
+
+@pytest.mark.parametrize("kind, message", [
+    ("folder", "is a folder, not a file"),
+    ("fifo", "is a named pipe (FIFO), not a file"),
+    ("loop", "a symbolic link that loops"),
+    ("self_loop", "a symbolic link that loops"),
+    ("dangling", "a symbolic link to '"),
+    ("missing", "no such file"),
+    ("in_a_file", "no such file (a part of the path before its name is not a folder)"),
+])
+def test_paths_that_are_not_files_are_refused_saying_what_they_are(tmp_path, kind, message):
+    """Each was 'no such file' (a folder, a FIFO, a loop of links all exist); a FIFO must
+    never be opened (that waits for a writer forever): each read runs on a thread here, so
+    that a regression fails rather than hangs."""
+    import threading
+
+    path = _not_a_file(tmp_path, kind)
+    for read in (readers.read_cloud, importer.load, ply.read_ply):
+        outcome = []
+
+        def run():
+            try:
+                read(str(path))
+                outcome.append(None)
+            except Exception as e:  # noqa: BLE001 -- checked below
+                outcome.append(e)
+
+        worker = threading.Thread(target=run, daemon=True)
+        worker.start()
+        worker.join(10)
+        assert outcome, f"{read.__name__} did not return for a {kind}"
+        assert isinstance(outcome[0], CloudFileError), outcome[0]
+        assert str(path) in str(outcome[0]) and message in str(outcome[0]), str(outcome[0])
+
+
 def test_ply_without_normals_is_imported_with_estimated_normals(tmp_path):
     from plyfile import PlyData, PlyElement
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-from ..cloud import CloudFileError, PointCloud
+from ..cloud import CloudFileError, PointCloud, check_file
 from .e57 import read_e57
 from .las import read_las
 from .ply import read_ply
@@ -26,8 +26,7 @@ _TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 
 
 def sniff(path: str) -> str:
     """The format of the file by its first bytes: one of FORMATS."""
-    if not os.path.isfile(path):
-        raise CloudFileError(f"{path}: no such file")
+    check_file(path)
     with open(path, "rb") as f:
         head = f.read(_SNIFF_BYTES)
     if not head:

@@ -13,7 +13,7 @@ import re
 import numpy as np
 
 from ...util.columns import finite_rows, in_blocks
-from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, linear_colours, make_cloud,
+from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, check_file, linear_colours, make_cloud,
                      srgb_to_linear, unit_colours)
 from . import gaussians
 
@@ -160,8 +160,7 @@ def read_ply(path: str) -> PointCloud:
     from plyfile import PlyData  # imported here: only reading needs it
 
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise CloudFileError(f"{path}: no such file")
+    check_file(path)
     header_len, header = read_header(path)
     _check_declared_sizes(path, header, header_len)
     _check_no_lists(path, header)
