@@ -131,6 +131,40 @@ def test_commas_between_values_are_still_separators(tmp_path):
     assert "numbers read with decimal commas" not in cloud.notes
 
 
+@pytest.mark.parametrize("ending", ["\r", "\r\n", "mixed"])
+@pytest.mark.parametrize("layout", ["xyz", "pts", "csv_header"])
+def test_text_with_any_line_ending(tmp_path, ending, layout):
+    """CR-only line endings (classic Mac OS) made the whole file one row (refused as 'cannot
+    tell what its 1500 columns are', or worse, read as one point); CR LF and a mix read alike."""
+    p, _, rgb = _sphere(200)
+    if layout == "xyz":
+        lines = _fmt(p).splitlines()
+    elif layout == "pts":
+        lines = [str(len(p))] + _fmt(np.column_stack([p, np.zeros(len(p)), rgb])).splitlines()
+    else:
+        lines = ["X;Y;Z;Red;Green;Blue"] + _fmt(np.column_stack([p, rgb])).replace(" ", ";").splitlines()
+    endings = ["\r", "\r\n", "\n"] if ending == "mixed" else [ending]
+    path = tmp_path / "cloud.txt"
+    path.write_bytes("".join(line + endings[k % len(endings)] for k, line in enumerate(lines)).encode())
+    assert readers.sniff(str(path)) == "TEXT"
+    cloud = readers.read_cloud(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+    if layout != "xyz":
+        np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"0 0 0\r1 1 1\r2 2\r3 3 3\r", "data line 3 (after 0 header lines) has 2 values"),
+    (b"0 0 0\r1 1 1\r2 2 \xe9\r", "byte 16, 0xe9, on line 3"),
+    (b"0 0 0\r\n1 1 1\r\n2 2 \xe9\r\n", "byte 18, 0xe9, on line 3"),
+])
+def test_cr_only_text_errors_name_the_right_line(tmp_path, content, message):
+    path = tmp_path / "ragged.xyz"
+    path.write_bytes(content)
+    with pytest.raises(CloudFileError, match=re.escape(message)):
+        readers.read_cloud(str(path))
+
+
 # --- LAS / LAZ ---------------------------------------------------------------------------
 
 def _write_las(path, p, rgb=None, compress=False, point_format=3):
