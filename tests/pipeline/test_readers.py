@@ -244,8 +244,8 @@ def _patched(path, out, fmt, at, *values):
 
 
 # (file, struct format, header offset, value, what the message names): the LAS public
-# header's fields (offset to point data 96, number of VLRs 100, scales 131.., offsets 155..,
-# LAS 1.4's start of the first EVLR 235 and number of EVLRs 243)
+# header's fields (header size 94, offset to point data 96, number of VLRs 100, scales
+# 131.., offsets 155.., LAS 1.4's start of the first EVLR 235 and number of EVLRs 243)
 _CORRUPT_HEADERS = [
     ("las12", "<I", 100, 0xFFFFFFF0, "number of VLRs (4,294,967,280) cannot fit"),
     ("las12", "<I", 100, 1, "number of VLRs (1) cannot fit"),  # one more than fit: none
@@ -256,6 +256,8 @@ _CORRUPT_HEADERS = [
     ("las14", "<Q", 235, 1 << 40, "start of the first EVLR"),
     ("las14", "<Q", 235, 0, "start of the first EVLR"),
     ("las12", "<I", 96, 1 << 31, "offset to point data"),
+    ("las12", "<H", 94, 100, "size (100) is smaller than a LAS 1.2 header's 227 bytes"),
+    ("laz14", "<H", 94, 235, "size (235) is smaller than a LAS 1.4 header's 375 bytes"),
     ("las12", "<d", 131, 0.0, "x scale is 0.0"),
     ("las14", "<d", 147, float("nan"), "z scale is nan"),
     ("laz14", "<d", 139, 0.0, "y scale is 0.0"),

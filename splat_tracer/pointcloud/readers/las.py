@@ -39,6 +39,7 @@ _SCALES_AND_OFFSETS = struct.Struct("<6d")
 _EVLR_FIELDS = struct.Struct("<QIQ")
 _HEADER_SIZE_14 = 375   # a LAS 1.4 header: its fields end at 375 bytes
 _HEADER_SIZE_MIN = 227  # a LAS 1.0-1.2 header
+_HEADER_SIZE_13 = 235   # LAS 1.3 adds the start of the waveform records
 _VLR_HEADER = 54        # bytes before each VLR's data
 _EVLR_HEADER = 60       # bytes before each EVLR's data
 _EVLR_LENGTH_AT = 20    # an EVLR's data length (uint64) follows its reserved, user ID and record ID fields
@@ -82,6 +83,10 @@ def read_header(path: str) -> HeaderFields:
                                      f"{_HEADER_SIZE_14} bytes but the file has {len(head)})")
             evlr_start, evlrs, count = _EVLR_FIELDS.unpack_from(head, 235)
         bad = f"{path}: not a valid LAS/LAZ file: its header's"
+        least = _HEADER_SIZE_14 if version[1] >= 4 else _HEADER_SIZE_13 if version[1] == 3 else _HEADER_SIZE_MIN
+        if header_size < least:
+            raise CloudFileError(f"{bad} size ({header_size:,}) is smaller than a LAS 1.{version[1]} header's "
+                                 f"{least} bytes")
         if not header_size <= offset <= size:
             raise CloudFileError(f"{bad} offset to point data ({offset:,}) is not between the header's size "
                                  f"({header_size:,}) and the file's ({size:,} bytes)")
