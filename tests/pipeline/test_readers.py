@@ -303,6 +303,57 @@ def test_las_evlr_lengths_are_checked_against_the_file(tmp_path):
             readers.read_cloud(str(path))
 
 
+def _within(seconds, read, path):
+    """read(path) on a thread: its result, its exception, or 'hang' after `seconds`."""
+    import threading
+
+    outcome = []
+
+    def run():
+        try:
+            outcome.append(read(path))
+        except Exception as e:  # noqa: BLE001 -- the caller judges it
+            outcome.append(e)
+
+    worker = threading.Thread(target=run, daemon=True)
+    worker.start()
+    worker.join(seconds)
+    return outcome[0] if outcome else "hang"
+
+
+@pytest.mark.parametrize("kind", ["las12", "las14", "laz14"])
+def test_mutated_las_headers_import_or_are_refused_never_hang(tmp_path, kind):
+    """Random bytes and 32-bit words written over a LAS/LAZ file's header fields, its VLRs
+    and EVLRs (a count of 2^32 - 1 among them): each file imports or is refused with a
+    CloudFileError, within seconds; none hangs in laspy or escapes as another exception."""
+    good = tmp_path / "good.las"
+    if kind == "las12":
+        _write_las(good, np.column_stack([RNG.uniform(0, 10, (300, 2)), np.zeros(300)]))
+    else:
+        _write_las14_with_evlrs(good, compress=kind == "laz14")
+    base = good.read_bytes()
+    fields = [94, 96, 100, 104, 105, 107, 131, 155] + ([235, 239, 243, 247] if kind != "las12" else [])
+    rng = np.random.default_rng(11)
+    outcomes = {"imported": 0, "refused": 0}
+    for k in range(150):
+        data = bytearray(base)
+        for _ in range(int(rng.integers(1, 4))):
+            if rng.uniform() < 0.5:
+                at = int(rng.choice(fields))
+                word = int(rng.choice([0, 1, 3, 1 << 16, 1 << 31, 0xFFFFFFFF, int(rng.integers(0, 1 << 32))]))
+                data[at:at + 4] = struct.pack("<I", word)
+            else:
+                data[int(rng.integers(0, len(base)))] = int(rng.integers(0, 256))
+        path = tmp_path / f"mutated_{k}.las"
+        path.write_bytes(bytes(data))
+        got = _within(20, readers.read_cloud, str(path))
+        assert got != "hang", f"{path.name} hung"
+        assert not isinstance(got, Exception) or isinstance(got, CloudFileError), f"{path.name}: {got!r}"
+        outcomes["refused" if isinstance(got, CloudFileError) else "imported"] += 1
+        path.unlink()
+    assert outcomes["imported"] and outcomes["refused"]  # the mutations reach both
+
+
 # --- E57 ---------------------------------------------------------------------------------
 
 def test_e57_round_trip_with_scanner_positions(tmp_path):
