@@ -123,9 +123,10 @@ def test_undecidable_decimal_marks_are_refused_naming_the_lines(tmp_path, conten
     assert str(path) in str(err.value)
 
 
-def test_commas_between_values_are_still_separators(tmp_path):
+@pytest.mark.parametrize("rows", ["1.5, 2.5, 3.5\n4,5,6\n7.25,8,9\n", "1.5 ,2.5 ,3.5\n4 ,5 ,6\n7.25 ,8 ,9\n"])
+def test_commas_between_values_are_still_separators(tmp_path, rows):
     path = tmp_path / "plain.csv"
-    path.write_text("x, y, z\n1.5, 2.5, 3.5\n4,5,6\n7.25,8,9\n")
+    path.write_text("x, y, z\n" + rows)
     cloud = readers.read_cloud(str(path))
     np.testing.assert_array_equal(cloud.positions, [[1.5, 2.5, 3.5], [4, 5, 6], [7.25, 8, 9]])
     assert "numbers read with decimal commas" not in cloud.notes

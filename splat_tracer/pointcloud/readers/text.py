@@ -26,7 +26,7 @@ _DECIMAL_COMMA = str.maketrans({",": ".", ";": " ", "\t": " "})
 # a later row that does not follow it is refused by the parse, naming its line.
 _DECIMAL_SAMPLE = 1 << 20
 _NUMERIC_LINE = re.compile(r"^[\d\s;,.+\-eE]*\d[\d\s;,.+\-eE]*$")  # digits and number punctuation only
-_COMMA_DECIMAL = re.compile(r"^[+-]?\d*,\d+([eE][+-]?\d+)?$")        # one comma, then digits: 10,50  -,5
+_COMMA_DECIMAL = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")        # one comma between digits: 10,50  -0,5
 _HEADER_LINES = 100  # at most this many lines before the data are taken as a header
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
 
