@@ -14,6 +14,7 @@ mode (`blender -b`).
 from __future__ import annotations
 
 import os
+import time
 
 import bpy
 from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
@@ -35,6 +36,13 @@ _ORIENTATION_ITEMS = [
     ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files); else Neighbour Graph"),
 ]
 _TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progress
+# How long a cancel (Esc, or Blender ending the operator: cancel(), which blocks the main
+# thread meanwhile) waits for the worker to stop: the work makes a progress call (where it
+# stops) every fraction of a second (a LAS chunk: 0.05-0.25 s). A reader inside one library
+# call that makes no progress call (plyfile, pye57) cannot be interrupted: after this wait
+# it is abandoned, its daemon thread running on until the call returns; what it returns is
+# only arrays (no Blender data), dropped with the job, so nothing of it reaches the scene.
+_CANCEL_WAIT_SECONDS = 1.0
 # What a failed or cancelled run reports, and which exceptions are the user's problem
 # (reported) rather than a bug (raised).
 _REPORTED = (CloudFileError, MemoryError, ValueError, Cancelled)
@@ -71,6 +79,7 @@ class _Work:
     use_job: bpy.props.BoolProperty(options={"HIDDEN", "SKIP_SAVE"}, default=False)
     _job = None
     _timer = None
+    _cancelled_at = None  # time.monotonic() of the Esc that cancelled the job
 
     def run(self, context) -> set:
         if self.use_job and not bpy.app.background and context.window is not None:
@@ -104,30 +113,36 @@ class _Work:
         job = self._job
         if event.type == "ESC" and event.value == "PRESS":
             job.cancel()  # the worker stops at its next progress call
+            if self._cancelled_at is None:
+                self._cancelled_at = time.monotonic()
             return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
         wm = context.window_manager
         if not job.done:
+            if self._cancelled_at is not None and time.monotonic() - self._cancelled_at > _CANCEL_WAIT_SECONDS:
+                self._end_modal(context)  # a worker that cannot be interrupted: abandoned
+                return self._refused(Cancelled("cancelled"))
             wm.progress_update(int(100 * job.fraction))
             self._status(context, f"{self.bl_label}: {100 * job.fraction:.0f} % {job.message} (Esc to cancel)")
             return {"RUNNING_MODAL"}
-        wm.event_timer_remove(self._timer)
-        wm.progress_end()
-        self._status(context, None)
+        self._end_modal(context)
         try:
             result = job.result()
         except _REPORTED as e:
             return self._refused(e)
         return self.finish(context, result)
 
+    def _end_modal(self, context) -> None:
+        context.window_manager.event_timer_remove(self._timer)
+        context.window_manager.progress_end()
+        self._status(context, None)
+
     def cancel(self, context):  # Blender ends the operator (e.g. the file is closed): stop the worker
         if self._job is not None:
             self._job.cancel()
-            self._job.wait()
-            context.window_manager.event_timer_remove(self._timer)
-            context.window_manager.progress_end()
-            self._status(context, None)
+            self._job.wait(_CANCEL_WAIT_SECONDS)  # then abandoned (see _CANCEL_WAIT_SECONDS)
+            self._end_modal(context)
 
 
 def create_objects(context, loaded, notes_for, progress=None, consume: bool = False) -> list:

@@ -3,7 +3,10 @@
 imported raises (naming the file and the problem)."""
 from __future__ import annotations
 
+import errno
 import functools
+import os
+import stat
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -15,6 +18,38 @@ from .neighbours import first_of_duplicates
 
 class CloudFileError(ValueError):
     """A point-cloud file that cannot be imported; the message names file and problem."""
+
+
+def check_file(path: str) -> None:
+    """Refuses a path that is not a readable regular file, saying what it is instead: a
+    folder, a named pipe (opening one waits for a writer, forever), a device, a symbolic
+    link that loops or leads nowhere, or a file that cannot be read."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        if os.path.islink(path):
+            raise CloudFileError(f"{path}: a symbolic link to '{os.readlink(path)}', which does not exist") from None
+        raise CloudFileError(f"{path}: no such file") from None
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise CloudFileError(f"{path}: a symbolic link that loops (following it leads back to a link already "
+                                 "followed), not a file") from None
+        if e.errno == errno.ENOTDIR:
+            raise CloudFileError(f"{path}: no such file (a part of the path before its name is not a folder)") from None
+        raise CloudFileError(f"{path}: cannot be opened ({e.strerror})") from None
+    if stat.S_ISDIR(mode):
+        raise CloudFileError(f"{path}: is a folder, not a file (choose the point-cloud files in it)")
+    if stat.S_ISFIFO(mode):
+        raise CloudFileError(f"{path}: is a named pipe (FIFO), not a file; the importer reads files from disk "
+                             "(save the data to a file first)")
+    if not stat.S_ISREG(mode):
+        what = "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else \
+            "not a regular file"
+        raise CloudFileError(f"{path}: is {what}, not a file of points")
+    try:
+        open(path, "rb").close()
+    except OSError as e:
+        raise CloudFileError(f"{path}: cannot be read ({e.strerror})") from None
 
 
 @dataclass

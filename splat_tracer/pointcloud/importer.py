@@ -29,6 +29,7 @@ from ..util.columns import bounds
 from ..util.progress import ProgressFn, nothing, scaled
 from . import normals, prepare, readers, spacing
 from .cloud import CloudFileError, PointCloud
+from .readers.las import read_header as read_las_header
 from .readers.ply import read_header
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
@@ -158,11 +159,8 @@ def declared_points(path: str, kind: str) -> Optional[int]:
         if kind == "PLY":
             _, header = read_header(path)
             return sum(e.count for e in header.elements if e.name == "vertex")
-        if kind == "LAS":
-            import laspy
-
-            with laspy.open(path) as reader:
-                return int(reader.header.point_count)
+        if kind == "LAS":  # its own header check: laspy.open loops on a corrupt count of VLRs
+            return read_las_header(path).point_count
         if kind == "E57":
             import pye57
 

@@ -83,7 +83,9 @@ class TerminalProgress:
 class Job:
     """`work(progress)` on a worker thread. The main thread polls `fraction`/`message`,
     may `cancel()` (the worker stops at its next progress call, raising Cancelled), and
-    after `done` reads `result()`, which re-raises the worker's exception."""
+    after `done` reads `result()`, which re-raises the worker's exception. Work inside a call
+    that makes no progress call cannot be stopped: the thread is a daemon, so that the main
+    thread can stop waiting (`wait(timeout)`) and abandon it."""
 
     def __init__(self, work: Callable[[ProgressFn], object]):
         self._work = work

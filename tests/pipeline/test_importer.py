@@ -291,8 +291,8 @@ BAD = [
     ("truncated.ply", (PLY_HEAD.replace("ascii", "binary_little_endian") + XYZ + "end_header\n").encode()
      + np.zeros(8, "<f4").tobytes(), "early end-of-file"),
     ("latin1.xyz", "# scanné\n0 0 0\n1 1 1\n2 2 2\n".encode("latin-1"), "not UTF-8 text (byte 7, 0xe9, on line 1)"),
-    ("no_z.e57", _e57_without_z, "scan 0 has neither cartesian nor spherical coordinates (its fields: cartesianQ, "
-                                 "cartesianX, cartesianY)"),
+    ("no_z.e57", _e57_without_z, "scan 0 ('Scan 0') has neither cartesian nor spherical coordinates (its fields: "
+                                 "cartesianQ, cartesianX, cartesianY)"),
     ("huge.laz", _las_count_beyond_memory, "declares 4,000,000,000 points; importing them needs about"),
 ]
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from geometry import cube_cloud, fibonacci_sphere
-from splat_tracer.pointcloud import spacing
+from splat_tracer.pointcloud import readers, spacing
 from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
 from splat_tracer.pointcloud.neighbours import first_of_duplicates
 from splat_tracer.pointcloud.readers import ply
@@ -77,6 +77,33 @@ def test_meaningless_files_are_refused_with_the_file_named(tmp_path, body, messa
     with pytest.raises(CloudFileError) as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value) and message in str(err.value)
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("listed, items", [("x", 2), ("z", 1), ("nx", 3), ("red", 1), ("radius", 0), ("opacity", 1)])
+def test_list_typed_vertex_properties_are_refused_naming_the_property(tmp_path, binary, listed, items):
+    """`property list uchar float x` (numpy's 'setting an array element with a sequence'
+    escaped as a bare ValueError, or a one-item list was read as if a number): a property a
+    splat is read from is refused when it is a list, of any length."""
+    from plyfile import PlyData, PlyElement
+
+    names = ["x", "y", "z", "nx", "ny", "nz"] + (["red", "green", "blue"] if listed == "red" else [])
+    names += ["radius"] if listed == "radius" else []
+    names += ["f_dc_0", "f_dc_1", "f_dc_2", "opacity", "rot_0", "rot_1", "rot_2", "rot_3", "scale_0", "scale_1",
+              "scale_2"] if listed == "opacity" else []
+    fields = [(c, "O" if c == listed else ("u1" if c in ("red", "green", "blue") else "f4")) for c in names]
+    rows = np.zeros(4, dtype=fields)
+    for c in names:
+        if c != listed:
+            rows[c] = 1
+    for i in range(4):
+        rows[listed][i] = np.full(items, 1.0 + i, "f4")
+    element = PlyElement.describe(rows, "vertex", val_types={listed: "f4"} if listed != "red" else {listed: "u1"})
+    path = tmp_path / "listed.ply"
+    PlyData([element], text=not binary).write(str(path))
+    with pytest.raises(CloudFileError, match=f"the vertex property '{listed}' is a list") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value) and "property list uchar" in str(err.value)
 
 
 def test_missing_file(tmp_path):

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-from ..cloud import CloudFileError, PointCloud
+from ..cloud import CloudFileError, PointCloud, check_file
 from .e57 import read_e57
 from .las import read_las
 from .ply import read_ply
@@ -26,8 +26,7 @@ _TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 
 
 def sniff(path: str) -> str:
     """The format of the file by its first bytes: one of FORMATS."""
-    if not os.path.isfile(path):
-        raise CloudFileError(f"{path}: no such file")
+    check_file(path)
     with open(path, "rb") as f:
         head = f.read(_SNIFF_BYTES)
     if not head:
@@ -57,7 +56,7 @@ def sniff(path: str) -> str:
 
 def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
     """Reads any supported file; `columns` maps a text file's columns (see read_text).
-    progress: progress.ProgressFn, called while reading LAS/LAZ (others read in one call)."""
+    progress: progress.ProgressFn, called while reading LAS/LAZ and E57 (others read in one call)."""
     path = os.fspath(path)
     kind = sniff(path)
     if kind == "PLY":
@@ -65,7 +64,7 @@ def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
     if kind == "LAS":
         return read_las(path, progress)
     if kind == "E57":
-        return read_e57(path)
+        return read_e57(path, progress)
     try:
         return read_text(path, columns)
     except CloudFileError as e:

@@ -13,7 +13,7 @@ import re
 import numpy as np
 
 from ...util.columns import finite_rows, in_blocks
-from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, linear_colours, make_cloud,
+from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, check_file, linear_colours, make_cloud,
                      srgb_to_linear, unit_colours)
 from . import gaussians
 
@@ -114,6 +114,19 @@ def _check_declared_sizes(path: str, header, header_len: int) -> None:
                 "of the file are left for them")
 
 
+def _check_no_lists(path: str, header) -> None:
+    """Refuses a list-typed vertex property among those a splat is read from (`property list
+    uchar float x`): each is one number per vertex, and a list (of any length, per row) has
+    no meaning as one."""
+    for element in header.elements:
+        if element.name != "vertex":
+            continue
+        for prop in element.properties:
+            if hasattr(prop, "list_dtype") and prop.name in _USED_PROPERTIES:
+                raise CloudFileError(f"{path}: the vertex property '{prop.name}' is a list ('{prop}'); a splat's "
+                                     f"'{prop.name}' is one number per vertex")
+
+
 def _declared(ply) -> str:
     return " and ".join(f"{e.count:,} '{e.name}'" for e in ply.elements) + " rows"
 
@@ -147,10 +160,10 @@ def read_ply(path: str) -> PointCloud:
     from plyfile import PlyData  # imported here: only reading needs it
 
     path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise CloudFileError(f"{path}: no such file")
+    check_file(path)
     header_len, header = read_header(path)
     _check_declared_sizes(path, header, header_len)
+    _check_no_lists(path, header)
     # Read from our own stream (ascii: text, as plyfile wants it) to see where it stops.
     with (open(path, "r", encoding="ascii", newline="") if header.text else open(path, "rb")) as f:
         try:
@@ -217,6 +230,8 @@ def read_ply(path: str) -> PointCloud:
 
 # The vertex properties a (non-Gaussian) PLY is read for; others are ignored and said.
 _KNOWN_PROPERTIES = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "radius"}
+# Every vertex property either reader (this one, gaussians.py) takes a number from.
+_USED_PROPERTIES = _KNOWN_PROPERTIES | set(gaussians.GAUSSIAN_FIELDS) | {"scale_2"}
 
 
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,

@@ -19,6 +19,14 @@ _NAMES = {
 }
 ROLES = ("x", "y", "z", "r", "g", "b", "a", "nx", "ny", "nz", "i", "_")
 _SEPARATORS = str.maketrans({",": " ", ";": " ", "\t": " "})
+# A file with decimal commas (European exports: `10,50;20,25;1,25`) separates its values by
+# semicolons, tabs or spaces: the commas become decimal points (_decimal_comma).
+_DECIMAL_COMMA = str.maketrans({",": ".", ";": " ", "\t": " "})
+# The decimal mark is decided on the file's first this many characters (some 30,000 rows):
+# a later row that does not follow it is refused by the parse, naming its line.
+_DECIMAL_SAMPLE = 1 << 20
+_NUMERIC_LINE = re.compile(r"^[\d\s;,.+\-eE]*\d[\d\s;,.+\-eE]*$")  # digits and number punctuation only
+_COMMA_DECIMAL = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")        # one comma between digits: 10,50  -0,5
 _HEADER_LINES = 100  # at most this many lines before the data are taken as a header
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
 
@@ -69,8 +77,43 @@ def _guess_columns(path: str, table: np.ndarray) -> list[str]:
     return roles
 
 
+def _decimal_comma(path: str, text: str) -> bool:
+    """Whether the file writes its numbers with decimal commas: a row of at least three
+    values separated by semicolons, tabs or spaces, whose commas each stand alone between
+    digits and which has no decimal point (`10,50;20,25;1,25`, `10,5\t20\t1,25`). Other
+    rows with commas have comma separators (`1.5,2.5,3`, `1, 2, 3`, `1,2,3`). Refused,
+    naming the lines: rows of both kinds, or a row separated by semicolons or tabs with both
+    '.' and ',' in its numbers (`1,5;2.5;3`, `1.234,5;7`: thousands separators)."""
+    if "," not in text:
+        return False
+    sample = text if len(text) <= _DECIMAL_SAMPLE else text[:text.rfind("\n", 0, _DECIMAL_SAMPLE) + 1]
+    decimal = separated = None  # the first row of each kind: (line number, text)
+    for k, line in enumerate(sample.split("\n")):
+        if "," not in line or not _NUMERIC_LINE.match(line):
+            continue  # nothing to decide, or a header
+        values = line.replace(";", " ").replace("\t", " ").split()
+        with_comma = [v for v in values if "," in v]
+        if ("\t" in line or ";" in line) and "." in line:
+            raise CloudFileError(f"{path}: line {k + 1} ('{line.strip()[:60]}') has both '.' and ',' in numbers "
+                                 "separated by semicolons or tabs (two decimal marks, or thousands separators), so its "
+                                 "decimal mark cannot be told; save it with one decimal mark and no thousands "
+                                 "separators")
+        if len(values) >= 3 and all(_COMMA_DECIMAL.match(v) for v in with_comma) and "." not in line:
+            decimal = decimal or (k + 1, line)
+        else:
+            separated = separated or (k + 1, line)
+        if decimal and separated:
+            (a, first), (b, second) = sorted([decimal, separated])
+            raise CloudFileError(
+                f"{path}: cannot tell its decimal mark: line {a} ('{first.strip()[:60]}') and line {b} "
+                f"('{second.strip()[:60]}') use ',' differently (one as a decimal comma, the other between values); "
+                "save it with one convention")
+    return decimal is not None
+
+
 def read_text(path: str, columns: str = "") -> PointCloud:
-    """x y z rows separated by whitespace, commas or semicolons, with optional colour
+    """x y z rows separated by whitespace, commas or semicolons (decimal commas when the
+    values are separated otherwise: _decimal_comma), with optional colour
     (0..255, 0..65535 or 0..1), alpha, intensity and normal columns. Lines before the first
     row of numbers are a header (its last line may name the columns; a PTS file's first
     line is its point count, which must match). Columns come from `columns` (e.g.
@@ -80,10 +123,15 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as e:
-        line = data[:e.start].count(b"\n") + 1
+        line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
                              "other point-cloud format; save it as UTF-8 or ASCII") from None
-    text = text.translate(_SEPARATORS)
+    if text.count("\r") != text.count("\r\n"):
+        # Lines ended by a lone CR (classic Mac OS, some exporters): every row would be one
+        # line. CR LF is left alone: its CR is whitespace to the parse below.
+        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    decimal_comma = _decimal_comma(path, text)
+    text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
     # The header: lines before the first one made of numbers only.
     offset, header, first = 0, [], None
     for _ in range(_HEADER_LINES + 1):
@@ -152,5 +200,6 @@ def read_text(path: str, columns: str = "") -> PointCloud:
         colours[finite] = np.column_stack([srgb_to_linear(rgb), alpha])
     normals = np.column_stack([col["nx"], col["ny"], col["nz"]]) if "nx" in col else None
     attributes = {"intensity": col["i"].astype(np.float32)} if "i" in col else {}
+    notes = ["numbers read with decimal commas"] if decimal_comma else []
     return make_cloud(path, pos, normals, colours, None, attributes, drop_non_finite=True, format="TEXT",
-                      notes=[f"columns read as: {' '.join(roles)}"])
+                      notes=notes + [f"columns read as: {' '.join(roles)}"])
