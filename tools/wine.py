@@ -109,7 +109,8 @@ def run_wine(args: list[str], cwd: Path | None = None, env: dict | None = None,
 
 def ensure_prefix() -> Path:
     stamp = PREFIX / "splat_tracer.stamp"
-    if stamp.is_file():
+    made = "win10\n" + PROCESS_PRNG  # what the prefix was made with: a new stand-in makes a new prefix
+    if stamp.is_file() and stamp.read_text() == made:
         return PREFIX
     shutil.rmtree(PREFIX, ignore_errors=True)
     PREFIX.parent.mkdir(parents=True, exist_ok=True)
@@ -117,7 +118,7 @@ def ensure_prefix() -> Path:
     if proc.returncode != 0:
         raise RuntimeError(f"wine: winecfg -v win10 failed:\n{proc.stdout}")
     shutil.copy2(process_prng_dll(), PREFIX / "drive_c" / "windows" / "system32" / "bcryptprimitives.dll")
-    stamp.write_text("win10, bcryptprimitives.dll\n")
+    stamp.write_text(made)
     return PREFIX
 
 
