@@ -94,7 +94,8 @@ for path in args.clouds:
 for name in BUNDLED:
     if name in sys.modules:  # each imported module comes from the extensions' site-packages
         origin = sys.modules[name].__file__
-        assert "/extensions/.local/" in origin and not any(origin.startswith(p) for p in HOST_SITE), origin
+        assert "/extensions/.local/" in Path(origin).as_posix(), origin  # as_posix: "\\" on Windows
+        assert not any(origin.startswith(p) for p in HOST_SITE), origin
         version = getattr(sys.modules[name], "__version__", "")  # pye57's is a module
         print(f"bundled: {name} {version if isinstance(version, str) else '?'} {origin}")
 print(f"numpy: {sys.modules['numpy'].__version__}")
