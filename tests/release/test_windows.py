@@ -38,9 +38,9 @@ than Z:, or an antivirus would show is not caught here.
 from __future__ import annotations
 
 import json
+import os
 import re
 import shutil
-import os
 import subprocess
 import sys
 from pathlib import Path
