@@ -1,0 +1,108 @@
+"""Skip, don't refuse (issue 22): one object, point or lamp the renderer cannot use is left out
+(or clamped) and named once, with the reason, in the render report; the frame renders.
+
+Each test renders a scene of good objects with the bad one, then the same scene without it
+(hidden, or rebuilt without the bad points or faces): the good objects' pixels must be the
+same. The headlight lights the scenes (one camera ray per sample, no secondary rays), so
+that an object left out changes nothing else; the lamp tests light with lamps.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_camera, extension_module, render_to_exr
+from geometry import fibonacci_sphere
+
+W, H = 64, 48
+
+
+def session():
+    return extension_module("blender.session")
+
+
+def report() -> list:
+    """The last frame's report lines."""
+    return session().HISTORY[-1]["report"]
+
+
+def said_once(lines: list, *parts: str) -> None:
+    """Exactly one line holds every one of `parts`."""
+    hits = [line for line in lines if all(p in line for p in parts)]
+    assert len(hits) == 1, (parts, lines)
+
+
+def cloud(name, n=2000, radius=0.6, location=(0, 0, 0), colours=None, edit=None):
+    """A closed splat-cloud sphere; edit(positions, normals, radii, colours) may spoil it
+    (the arrays are float32 copies) before the object is made."""
+    cloud_object = extension_module("blender.cloud_object")
+    p, nrm = fibonacci_sphere(n, radius)
+    p, nrm = p.astype(np.float32), nrm.astype(np.float32)
+    radii = np.full(n, 1.5 * math.sqrt(4 * math.pi * radius ** 2 / n), np.float32)
+    if colours is not None:
+        colours = np.array(colours, np.float32)
+    if edit is not None:
+        p, nrm, radii, colours = edit(p, nrm, radii, colours)
+    obj = cloud_object.create_cloud_object(name, p, nrm, radii, colours, location=location)
+    obj.splat_tracer.closed = True
+    return obj
+
+
+def cube(bpy, name, size=0.8, location=(0, 0, 0), edit=None):
+    """A mesh cube; edit(bm) may change it with bmesh first."""
+    import bmesh
+
+    mesh = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    bmesh.ops.create_cube(bm, size=size)
+    if edit is not None:
+        edit(bm)
+    bm.to_mesh(mesh)
+    bm.free()
+    obj = bpy.data.objects.new(name, mesh)
+    obj.location = location
+    bpy.context.scene.collection.objects.link(obj)
+    return obj
+
+
+def good_scene(bpy, scene, headlight=True):
+    """A cloud on the left and a mesh cube on the right, seen by the camera; returns them."""
+    a = cloud("Good Cloud", location=(-0.9, 0, 0))
+    b = cube(bpy, "Good Cube", location=(0.9, 0, 0))
+    add_camera(bpy, scene, (0, -5, 0), (math.radians(90), 0, 0))
+    if headlight:
+        scene.splat_tracer.lighting = "HEADLIGHT"
+    scene.splat_tracer.samples = 4
+    return a, b
+
+
+def rgba(bpy, scene, path):
+    out = render_to_exr(bpy, scene, path, W, H, passes=False)
+    assert session().HISTORY[-1]["completed"]
+    return out["rgba"]
+
+
+# --------------------------------------------------------------------------------------
+# The render border.
+
+# (min x, max x, min y, max y). The first: Blender's result is 1 x 1 pixel at (62, 46) from
+# the bottom left, rounding the edges gave 2 x 1 pixels at (62, 47).
+@pytest.mark.parametrize("border", [(0.975, 0.999, 0.97, 0.999), (0.99, 1.0, 0.99, 1.0), (0.95, 1.0, 0.96, 1.0),
+                                    (0.0, 0.02, 0.0, 0.03), (0.3, 0.7, 0.31, 0.77), (0.0, 1.0, 0.98, 1.0)])
+def test_a_border_anywhere_renders_the_pixels_blender_allocates(blender, empty_scene, tmp_path, border):
+    """The border's window is Blender's (float32 edges truncated): a border touching the
+    top-right pixel used to be a pixel wider than Blender's result, and the frame failed."""
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    scene.render.film_transparent = True
+    full = rgba(bpy, scene, tmp_path / "full.exr")
+    r = scene.render
+    r.use_border, r.use_crop_to_border = True, True
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border
+    crop = rgba(bpy, scene, tmp_path / "crop.exr")
+    x0, x1, yb0, yb1 = (int(np.float32(getattr(r, f"border_{e}")) * np.float32(size))
+                        for e, size in (("min_x", W), ("max_x", W), ("min_y", H), ("max_y", H)))
+    assert crop.shape[:2] == (yb1 - yb0, x1 - x0)
+    np.testing.assert_array_equal(crop, full[H - yb1:H - yb0, x0:x1])
