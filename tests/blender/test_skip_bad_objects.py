@@ -85,6 +85,64 @@ def rgba(bpy, scene, path):
 
 
 # --------------------------------------------------------------------------------------
+# Objects scaled to 0.
+
+@pytest.mark.parametrize("kind", ["mesh", "cloud"])
+@pytest.mark.parametrize("axis", [0, 1, 2])
+def test_an_object_scaled_to_zero_is_left_out_and_named(blender, empty_scene, tmp_path, kind, axis):
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    bad = cube(bpy, "Flat", location=(0, 0, 0.8)) if kind == "mesh" else cloud("Flat", location=(0, 0, 0.8))
+    scale = [1.0, 1.0, 1.0]
+    scale[axis] = 0.0
+    bad.scale = scale
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "object 'Flat'", "singular (scaled to 0 along an axis)", "not rendered")
+    bad.hide_render = True
+    without = rgba(bpy, scene, tmp_path / "without.exr")
+    np.testing.assert_array_equal(with_bad, without)
+    assert (without[..., 3] > 0).sum() > 200  # the good objects are there
+
+
+@pytest.mark.parametrize("scale", [1e-30, 1e20])
+def test_an_object_scaled_beyond_the_limits_is_left_out_and_named(blender, empty_scene, tmp_path, scale):
+    """Not singular, but its inverse (scale 1e-30) or itself (1e20) is beyond float32's
+    reach of the core."""
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    bad = cube(bpy, "Extreme", location=(0, 0, 0.8))
+    bad.scale = (scale, scale, scale)
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "object 'Extreme'", "renderer's limit", "not rendered")
+    bad.hide_render = True
+    np.testing.assert_array_equal(with_bad, rgba(bpy, scene, tmp_path / "without.exr"))
+
+
+def test_an_animation_scaling_an_object_to_zero_renders_every_frame(blender, empty_scene, tmp_path):
+    """Scale 1, 0, 1 on frames 1-3 (exact on the keys): every frame renders; only frame 2
+    leaves the object out."""
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    bad = cube(bpy, "Pulse", location=(0, 0, 0.8))
+    for frame, s in ((1, 1.0), (2, 0.0), (3, 1.0)):
+        bad.scale = (s, s, s)
+        bad.keyframe_insert("scale", frame=frame)
+    scene.frame_start, scene.frame_end = 1, 3
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = W, H, 100
+    r.image_settings.media_type = "IMAGE"
+    r.image_settings.file_format = "PNG"
+    r.filepath = str(tmp_path / "frame_")
+    assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    frames = session().HISTORY[-3:]
+    assert [f["frame"] for f in frames] == [1, 2, 3] and all(f["completed"] for f in frames)
+    assert [f["instances"] for f in frames] == [3, 2, 3]
+    said_once(frames[1]["report"], "object 'Pulse'", "scaled to 0")
+    assert not any("Pulse" in line for f in (frames[0], frames[2]) for line in f["report"])
+    assert len(list(tmp_path.glob("frame_*.png"))) == 3
+
+
+# --------------------------------------------------------------------------------------
 # The render border.
 
 # (min x, max x, min y, max y). The first: Blender's result is 1 x 1 pixel at (62, 46) from

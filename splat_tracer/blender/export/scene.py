@@ -21,7 +21,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.camera import Camera
-from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene
+from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import SplatCloud
 from ...util import resources
 from ...util.columns import finite_rows, nonzero_rows
@@ -289,6 +289,12 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             continue
         geometry, kind = frame.geometry(obj)
         if geometry is None:
+            continue
+        problem = transform_problem(matrix)
+        if problem is not None:
+            # An object scaled to 0 (a step of an animation, a flattened plane) is left out,
+            # and the rest of the frame renders.
+            report.once(f"object '{obj.name}': {problem}; not rendered")
             continue
         parent = inst.parent if inst.is_instance else None
         vis = export_shading.object_visibility(obj, view_layer, parent)
