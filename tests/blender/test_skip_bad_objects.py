@@ -164,3 +164,45 @@ def test_a_border_anywhere_renders_the_pixels_blender_allocates(blender, empty_s
                         for e, size in (("min_x", W), ("max_x", W), ("min_y", H), ("max_y", H)))
     assert crop.shape[:2] == (yb1 - yb0, x1 - x0)
     np.testing.assert_array_equal(crop, full[H - yb1:H - yb0, x0:x1])
+
+
+# --------------------------------------------------------------------------------------
+# Splat attributes re-made with another type.
+
+def test_a_retyped_radius_leaves_the_cloud_out_at_render(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    bad = cloud("Retyped", location=(0, 0, 0.8))
+    attrs = bad.data.attributes
+    attrs.remove(attrs["splat_radius"])
+    attrs.new("splat_radius", "INT", "POINT")
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "point cloud 'Retyped': attribute 'splat_radius' must be FLOAT on points, not INT on POINT",
+              "not rendered")
+    bad.hide_render = True
+    np.testing.assert_array_equal(with_bad, rgba(bpy, scene, tmp_path / "without.exr"))
+
+
+@pytest.mark.parametrize("name, data_type", [("splat_radius", "INT"), ("splat_normal", "FLOAT2"),
+                                             ("splat_normal", "FLOAT_COLOR")])
+def test_estimate_normals_on_a_retyped_attribute_names_it_and_changes_nothing(blender, empty_scene, name,
+                                                                             data_type):
+    bpy = blender
+    obj = cloud("Retyped")
+    attrs = obj.data.attributes
+    attrs.remove(attrs[name])
+    attrs.new(name, data_type, "POINT")
+    before = {a.name: np.array([tuple(getattr(d, k)) if hasattr(getattr(d, k), "__len__") else getattr(d, k)
+                                for d in a.data for k in ("vector", "value", "color") if hasattr(d, k)][:50])
+              for a in obj.data.attributes if a.name.startswith("splat_")}
+    with pytest.raises(RuntimeError) as err, bpy.context.temp_override(selected_objects=[obj]):
+        bpy.ops.splat_tracer.estimate_normals(orientation="PROPAGATE")
+    expected = "FLOAT" if name == "splat_radius" else "FLOAT_VECTOR"
+    assert f"Retyped: attribute '{name}' must be {expected} on points, not {data_type} on POINT" in str(err.value)
+    assert "nothing was changed" in str(err.value)
+    after = {a.name: np.array([tuple(getattr(d, k)) if hasattr(getattr(d, k), "__len__") else getattr(d, k)
+                               for d in a.data for k in ("vector", "value", "color") if hasattr(d, k)][:50])
+             for a in obj.data.attributes if a.name.startswith("splat_")}
+    assert before.keys() == after.keys()
+    for key in before:
+        np.testing.assert_array_equal(before[key], after[key])

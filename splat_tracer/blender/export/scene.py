@@ -25,7 +25,7 @@ from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transfo
 from ...render.splats import SplatCloud
 from ...util import resources
 from ...util.columns import finite_rows, nonzero_rows
-from ..cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
+from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -95,16 +95,19 @@ def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarra
 def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
     """(positions, normals, radii, colours or None, alphas or None) of a point cloud or of a
     vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
-    some point is not opaque."""
+    some point is not opaque. None (said in the report) when the splat attributes are missing
+    or of another type: the object is left out, the frame renders."""
+    rad_name = RADIUS if RADIUS in attrs else "radius"
+    if rad_name not in attrs:
+        report.once(f"point cloud '{obj.name}' has splat normals but no radius attribute ('{RADIUS}'); not rendered")
+        return None
+    problems = [attribute_problem(attrs, NORMAL), attribute_problem(attrs, rad_name, ATTRIBUTE_TYPES[RADIUS])]
+    if any(problems):
+        report.once(f"point cloud '{obj.name}': {'; '.join(p for p in problems if p)}; not rendered")
+        return None
     pos = _read(attrs["position"], "vector", 3, n)
     nrm = _read(attrs[NORMAL], "vector", 3, n)
-    rad_attr = attrs[RADIUS] if RADIUS in attrs else attrs.get("radius")
-    if rad_attr is None:
-        raise ValueError(f"point cloud '{obj.name}' has splat normals but no radius attribute")
-    for name, attr, kinds in ((NORMAL, attrs[NORMAL], ("FLOAT_VECTOR",)), ("radius", rad_attr, ("FLOAT",))):
-        if attr.data_type not in kinds or attr.domain != "POINT":
-            raise ValueError(f"point cloud '{obj.name}': attribute '{attr.name}' must be {kinds[0]} on points, "
-                             f"not {attr.data_type} on {attr.domain}")
+    rad_attr = attrs[rad_name]
     rad = _read(rad_attr, "value", 1, n)
     col = alpha = None
     if COLOUR in attrs:
@@ -183,7 +186,10 @@ class _Frame:
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
         closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
-        pos, nrm, rad, col, alpha = _cloud_arrays(obj, attrs, n, self.report)
+        arrays = _cloud_arrays(obj, attrs, n, self.report)
+        if arrays is None:
+            return None
+        pos, nrm, rad, col, alpha = arrays
         if len(pos) == 0:
             return None
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
