@@ -143,6 +143,87 @@ def test_an_animation_scaling_an_object_to_zero_renders_every_frame(blender, emp
 
 
 # --------------------------------------------------------------------------------------
+# Bad points among good ones.
+
+def _spoil(what):
+    """An edit for cloud(): point 5 (and for some, point 9) made bad in one attribute."""
+    def edit(p, nrm, radii, colours):
+        if what == "nan colour":
+            colours[5, 0] = np.nan
+        elif what == "inf colour":
+            colours[5, 2] = np.inf
+        elif what == "nan alpha":
+            colours[:, 3] = 0.5  # a cloud that is not opaque keeps its alpha
+            colours[5, 3] = np.nan
+        elif what == "huge position":
+            p[5] = (1e19, 0.0, 0.0)
+        elif what == "huge radius":
+            radii[5] = 1e30
+        elif what == "3dgs radius":
+            radii[5] = 2.0 * math.exp(44.0)  # a Gaussian's scales of 88 and 0: sqrt(e^88), about 1.6e19
+        return p, nrm, radii, colours
+    return edit
+
+
+REASONS = {"nan colour": "a colour that is not finite", "inf colour": "a colour that is not finite",
+           "nan alpha": "a colour that is not finite", "huge position": "a position beyond the renderer's limit",
+           "huge radius": "a radius beyond the renderer's limit", "3dgs radius": "a radius beyond the renderer's limit"}
+
+
+@pytest.mark.parametrize("what", list(REASONS))
+def test_a_bad_point_is_left_out_counted_and_the_rest_renders(blender, empty_scene, tmp_path, what):
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    colours = np.tile(np.float32([0.9, 0.3, 0.1, 1.0]), (2000, 1))
+    bad = cloud("Speckled", location=(0, 0, 0.8), colours=colours, edit=_spoil(what))
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "point cloud 'Speckled': 1 points have", REASONS[what], "(first: point 5)", "not rendered")
+    # The same cloud without point 5.
+    bpy.data.objects.remove(bad)
+
+    def without_point_5(p, nrm, radii, colours):
+        spoilt = _spoil(what)(p, nrm, radii, colours)
+        keep = np.arange(len(p)) != 5
+        return tuple(a[keep] for a in spoilt)
+
+    cloud("Clean", location=(0, 0, 0.8), colours=colours, edit=without_point_5)
+    np.testing.assert_array_equal(with_bad, rgba(bpy, scene, tmp_path / "without.exr"))
+
+
+def test_a_radius_beyond_the_limit_after_the_radius_factor_is_left_out(blender, empty_scene, tmp_path):
+    """A radius of 1e17 is fine alone; the Radius Factor's maximum (100) puts it beyond the
+    core's limit. The factor itself has a hard maximum: 1e30 is clamped."""
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    scene.splat_tracer.radius_factor = 1e30
+    assert scene.splat_tracer.radius_factor == 100.0
+
+    def big(p, nrm, radii, colours):
+        radii[7] = 1e17
+        return p, nrm, radii, colours
+
+    cloud("Big", location=(0, 0, 0.8), edit=big)
+    rgba(bpy, scene, tmp_path / "big.exr")
+    said_once(report(), "point cloud 'Big': 1 points have", "a radius beyond the renderer's limit (1e+18) after the "
+              "Radius Factor (100)", "(first: point 7)")
+
+
+def test_a_cloud_whose_every_point_is_bad_is_left_out_and_named(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+
+    def all_nan(p, nrm, radii, colours):
+        colours[:, 1] = np.nan
+        return p, nrm, radii, colours
+
+    bad = cloud("Hopeless", location=(0, 0, 0.8), colours=np.ones((2000, 4)), edit=all_nan)
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "point cloud 'Hopeless': none of its 2,000 points can be rendered; not rendered")
+    bad.hide_render = True
+    np.testing.assert_array_equal(with_bad, rgba(bpy, scene, tmp_path / "without.exr"))
+
+
+# --------------------------------------------------------------------------------------
 # The render border.
 
 # (min x, max x, min y, max y). The first: Blender's result is 1 x 1 pixel at (62, 46) from

@@ -22,9 +22,9 @@ import numpy as np
 from ...render import shading
 from ...render.camera import Camera
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
-from ...render.splats import SplatCloud
+from ...render.splats import MAX_COORDINATE, SplatCloud
 from ...util import resources
-from ...util.columns import finite_rows, nonzero_rows
+from ...util.columns import finite_rows, nonzero_rows, rows_within
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
 
@@ -74,15 +74,28 @@ def _source(obj: bpy.types.Object) -> bpy.types.Object:
     return obj.original if obj.original is not None else obj
 
 
-def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarray:
+def _valid_points(name: str, pos, nrm, rad, col, alpha, radius_factor: float, report: shading.Report) -> np.ndarray:
     """Mask of the points that can be splats. The others (a vertex added in Edit Mode has a
-    zero normal and radius) are left out and counted in the report, never failing the
+    zero normal and radius; a NaN colour; a vertex or a radius, after the Radius Factor,
+    beyond the core's limit) are left out and counted in the report, never failing the
     whole render."""
-    problems = (
-        (~finite_rows(pos), "a position that is not finite"),
-        (~(finite_rows(nrm) & nonzero_rows(nrm)), "a zero or non-finite normal"),
-        (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
-    )
+    limit = MAX_COORDINATE
+    with np.errstate(invalid="ignore", over="ignore"):
+        scaled = rad * np.float32(radius_factor)
+        finite = finite_rows(pos)
+        problems = [
+            (~finite, "a position that is not finite"),
+            (finite & ~rows_within(pos, limit), f"a position beyond the renderer's limit ({limit:.0e})"),
+            (~(finite_rows(nrm) & nonzero_rows(nrm)), "a zero or non-finite normal"),
+            (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
+            (np.isfinite(rad) & (rad > 0) & ~(scaled <= limit),
+             f"a radius beyond the renderer's limit ({limit:.0e}) after the Radius Factor ({radius_factor:g})"),
+        ]
+        if col is not None:
+            bad = ~finite_rows(col)
+            if alpha is not None:
+                bad |= ~np.isfinite(alpha)
+            problems.append((bad, "a colour that is not finite"))
     ok = np.ones(len(pos), bool)
     for bad, what in problems:
         if bad.any():
@@ -92,7 +105,7 @@ def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarra
     return ok
 
 
-def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
+def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Report):
     """(positions, normals, radii, colours or None, alphas or None) of a point cloud or of a
     vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
     some point is not opaque. None (said in the report) when the splat attributes are missing
@@ -120,7 +133,7 @@ def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
         else:
             report.once(f"point cloud '{obj.name}': attribute '{COLOUR}' is {c.data_type} on {c.domain}, "
                         "not a point colour; ignored")
-    ok = _valid_points(obj.name, pos, nrm, rad, report)
+    ok = _valid_points(obj.name, pos, nrm, rad, col, alpha, radius_factor, report)
     if not ok.all():
         keep = (lambda a: None if a is None else a[ok])
         pos, nrm, rad, col, alpha = pos[ok], nrm[ok], rad[ok], keep(col), keep(alpha)
@@ -186,11 +199,12 @@ class _Frame:
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
         closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
-        arrays = _cloud_arrays(obj, attrs, n, self.report)
+        arrays = _cloud_arrays(obj, attrs, n, self.radius_factor, self.report)
         if arrays is None:
             return None
         pos, nrm, rad, col, alpha = arrays
         if len(pos) == 0:
+            self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
