@@ -224,6 +224,46 @@ def test_a_cloud_whose_every_point_is_bad_is_left_out_and_named(blender, empty_s
 
 
 # --------------------------------------------------------------------------------------
+# Meshes with a bad vertex.
+
+def _triangulated(bm):
+    import bmesh
+
+    bmesh.ops.triangulate(bm, faces=bm.faces[:])  # the same triangles whatever a vertex holds
+
+
+@pytest.mark.parametrize("value", [np.nan, np.inf, 1e19])
+def test_a_mesh_vertex_that_is_not_finite_drops_only_its_triangles(blender, empty_scene, tmp_path, value):
+    import bmesh
+
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    bad = cube(bpy, "Spiky", location=(0, 0, 0.8), edit=_triangulated)
+    touching = sum(0 in p.vertices for p in bad.data.polygons)
+    positions = np.empty(len(bad.data.vertices) * 3, np.float32)
+    bad.data.attributes["position"].data.foreach_get("vector", positions)
+    positions[0] = value  # vertex 0's x
+    bad.data.attributes["position"].data.foreach_set("vector", positions)
+    bad.data.update()
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "mesh 'Spiky': 1 vertices are not finite or beyond the renderer's limit", "(first: vertex 0)",
+              f"the {touching} triangles using them are not rendered")
+    assert session().HISTORY[-1]["triangles"] == 12 + 12 - touching
+    # The same cube without vertex 0 and its triangles.
+    bpy.data.objects.remove(bad)
+
+    def without_vertex_0(bm):
+        _triangulated(bm)
+        bm.verts.ensure_lookup_table()
+        bmesh.ops.delete(bm, geom=[bm.verts[0]], context="VERTS")
+
+    cube(bpy, "Clean", location=(0, 0, 0.8), edit=without_vertex_0)
+    without = rgba(bpy, scene, tmp_path / "without.exr")
+    assert session().HISTORY[-1]["triangles"] == 12 + 12 - touching
+    np.testing.assert_array_equal(with_bad, without)
+
+
+# --------------------------------------------------------------------------------------
 # The render border.
 
 # (min x, max x, min y, max y). The first: Blender's result is 1 x 1 pixel at (62, 46) from

@@ -248,6 +248,7 @@ class _Frame:
         finally:
             if temporary:
                 obj.to_mesh_clear()
+        verts, tris, normals, mats = self._usable_triangles(obj.name, verts, tris, normals, mats)
         if len(tris) == 0:
             return None
         key = ("mesh", _digest(verts, tris, normals, mats))
@@ -256,6 +257,23 @@ class _Frame:
                                 lambda: Mesh(verts, tris, normals, mats, threads=self.threads))
         self.triangles += self._first_use(key, geometry)
         return geometry
+
+    def _usable_triangles(self, name: str, verts, tris, normals, mats):
+        """The mesh without the triangles that touch a vertex the core cannot hold (not
+        finite, or beyond its limit: a NaN from a driver or a modifier), which are counted
+        in the report; the rest of the mesh renders. Those vertices are set to 0, as the
+        core checks every vertex, used or not."""
+        bad = ~rows_within(verts, MAX_COORDINATE)
+        if not bad.any():
+            return verts, tris, normals, mats
+        touching = bad[tris].any(axis=1)
+        self.report.once(f"mesh '{name}': {int(bad.sum())} vertices are not finite or beyond the renderer's limit "
+                         f"({MAX_COORDINATE:.0e}) (first: vertex {int(np.flatnonzero(bad)[0])}); the "
+                         f"{int(touching.sum())} triangles using them are not rendered")
+        keep = ~touching
+        verts = verts.copy()
+        verts[bad] = 0.0
+        return verts, tris[keep], normals[keep], mats[keep]
 
     def geometry(self, obj):
         """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""
