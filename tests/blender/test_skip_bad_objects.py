@@ -264,6 +264,84 @@ def test_a_mesh_vertex_that_is_not_finite_drops_only_its_triangles(blender, empt
 
 
 # --------------------------------------------------------------------------------------
+# Lamps.
+
+def lamp(bpy, kind, location, **settings):
+    light = bpy.data.lights.new(kind.title(), kind)
+    for key, value in settings.items():
+        setattr(light, key, value)
+    obj = bpy.data.objects.new(kind.title(), light)
+    bpy.context.scene.collection.objects.link(obj)
+    obj.location = location
+    return obj
+
+
+def lit_scene(bpy, scene):
+    """The good scene under one point lamp, in a black world."""
+    good_scene(bpy, scene, headlight=False)
+    scene.splat_tracer.lighting = "SCENE"
+    scene.world = None
+    lamp(bpy, "POINT", location=(0, -3, 2), energy=300.0)
+
+
+@pytest.mark.parametrize("kind", ["POINT", "SPOT", "AREA"])
+def test_a_lamp_beyond_the_limit_is_left_out_and_named(blender, empty_scene, tmp_path, kind):
+    bpy, scene = blender, empty_scene
+    lit_scene(bpy, scene)
+    far = lamp(bpy, kind, location=(1e19, 0, 0), energy=1000.0)
+    far.name = "Far Away"
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), "light 'Far Away'", "position is beyond the renderer's limit", "not rendered")
+    assert session().HISTORY[-1]["lights"] == 1
+    far.hide_render = True
+    without = rgba(bpy, scene, tmp_path / "without.exr")
+    np.testing.assert_array_equal(with_bad, without)
+    assert without[..., :3].max() > 0.05  # lit by the good lamp
+
+
+def test_a_sun_shines_the_same_from_anywhere(blender, empty_scene, tmp_path):
+    """A sun's position does not count (Cycles renders one at 1e19 m): nothing to say."""
+    bpy, scene = blender, empty_scene
+    lit_scene(bpy, scene)
+    sun = lamp(bpy, "SUN", location=(0, 0, 0), energy=2.0)
+    sun.rotation_euler = (0.3, 0.2, 0.0)
+    near = rgba(bpy, scene, tmp_path / "near.exr")
+    sun.location = (1e19, 0, 0)
+    far = rgba(bpy, scene, tmp_path / "far.exr")
+    assert not any("Sun" in line for line in report()) and session().HISTORY[-1]["lights"] == 2
+    np.testing.assert_array_equal(near, far)
+
+
+def test_a_lamp_of_absurd_power_is_clamped_and_named(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    lit_scene(bpy, scene)
+    bright = lamp(bpy, "POINT", location=(0, -3, -2), energy=1e30)
+    bright.name = "Supernova"
+    image = rgba(bpy, scene, tmp_path / "bright.exr")
+    said_once(report(), "light 'Supernova'", "a power of 1e+30 is beyond the renderer's limit; clamped to")
+    assert session().HISTORY[-1]["lights"] == 2
+    assert np.isfinite(image).all()
+
+
+@pytest.mark.parametrize("kind", ["SPOT", "AREA"])
+def test_a_lamp_scaled_to_zero_is_left_out_unless_it_has_no_direction(blender, empty_scene, tmp_path, kind):
+    """A spot or area lamp whose Z axis is scaled to 0 has no direction: left out, named. A
+    point lamp shines the same whatever its scale."""
+    bpy, scene = blender, empty_scene
+    lit_scene(bpy, scene)
+    flat = lamp(bpy, kind, location=(0, -3, -2), energy=100.0)
+    flat.scale = (1.0, 1.0, 0.0)
+    point = lamp(bpy, "POINT", location=(1, -3, 0), energy=10.0)
+    point.scale = (0.0, 0.0, 0.0)
+    with_bad = rgba(bpy, scene, tmp_path / "with.exr")
+    said_once(report(), f"light '{flat.name}'", "scaled to 0", "not rendered")
+    assert not any(point.name + "'" in line for line in report())
+    assert session().HISTORY[-1]["lights"] == 2
+    flat.hide_render = True
+    np.testing.assert_array_equal(with_bad, rgba(bpy, scene, tmp_path / "without.exr"))
+
+
+# --------------------------------------------------------------------------------------
 # The render border.
 
 # (min x, max x, min y, max y). The first: Blender's result is 1 x 1 pixel at (62, 46) from
