@@ -405,3 +405,23 @@ def test_estimate_normals_on_a_retyped_attribute_names_it_and_changes_nothing(bl
     assert before.keys() == after.keys()
     for key in before:
         np.testing.assert_array_equal(before[key], after[key])
+
+
+def test_a_cloud_given_faces_without_its_modifier_is_reported(blender, empty_scene, tmp_path):
+    """A face added in Edit Mode to a cloud whose modifier was removed: it renders as the
+    mesh Cycles shows, and the splats it leaves out are said."""
+    import bmesh
+
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    obj = cloud("Faced", location=(0, 0, 0.8))
+    obj.modifiers.remove(obj.modifiers[0])
+    bm = bmesh.new()
+    bm.from_mesh(obj.data)
+    bm.verts.ensure_lookup_table()
+    bm.faces.new(bm.verts[:3])
+    bm.to_mesh(obj.data)
+    bm.free()
+    rgba(bpy, scene, tmp_path / "faced.exr")
+    said_once(report(), "object 'Faced' carries splats but evaluates to a mesh with 1 faces",
+              "the splats of its 2,000 vertices are not rendered")

@@ -295,6 +295,13 @@ class _Frame:
                              "'Splat Points' modifier is missing or changed); rendering its vertices as splats")
             result = (self.cloud(obj, data.attributes, len(data.vertices)), "cloud")
         elif obj.type in _MESH_LIKE:
+            if obj.type == "MESH" and NORMAL in data.attributes and len(data.vertices):
+                # A splat cloud given faces (Edit Mode) without its modifier: Cycles renders
+                # the faces, and so does this engine; the splats they leave out are said.
+                self.report.once(f"object '{obj.name}' carries splats but evaluates to a mesh with "
+                                 f"{len(data.polygons):,} faces (its 'Splat Points' modifier is missing or changed): "
+                                 f"rendered as that mesh; the splats of its {len(data.vertices):,} vertices are "
+                                 "not rendered")
             result = (self.mesh(obj), "mesh")
         if pointer is not None:
             self.by_pointer[pointer] = result
