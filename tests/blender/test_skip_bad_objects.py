@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from blender_helpers import add_camera, extension_module, render_to_exr
 from geometry import fibonacci_sphere
@@ -425,3 +427,69 @@ def test_a_cloud_given_faces_without_its_modifier_is_reported(blender, empty_sce
     rgba(bpy, scene, tmp_path / "faced.exr")
     said_once(report(), "object 'Faced' carries splats but evaluates to a mesh with 1 faces",
               "the splats of its 2,000 vertices are not rendered")
+
+
+# --------------------------------------------------------------------------------------
+# Any one bad object among good ones.
+
+# Values one attribute of the bad object gets: non-finite, beyond the core's 1e18, zero.
+BAD_VALUES = [np.nan, np.inf, -np.inf, 1e19, -1e30, 3e38, 0.0]
+_REFERENCE: dict = {}
+
+
+@settings(max_examples=40, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(kind=st.sampled_from(["cloud", "mesh"]),
+       what=st.sampled_from(["scale", "location", "position", "normal", "radius", "colour", "alpha"]),
+       axis=st.integers(0, 2), value=st.sampled_from(BAD_VALUES), row=st.integers(0, 7),
+       radius_factor=st.sampled_from([1.0, 100.0]))
+def test_one_bad_object_among_good_ones_never_fails_the_frame(blender, tmp_path, kind, what, axis, value, row,
+                                                              radius_factor):
+    """A cloud or mesh with one NaN, infinite, huge or zero value in one attribute (its
+    transform, a vertex, a normal, a radius, a colour) among good objects: the frame renders,
+    and the good objects' pixels are the scene's without it. The bad object sits behind the
+    camera, so that whatever of it is rendered is not seen; a non-finite value is named."""
+    bpy = blender
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "SPLAT_TRACER"
+    good_scene(bpy, scene)
+    scene.splat_tracer.radius_factor = radius_factor
+    if radius_factor not in _REFERENCE:  # the good objects alone
+        _REFERENCE[radius_factor] = rgba(bpy, scene, tmp_path / "reference.exr")
+    if what == "location" and value == 0.0:
+        value = np.nan  # at the origin the object is in view: not a bad value
+    behind = (0, -40, 0)  # beyond reach of its discs x the Radius Factor (100): about 8 m
+    if kind == "mesh" or what in ("scale", "location"):
+        what = what if what in ("scale", "location") else "position"
+
+    def spoil(p, nrm, radii, colours):
+        target = {"position": p, "normal": nrm, "colour": colours, "alpha": colours}.get(what)
+        if what == "radius":
+            radii[row] = value
+        elif what == "alpha":
+            colours[:, 3] = 0.5
+            colours[row, 3] = value
+        elif target is not None:
+            target[row, axis] = value
+        return p, nrm, radii, colours
+
+    if kind == "cloud":
+        bad = cloud("Bad", n=400, location=behind, colours=np.ones((400, 4)), edit=spoil)
+    else:
+        bad = cube(bpy, "Bad", location=behind)
+        if what == "position":
+            positions = np.empty(len(bad.data.vertices) * 3, np.float32)
+            bad.data.attributes["position"].data.foreach_get("vector", positions)
+            positions[3 * row + axis] = value
+            bad.data.attributes["position"].data.foreach_set("vector", positions)
+            bad.data.update()
+    if what in ("scale", "location"):
+        vector = list(getattr(bad, what))
+        vector[axis] = value if what == "scale" else behind[axis] + value
+        setattr(bad, what, vector)
+    with np.errstate(invalid="ignore", over="ignore"):
+        image = rgba(bpy, scene, tmp_path / "bad.exr")
+    np.testing.assert_array_equal(image, _REFERENCE[radius_factor])
+    if not np.isfinite(value):
+        assert any("'Bad'" in line for line in report()), report()
