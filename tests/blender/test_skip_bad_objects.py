@@ -493,3 +493,32 @@ def test_one_bad_object_among_good_ones_never_fails_the_frame(blender, tmp_path,
     np.testing.assert_array_equal(image, _REFERENCE[radius_factor])
     if not np.isfinite(value):
         assert any("'Bad'" in line for line in report()), report()
+
+
+# --------------------------------------------------------------------------------------
+# Materials with values that are not finite.
+
+def test_a_material_value_that_is_not_finite_falls_back_to_its_default_and_is_named(blender, empty_scene, tmp_path):
+    """Blender keeps a NaN a script or a driver puts in a socket; the material refused the
+    frame. Each such value is the contract's default, said once; an emission Blender clamps to
+    3.4e38 is clamped to the renderer's limit."""
+    bpy, scene = blender, empty_scene
+    good_scene(bpy, scene)
+    material = bpy.data.materials.new("Broken")
+    shader = material.node_tree.nodes["Principled BSDF"]
+    shader.inputs["Base Color"].default_value = (math.nan, 0.8, 0.8, 1.0)
+    shader.inputs["Roughness"].default_value = math.nan
+    bad = cube(bpy, "Painted", location=(0, 0, 0.8))
+    bad.data.materials.append(material)
+    broken = rgba(bpy, scene, tmp_path / "broken.exr")
+    said_once(report(), "material 'Broken': base colour (nan, 0.8, 0.8) is not finite; using (0.8, 0.8, 0.8)")
+    said_once(report(), "material 'Broken': roughness nan is not finite; using 0.5")
+    shader.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    shader.inputs["Roughness"].default_value = 0.5
+    np.testing.assert_array_equal(broken, rgba(bpy, scene, tmp_path / "fixed.exr"))
+    shader.inputs["Emission Strength"].default_value = math.inf  # Blender keeps 3.4e38
+    shader.inputs["Emission Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    scene.splat_tracer.lighting = "SCENE"
+    rgba(bpy, scene, tmp_path / "bright.exr")
+    said_once(report(), "material 'Broken': an emission of (3.4e+38, 3.4e+38, 3.4e+38) is beyond the renderer's "
+              "limit; clamped to 1e+18")

@@ -281,9 +281,20 @@ def _shader(socket, sockets: _Sockets) -> dict:
     return {_IS_BSDF: node.type not in ("EMISSION", "BSDF_TRANSPARENT"), **reader(node, sockets)}
 
 
-def _clamped(fields: dict) -> shading.Material:
-    """The Material for shader fields, held to the contract's ranges (as Cycles clamps)."""
+def _clamped(fields: dict, sockets: _Sockets) -> shading.Material:
+    """The Material for shader fields, held to the contract's ranges (as Cycles clamps). A
+    value that is not finite (a NaN a driver or a script put in a socket) is the field's
+    default, and an emission beyond the renderer's limit is clamped to it, each said: one
+    material never fails the frame."""
     f = {**_DEFAULTS, **fields}
+    for key, value in f.items():
+        if not isinstance(value, bool) and not all(math.isfinite(float(c)) for c in np.ravel(value)):
+            sockets.say(f": {key.replace('_', ' ')} {_fmt(value)} is not finite; using {_fmt(_DEFAULTS[key])}")
+            f[key] = _DEFAULTS[key]
+    if max(f["emission"]) > MAX_COORDINATE:
+        sockets.say(f": an emission of {_fmt(f['emission'])} is beyond the renderer's limit; clamped to "
+                    f"{MAX_COORDINATE:.0e}")
+        f["emission"] = tuple(min(float(c), MAX_COORDINATE) for c in f["emission"])
     unit = lambda v: min(max(float(v), 0.0), 1.0)  # noqa: E731
     return shading.Material(
         base_colour=tuple(max(float(c), 0.0) for c in f["base_colour"]), metallic=unit(f["metallic"]),
@@ -297,7 +308,7 @@ def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
     """A material without nodes: its viewport display settings, as Cycles renders it."""
     sockets.say(" does not use nodes; using its viewport display colour, metallic and roughness")
     return _clamped(dict(base_colour=tuple(bl_material.diffuse_color[:3]), metallic=bl_material.metallic,
-                         roughness=bl_material.roughness))
+                         roughness=bl_material.roughness), sockets)
 
 
 def material_of(bl_material, report: shading.Report) -> shading.Material:
@@ -316,13 +327,13 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     output = _output_node(tree, "OUTPUT_MATERIAL")
     if output is None:
         sockets.say(" has no Material Output; rendered black, as Cycles does")
-        return _clamped(_BLACK)
+        return _clamped(_BLACK, sockets)
     ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
     if _upstream(output.inputs["Surface"]) is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
-    return _clamped(_shader(output.inputs["Surface"], sockets))
+    return _clamped(_shader(output.inputs["Surface"], sockets), sockets)
 
 
 # --------------------------------------------------------------------------------------
