@@ -19,7 +19,7 @@ import time
 import bpy
 from bpy_extras.io_utils import ImportHelper, axis_conversion, orientation_helper
 
-from ..splat_tracer.blender.cloud_object import NORMAL, RADIUS, create_cloud_object, mesh_positions
+from ..splat_tracer.blender.cloud_object import NORMAL, RADIUS, attribute_problem, create_cloud_object, mesh_positions
 from ..splat_tracer.pointcloud import importer, normals, prepare, readers, spacing
 from ..splat_tracer.pointcloud.cloud import CloudFileError
 from ..splat_tracer.pointcloud.readers import ply
@@ -340,6 +340,10 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
 
         jobs = []  # (name, points, scanners, mode): read here, on the main thread
         for obj in self.clouds(context):
+            problem = self.attribute_problem(obj)
+            if problem is not None:
+                self.report({"ERROR"}, problem)
+                return {"CANCELLED"}
             mesh = obj.data
             n = len(mesh.vertices)
             if n < normals.MIN_POINTS:
@@ -380,6 +384,16 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
         self.work = work
         return self.run(context)
 
+    def attribute_problem(self, obj):
+        """Why the object's splat attributes cannot take the estimate (re-made with another
+        type), naming object, attribute and the type wanted; None when they can. Checked
+        before anything is written: a retyped attribute changes nothing."""
+        wanted = [NORMAL] + ([RADIUS] if self.radii else [])
+        problems = [p for p in (attribute_problem(obj.data.attributes, name) for name in wanted) if p]
+        if not problems:
+            return None
+        return f"{obj.name}: {'; '.join(problems)}; nothing was changed"
+
     def finish(self, context, results) -> set:
         import numpy as np
 
@@ -387,6 +401,10 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
             obj = bpy.data.objects.get(name)
             if obj is None or obj.type != "MESH" or len(obj.data.vertices) != len(result.normals):
                 self.report({"WARNING"}, f"{name}: changed while its normals were estimated; left as it was")
+                continue
+            problem = self.attribute_problem(obj)  # retyped while the worker ran
+            if problem is not None:
+                self.report({"WARNING"}, problem)
                 continue
             mesh = obj.data
             mesh.attributes[NORMAL].data.foreach_set("vector", result.normals.ravel())

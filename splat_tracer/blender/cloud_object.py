@@ -25,10 +25,24 @@ NODE_GROUP_VERSION = 2
 MATERIAL_TAG = "splat_tracer_material"  # custom property marking our material
 MATERIAL_VERSION = 2  # 1: Base Color from splat_color; 2: its alpha into Alpha too
 MATERIAL_NAME = "Splat Cloud"
+# The type each splat attribute must have, on points: what the renderer reads and Estimate
+# Splat Normals writes. A user can re-make one with another type (Attribute > Convert).
+ATTRIBUTE_TYPES = {NORMAL: "FLOAT_VECTOR", RADIUS: "FLOAT"}
 # A mesh's vertex positions as its "position" attribute: foreach_get/foreach_set on it copy
 # the array at once, while MeshVertex.co goes through RNA a vertex at a time (10M vertices:
 # 0.01 s against 0.5-0.7 s).
 POSITION = "position"
+
+
+def attribute_problem(attributes, name: str, data_type: Optional[str] = None) -> Optional[str]:
+    """Why the attribute `name` (when present) cannot be read or written as a splat
+    attribute -- "attribute 'splat_radius' must be FLOAT on points, not INT on POINT" --
+    or None when it can. data_type: the type wanted (default: ATTRIBUTE_TYPES[name])."""
+    attr = attributes.get(name)
+    wanted = data_type or ATTRIBUTE_TYPES[name]
+    if attr is None or (attr.data_type == wanted and attr.domain == "POINT"):
+        return None
+    return f"attribute '{name}' must be {wanted} on points, not {attr.data_type} on {attr.domain}"
 
 
 def mesh_positions(mesh: bpy.types.Mesh) -> np.ndarray:

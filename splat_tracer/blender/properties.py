@@ -78,7 +78,9 @@ class _VisibilitySettings:
     radius_factor: bpy.props.FloatProperty(
         name="Radius Factor",
         description="Scales every splat radius at render time (1: each disc reaches its neighbours' centres)",
-        default=1.0, min=0.01, soft_min=0.25, soft_max=4.0, precision=3,
+        # A hard max: discs 100 times their spacing already cover everything behind them,
+        # and a factor of 1e30 put every radius beyond the renderer's limit.
+        default=1.0, min=0.01, max=100.0, soft_min=0.25, soft_max=4.0, precision=3,
     )
     kernel: bpy.props.EnumProperty(
         name="Kernel",

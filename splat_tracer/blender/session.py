@@ -97,10 +97,19 @@ def border_window(render, width: int, height: int) -> tuple[int, int, int, int]:
     """(x0, y0 from the top, w, h) of the rendered region: the border when one is set."""
     if not render.use_border:
         return 0, 0, width, height
-    # Blender rounds the border edges to the nearest pixel (round_fl_to_int).
-    x0, x1 = (int(np.floor(v * width + 0.5)) for v in (render.border_min_x, render.border_max_x))
-    yb0, yb1 = (int(np.floor(v * height + 0.5)) for v in (render.border_min_y, render.border_max_y))
-    x1, yb1 = max(x1, x0 + 1), max(yb1, yb0 + 1)
+    # The region must be the one Blender allocates the result for (render_init_from_main:
+    # `disprect.xmin = rd->border.xmin * winx`): a float32 product truncated to an int, not
+    # rounded -- rounding gave a border near the top-right pixel one more pixel than
+    # Blender's result holds, and the frame failed. Blender refuses a region under one
+    # pixel ("Image too small") before the engine runs; the compare operator does not, so
+    # a region is at least one pixel, inside the image.
+    def edges(lo, hi, size):
+        a, b = (int(np.float32(v) * np.float32(size)) for v in (lo, hi))
+        a = min(max(a, 0), size - 1)
+        return a, min(max(b, a + 1), size)
+
+    x0, x1 = edges(render.border_min_x, render.border_max_x, width)
+    yb0, yb1 = edges(render.border_min_y, render.border_max_y, height)
     return x0, height - yb1, x1 - x0, yb1 - yb0
 
 

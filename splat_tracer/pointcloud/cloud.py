@@ -12,8 +12,13 @@ from typing import Optional
 
 import numpy as np
 
+from .. import _core
 from ..util.columns import compress, finite_rows, in_blocks, kept_rows
 from .neighbours import first_of_duplicates
+
+# Largest radius the renderer accepts (native/base/ray.h): the import drops points beyond
+# it, so that what imports renders -- the same constant the export checks against.
+MAX_RADIUS = _core.MAX_COORDINATE
 
 
 class CloudFileError(ValueError):
@@ -73,6 +78,7 @@ class PointCloud:
     orientation: str = "PROPAGATE"   # how to orient estimated normals: PROPAGATE, UP (aerial), SCANNER
     oriented: bool = True            # False: the normals' axes are right but their signs arbitrary
     dropped_rows: int = 0            # rows dropped for non-finite coordinates (text, LAS, E57)
+    dropped_radii: int = 0           # rows dropped for a radius beyond MAX_RADIUS (a 3DGS scale of 88)
     format: str = "PLY"              # what the file was read as (for the notes)
     budget_dropped: int = 0          # points left out to keep within the import's point budget
     notes: list = field(default_factory=list)  # what the reader changed or ignored, one sentence each
@@ -250,6 +256,16 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
         if not (ok & keep).any():
             raise CloudFileError(f"{path}: no vertex has a usable normal (all are zero or not finite)")
         keep &= ok
+    dropped_radii = 0
+    if radii is not None:
+        # A file radius of 1e30 (or a Gaussian's exp(88) scale) would be refused by the
+        # renderer: the point is dropped and counted here instead.
+        huge = keep & ~(np.asarray(radii) <= MAX_RADIUS)
+        dropped_radii = int(huge.sum())
+        if dropped_radii:
+            if dropped_radii == int(keep.sum()):
+                raise CloudFileError(f"{path}: every radius is beyond the renderer's limit ({MAX_RADIUS:.0e})")
+            keep &= ~huge
     # Points at exactly the same position as an earlier one are merged into it (the
     # first row's normal, colour and radius are kept): a splat repeated adds nothing, and
     # piles of them make the neighbour search pathological.
@@ -262,7 +278,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     keep[repeats] = False
     cloud = PointCloud(pos, None if nrm is None else nrm.astype(np.float32, copy=False), colours, radii, dropped, merged,
                        first_merged, None, dict(attributes or {}), scanners, dropped_rows=dropped_rows,
-                       **fields)
+                       dropped_radii=dropped_radii, **fields)
     # a mask: faster than indices; in place: the arrays are the reader's own and this
     # function's (normals made unit above), and the cloud before the subset is not returned
     return cloud if every and not merged else cloud.subset(keep, in_place=True)

@@ -28,7 +28,7 @@ from ..util import matrices, resources
 from ..util.columns import bounds
 from ..util.progress import ProgressFn, nothing, scaled
 from . import normals, prepare, readers, spacing
-from .cloud import CloudFileError, PointCloud
+from .cloud import MAX_RADIUS, CloudFileError, PointCloud
 from .readers.las import read_header as read_las_header
 from .readers.ply import read_header
 
@@ -86,7 +86,14 @@ def transform(cloud: PointCloud, axes=None, scale: float = 1.0) -> PointCloud:
     turn = (lambda a: None if a is None else matrices.transform_rows(a, m).astype(a.dtype))  # noqa: E731
     scanners = None if cloud.scanners is None else matrices.transform_rows(cloud.scanners, m) * scale
     radii = None if cloud.radii is None else (cloud.radii * np.float32(scale)).astype(np.float32)
-    return replace(cloud, positions=pos, normals=turn(cloud.normals), scanners=scanners, radii=radii)
+    out = replace(cloud, positions=pos, normals=turn(cloud.normals), scanners=scanners, radii=radii)
+    if radii is not None and scale > 1.0:
+        # The reader dropped radii beyond the renderer's limit (make_cloud); the scale can
+        # carry more past it, and those points are dropped and counted alike.
+        huge = ~(radii <= MAX_RADIUS)
+        if huge.any():
+            out = replace(out.subset(~huge), dropped_radii=cloud.dropped_radii + int(huge.sum()))
+    return out
 
 
 def _cell_keys(points: np.ndarray, lo: np.ndarray, cell: float) -> Optional[np.ndarray]:

@@ -25,7 +25,7 @@ import numpy as np
 from ..util.columns import bounds, rows_outside
 from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
-from .cloud import CloudFileError, PointCloud
+from .cloud import MAX_RADIUS, CloudFileError, PointCloud
 from .neighbours import local_frame
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
@@ -91,6 +91,9 @@ class PreparedCloud:
         if self.ambiguous:
             notes.append(f"{self.ambiguous:,} points' normal orientation was ambiguous (a neighbour more than 60 "
                          "degrees off, or a grazing view); check them, or re-estimate with another orientation")
+        if c.dropped_radii:
+            notes.append(f"{c.dropped_radii:,} points with a radius beyond the renderer's limit ({MAX_RADIUS:.0e}) "
+                         "were dropped")
         if c.dropped_normals:
             notes.append(f"{c.dropped_normals:,} points with a zero or non-finite normal were dropped")
         if c.merged_duplicates:

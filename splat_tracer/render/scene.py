@@ -13,9 +13,29 @@ from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
 from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
-from .splats import SplatCloud
+from .splats import MAX_COORDINATE, SplatCloud
 
 RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
+
+
+def transform_problem(matrix) -> Optional[str]:
+    """Why the core cannot place geometry by this 4x4 object-to-local matrix (a phrase for a
+    report: "its transform is ..."), or None when it can. The core traces each instance in
+    object space through the inverse, so the matrix must be invertible, and both it and
+    its inverse within the core's coordinate limit as float32 (an object scaled to 0 along
+    an axis has no inverse; one scaled by 1e-20 has one beyond the limit)."""
+    m = np.asarray(matrix, np.float64).reshape(4, 4)
+    if not np.isfinite(m).all():
+        return "its transform is not finite"
+    if abs(np.linalg.det(m[:3, :3])) < 1e-300:
+        return "its transform is singular (scaled to 0 along an axis)"
+    inv = matrices.inverse(m)
+    limit = np.float32(MAX_COORDINATE)
+    if not np.abs(m[:3].astype(np.float32)).max() <= limit:
+        return f"its transform places or scales it beyond the renderer's limit ({MAX_COORDINATE:.0e})"
+    if not np.abs(inv[:3].astype(np.float32)).max() <= limit:
+        return f"its scale is too close to 0 (the inverse transform exceeds the renderer's limit, {MAX_COORDINATE:.0e})"
+    return None
 
 
 class Mesh:
@@ -94,8 +114,9 @@ class RenderScene:
                 index_of[id(native)] = len(geometries)
                 geometries.append(native)
             m = np.asarray(inst.matrix, np.float64).reshape(4, 4)
-            if not np.isfinite(m).all() or abs(np.linalg.det(m[:3, :3])) < 1e-300:
-                raise ValueError("instance matrix must be finite and invertible")
+            problem = transform_problem(m)
+            if problem is not None:
+                raise ValueError(f"instance matrix must be finite and invertible: {problem}")
             inv = matrices.inverse(m)
             unknown = set(inst.visibility) - set(RAY_VISIBILITY)
             if unknown:

@@ -27,6 +27,9 @@ from .method import Method
 
 PARALLEL_COSINE = _core.PARALLEL_COSINE
 MAX_LAYER_HITS = _core.MAX_LAYER_HITS  # per-ray hit buffer of the ε-window query
+# Largest coordinate or radius magnitude the core accepts (native/base/ray.h says why); the
+# export leaves out what exceeds it, and the import reads with the same limit.
+MAX_COORDINATE = _core.MAX_COORDINATE
 hardware_threads = _core.hardware_threads
 simd_path = _core.simd_path  # 'SSE2' or 'plain floats': the BVH's box and disc tests
 

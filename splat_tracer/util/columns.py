@@ -27,6 +27,20 @@ def finite_rows(a: np.ndarray) -> np.ndarray:
     return ok
 
 
+def rows_within(a: np.ndarray, limit: float) -> np.ndarray:
+    """(N,) bool: rows of `a` (N, C) whose every value has a magnitude of at most `limit`
+    (False for NaN)."""
+    ok = np.empty(len(a), bool)
+
+    def block(b: int, e: int) -> None:
+        ok[b:e] = np.abs(a[b:e, 0]) <= limit
+        for c in range(1, a.shape[1]):
+            ok[b:e] &= np.abs(a[b:e, c]) <= limit
+
+    in_blocks(block, len(a))
+    return ok
+
+
 def bounds(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi): each column's smallest and largest value (float64 (C,)); NaN where a column
     holds one. A block of rows at a time on all cores (in_blocks)."""

@@ -88,6 +88,17 @@ def test_scale_multiplies_file_radii_and_scanner_positions():
         importer.transform(cloud, np.eye(3) * 2)
 
 
+def test_a_radius_the_scale_carries_beyond_the_renderers_limit_is_dropped_and_counted():
+    """What imports renders: 1e13 passes the reader; the largest import scale (1e6) makes it
+    1e19, beyond the renderer's 1e18."""
+    radii = np.full(50, 0.1, np.float32)
+    radii[3] = 1e13
+    cloud = make_cloud("c", RNG.uniform(0, 1, (50, 3)), None, None, radii)
+    out = importer.transform(cloud, None, 1e6)
+    assert len(out) == 49 and out.dropped_radii == 1 and out.radii.max() == np.float32(0.1 * 1e6)
+    assert len(importer.transform(cloud, None, 1e4)) == 50  # 1e17: within the limit
+
+
 # --- point budget ------------------------------------------------------------------------
 
 def test_point_budget_is_exact_deterministic_and_spatially_even(tmp_path):

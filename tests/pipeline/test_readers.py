@@ -826,3 +826,34 @@ def test_gaussian_capture_renders_with_its_colours_and_orientation(blender, empt
         np.testing.assert_allclose(out["rgba"][row, col, :3], expected, rtol=0.05)
         n = out["normal"][row, col]
         assert abs(n @ normal) > 0.99, n  # the Gaussians' thin axis
+
+
+@pytest.mark.parametrize("radius", [1e30, 2e18, np.float32(3e38)])
+def test_a_radius_beyond_the_renderers_limit_is_dropped_and_counted(tmp_path, radius):
+    """What imports renders: a file radius the renderer would refuse (its limit, the core's
+    MAX_COORDINATE) drops that point at import, counted in the notes."""
+    p, n = fibonacci_sphere(500)
+    radii = np.full(500, 0.05, np.float32)
+    radii[4] = radius
+    path = tmp_path / "huge.ply"
+    ply.write_ply(str(path), p, n, radii=radii)
+    cloud = readers.read_cloud(str(path))
+    assert len(cloud) == 499 and cloud.dropped_radii == 1 and cloud.radii.max() == np.float32(0.05)
+    notes = prepare.prepare(cloud, str(path)).notes(6)
+    assert "1 points with a radius beyond the renderer's limit (1e+18) were dropped" in notes, notes
+
+
+def test_a_gaussian_whose_scale_overflows_the_renderers_limit_is_dropped(tmp_path):
+    """A 3DGS log-scale of 88 (exp(88) is about 1.7e38, finite) gave a radius the reader
+    accepted and the renderer refused."""
+    normal = np.array([0.0, 0.0, 1.0])
+    path = tmp_path / "capture.ply"
+    gaussian_plane(path, normal, True)
+    from plyfile import PlyData
+
+    data = PlyData.read(str(path), mmap=False)
+    data["vertex"].data["scale_0"][7] = data["vertex"].data["scale_1"][7] = 88.0
+    data.write(str(path))
+    cloud = readers.read_cloud(str(path))
+    assert len(cloud) == 60 * 60 - 1 and cloud.dropped_radii == 1
+    assert cloud.radii.max() < 1.0

@@ -21,11 +21,11 @@ import numpy as np
 
 from ...render import shading
 from ...render.camera import Camera
-from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene
-from ...render.splats import SplatCloud
+from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
+from ...render.splats import MAX_COORDINATE, SplatCloud
 from ...util import resources
-from ...util.columns import finite_rows, nonzero_rows
-from ..cloud_object import COLOUR, NORMAL, RADIUS, mesh_positions
+from ...util.columns import finite_rows, nonzero_rows, rows_within
+from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -74,15 +74,28 @@ def _source(obj: bpy.types.Object) -> bpy.types.Object:
     return obj.original if obj.original is not None else obj
 
 
-def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarray:
+def _valid_points(name: str, pos, nrm, rad, col, alpha, radius_factor: float, report: shading.Report) -> np.ndarray:
     """Mask of the points that can be splats. The others (a vertex added in Edit Mode has a
-    zero normal and radius) are left out and counted in the report, never failing the
+    zero normal and radius; a NaN colour; a vertex or a radius, after the Radius Factor,
+    beyond the core's limit) are left out and counted in the report, never failing the
     whole render."""
-    problems = (
-        (~finite_rows(pos), "a position that is not finite"),
-        (~(finite_rows(nrm) & nonzero_rows(nrm)), "a zero or non-finite normal"),
-        (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
-    )
+    limit = MAX_COORDINATE
+    with np.errstate(invalid="ignore", over="ignore"):
+        scaled = rad * np.float32(radius_factor)
+        finite = finite_rows(pos)
+        problems = [
+            (~finite, "a position that is not finite"),
+            (finite & ~rows_within(pos, limit), f"a position beyond the renderer's limit ({limit:.0e})"),
+            (~(finite_rows(nrm) & nonzero_rows(nrm)), "a zero or non-finite normal"),
+            (~(np.isfinite(rad) & (rad > 0)), "a radius that is not a positive number"),
+            (np.isfinite(rad) & (rad > 0) & ~(scaled <= limit),
+             f"a radius beyond the renderer's limit ({limit:.0e}) after the Radius Factor ({radius_factor:g})"),
+        ]
+        if col is not None:
+            bad = ~finite_rows(col)
+            if alpha is not None:
+                bad |= ~np.isfinite(alpha)
+            problems.append((bad, "a colour that is not finite"))
     ok = np.ones(len(pos), bool)
     for bad, what in problems:
         if bad.any():
@@ -92,19 +105,22 @@ def _valid_points(name: str, pos, nrm, rad, report: shading.Report) -> np.ndarra
     return ok
 
 
-def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
+def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Report):
     """(positions, normals, radii, colours or None, alphas or None) of a point cloud or of a
     vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
-    some point is not opaque."""
+    some point is not opaque. None (said in the report) when the splat attributes are missing
+    or of another type: the object is left out, the frame renders."""
+    rad_name = RADIUS if RADIUS in attrs else "radius"
+    if rad_name not in attrs:
+        report.once(f"point cloud '{obj.name}' has splat normals but no radius attribute ('{RADIUS}'); not rendered")
+        return None
+    problems = [attribute_problem(attrs, NORMAL), attribute_problem(attrs, rad_name, ATTRIBUTE_TYPES[RADIUS])]
+    if any(problems):
+        report.once(f"point cloud '{obj.name}': {'; '.join(p for p in problems if p)}; not rendered")
+        return None
     pos = _read(attrs["position"], "vector", 3, n)
     nrm = _read(attrs[NORMAL], "vector", 3, n)
-    rad_attr = attrs[RADIUS] if RADIUS in attrs else attrs.get("radius")
-    if rad_attr is None:
-        raise ValueError(f"point cloud '{obj.name}' has splat normals but no radius attribute")
-    for name, attr, kinds in ((NORMAL, attrs[NORMAL], ("FLOAT_VECTOR",)), ("radius", rad_attr, ("FLOAT",))):
-        if attr.data_type not in kinds or attr.domain != "POINT":
-            raise ValueError(f"point cloud '{obj.name}': attribute '{attr.name}' must be {kinds[0]} on points, "
-                             f"not {attr.data_type} on {attr.domain}")
+    rad_attr = attrs[rad_name]
     rad = _read(rad_attr, "value", 1, n)
     col = alpha = None
     if COLOUR in attrs:
@@ -117,7 +133,7 @@ def _cloud_arrays(obj, attrs, n: int, report: shading.Report):
         else:
             report.once(f"point cloud '{obj.name}': attribute '{COLOUR}' is {c.data_type} on {c.domain}, "
                         "not a point colour; ignored")
-    ok = _valid_points(obj.name, pos, nrm, rad, report)
+    ok = _valid_points(obj.name, pos, nrm, rad, col, alpha, radius_factor, report)
     if not ok.all():
         keep = (lambda a: None if a is None else a[ok])
         pos, nrm, rad, col, alpha = pos[ok], nrm[ok], rad[ok], keep(col), keep(alpha)
@@ -183,8 +199,12 @@ class _Frame:
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
         closed = bool(getattr(_source(obj), "splat_tracer", None) and _source(obj).splat_tracer.closed)
-        pos, nrm, rad, col, alpha = _cloud_arrays(obj, attrs, n, self.report)
+        arrays = _cloud_arrays(obj, attrs, n, self.radius_factor, self.report)
+        if arrays is None:
+            return None
+        pos, nrm, rad, col, alpha = arrays
         if len(pos) == 0:
+            self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
@@ -228,6 +248,7 @@ class _Frame:
         finally:
             if temporary:
                 obj.to_mesh_clear()
+        verts, tris, normals, mats = self._usable_triangles(obj.name, verts, tris, normals, mats)
         if len(tris) == 0:
             return None
         key = ("mesh", _digest(verts, tris, normals, mats))
@@ -236,6 +257,23 @@ class _Frame:
                                 lambda: Mesh(verts, tris, normals, mats, threads=self.threads))
         self.triangles += self._first_use(key, geometry)
         return geometry
+
+    def _usable_triangles(self, name: str, verts, tris, normals, mats):
+        """The mesh without the triangles that touch a vertex the core cannot hold (not
+        finite, or beyond its limit: a NaN from a driver or a modifier), which are counted
+        in the report; the rest of the mesh renders. Those vertices are set to 0, as the
+        core checks every vertex, used or not."""
+        bad = ~rows_within(verts, MAX_COORDINATE)
+        if not bad.any():
+            return verts, tris, normals, mats
+        touching = bad[tris].any(axis=1)
+        self.report.once(f"mesh '{name}': {int(bad.sum())} vertices are not finite or beyond the renderer's limit "
+                         f"({MAX_COORDINATE:.0e}) (first: vertex {int(np.flatnonzero(bad)[0])}); the "
+                         f"{int(touching.sum())} triangles using them are not rendered")
+        keep = ~touching
+        verts = verts.copy()
+        verts[bad] = 0.0
+        return verts, tris[keep], normals[keep], mats[keep]
 
     def geometry(self, obj):
         """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""
@@ -257,6 +295,13 @@ class _Frame:
                              "'Splat Points' modifier is missing or changed); rendering its vertices as splats")
             result = (self.cloud(obj, data.attributes, len(data.vertices)), "cloud")
         elif obj.type in _MESH_LIKE:
+            if obj.type == "MESH" and NORMAL in data.attributes and len(data.vertices):
+                # A splat cloud given faces (Edit Mode) without its modifier: Cycles renders
+                # the faces, and so does this engine; the splats they leave out are said.
+                self.report.once(f"object '{obj.name}' carries splats but evaluates to a mesh with "
+                                 f"{len(data.polygons):,} faces (its 'Splat Points' modifier is missing or changed): "
+                                 f"rendered as that mesh; the splats of its {len(data.vertices):,} vertices are "
+                                 "not rendered")
             result = (self.mesh(obj), "mesh")
         if pointer is not None:
             self.by_pointer[pointer] = result
@@ -289,6 +334,12 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             continue
         geometry, kind = frame.geometry(obj)
         if geometry is None:
+            continue
+        problem = transform_problem(matrix)
+        if problem is not None:
+            # An object scaled to 0 (a step of an animation, a flattened plane) is left out,
+            # and the rest of the frame renders.
+            report.once(f"object '{obj.name}': {problem}; not rendered")
             continue
         parent = inst.parent if inst.is_instance else None
         vis = export_shading.object_visibility(obj, view_layer, parent)

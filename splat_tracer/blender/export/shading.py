@@ -35,6 +35,7 @@ import bpy
 import numpy as np
 
 from ...render import shading
+from ...render.splats import MAX_COORDINATE
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"
@@ -280,9 +281,20 @@ def _shader(socket, sockets: _Sockets) -> dict:
     return {_IS_BSDF: node.type not in ("EMISSION", "BSDF_TRANSPARENT"), **reader(node, sockets)}
 
 
-def _clamped(fields: dict) -> shading.Material:
-    """The Material for shader fields, held to the contract's ranges (as Cycles clamps)."""
+def _clamped(fields: dict, sockets: _Sockets) -> shading.Material:
+    """The Material for shader fields, held to the contract's ranges (as Cycles clamps). A
+    value that is not finite (a NaN a driver or a script put in a socket) is the field's
+    default, and an emission beyond the renderer's limit is clamped to it, each said: one
+    material never fails the frame."""
     f = {**_DEFAULTS, **fields}
+    for key, value in f.items():
+        if not isinstance(value, bool) and not all(math.isfinite(float(c)) for c in np.ravel(value)):
+            sockets.say(f": {key.replace('_', ' ')} {_fmt(value)} is not finite; using {_fmt(_DEFAULTS[key])}")
+            f[key] = _DEFAULTS[key]
+    if max(f["emission"]) > MAX_COORDINATE:
+        sockets.say(f": an emission of {_fmt(f['emission'])} is beyond the renderer's limit; clamped to "
+                    f"{MAX_COORDINATE:.0e}")
+        f["emission"] = tuple(min(float(c), MAX_COORDINATE) for c in f["emission"])
     unit = lambda v: min(max(float(v), 0.0), 1.0)  # noqa: E731
     return shading.Material(
         base_colour=tuple(max(float(c), 0.0) for c in f["base_colour"]), metallic=unit(f["metallic"]),
@@ -296,7 +308,7 @@ def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
     """A material without nodes: its viewport display settings, as Cycles renders it."""
     sockets.say(" does not use nodes; using its viewport display colour, metallic and roughness")
     return _clamped(dict(base_colour=tuple(bl_material.diffuse_color[:3]), metallic=bl_material.metallic,
-                         roughness=bl_material.roughness))
+                         roughness=bl_material.roughness), sockets)
 
 
 def material_of(bl_material, report: shading.Report) -> shading.Material:
@@ -315,13 +327,13 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     output = _output_node(tree, "OUTPUT_MATERIAL")
     if output is None:
         sockets.say(" has no Material Output; rendered black, as Cycles does")
-        return _clamped(_BLACK)
+        return _clamped(_BLACK, sockets)
     ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
     if _upstream(output.inputs["Surface"]) is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
-    return _clamped(_shader(output.inputs["Surface"], sockets))
+    return _clamped(_shader(output.inputs["Surface"], sockets), sockets)
 
 
 # --------------------------------------------------------------------------------------
@@ -329,7 +341,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
 
 def _unit(v) -> tuple:
     v = np.asarray(v, np.float64)
-    return tuple(float(c) for c in v / np.linalg.norm(v))
+    with np.errstate(invalid="ignore", divide="ignore"):  # an axis scaled to 0: NaN, see _within_limits
+        return tuple(float(c) for c in v / np.linalg.norm(v))
 
 
 def _has_custom_nodes(light) -> bool:
@@ -410,7 +423,41 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
     fields.update(visible_camera=bool(getattr(obj_eval, "visible_camera", True)),
                   visible_glossy=bool(getattr(obj_eval, "visible_glossy", True)),
                   visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)))
+    if not _within_limits(light.type, fields, say):
+        return None
     return shading.Light(**fields)
+
+
+def _within_limits(kind: str, fields: dict, say) -> bool:
+    """Brings a lamp's fields within what the core can hold, in place, saying what changed:
+    a power or size beyond the coordinate limit is clamped to it (it lights the scene as
+    brightly as anything can); a lamp placed beyond it, or whose axes an object scale of 0
+    removed, is left out (False). The frame renders either way."""
+    limit = MAX_COORDINATE
+    if not all(abs(c) <= limit for c in fields["position"]):
+        if kind != "SUN":
+            say(f"its position is beyond the renderer's limit ({limit:.0e}); not rendered")
+            return False
+        fields["position"] = (0.0, 0.0, 0.0)  # a sun shines the same from anywhere
+    for axis in ("direction", "u_axis"):
+        if not all(math.isfinite(c) for c in fields[axis]):
+            if kind == "POINT" or (axis == "u_axis" and kind != "AREA"):
+                fields.pop(axis)  # unused by this kind of lamp: the contract's default
+                continue
+            say("its transform is singular (scaled to 0 along an axis); not rendered")
+            return False
+    # The core holds colour x power: the brightest channel decides.
+    peak = max(max(fields["colour"]), 1e-30)
+    if fields["power"] * peak > limit:
+        clamped = limit / peak * (1 - 1e-6)  # below the limit after rounding to float32
+        say(f"a power of {fields['power']:.3g} is beyond the renderer's limit; clamped to {clamped:.3g}")
+        fields["power"] = clamped
+    for key in ("radius", "size", "size_y"):
+        if fields.get(key, 0.0) > limit:
+            say(f"a {key.replace('_', ' ')} of {fields[key]:.3g} is beyond the renderer's limit; "
+                f"clamped to {limit:.0e}")
+            fields[key] = limit
+    return True
 
 
 # --------------------------------------------------------------------------------------

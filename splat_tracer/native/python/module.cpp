@@ -436,6 +436,7 @@ int module_exec(PyObject *module) {
     }
     if (PyModule_AddObject(module, "PARALLEL_COSINE", PyFloat_FromDouble(kParallelCosine)) < 0) return -1;
     if (PyModule_AddIntConstant(module, "MAX_LAYER_HITS", kMaxLayerHits) < 0) return -1;
+    if (PyModule_AddObject(module, "MAX_COORDINATE", PyFloat_FromDouble(kMaxCoordinate)) < 0) return -1;
     if (PyModule_AddIntConstant(module, "PACKET_RAYS", kPacketRays) < 0) return -1;
     if (add_neighbour_types(module) < 0) return -1;
     if (add_graph_functions(module) < 0) return -1;
