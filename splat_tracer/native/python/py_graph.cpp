@@ -18,27 +18,29 @@ namespace {
 
 // Runs fn(poll) without the GIL. `progress` (None or a callable) is called as
 // progress(fraction) on this thread, with the GIL, whenever the work polls; an exception
-// from it (the user cancelled) stops the work and is re-raised. Returns false with a Python
-// exception set on any failure.
+// from it (the user cancelled) stops the work and is re-raised. The work also stops when
+// Python is exiting (RuntimeError; see GilRelease). Returns false with a Python exception
+// set on any failure.
 template <class Fn>
 bool run_graph(PyObject *progress, Fn &&fn) {
-    PyThreadState *saved = nullptr;
-    bool callback_failed = false;
+    GilRelease gil;
+    bool callback_failed = false, exit_stop = false;
     const GraphPoll poll = [&](double fraction) {
+        if (exiting()) return exit_stop = true, false;
         if (progress == Py_None) return true;
-        PyEval_RestoreThread(saved);
+        gil.take();
         PyObject *res = PyObject_CallFunction(progress, "d", fraction);
         if (res) Py_DECREF(res);
         else callback_failed = true;
-        saved = PyEval_SaveThread();
+        gil.give();
         return !callback_failed;
     };
     std::string message;
-    PyObject *error_type = nullptr;
-    saved = PyEval_SaveThread();
-    error_type = run_native([&] { fn(poll); }, message);
-    PyEval_RestoreThread(saved);
+    if (!gil.release()) return false;
+    PyObject *error_type = run_native([&] { fn(poll); }, message);
+    gil.finish();
     if (callback_failed) return false;  // its exception is still set
+    if (exit_stop && !error_type) error_type = PyExc_RuntimeError, message = kExitingMessage;
     if (error_type) PyErr_SetString(error_type, message.c_str());
     return error_type == nullptr;
 }

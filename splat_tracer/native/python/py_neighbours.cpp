@@ -26,10 +26,11 @@ PointIndex &index_of(PyObject *self) { return *reinterpret_cast<PointIndexObject
 // on one of the importer's chunks (2^18 rows; the closed guess's, a few thousand).
 constexpr size_t kRowsPerTask = 512;
 
-// Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL.
+// Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL (stopped, with a
+// RuntimeError, when Python is exiting).
 template <class Task>
 bool for_tasks(size_t tasks, int threads, Task &&task) {
-    return without_gil([&] { parallel_for(tasks, threads, task, [](size_t) { return true; }); });
+    return without_gil([&] { parallel_until_exit(tasks, threads, task); });
 }
 
 // Runs fn(i) for i in [0, m) in tasks of kRowsPerTask.

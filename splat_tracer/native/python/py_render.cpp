@@ -270,7 +270,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     RenderCounters counters;
     Integrator integrator(scene, cam, film, cfg, counters);
     const int done = run_tiles(integrator.tile_count(), threads > 0 ? threads : obj->threads, progress,
-                               [&](size_t t) { integrator.render_tile(t); });
+                               [&](size_t t, const std::atomic<bool> &stop) { integrator.render_tile(t, &stop); });
     if (done < 0) return nullptr;
     auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
     return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,

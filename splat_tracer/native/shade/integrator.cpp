@@ -125,11 +125,11 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
 
-void Integrator::render_tile(size_t tile) const {
+void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     Tally tally;
     // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
     for_each_block(film_, settings_.tile_size, tile,
-                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally); });
+                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally, stop); });
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
     counters_.transparent += tally.transparent;
@@ -141,7 +141,8 @@ void Integrator::render_tile(size_t tile) const {
 
 // Every sample of n pixels (cols[k], rows[k]): sample by sample, the n camera rays' first
 // hits in one packet query (settings.packets), then each pixel's path.
-void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally) const {
+void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally,
+                             const std::atomic<bool> *stop) const {
     const int samples = settings_.samples;
     struct Pixel {
         Vec3 sum, diffcol, emit, shadow;
@@ -149,6 +150,9 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
     } acc[kPacketRays];
     for (int s = 0; s < samples; ++s) {
+        // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
+        // stop (the viewport closing, Python exiting) must not wait for it.
+        if (stop && stop->load(std::memory_order_relaxed)) return;
         float ux, uy;
         r2_point(uint32_t(s), &ux, &uy);
         const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
