@@ -174,6 +174,9 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!get_array(oid, "out_id", 'i', 1, s1, true, id)) return nullptr;
     if (!get_array(ofr, "out_front", 'B', 1, s1, true, fr)) return nullptr;
     if (onrm != Py_None && !get_array(onrm, "out_normal", 'f', 2, sn, true, nrm)) return nullptr;
+    if (!check_separate({{t, "out_t"}, {id, "out_id"}, {fr, "out_front"}, {nrm, "out_normal"}, {stats_view, "out_stats"}},
+                        {{o, "origins"}, {d, "directions"}}))
+        return nullptr;
 
     const SplatScene &scene = scene_of(self);
     const float *po = o.data<float>(), *pd = d.data<float>();
@@ -240,6 +243,10 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (omem != Py_None && !get_array(omem, "out_members", 'i', 2, sm, true, mem)) return nullptr;
     if (oin != Py_None && !get_array(oin, "inside", 'B', 1, s1, false, in)) return nullptr;
     if (oex != Py_None && !get_array(oex, "exclude", 'i', 2, sx, false, ex)) return nullptr;
+    if (!check_separate({{t, "out_t"}, {id, "out_id"}, {fr, "out_front"}, {nrm, "out_normal"}, {col, "out_colour"},
+                         {mem, "out_members"}},
+                        {{o, "origins"}, {d, "directions"}, {in, "inside"}, {ex, "exclude"}}))
+        return nullptr;
     const int n_ex = ex.held ? int(ex.dim(1)) : 0;
     if (ex.held) {
         const int32_t *e = ex.data<int32_t>();
@@ -305,12 +312,16 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     Camera cam;
-    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+    CameraViews cam_views;
+    if (!parse_camera(om, opos, ofwd, cam, cam_views)) return nullptr;
     View rgba, depth, normal;
     Py_ssize_t sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
     if (!get_array(orgba, "out_rgba", 'f', 3, sr, true, rgba)) return nullptr;
     if (odepth != Py_None && !get_array(odepth, "out_depth", 'f', 2, sd, true, depth)) return nullptr;
     if (onormal != Py_None && !get_array(onormal, "out_normal", 'f', 3, sn, true, normal)) return nullptr;
+    if (!check_separate({{rgba, "out_rgba"}, {depth, "out_depth"}, {normal, "out_normal"}},
+                        {{cam_views.m, "local_from_ndc"}, {cam_views.pos, "position"}, {cam_views.fwd, "forward"}}))
+        return nullptr;
     for (float v : bg)
         if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "background must be finite");
 

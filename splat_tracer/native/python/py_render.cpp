@@ -3,6 +3,7 @@
 // splat_tracer/core.py wraps both; every input is validated here too.
 #include <atomic>
 #include <cmath>
+#include <iterator>
 #include <memory>
 #include <vector>
 
@@ -241,7 +242,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     cfg.packets = packets != 0;
 
     Camera cam;
-    if (!parse_camera(om, opos, ofwd, cam)) return nullptr;
+    CameraViews cam_views;
+    if (!parse_camera(om, opos, ofwd, cam, cam_views)) return nullptr;
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -262,6 +264,13 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         *out.target = out.view.data<float>();
     }
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    for (size_t i = 0; i < std::size(outs); ++i) {
+        if (!check_separate({{outs[i].view, outs[i].name}},
+                            {{cam_views.m, "local_from_ndc"}, {cam_views.pos, "position"}, {cam_views.fwd, "forward"}}))
+            return nullptr;
+        for (size_t j = 0; j < i; ++j)
+            if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+    }
 
     auto *obj = reinterpret_cast<RenderSceneObject *>(self);
     RenderScene &scene = *obj->scene;

@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <cstdint>
 #include <cstring>
+#include <initializer_list>
 #include <mutex>
 #include <new>
 #include <stdexcept>
@@ -99,6 +100,37 @@ inline bool get_array(PyObject *obj, const char *name, char kind, int ndim, cons
                          view.buf.shape[i], i, shape[i]);
             return false;
         }
+    }
+    return true;
+}
+
+// A buffer argument and its name, for check_separate.
+struct Named {
+    const View &view;
+    const char *name;
+};
+
+// Outputs must share no memory with any input or with one another: an output overlapping an
+// input is read after being overwritten (an index then leads anywhere: a segfault), two
+// outputs are written by two threads at once. Views not held (an omitted optional argument)
+// are skipped. Sets ValueError naming both arguments and returns false otherwise.
+inline bool check_separate(std::initializer_list<Named> outputs, std::initializer_list<Named> inputs) {
+    auto overlap = [](const View &a, const View &b) {
+        if (!a.held || !b.held || a.buf.len <= 0 || b.buf.len <= 0) return false;
+        const char *p = static_cast<const char *>(a.buf.buf), *q = static_cast<const char *>(b.buf.buf);
+        return p < q + b.buf.len && q < p + a.buf.len;
+    };
+    for (auto out = outputs.begin(); out != outputs.end(); ++out) {
+        for (const Named &in : inputs)
+            if (overlap(out->view, in.view))
+                return PyErr_Format(PyExc_ValueError, "%s and %s share memory: an output needs a buffer of its own",
+                                    out->name, in.name),
+                       false;
+        for (auto other = outputs.begin(); other != out; ++other)
+            if (overlap(out->view, other->view))
+                return PyErr_Format(PyExc_ValueError, "%s and %s share memory: each output needs a buffer of its own",
+                                    out->name, other->name),
+                       false;
     }
     return true;
 }
@@ -369,10 +401,15 @@ inline bool check_render_args(int width, int height, int x0, int y0, int w, int 
     return true;
 }
 
+// The three arrays of a camera, held while the call runs (for check_separate).
+struct CameraViews {
+    View m, pos, fwd;
+};
+
 // A camera from its three arrays (core.Camera): local_from_ndc 4x4, position and forward 3,
 // all float64 and finite. Sets an exception and returns false otherwise.
-inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &cam) {
-    View m, pos, fwd;
+inline bool parse_camera(PyObject *om, PyObject *opos, PyObject *ofwd, Camera &cam, CameraViews &views) {
+    View &m = views.m, &pos = views.pos, &fwd = views.fwd;
     Py_ssize_t s44[2] = {4, 4}, s3[1] = {3};
     if (!get_array(om, "local_from_ndc", 'd', 2, s44, false, m) || !get_array(opos, "position", 'd', 1, s3, false, pos) ||
         !get_array(ofwd, "forward", 'd', 1, s3, false, fwd))
