@@ -273,13 +273,15 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     }
 
     auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    RenderScene &scene = *obj->scene;
-    const Vec3 eye(float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
-    scene.locate_camera(eye);  // renders of one RenderScene are not concurrent: the GIL is held here
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
     RenderCounters counters;
-    Integrator integrator(scene, cam, film, cfg, counters);
-    const int done = run_tiles(integrator.tile_count(), threads > 0 ? threads : obj->threads, progress,
-                               [&](size_t t, const std::atomic<bool> &stop) { integrator.render_tile(t, &stop); });
+    std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
+    std::string message;
+    if (PyObject *type = run_native([&] { integrator = std::make_unique<Integrator>(scene, cam, film, cfg, counters); },
+                                    message))
+        return PyErr_SetString(type, message.c_str()), nullptr;
+    const int done = run_tiles(integrator->tile_count(), threads > 0 ? threads : obj->threads, progress,
+                               [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
     if (done < 0) return nullptr;
     auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
     return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,

@@ -123,6 +123,8 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
                        const IntegratorSettings &settings, RenderCounters &counters)
     : scene_(scene), camera_(camera), film_(film), settings_(settings), counters_(counters),
       filter_(settings.filter_type, settings.filter_width),
+      camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
+                                              float(camera.position[2])))),
       lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
@@ -159,7 +161,8 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         Ray rays[kPacketRays];
         block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
         SurfacePoint hits[kPacketRays];
-        if (settings_.packets) scene_.intersect_camera(rays, n, settings_.method, hits, &tally.stats);
+        if (settings_.packets)
+            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
             const uint32_t pixel_id =
                 uint32_t(film_.y0 + rows[k]) * uint32_t(film_.width) + uint32_t(film_.x0 + cols[k]);
@@ -208,7 +211,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
     for (;;) {
         if (first) sp = *first, first = nullptr;  // the camera packet's answer for this ray
-        else sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
+        else
+            sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera ? camera_inside_.data() : nullptr,
+                                  &tally.stats);
         if (st.specular && !cfg.headlight)
             for (const Light &light : scene_.lights())
                 if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
@@ -434,7 +439,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     Vec3 t(1, 1, 1);
     SurfacePoint sp, previous;  // `from` points into `previous` while `sp` is being found
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
-        sp = scene_.intersect(ray, method, kVisShadow, from, false, &tally.stats);
+        sp = scene_.intersect(ray, method, kVisShadow, from, nullptr, &tally.stats);
         if (!sp.valid()) return t;
         const Material &m = scene_.material(sp.material);
         const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <vector>
 
 #include "scene/camera.h"
 #include "scene/render_scene.h"
@@ -72,6 +73,7 @@ class Integrator {
     const IntegratorSettings &settings_;
     RenderCounters &counters_;
     PixelFilter filter_;
+    const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
 };
 
