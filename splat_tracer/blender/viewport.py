@@ -12,9 +12,11 @@ and view_draw, and hands the thread immutable snapshots (a RenderScene, a Camera
 """
 from __future__ import annotations
 
+import atexit
 import math
 import threading
 import time
+import weakref
 from dataclasses import dataclass, field
 from typing import Iterable, Optional
 
@@ -528,6 +530,7 @@ class ViewportSession:
         """Renders the passes on a thread from now on (it never calls bpy)."""
         if self._thread is None:
             self._thread = threading.Thread(target=self._loop, name="splat_tracer viewport", daemon=True)
+            _running.add(self)
             self._thread.start()
 
     def _loop(self) -> None:
@@ -555,12 +558,28 @@ class ViewportSession:
         return all(self._next[name] >= len(job.schedule) for name, job in self._jobs.items())
 
     def close(self) -> None:
+        """Stops the thread: the pass in flight stops within a sample of a 4x4 block (the
+        core checks its stop flag between samples), so the join returns in well under its
+        timeout."""
         with self._cond:
             self._closed = True
             self._cond.notify_all()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=5.0)
         self._thread = None
+        _running.discard(self)
+
+
+# The sessions whose thread runs, closed at exit before Python finalizes: an engine's
+# __del__, which closes its session, may come only during finalization or never, when the
+# thread can no longer take the GIL to see the close.
+_running: "weakref.WeakSet[ViewportSession]" = weakref.WeakSet()
+
+
+@atexit.register
+def _close_running_sessions() -> None:
+    for vs in list(_running):
+        vs.close()
 
 
 def status(images: dict, done: bool) -> str:

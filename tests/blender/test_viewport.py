@@ -489,3 +489,65 @@ def test_ab_operators_and_shortcut(blender, empty_scene):
     item = next(k for k in keymap.keymap_items if k.idname == "splat_tracer.ab_flip")
     assert (item.type, item.shift, item.alt, item.ctrl) == ("B", True, True, False)
     assert bpy.types.SPLAT_TRACER_PT_viewport_ab.poll(bpy.context)
+
+
+# --------------------------------------------------------------------------------------
+# Stopping the render thread (issue #22): close() and interpreter exit.
+
+LONG_PASS_CHILD = """
+import atexit, sys, threading, time
+sys.path[:0] = [{root!r}, {support!r}]
+STATE = {{}}
+# Registered before viewport's own hook: runs after it (atexit is last in, first out).
+atexit.register(lambda: print("at exit: alive", STATE["thread"].is_alive(), flush=True) if STATE else None)
+from splat_tracer.blender import viewport
+from splat_tracer.render import ab
+from splat_tracer.render.camera import Camera
+from splat_tracer.render.method import Method
+from splat_tracer.render.scene import Instance, RenderScene
+from splat_tracer.render.shading import Light, RenderSettings, World
+from splat_tracer.render.splats import SplatCloud
+from geometry import sphere_cloud
+
+# One pass of 65536 samples: a single 32x32 tile of it takes minutes.
+scene = RenderScene([Instance(SplatCloud(*sphere_cloud(20000)))], [Light(type="SUN", power=3.0)],
+                    World(colour=(0.1, 0.1, 0.1)))
+camera = Camera.look_at((0, 0, 4), (0, 0, 0), (0, 1, 0), 40.0, 1.0)
+view = viewport.View(((1.0, 0, 0, 0),) * 4, ((1.0, 0, 0, 0),) * 4, 64, 64, (0, 0, 64, 64))
+settings = RenderSettings(samples=65536)
+vs = viewport.ViewportSession()
+job = viewport._VariantRender(1, "SCENE", scene, camera, view, settings, Method(), 0, ((1, 65536),))
+vs._variants = (ab.Variant("SCENE", Method(), 1.0),)
+with vs._cond:
+    vs._jobs["SCENE"], vs._next["SCENE"] = job, 0
+vs.start()
+time.sleep(0.5)  # inside the pass
+thread = vs._thread
+print("passes done", vs.counters["renders"], flush=True)
+if {mode!r} == "close":
+    t0 = time.monotonic()
+    vs.close()
+    print("closed in %.2f s, alive %s" % (time.monotonic() - t0, thread.is_alive()), flush=True)
+else:
+    STATE["thread"] = thread
+"""
+
+
+@pytest.mark.parametrize("mode", ["close", "exit"])
+def test_the_render_thread_stops_within_its_timeout_mid_pass(mode):
+    """A pass whose one tile takes minutes: close() -- called directly, or by the module's
+    atexit hook when Python exits with the session still running -- ends the thread in well
+    under close()'s 5 s join, and the process exits cleanly."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    code = LONG_PASS_CHILD.format(root=str(root), support=str(root / "tests" / "support"), mode=mode)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "passes done 0" in r.stdout, r.stdout  # the close came mid-pass
+    if mode == "close":
+        line = next(line for line in r.stdout.splitlines() if line.startswith("closed in"))
+        assert float(line.split()[2]) < 1.0 and line.endswith("alive False"), line
+    else:
+        assert "at exit: alive False" in r.stdout, r.stdout

@@ -77,7 +77,7 @@ def core_part(i: dict) -> dict:
 
     w, h = i["size"][0], i["size"][1]
     rgba, depth, normals = empty("f", h, w, 4), empty("f", h, w), empty("f", h, w, 3)
-    scene.render(i["local_from_ndc"], i["position"], i["forward"], w, h, (0, 0, w, h), (0.0, 0.0, 0.0, 0.0),
+    scene.render(i["local_from_camera"], i["frustum"], bool(i["orthographic"][0]), w, h, (0, 0, w, h), (0.0, 0.0, 0.0, 0.0),
                  rgba, depth, normals, THREADS)  # the headlight, the default method
     out.update(headlight_rgba=rgba, headlight_depth=depth, headlight_normal=normals)
 
@@ -115,7 +115,8 @@ def api_part(i: dict) -> dict:
     grey = Material(base_colour=(0.8, 0.8, 0.8), roughness=0.5)
     scene = RenderScene([Instance(cloud, materials=(grey,), pass_index=1), Instance(floor, pass_index=2)],
                         [Light(type="SUN", power=3.0, direction=tuple(a["sun_direction"]))], threads=THREADS)
-    camera = Camera(a["local_from_ndc"], a["position"], a["forward"])
+    camera = Camera(a["local_from_camera"], tuple(a["frustum"][:4]), tuple(a["frustum"][4:]),
+                    bool(a["orthographic"][0]))
     w, h = (int(v) for v in a["size"])
     frame = scene.render(camera, w, h, RenderSettings(samples=4), passes=(
         "Combined", "Depth", "Normal", "DiffCol", "Shadow", "IndexOB"), threads=THREADS)

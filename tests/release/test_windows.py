@@ -109,8 +109,10 @@ def inputs(tmp_path_factory) -> Path:
     f32 = np.float32
     np.savez(path, centres=centres.astype(f32), normals=normals.astype(f32), radii=radii.astype(f32),
              origins=origins.astype(f32), directions=directions.astype(f32),
-             local_from_ndc=np.ascontiguousarray(camera.local_from_ndc, np.float64),
-             position=np.asarray(camera.position, np.float64), forward=np.asarray(camera.forward, np.float64),
+             # the camera as the core takes it: local_from_camera 4x4, frustum and clip range (6)
+             local_from_camera=np.ascontiguousarray(camera.native()[0], np.float64),
+             frustum=np.ascontiguousarray(camera.native()[1], np.float64),
+             orthographic=np.array([camera.orthographic], np.int32),
              size=np.array([320, 240], np.int32), queries=rng.uniform(-1.2, 1.2, (2000, 3)).astype(f32),
              rows=np.arange(0, 20000, 7, dtype=np.int32),
              floor_vertices=np.array([[-4, -4, -1], [4, -4, -1], [4, 4, -1], [-4, 4, -1]], f32),

@@ -134,13 +134,10 @@ template <class PerRay>
 bool for_each_ray(PyObject *self, int threads, Py_ssize_t count, size_t chunk, PerRay &&per_ray) {
     const size_t chunks = (size_t(count) + chunk - 1) / chunk;
     return without_gil([&] {
-        parallel_for(
-            chunks, threads_arg(self, threads),
-            [&](size_t c) {
-                const size_t end = std::min(size_t(count), (c + 1) * chunk);
-                for (size_t i = c * chunk; i < end; ++i) per_ray(i);
-            },
-            [](size_t) { return true; });
+        parallel_until_exit(chunks, threads_arg(self, threads), [&](size_t c) {
+            const size_t end = std::min(size_t(count), (c + 1) * chunk);
+            for (size_t i = c * chunk; i < end; ++i) per_ray(i);
+        });
     });
 }
 
@@ -177,6 +174,9 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!get_array(oid, "out_id", 'i', 1, s1, true, id)) return nullptr;
     if (!get_array(ofr, "out_front", 'B', 1, s1, true, fr)) return nullptr;
     if (onrm != Py_None && !get_array(onrm, "out_normal", 'f', 2, sn, true, nrm)) return nullptr;
+    if (!check_separate({{t, "out_t"}, {id, "out_id"}, {fr, "out_front"}, {nrm, "out_normal"}, {stats_view, "out_stats"}},
+                        {{o, "origins"}, {d, "directions"}}))
+        return nullptr;
 
     const SplatScene &scene = scene_of(self);
     const float *po = o.data<float>(), *pd = d.data<float>();
@@ -243,6 +243,10 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (omem != Py_None && !get_array(omem, "out_members", 'i', 2, sm, true, mem)) return nullptr;
     if (oin != Py_None && !get_array(oin, "inside", 'B', 1, s1, false, in)) return nullptr;
     if (oex != Py_None && !get_array(oex, "exclude", 'i', 2, sx, false, ex)) return nullptr;
+    if (!check_separate({{t, "out_t"}, {id, "out_id"}, {fr, "out_front"}, {nrm, "out_normal"}, {col, "out_colour"},
+                         {mem, "out_members"}},
+                        {{o, "origins"}, {d, "directions"}, {in, "inside"}, {ex, "exclude"}}))
+        return nullptr;
     const int n_ex = ex.held ? int(ex.dim(1)) : 0;
     if (ex.held) {
         const int32_t *e = ex.data<int32_t>();
@@ -308,12 +312,16 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     Camera cam;
-    if (!parse_camera(om, ofrustum, orthographic, cam)) return nullptr;
+    CameraViews cam_views;
+    if (!parse_camera(om, ofrustum, orthographic, cam, cam_views)) return nullptr;
     View rgba, depth, normal;
     Py_ssize_t sr[3] = {h, w, 4}, sd[2] = {h, w}, sn[3] = {h, w, 3};
     if (!get_array(orgba, "out_rgba", 'f', 3, sr, true, rgba)) return nullptr;
     if (odepth != Py_None && !get_array(odepth, "out_depth", 'f', 2, sd, true, depth)) return nullptr;
     if (onormal != Py_None && !get_array(onormal, "out_normal", 'f', 3, sn, true, normal)) return nullptr;
+    if (!check_separate({{rgba, "out_rgba"}, {depth, "out_depth"}, {normal, "out_normal"}},
+                        {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
     for (float v : bg)
         if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "background must be finite");
 
@@ -331,7 +339,7 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     const size_t tiles = renderer.tile_count();
 
     const int completed = run_tiles(tiles, threads_arg(self, threads), progress,
-                                    [&](size_t t) { renderer.render_tile(t); });
+                                    [&](size_t t, const std::atomic<bool> &) { renderer.render_tile(t); });
     if (completed < 0) return nullptr;
     return PyBool_FromLong(completed);
 }
@@ -413,6 +421,19 @@ PyObject *set_thread_budget(PyObject *, PyObject *arg) {
     Py_RETURN_NONE;
 }
 
+// Test seam: how long the exit hook waits for native calls in flight (ExitState::wait);
+// returns the previous wait. 0 makes any call still running at exit park its thread.
+PyObject *set_exit_wait(PyObject *, PyObject *arg) {
+    const double seconds = PyFloat_AsDouble(arg);
+    if (seconds == -1.0 && PyErr_Occurred()) return nullptr;
+    if (!(seconds >= 0.0 && seconds <= 3600.0)) return PyErr_Format(PyExc_ValueError, "wait must be in 0..3600 s");
+    ExitState &s = exit_state();
+    std::lock_guard<std::mutex> lock(s.mutex);
+    const double previous = double(s.wait.count()) / 1000.0;
+    s.wait = std::chrono::milliseconds(int64_t(seconds * 1000.0));
+    return PyFloat_FromDouble(previous);
+}
+
 PyMethodDef module_methods[] = {
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
     {"simd_path", simd_path, METH_NOARGS,
@@ -424,10 +445,31 @@ PyMethodDef module_methods[] = {
     {"_set_thread_budget", set_thread_budget, METH_O,
      "Test seam: the core may start this many more threads, then thread creation fails as if the system "
      "refused it (-1: no limit)."},
+    {"_set_exit_wait", set_exit_wait, METH_O,
+     "Test seam: seconds the exit hook waits for native calls in flight; returns the previous wait."},
     {nullptr, nullptr, 0, nullptr},
 };
 
+PyMethodDef at_exit_def = {"_at_exit", at_exit, METH_NOARGS,
+                           "Stops native work before Python finalizes (registered with atexit on import)."};
+
+// Registers at_exit with the atexit module (see ExitState).
+int register_at_exit(PyObject *module) {
+    PyObject *hook = PyCFunction_NewEx(&at_exit_def, nullptr, nullptr);
+    if (!hook) return -1;
+    PyObject *atexit = PyImport_ImportModule("atexit");
+    PyObject *res = atexit ? PyObject_CallMethod(atexit, "register", "O", hook) : nullptr;
+    Py_XDECREF(atexit);
+    Py_XDECREF(res);
+    if (!res || PyModule_AddObject(module, "_at_exit", hook) < 0) {
+        Py_DECREF(hook);
+        return -1;
+    }
+    return 0;
+}
+
 int module_exec(PyObject *module) {
+    if (register_at_exit(module) < 0) return -1;
     PyObject *type = PyType_FromSpec(&Scene_spec);
     if (!type) return -1;
     if (PyModule_AddObject(module, "Scene", type) < 0) {

@@ -18,27 +18,29 @@ namespace {
 
 // Runs fn(poll) without the GIL. `progress` (None or a callable) is called as
 // progress(fraction) on this thread, with the GIL, whenever the work polls; an exception
-// from it (the user cancelled) stops the work and is re-raised. Returns false with a Python
-// exception set on any failure.
+// from it (the user cancelled) stops the work and is re-raised. The work also stops when
+// Python is exiting (RuntimeError; see GilRelease). Returns false with a Python exception
+// set on any failure.
 template <class Fn>
 bool run_graph(PyObject *progress, Fn &&fn) {
-    PyThreadState *saved = nullptr;
-    bool callback_failed = false;
+    GilRelease gil;
+    bool callback_failed = false, exit_stop = false;
     const GraphPoll poll = [&](double fraction) {
+        if (exiting()) return exit_stop = true, false;
         if (progress == Py_None) return true;
-        PyEval_RestoreThread(saved);
+        gil.take();
         PyObject *res = PyObject_CallFunction(progress, "d", fraction);
         if (res) Py_DECREF(res);
         else callback_failed = true;
-        saved = PyEval_SaveThread();
+        gil.give();
         return !callback_failed;
     };
     std::string message;
-    PyObject *error_type = nullptr;
-    saved = PyEval_SaveThread();
-    error_type = run_native([&] { fn(poll); }, message);
-    PyEval_RestoreThread(saved);
+    if (!gil.release()) return false;
+    PyObject *error_type = run_native([&] { fn(poll); }, message);
+    gil.finish();
     if (callback_failed) return false;  // its exception is still set
+    if (exit_stop && !error_type) error_type = PyExc_RuntimeError, message = kExitingMessage;
     if (error_type) PyErr_SetString(error_type, message.c_str());
     return error_type == nullptr;
 }
@@ -46,19 +48,6 @@ bool run_graph(PyObject *progress, Fn &&fn) {
 bool check_progress(PyObject *progress) {
     if (progress != Py_None && !PyCallable_Check(progress))
         return PyErr_Format(PyExc_TypeError, "progress must be callable or None"), false;
-    return true;
-}
-
-// An output sharing memory with another argument would be read after being overwritten,
-// indices then leading anywhere: refused.
-bool check_separate(const View &out, const char *name, std::initializer_list<const View *> others) {
-    const char *a = static_cast<const char *>(out.buf.buf);
-    for (const View *o : others) {
-        if (!o->held || o == &out) continue;
-        const char *b = static_cast<const char *>(o->buf.buf);
-        if (out.buf.len > 0 && o->buf.len > 0 && a < b + o->buf.len && b < a + out.buf.len)
-            return PyErr_Format(PyExc_ValueError, "%s must not share memory with another argument", name), false;
-    }
     return true;
 }
 
@@ -81,7 +70,7 @@ PyObject *per_point(PyObject *args, PyObject *kwargs, char kind, Fn &&fn) {
     }();
     if (!get_array(op, "points", single ? 'f' : 'd', 2, s3, false, p)) return nullptr;
     Py_ssize_t sn[1] = {p.dim(0)};
-    if (!get_array(oout, "out", kind, 1, sn, true, out) || !check_separate(out, "out", {&p})) return nullptr;
+    if (!get_array(oout, "out", kind, 1, sn, true, out) || !check_separate({{out, "out"}}, {{p, "points"}})) return nullptr;
     if (!run_graph(Py_None, [&](const GraphPoll &) {
             if constexpr (kFloat32Too) {
                 if (single) return fn(p.data<float>(), size_t(p.dim(0)), out.data<Out>(), threads);
@@ -113,7 +102,7 @@ PyObject *permute_table_py(PyObject *, PyObject *args, PyObject *kwargs) {
     const Py_ssize_t n = table.dim(0);
     Py_ssize_t sn[1] = {n}, so[2] = {n, -1};
     if (!get_array(oorder, "order", 'i', 1, sn, false, order) || !get_array(oout, "out", 'i', 2, so, true, out) ||
-        !check_separate(out, "out", {&table, &order}))
+        !check_separate({{out, "out"}}, {{table, "table"}, {order, "order"}}))
         return nullptr;
     if (first < 0 || first + out.dim(1) > table.dim(1))
         return PyErr_Format(PyExc_ValueError, "columns %zd to %zd are not all in the table's %zd", first,
@@ -138,7 +127,7 @@ PyObject *take_rows_py(PyObject *, PyObject *args, PyObject *kwargs) {
     if (!get_array(oa, "array", 'd', 2, s2, false, a) || !get_array(oorder, "order", 'i', 1, s1, false, order))
         return nullptr;
     Py_ssize_t so[2] = {order.dim(0), a.dim(1)};
-    if (!get_array(oout, "out", 'd', 2, so, true, out) || !check_separate(out, "out", {&a, &order})) return nullptr;
+    if (!get_array(oout, "out", 'd', 2, so, true, out) || !check_separate({{out, "out"}}, {{a, "array"}, {order, "order"}})) return nullptr;
     if (!run_graph(Py_None, [&](const GraphPoll &) {
             take_rows(a.data<double>(), size_t(a.dim(0)), size_t(a.dim(1)), order.data<int32_t>(),
                       size_t(order.dim(0)), out.data<double>(), threads);
@@ -172,7 +161,7 @@ PyObject *graph_weights(PyObject *, PyObject *args, PyObject *kwargs) {
     if (!get_array(on, "normals", 'd', 2, sn, false, n) || !get_array(onbr, "neighbours", 'i', 2, sk, false, nbr))
         return nullptr;
     Py_ssize_t so[2] = {count, nbr.dim(1)};
-    if (!get_array(oout, "out", 'f', 2, so, true, out) || !check_separate(out, "out", {&p, &n, &nbr})) return nullptr;
+    if (!get_array(oout, "out", 'f', 2, so, true, out) || !check_separate({{out, "out"}}, {{p, "points"}, {n, "normals"}, {nbr, "neighbours"}})) return nullptr;
     if (!run_graph(progress, [&](const GraphPoll &poll) {
             neighbour_edge_weights(p.data<double>(), n.data<double>(), size_t(count), nbr.data<int32_t>(),
                                           size_t(nbr.dim(1)), across, out.data<float>(), threads, poll);
@@ -196,7 +185,7 @@ PyObject *spanning_forest(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_ssize_t sw[2] = {count, k}, se[2] = {std::max<Py_ssize_t>(count - 1, 0), 2}, sl[1] = {count};
     if (!get_array(ow, "weights", 'f', 2, sw, false, w) || !get_array(oedges, "out_edges", 'i', 2, se, true, edges) ||
         !get_array(olabels, "out_labels", 'i', 1, sl, true, labels) ||
-        !check_separate(edges, "out_edges", {&nbr, &w, &labels}) || !check_separate(labels, "out_labels", {&nbr, &w}))
+        !check_separate({{edges, "out_edges"}, {labels, "out_labels"}}, {{nbr, "neighbours"}, {w, "weights"}}))
         return nullptr;
     size_t n_edges = 0, n_components = 0;
     if (!run_graph(progress, [&](const GraphPoll &poll) {
@@ -222,8 +211,7 @@ PyObject *forest_traversal_py(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_ssize_t sn[1] = {count};
     if (!get_array(oparent, "out_parent", 'i', 1, sn, true, parent) ||
         !get_array(oorder, "out_order", 'i', 1, sn, true, order) ||
-        !check_separate(parent, "out_parent", {&edges, &anchors, &order}) ||
-        !check_separate(order, "out_order", {&edges, &anchors}))
+        !check_separate({{parent, "out_parent"}, {order, "out_order"}}, {{edges, "edges"}, {anchors, "anchors"}}))
         return nullptr;
     size_t reached = 0;
     if (!run_graph(progress, [&](const GraphPoll &poll) {
@@ -245,7 +233,7 @@ PyObject *chain_flips_py(PyObject *, PyObject *args, PyObject *kwargs) {
         return nullptr;
     Py_ssize_t sn[1] = {parent.dim(0)};
     if (!get_array(oflip, "flip", 'B', 1, sn, false, flip) || !get_array(oneg, "out_negative", 'B', 1, sn, true, neg) ||
-        !check_separate(neg, "out_negative", {&order, &parent, &flip}))
+        !check_separate({{neg, "out_negative"}}, {{order, "order"}, {parent, "parent"}, {flip, "flip"}}))
         return nullptr;
     if (!run_graph(Py_None, [&](const GraphPoll &) {
             chain_flips(order.data<int32_t>(), size_t(order.dim(0)), parent.data<int32_t>(), flip.data<uint8_t>(),

@@ -26,10 +26,11 @@ PointIndex &index_of(PyObject *self) { return *reinterpret_cast<PointIndexObject
 // on one of the importer's chunks (2^18 rows; the closed guess's, a few thousand).
 constexpr size_t kRowsPerTask = 512;
 
-// Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL.
+// Runs task(t) for t in [0, tasks) on `threads` threads, without the GIL (stopped, with a
+// RuntimeError, when Python is exiting).
 template <class Task>
 bool for_tasks(size_t tasks, int threads, Task &&task) {
-    return without_gil([&] { parallel_for(tasks, threads, task, [](size_t) { return true; }); });
+    return without_gil([&] { parallel_until_exit(tasks, threads, task); });
 }
 
 // Runs fn(i) for i in [0, m) in tasks of kRowsPerTask.
@@ -212,7 +213,9 @@ PyObject *PointIndex_knn(PyObject *self, PyObject *args, PyObject *kwargs) {
     View rows, dist, ids;
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
     Py_ssize_t s[2] = {rows.dim(0), k};
-    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids)) return nullptr;
+    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids) ||
+        !check_separate({{dist, "dist"}, {ids, "ids"}}, {{rows, "rows"}}))
+        return nullptr;
     const int32_t *r = rows.data<int32_t>();
     float *d = dist.data<float>();
     uint32_t *n = reinterpret_cast<uint32_t *>(ids.data<int32_t>());
@@ -237,7 +240,9 @@ PyObject *PointIndex_knn_at(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!check_threads(threads) || !get_array(opos, "positions", 'f', 2, s3, false, pos) || !check_k(k, index.size()))
         return nullptr;
     Py_ssize_t s[2] = {pos.dim(0), k};
-    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids)) return nullptr;
+    if (!get_array(odist, "dist", 'f', 2, s, true, dist) || !get_array(oids, "ids", 'i', 2, s, true, ids) ||
+        !check_separate({{dist, "dist"}, {ids, "ids"}}, {{pos, "positions"}}))
+        return nullptr;
     const float *p = pos.data<float>();
     // Within 1e18 like the points (a distance to a position at 1e38 overflows float: no
     // candidate would ever be nearer than "infinitely far", and k would not be found).
@@ -271,7 +276,8 @@ PyObject *PointIndex_covering(PyObject *self, PyObject *args, PyObject *kwargs) 
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
     Py_ssize_t sn[2] = {Py_ssize_t(index.size()), 3}, ss[1] = {Py_ssize_t(index.size())}, so[1] = {rows.dim(0)};
     if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ospacing, "spacing", 'f', 1, ss, false, sp) ||
-        !get_array(oout, "out", 'f', 1, so, true, out))
+        !get_array(oout, "out", 'f', 1, so, true, out) ||
+        !check_separate({{out, "out"}}, {{rows, "rows"}, {nrm, "normals"}, {sp, "spacing"}}))
         return nullptr;
     if (!check_cover(k, k, hole, max_gap)) return nullptr;
     const int32_t *r = rows.data<int32_t>();
@@ -327,6 +333,7 @@ PyObject *PointIndex_radii(PyObject *self, PyObject *args, PyObject *kwargs) {
             !get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(ocover, "cover", 'f', 1, so, true, cov))
             return nullptr;
     }
+    if (!check_separate({{sp, "spacing"}, {cov, "cover"}}, {{rows, "rows"}, {nrm, "normals"}})) return nullptr;
     const int k = std::max(spacing_k, covering ? cover_k : 0);
     const int32_t *r = rows.data<int32_t>();
     const size_t m = size_t(rows.dim(0));
@@ -388,7 +395,8 @@ PyObject *PointIndex_widest_gaps(PyObject *self, PyObject *args, PyObject *kwarg
     View rows, nrm, out;
     if (!check_threads(threads) || !get_rows(orows, index, rows) || !check_k(k, index.size() - 1)) return nullptr;
     Py_ssize_t sn[2] = {Py_ssize_t(index.size()), 3}, so[1] = {rows.dim(0)};
-    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(oout, "out", 'f', 1, so, true, out))
+    if (!get_array(onrm, "normals", 'f', 2, sn, false, nrm) || !get_array(oout, "out", 'f', 1, so, true, out) ||
+        !check_separate({{out, "out"}}, {{rows, "rows"}, {nrm, "normals"}}))
         return nullptr;
     const float *n = nrm.data<float>();
     float *o = out.data<float>();
@@ -444,6 +452,8 @@ PyObject *PointIndex_pca(PyObject *self, PyObject *args, PyObject *kwargs) {
         if (!check_cover(cover_k, k, hole, max_gap) || !get_array(ocover, "cover", 'f', 1, ss, true, cov))
             return nullptr;
     }
+    if (!check_separate({{nrm, "normals"}, {graph, "graph"}, {sp, "spacing"}, {cov, "cover"}}, {{rows, "rows"}}))
+        return nullptr;
     const int32_t *r = rows.data<int32_t>();
     double *normals = nrm.data<double>();
     int32_t *g = graph.held ? graph.data<int32_t>() : nullptr;

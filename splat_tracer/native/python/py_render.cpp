@@ -3,6 +3,7 @@
 // splat_tracer/core.py wraps both; every input is validated here too.
 #include <atomic>
 #include <cmath>
+#include <iterator>
 #include <memory>
 #include <vector>
 
@@ -242,7 +243,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     cfg.packets = packets != 0;
 
     Camera cam;
-    if (!parse_camera(om, ofrustum, orthographic, cam)) return nullptr;
+    CameraViews cam_views;
+    if (!parse_camera(om, ofrustum, orthographic, cam, cam_views)) return nullptr;
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -263,15 +265,24 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         *out.target = out.view.data<float>();
     }
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    for (size_t i = 0; i < std::size(outs); ++i) {
+        if (!check_separate({{outs[i].view, outs[i].name}},
+                            {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+            return nullptr;
+        for (size_t j = 0; j < i; ++j)
+            if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+    }
 
     auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    RenderScene &scene = *obj->scene;
-    const Vec3 eye(float(cam.position[0]), float(cam.position[1]), float(cam.position[2]));
-    scene.locate_camera(eye);  // renders of one RenderScene are not concurrent: the GIL is held here
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
     RenderCounters counters;
-    Integrator integrator(scene, cam, film, cfg, counters);
-    const int done = run_tiles(integrator.tile_count(), threads > 0 ? threads : obj->threads, progress,
-                               [&](size_t t) { integrator.render_tile(t); });
+    std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
+    std::string message;
+    if (PyObject *type = run_native([&] { integrator = std::make_unique<Integrator>(scene, cam, film, cfg, counters); },
+                                    message))
+        return PyErr_SetString(type, message.c_str()), nullptr;
+    const int done = run_tiles(integrator->tile_count(), threads > 0 ? threads : obj->threads, progress,
+                               [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
     if (done < 0) return nullptr;
     auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
     return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,

@@ -5,11 +5,18 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdint>
 #include <cstring>
+#include <initializer_list>
+#include <mutex>
 #include <new>
+#include <stdexcept>
 #include <string>
+#include <thread>
 
 #include "base/errors.h"
 #include "base/parallel.h"
@@ -97,6 +104,37 @@ inline bool get_array(PyObject *obj, const char *name, char kind, int ndim, cons
     return true;
 }
 
+// A buffer argument and its name, for check_separate.
+struct Named {
+    const View &view;
+    const char *name;
+};
+
+// Outputs must share no memory with any input or with one another: an output overlapping an
+// input is read after being overwritten (an index then leads anywhere: a segfault), two
+// outputs are written by two threads at once. Views not held (an omitted optional argument)
+// are skipped. Sets ValueError naming both arguments and returns false otherwise.
+inline bool check_separate(std::initializer_list<Named> outputs, std::initializer_list<Named> inputs) {
+    auto overlap = [](const View &a, const View &b) {
+        if (!a.held || !b.held || a.buf.len <= 0 || b.buf.len <= 0) return false;
+        const char *p = static_cast<const char *>(a.buf.buf), *q = static_cast<const char *>(b.buf.buf);
+        return p < q + b.buf.len && q < p + a.buf.len;
+    };
+    for (auto out = outputs.begin(); out != outputs.end(); ++out) {
+        for (const Named &in : inputs)
+            if (overlap(out->view, in.view))
+                return PyErr_Format(PyExc_ValueError, "%s and %s share memory: an output needs a buffer of its own",
+                                    out->name, in.name),
+                       false;
+        for (auto other = outputs.begin(); other != out; ++other)
+            if (overlap(out->view, other->view))
+                return PyErr_Format(PyExc_ValueError, "%s and %s share memory: each output needs a buffer of its own",
+                                    out->name, other->name),
+                       false;
+    }
+    return true;
+}
+
 // Runs `fn`, turning a C++ exception into the Python exception type to raise and its
 // message: InputError (the caller's bad input) ValueError, bad_alloc MemoryError, anything
 // else RuntimeError. Returns nullptr when fn returned. Touches no Python object: it may run
@@ -115,15 +153,142 @@ PyObject *run_native(F &&fn, std::string &message) {
     return nullptr;
 }
 
+// ---------------------------------------------------------------------------------------
+// Native work at interpreter exit
+//
+// A thread that takes the GIL back once Python's finalization has begun is ended by CPython
+// (3.11 to 3.13: PyThread_exit_thread, a pthread_exit whose forced unwind through these C++
+// frames aborts the process; later versions hang the thread instead). A daemon thread inside
+// a render or an import when the main thread exits would do exactly that. So the module
+// registers at_exit() with `atexit`, whose callbacks run before finalization begins: it asks
+// every native loop to stop, refuses new calls, and waits (bounded) for the calls in flight
+// to take the GIL back and return. A call still running when the wait ends parks its thread
+// at its end without touching Python again: the process exits around it.
+
+// Shared by every call of every instance of the module (process-wide), never destroyed: a
+// parked thread may outlive static destruction.
+struct ExitState {
+    std::mutex mutex;
+    std::condition_variable changed;
+    std::atomic<bool> exiting{false};  // at_exit ran: native loops stop, new calls are refused
+    bool closed = false;               // at_exit returned: no call may take the GIL back
+    int calls = 0;                     // calls that released the GIL and have not returned
+    int taking = 0;                    // of those, threads holding or waiting for the GIL
+    // How long at_exit waits for the calls in flight. Stopped loops notice within a poll
+    // (50 ms) and a task; the wait only matters for work that has no poll (building a BVH
+    // or a k-d tree), which is safe to abandon by parking.
+    std::chrono::milliseconds wait{2000};
+};
+
+inline ExitState &exit_state() {
+    static ExitState *state = new ExitState;
+    return *state;
+}
+
+// Whether Python is exiting: native loops poll this and stop. Any thread, no GIL needed.
+inline bool exiting() { return exit_state().exiting.load(std::memory_order_relaxed); }
+
+inline constexpr const char *kExitingMessage = "Python is exiting: native work stopped";
+
+// Thrown by a native loop that stopped because Python is exiting; run_native makes it the
+// RuntimeError above.
+struct ExitStop : std::runtime_error {
+    ExitStop() : std::runtime_error(kExitingMessage) {}
+};
+
+// The GIL released for one call's native work, taken back only while that is safe (see
+// above). release() once with the GIL, then without it any number of take() / give() pairs
+// (progress callbacks), then finish().
+class GilRelease {
+  public:
+    GilRelease() = default;
+    GilRelease(const GilRelease &) = delete;
+    GilRelease &operator=(const GilRelease &) = delete;
+
+    // With the GIL: releases it. False with RuntimeError set when Python is exiting.
+    bool release() {
+        ExitState &s = exit_state();
+        {
+            std::lock_guard<std::mutex> lock(s.mutex);
+            if (s.exiting) return PyErr_SetString(PyExc_RuntimeError, kExitingMessage), false;
+            ++s.calls;
+        }
+        saved_ = PyEval_SaveThread();
+        return true;
+    }
+    // Without the GIL: takes it (for a progress callback). Never returns once at_exit has
+    // returned: the thread parks.
+    void take() {
+        ExitState &s = exit_state();
+        {
+            std::unique_lock<std::mutex> lock(s.mutex);
+            if (s.closed) {
+                lock.unlock();
+                for (;;) std::this_thread::sleep_for(std::chrono::hours(1));
+            }
+            ++s.taking;
+        }
+        PyEval_RestoreThread(saved_);
+    }
+    // With the GIL, after take(): releases it again to go on with the work.
+    void give() {
+        done_taking(false);
+        saved_ = PyEval_SaveThread();
+    }
+    // Without the GIL: takes it back at the end of the call (or parks, as take()).
+    void finish() {
+        take();
+        done_taking(true);
+    }
+
+  private:
+    static void done_taking(bool returned) {
+        ExitState &s = exit_state();
+        std::lock_guard<std::mutex> lock(s.mutex);
+        --s.taking;
+        if (returned) --s.calls;
+        s.changed.notify_all();
+    }
+    PyThreadState *saved_ = nullptr;
+};
+
+// The module's atexit callback (registered by module_exec): see ExitState. Called with the
+// GIL; waits without it.
+inline PyObject *at_exit(PyObject *, PyObject *) {
+    ExitState &s = exit_state();
+    {
+        std::lock_guard<std::mutex> lock(s.mutex);
+        if (s.closed) Py_RETURN_NONE;  // a second instance of the module: done already
+        s.exiting = true;
+    }
+    Py_BEGIN_ALLOW_THREADS
+    std::unique_lock<std::mutex> lock(s.mutex);
+    s.changed.wait_for(lock, s.wait, [&] { return s.calls == 0; });
+    // A thread in a progress callback or returning holds or is about to hold the GIL: it is
+    // let through (it gives the GIL back within the callback), never cut off holding it.
+    s.changed.wait(lock, [&] { return s.taking == 0; });
+    s.closed = true;
+    lock.unlock();
+    Py_END_ALLOW_THREADS
+    Py_RETURN_NONE;
+}
+
+// parallel_for over `count` tasks with no progress callback, stopping when Python exits
+// (ExitStop).
+template <class Task>
+void parallel_until_exit(size_t count, int threads, Task &&task) {
+    if (!parallel_for(count, threads, task, [](size_t) { return !exiting(); })) throw ExitStop();
+}
+
 // Runs `fn` without the GIL, turning C++ exceptions into Python ones (run_native). Returns
-// false with a Python exception set when `fn` threw.
+// false with a Python exception set when `fn` threw, or when Python is exiting.
 template <class F>
 bool without_gil(F &&fn) {
     std::string message;
-    PyObject *type = nullptr;
-    Py_BEGIN_ALLOW_THREADS
-    type = run_native(fn, message);
-    Py_END_ALLOW_THREADS
+    GilRelease gil;
+    if (!gil.release()) return false;
+    PyObject *type = run_native(fn, message);
+    gil.finish();
     if (type) PyErr_SetString(type, message.c_str());
     return type == nullptr;
 }
@@ -219,50 +384,62 @@ inline bool parse_method(PyObject *obj, Method &m) {
     return true;
 }
 
-// Runs task(t) for the `tiles` tiles on `threads` threads without the GIL. `progress`
+// Runs task(t, stop) for the `tiles` tiles on `threads` threads without the GIL. `progress`
 // (None or a callable) runs on this (the calling) thread, with the GIL, between waits, as
 // progress(done, total); it returns True to stop. An exception from it stops the work and
-// is re-raised. Returns 1 when every tile was done, 0 when stopped, -1 with an exception set.
+// is re-raised. Once a stop is asked (or Python is exiting) `stop` is set: a long tile may
+// end early with its pixels unfinished. Returns 1 when every tile was done, 0 when stopped,
+// -1 with an exception set (RuntimeError when Python is exiting).
 template <class Task>
 int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
-    bool callback_failed = false, completed = false;
-    PyThreadState *saved = nullptr;
+    bool callback_failed = false, completed = false, exit_stop = false;
+    std::atomic<bool> stop{false};
+    GilRelease gil;
     auto poll = [&](size_t done) {
-        if (progress == Py_None) return true;
-        PyEval_RestoreThread(saved);
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
-        bool go_on = false;
-        if (!res) {
-            callback_failed = true;
-        } else {
-            int stop = PyObject_IsTrue(res);
-            Py_DECREF(res);
-            if (stop < 0) callback_failed = true;
-            go_on = stop == 0;
+        bool go_on = true;
+        if (exiting()) {
+            exit_stop = true, go_on = false;
+        } else if (progress != Py_None) {
+            gil.take();
+            PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
+            if (!res) {
+                callback_failed = true, go_on = false;
+            } else {
+                const int asked = PyObject_IsTrue(res);
+                Py_DECREF(res);
+                if (asked < 0) callback_failed = true;
+                go_on = asked == 0;
+            }
+            gil.give();
         }
-        saved = PyEval_SaveThread();
+        if (!go_on) stop = true;
         return go_on;
     };
     std::string message;
     PyObject *error_type = nullptr;
-    saved = PyEval_SaveThread();
+    if (!gil.release()) return -1;
     try {
-        completed = parallel_for(tiles, threads, task, poll);
+        completed = parallel_for(tiles, threads, [&](size_t t) { task(t, stop); }, poll);
     } catch (const std::bad_alloc &) {
         error_type = PyExc_MemoryError, message = "out of memory";
     } catch (const std::exception &e) {
         error_type = PyExc_RuntimeError, message = e.what();
     }
-    PyEval_RestoreThread(saved);
+    // A last report, so that callers see 100 %: still inside the call (between take and
+    // give), since the callback may release the GIL and want it back.
+    if (progress != Py_None && completed && !error_type) {
+        gil.take();
+        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
+        if (res) Py_DECREF(res);
+        else callback_failed = true;
+        gil.give();
+    }
+    gil.finish();
     if (callback_failed) return -1;  // the callback's exception is still set
+    if (exit_stop && !error_type) error_type = PyExc_RuntimeError, message = kExitingMessage;
     if (error_type) {
         PyErr_SetString(error_type, message.c_str());
         return -1;
-    }
-    if (progress != Py_None && completed) {  // a last report, so that callers see 100 %
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
-        if (!res) return -1;
-        Py_DECREF(res);
     }
     return completed ? 1 : 0;
 }
@@ -285,11 +462,17 @@ inline bool check_render_args(int width, int height, int x0, int y0, int w, int 
     return true;
 }
 
+// The arrays of a camera, held while the call runs (for check_separate).
+struct CameraViews {
+    View m, frustum;
+};
+
 // A camera from its parameters (render.camera.Camera): local_from_camera 4x4 (an affine
 // matrix), frustum 6 (left, right, bottom, top, clip start, clip end), all float64 and
 // finite, and whether it is orthographic. Sets an exception and returns false otherwise.
-inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Camera &cam) {
-    View m, fr;
+// `views` holds the two arrays while the call runs (for check_separate).
+inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Camera &cam, CameraViews &views) {
+    View &m = views.m, &fr = views.frustum;
     Py_ssize_t s44[2] = {4, 4}, s6[1] = {6};
     if (!get_array(om, "local_from_camera", 'd', 2, s44, false, m) ||
         !get_array(ofrustum, "frustum", 'd', 1, s6, false, fr))

@@ -45,12 +45,13 @@ Ray RenderScene::to_object(const Instance &inst, const Ray &ray, float *scale) {
     return r;
 }
 
-void RenderScene::locate_camera(Vec3 eye) {
+std::vector<uint8_t> RenderScene::locate_camera(Vec3 eye) const {
     // A point is inside a closed surface when rays from it in every direction first meet the
     // surface from behind. Six axis rays, five of which must agree: one may slip through a
     // gap between discs or graze an edge.
-    for (Instance &inst : instances_) {
-        inst.camera_inside = false;
+    std::vector<uint8_t> camera_inside(instances_.size(), 0);
+    for (size_t i = 0; i < instances_.size(); ++i) {
+        const Instance &inst = instances_[i];
         if (!inst.splats || !inst.splats->any_closed()) continue;
         const Vec3 o = inst.to_object.point(eye);
         int behind = 0;
@@ -62,8 +63,9 @@ void RenderScene::locate_camera(Vec3 eye) {
             const Hit h = inst.splats->intersect(r);
             behind += h.valid() && !h.front && inst.splats->closed(h.id);
         }
-        inst.camera_inside = behind >= 5;
+        camera_inside[i] = behind >= 5;
     }
+    return camera_inside;
 }
 
 // Visits, front to back, each instance visible to `ray_kind` whose box the ray enters before
@@ -163,7 +165,7 @@ inline float mesh_reach(float limit, float s) {
 }
 
 SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
-                                    bool camera_ray, TraversalStats *stats) const {
+                                    const uint8_t *camera_inside, TraversalStats *stats) const {
     SurfacePoint best;
     float limit = ray.tmax;
     for_each_instance(ray, limit, ray_kind, from, stats,
@@ -176,7 +178,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                               // The whole ray, not cut at the nearest surface so far: the layer's
                               // window may reach past it (its members, and the far phase's exit),
                               // and what the ray sees must not depend on the instances' order.
-                              const bool inside = from.inside == index || (camera_ray && inst.camera_inside);
+                              const bool inside = from.inside == index || (camera_inside && camera_inside[index]);
                               take_splat_hit(index, inst, ray,
                                              find_surface(*inst.splats, local, method, inside,
                                                           self ? from.members : nullptr, self ? from.n_members : 0,
@@ -189,8 +191,8 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
     return best;
 }
 
-void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
-                                   TraversalStats *stats) const {
+void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
+                                   SurfacePoint *out, TraversalStats *stats) const {
     for (int i = 0; i < n; ++i) new (&out[i]) SurfacePoint;
     // The camera-visible instances each ray enters (its own box test, through the top-level
     // tree as a packet), then each instance's rays together.
@@ -223,7 +225,7 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
         },
         stats ? &stats->nodes : nullptr);
     if (overflow) {  // a packet crossing more than kMaxEntered instances' boxes: ray by ray
-        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), true, stats);
+        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), camera_inside, stats);
         return;
     }
     for (int e = 0; e < n_entered; ++e) {
@@ -252,7 +254,7 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
             }
         } else {
             bool inside[kPacketRays];
-            for (int j = 0; j < m; ++j) inside[j] = inst.camera_inside;
+            for (int j = 0; j < m; ++j) inside[j] = camera_inside[index] != 0;
             SurfaceHit hits[kPacketRays];
             find_surfaces(*inst.splats, local, m, method, inside, nullptr, 0, hits, stats);
             for (int j = 0; j < m; ++j) take_splat_hit(index, inst, rays[ray_of[j]], hits[j], scale[j], out[ray_of[j]]);

@@ -52,7 +52,6 @@ struct Instance {
     uint32_t visibility = kVisAll;
     bool holdout = false;        // camera rays that see it get alpha 0
     float pass_index = 0;        // Object Index pass
-    bool camera_inside = false;  // a closed cloud around the camera: its camera rays start inside
     AABB bounds;                 // in the scene frame
 };
 
@@ -96,16 +95,19 @@ class RenderScene {
     bool any_transparent() const { return any_transparent_; }
     bool any_emission() const { return any_emission_; }  // a material emits light
 
-    // Marks the closed clouds that enclose `eye`: their camera rays start inside them.
-    void locate_camera(Vec3 eye);
+    // Per instance, 1 where a closed cloud encloses `eye`: that cloud's camera rays start
+    // inside it. Kept by each render (the integrator), not by the scene: renders of one scene
+    // from different cameras may run at once.
+    std::vector<uint8_t> locate_camera(Vec3 eye) const;
 
     // The nearest surface along the ray among the instances visible to `ray_kind`.
+    // camera_inside: locate_camera's flags for a camera ray, null for any other.
     SurfacePoint intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
-                           bool camera_ray, TraversalStats *stats) const;
+                           const uint8_t *camera_inside, TraversalStats *stats) const;
     // intersect() for n <= kPacketRays camera rays (a 4x4 pixel block): the same answers,
     // each instance's rays traced together as a packet (packet.h).
-    void intersect_camera(const Ray *rays, int n, const Method &method, SurfacePoint *out,
-                          TraversalStats *stats) const;
+    void intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
+                          SurfacePoint *out, TraversalStats *stats) const;
     // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 

@@ -123,13 +123,15 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
                        const IntegratorSettings &settings, RenderCounters &counters)
     : scene_(scene), camera_(camera), film_(film), settings_(settings), counters_(counters),
       filter_(settings.filter_type, settings.filter_width),
+      camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
+                                              float(camera.position[2])))),
       lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
 
-void Integrator::render_tile(size_t tile) const {
+void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     Tally tally;
     // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
     for_each_block(film_, settings_.tile_size, tile,
-                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally); });
+                   [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally, stop); });
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
     counters_.transparent += tally.transparent;
@@ -141,7 +143,8 @@ void Integrator::render_tile(size_t tile) const {
 
 // Every sample of n pixels (cols[k], rows[k]): sample by sample, the n camera rays' first
 // hits in one packet query (settings.packets), then each pixel's path.
-void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally) const {
+void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally,
+                             const std::atomic<bool> *stop) const {
     const int samples = settings_.samples;
     struct Pixel {
         Vec3 sum, diffcol, emit, shadow;
@@ -149,13 +152,17 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
     } acc[kPacketRays];
     for (int s = 0; s < samples; ++s) {
+        // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
+        // stop (the viewport closing, Python exiting) must not wait for it.
+        if (stop && stop->load(std::memory_order_relaxed)) return;
         float ux, uy;
         r2_point(uint32_t(s), &ux, &uy);
         const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
         Ray rays[kPacketRays];
         block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
         SurfacePoint hits[kPacketRays];
-        if (settings_.packets) scene_.intersect_camera(rays, n, settings_.method, hits, &tally.stats);
+        if (settings_.packets)
+            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
             const uint32_t pixel_id =
                 uint32_t(film_.y0 + rows[k]) * uint32_t(film_.width) + uint32_t(film_.x0 + cols[k]);
@@ -204,7 +211,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
     for (;;) {
         if (first) sp = *first, first = nullptr;  // the camera packet's answer for this ray
-        else sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera, &tally.stats);
+        else
+            sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera ? camera_inside_.data() : nullptr,
+                                  &tally.stats);
         if (st.specular && !cfg.headlight)
             for (const Light &light : scene_.lights())
                 if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
@@ -430,7 +439,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     Vec3 t(1, 1, 1);
     SurfacePoint sp, previous;  // `from` points into `previous` while `sp` is being found
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
-        sp = scene_.intersect(ray, method, kVisShadow, from, false, &tally.stats);
+        sp = scene_.intersect(ray, method, kVisShadow, from, nullptr, &tally.stats);
         if (!sp.valid()) return t;
         const Material &m = scene_.material(sp.material);
         const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);

@@ -5,6 +5,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <vector>
 
 #include "scene/camera.h"
 #include "scene/render_scene.h"
@@ -45,7 +46,9 @@ class Integrator {
                RenderCounters &counters);
 
     size_t tile_count() const { return splat::tile_count(film_, settings_.tile_size); }
-    void render_tile(size_t tile) const;
+    // stop: set by another thread to end the render early; the tile's pixels are then
+    // left unfinished (the caller discards a stopped render).
+    void render_tile(size_t tile, const std::atomic<bool> *stop = nullptr) const;
 
   private:
     struct Tally;       // per-tile ray counts
@@ -61,7 +64,7 @@ class Integrator {
                       const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
-    void shade_block(const int *cols, const int *rows, int n, Tally &tally) const;
+    void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
 
     const RenderScene &scene_;
@@ -70,6 +73,7 @@ class Integrator {
     const IntegratorSettings &settings_;
     RenderCounters &counters_;
     PixelFilter filter_;
+    const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
 };
 
