@@ -88,7 +88,8 @@ SAN_ENV   = LD_PRELOAD="$(SAN_LIBS)" \
             ASAN_OPTIONS=detect_leaks=0:log_path=$(abspath $(SAN))/logs/asan \
             UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:log_path=$(abspath $(SAN))/logs/ubsan
 SAN_TESTS = render/test_splats.py render/test_hostile_inputs.py render/test_method.py render/test_invariants.py \
-            render/test_scene.py pipeline/test_neighbours.py pipeline/test_graph.py
+            render/test_scene.py render/test_native_buffers.py render/test_scene_concurrency.py \
+            pipeline/test_neighbours.py pipeline/test_graph.py
 
 sanitize-tree: $(STAMP)
 	SPLAT_SANITIZE=1 $(VPY) setup.py --quiet build_ext --build-lib $(SAN)/lib --build-temp $(SAN)/tmp
