@@ -5,7 +5,7 @@
 The input bytes are decoded (atheris.FuzzedDataProvider) into float32 splat arrays mixing
 ordinary values with NaN, inf, -0.0, denormals, 1e18..1e19 and float32's extremes
 (sometimes with a wrong dtype or shape), and then into calls of every native entry
-point on them: _core.Scene(...), trace, trace_surface (methods read by field name, exclude ids, inside
+point on them: _core.SplatCloud(...), trace, trace_surface (methods read by field name, exclude ids, inside
 flags, tmin/tmax), render (camera matrices, windows, tile sizes), bvh_stats and bounds,
 coherent rays (fans and parallel bundles) traced in packets and one by one, which must
 agree exactly; then a _core.Mesh and a _core.RenderScene over both with fuzzed transforms, material
@@ -115,7 +115,7 @@ def fuzz_scene(fdp):
     r = array(fdp, (n,))
     col = array(fdp, (n, 3)) if fdp.ConsumeBool() else None
     closed = np.frombuffer(fdp.ConsumeBytes(n).ljust(n, b"\1"), np.uint8).copy() if fdp.ConsumeBool() else None
-    scene = call(_core.Scene, c, nrm, r, col, closed, fdp.ConsumeIntInRange(0, 3))
+    scene = call(_core.SplatCloud, c, nrm, r, col, closed, fdp.ConsumeIntInRange(0, 3))
     if scene is None:
         return None
     assert scene.size == n

@@ -77,7 +77,7 @@ class SplatCloud:
         col = None if colours is None else as_f32(colours, "colours", (len(c), 3))
         a = None if alphas is None else as_f32(alphas, "alphas", (len(c),))
         flags = np.broadcast_to(np.asarray(closed, dtype=np.uint8), (len(c),))
-        self._scene = _core.Scene(c, n, r, col, np.ascontiguousarray(flags), threads, a)
+        self._scene = _core.SplatCloud(c, n, r, col, np.ascontiguousarray(flags), threads, a)
 
     def __len__(self) -> int:
         return self._scene.size

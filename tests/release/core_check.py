@@ -7,7 +7,7 @@ TREE holds a copy of the splat_tracer package with the core under test (the Linu
 Windows build); it goes first on sys.path, so that no other build can be imported. Prints
 one JSON line of facts: where the module came from, its SIMD path, the Python.
 
-Two parts. The core's own entry points (`_core.Scene`, `PointIndex`) take any buffer, so
+Two parts. The core's own entry points (`_core.SplatCloud`, `PointIndex`) take any buffer, so
 they are called with memoryviews and the .npz is read and written by hand (an .npy is a
 short header and the raw array): that part needs no numpy, and runs in Windows Python 3.13
 under Wine 8.0, where numpy 2's Windows wheels do not load (they need ucrtbase's crealf,
@@ -69,7 +69,7 @@ def empty(fmt: str, *shape: int) -> memoryview:
 def core_part(i: dict) -> dict:
     """The compiled module's entry points, with memoryviews."""
     out = {}
-    scene = _core.Scene(i["centres"], i["normals"], i["radii"], None, None, THREADS)
+    scene = _core.SplatCloud(i["centres"], i["normals"], i["radii"], None, None, THREADS)
     rays = i["origins"].shape[0]
     t, ids, front, normal = empty("f", rays), empty("i", rays), empty("B", rays), empty("f", rays, 3)
     scene.trace(i["origins"], i["directions"], 0.0, float("inf"), t, ids, front, normal, THREADS)

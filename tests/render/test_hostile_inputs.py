@@ -158,7 +158,7 @@ def test_exclude_ids_are_checked_not_cast(exclude, error):
 
 
 def test_native_exclude_check():
-    scene = _core.Scene(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
+    scene = _core.SplatCloud(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
     out = [np.empty(1, np.float32), np.empty(1, np.int32), np.empty(1, np.uint8), np.empty((1, 3), np.float32),
            np.empty((1, 3), np.float32)]
     with pytest.raises(ValueError, match="exclude"):
@@ -214,7 +214,7 @@ def test_objects_of_an_earlier_module_initialisation_stay_usable():
         assert other is not _core
         print("mesh size", len(mesh))
         print("instances", RenderScene([Instance(scene), Instance(mesh)])._scene.instances)
-        new_scene = other.Scene(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
+        new_scene = other.SplatCloud(np.zeros((1, 3), np.float32), np.float32([[0, 0, 1]]), np.ones(1, np.float32))
         print("new scene", len(new_scene.bvh_stats()))
     """)
     assert result.returncode == 0, result.stderr

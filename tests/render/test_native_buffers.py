@@ -93,9 +93,9 @@ def _index():
 
 ROWS = np.arange(N, dtype=np.int32)
 CASES = {
-    "Scene.trace": (_trace, [4, 5, 6, "out_normal", "out_stats"]),
-    "Scene.trace_surface": (_trace_surface, [5, 6, 7, 8, 9, "out_members"]),
-    "Scene.render": (_splat_render, [7, "out_depth", "out_normal"]),
+    "SplatCloud.trace": (_trace, [4, 5, 6, "out_normal", "out_stats"]),
+    "SplatCloud.trace_surface": (_trace_surface, [5, 6, 7, 8, 9, "out_members"]),
+    "SplatCloud.render": (_splat_render, [7, "out_depth", "out_normal"]),
     "RenderScene.render": (_scene_render, [10, "depth", "normal", "diffcol", "emit", "shadow", "index",
                                            "splat_count"]),
     "PointIndex.knn": (lambda: (_index().knn, [ROWS.copy(), K, np.empty((N, K), np.float32),
@@ -198,7 +198,7 @@ def test_every_binding_with_an_output_is_covered():
     """Each callable of _core whose docstring names an out_/output argument is in CASES."""
     covered = {name.split(".")[-1] for name in CASES}
     found = set()
-    for owner in (_core, _core.Scene, _core.RenderScene, _core.PointIndex):
+    for owner in (_core, _core.SplatCloud, _core.RenderScene, _core.PointIndex):
         for attr in dir(owner):
             doc = getattr(getattr(owner, attr), "__doc__", None) or ""
             head = doc.split("--")[0].split(":")[0]

@@ -183,14 +183,14 @@ def test_native_module_validates_buffers_itself():
     n = np.tile(np.float32([0, 0, 1]), (4, 1))
     r = np.ones(4, np.float32)
     with pytest.raises(TypeError, match="float32"):
-        _core.Scene(c.astype(np.float64), n, r)
+        _core.SplatCloud(c.astype(np.float64), n, r)
     with pytest.raises(TypeError, match="C-contiguous"):
-        _core.Scene(np.zeros((3, 4), np.float32).T, n[:4], r)
+        _core.SplatCloud(np.zeros((3, 4), np.float32).T, n[:4], r)
     with pytest.raises(TypeError):
-        _core.Scene("not an array", n, r)
+        _core.SplatCloud("not an array", n, r)
     with pytest.raises(ValueError, match="axis 0"):
-        _core.Scene(c, n[:3], r)
-    scene = _core.Scene(c, n, r)
+        _core.SplatCloud(c, n[:3], r)
+    scene = _core.SplatCloud(c, n, r)
     o = np.zeros((5, 3), np.float32)
     d = np.tile(np.float32([0, 0, 1]), (5, 1))
     out = (np.empty(5, np.float32), np.empty(5, np.int32), np.empty(5, np.uint8))

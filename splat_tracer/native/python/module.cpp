@@ -1,8 +1,8 @@
 // Python bindings of the core: `splat_tracer._core`.
 //
 // Built against the CPython limited API (Py_LIMITED_API = 3.11, abi3) so that one binary
-// loads in every Blender from 4.2 (Python 3.11) to 5.1 (Python 3.13). Arrays travel
-// through the buffer protocol: the caller (splat_tracer/core.py) allocates every output
+// loads in every Blender from 4.2 (Python 3.11) to 5.2 (Python 3.13). Arrays travel
+// through the buffer protocol: the caller (splat_tracer/render/, splat_tracer/pointcloud/) allocates every output
 // with numpy, so this file never needs numpy's C API. Every input is validated here as
 // well, since the module may be called directly: bad input raises, it never crashes.
 #define PY_SSIZE_T_CLEAN
@@ -70,13 +70,13 @@ Ray make_ray(const float *origins, const float *directions, size_t i, double tmi
 // ---------------------------------------------------------------------------------------
 // Scene
 
-struct SceneObject {
+struct SplatCloudObject {
     PyObject_HEAD
     SplatScene *scene;
     int threads;
 };
 
-PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
+PyObject *SplatCloud_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", "alphas", nullptr};
     PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None, *oalpha = Py_None;
     int threads = 0;
@@ -109,23 +109,23 @@ PyObject *Scene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
         delete scene;
         return nullptr;
     }
-    reinterpret_cast<SceneObject *>(self)->scene = scene;
-    reinterpret_cast<SceneObject *>(self)->threads = threads;
+    reinterpret_cast<SplatCloudObject *>(self)->scene = scene;
+    reinterpret_cast<SplatCloudObject *>(self)->threads = threads;
     return self;
 }
 
-void Scene_dealloc(PyObject *self) {
-    delete reinterpret_cast<SceneObject *>(self)->scene;
+void SplatCloud_dealloc(PyObject *self) {
+    delete reinterpret_cast<SplatCloudObject *>(self)->scene;
     PyTypeObject *type = Py_TYPE(self);
     auto free_fn = reinterpret_cast<freefunc>(PyType_GetSlot(type, Py_tp_free));
     free_fn(self);
     Py_DECREF(type);
 }
 
-const SplatScene &scene_of(PyObject *self) { return *reinterpret_cast<SceneObject *>(self)->scene; }
+const SplatScene &scene_of(PyObject *self) { return *reinterpret_cast<SplatCloudObject *>(self)->scene; }
 
 int threads_arg(PyObject *self, int requested) {
-    return requested > 0 ? requested : reinterpret_cast<SceneObject *>(self)->threads;
+    return requested > 0 ? requested : reinterpret_cast<SplatCloudObject *>(self)->threads;
 }
 
 // Calls per_ray(i) for every ray of a batch of `count`, in chunks of `chunk` rays spread over
@@ -150,7 +150,7 @@ bool for_each_group(PyObject *self, int threads, Py_ssize_t count, size_t chunk,
                         [&](size_t g) { per_group(g * group, std::min(group, size_t(count) - g * group)); });
 }
 
-PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
+PyObject *SplatCloud_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "out_t", "out_id",
                                    "out_front", "out_normal", "threads", "brute_force", "out_stats", "packets",
                                    nullptr};
@@ -214,7 +214,7 @@ PyObject *Scene_trace(PyObject *self, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
-PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) {
+PyObject *SplatCloud_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"origins", "directions", "tmin", "tmax", "method", "out_t", "out_id",
                                    "out_front", "out_normal", "out_colour", "out_members", "inside", "exclude",
                                    "threads", "brute_force", "packets", nullptr};
@@ -297,7 +297,7 @@ PyObject *Scene_trace_surface(PyObject *self, PyObject *args, PyObject *kwargs) 
     Py_RETURN_NONE;
 }
 
-PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
+PyObject *SplatCloud_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "background", "out_rgba", "out_depth", "out_normal", "threads",
                                    "progress", "tile_size", "method", "packets", nullptr};
@@ -344,15 +344,15 @@ PyObject *Scene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     return PyBool_FromLong(completed);
 }
 
-PyObject *Scene_len(PyObject *self, void *) { return PyLong_FromSize_t(scene_of(self).size()); }
+PyObject *SplatCloud_len(PyObject *self, void *) { return PyLong_FromSize_t(scene_of(self).size()); }
 
-PyObject *Scene_bounds(PyObject *self, void *) {
+PyObject *SplatCloud_bounds(PyObject *self, void *) {
     const AABB &b = scene_of(self).bounds();
     if (b.empty()) Py_RETURN_NONE;
     return Py_BuildValue("((ddd)(ddd))", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
 }
 
-PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
+PyObject *SplatCloud_bvh_stats(PyObject *self, PyObject *) {
     const BVH &bvh = scene_of(self).bvh();
     Py_ssize_t leaves = 0, max_leaf = 0;
     for (const WideNode &n : bvh.nodes)
@@ -362,39 +362,39 @@ PyObject *Scene_bvh_stats(PyObject *self, PyObject *) {
                          bvh.depth(), "max_leaf_size", max_leaf, "bytes", Py_ssize_t(scene_of(self).memory_bytes()));
 }
 
-PyMethodDef Scene_methods[] = {
-    {"trace", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace)), METH_VARARGS | METH_KEYWORDS,
+PyMethodDef SplatCloud_methods[] = {
+    {"trace", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(SplatCloud_trace)), METH_VARARGS | METH_KEYWORDS,
      "trace(origins, directions, tmin, tmax, out_t, out_id, out_front, out_normal=None, threads=0, "
-     "brute_force=False)\n--\n\nNearest hit per ray, written into the out_ arrays (see core.py)."},
-    {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_render)), METH_VARARGS | METH_KEYWORDS,
+     "brute_force=False)\n--\n\nNearest hit per ray, written into the out_ arrays (see render/splats.py)."},
+    {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(SplatCloud_render)), METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, background, out_rgba, "
      "out_depth=None, out_normal=None, threads=0, progress=None, tile_size=32, method=None, packets=True)\n--\n\n"
      "Renders a window of an image; returns False when progress() asked to stop."},
-    {"trace_surface", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(Scene_trace_surface)),
+    {"trace_surface", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(SplatCloud_trace_surface)),
      METH_VARARGS | METH_KEYWORDS,
      "trace_surface(origins, directions, tmin, tmax, method, out_t, out_id, out_front, out_normal, out_colour, "
      "out_members=None, inside=None, exclude=None, threads=0, brute_force=False, packets=True)\n--\n\n"
      "The surface each ray sees under the visibility method (a render.method.Method, read by field name)."},
-    {"bvh_stats", Scene_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
+    {"bvh_stats", SplatCloud_bvh_stats, METH_NOARGS, "Node count, leaf count, depth and largest leaf of the BVH; bytes the scene keeps."},
     {nullptr, nullptr, 0, nullptr},
 };
 
-PyGetSetDef Scene_getset[] = {
-    {"size", Scene_len, nullptr, "Number of splats.", nullptr},
-    {"bounds", Scene_bounds, nullptr, "((xmin, ymin, zmin), (xmax, ymax, zmax)) of all discs, or None.", nullptr},
+PyGetSetDef SplatCloud_getset[] = {
+    {"size", SplatCloud_len, nullptr, "Number of splats.", nullptr},
+    {"bounds", SplatCloud_bounds, nullptr, "((xmin, ymin, zmin), (xmax, ymax, zmax)) of all discs, or None.", nullptr},
     {nullptr, nullptr, nullptr, nullptr, nullptr},
 };
 
-PyType_Slot Scene_slots[] = {
-    {Py_tp_new, reinterpret_cast<void *>(Scene_new)},
-    {Py_tp_dealloc, reinterpret_cast<void *>(Scene_dealloc)},
-    {Py_tp_methods, Scene_methods},
-    {Py_tp_getset, Scene_getset},
-    {Py_tp_doc, const_cast<char *>("Scene(centres, normals, radii, colours=None, threads=0): splats and their BVH.")},
+PyType_Slot SplatCloud_slots[] = {
+    {Py_tp_new, reinterpret_cast<void *>(SplatCloud_new)},
+    {Py_tp_dealloc, reinterpret_cast<void *>(SplatCloud_dealloc)},
+    {Py_tp_methods, SplatCloud_methods},
+    {Py_tp_getset, SplatCloud_getset},
+    {Py_tp_doc, const_cast<char *>("SplatCloud(centres, normals, radii, colours=None, threads=0): splats and their BVH.")},
     {0, nullptr},
 };
 
-PyType_Spec Scene_spec = {"splat_tracer._core.Scene", sizeof(SceneObject), 0, Py_TPFLAGS_DEFAULT, Scene_slots};
+PyType_Spec SplatCloud_spec = {"splat_tracer._core.SplatCloud", sizeof(SplatCloudObject), 0, Py_TPFLAGS_DEFAULT, SplatCloud_slots};
 
 PyObject *hardware_threads(PyObject *, PyObject *) { return PyLong_FromLong(resolve_threads(0)); }
 
@@ -470,9 +470,9 @@ int register_at_exit(PyObject *module) {
 
 int module_exec(PyObject *module) {
     if (register_at_exit(module) < 0) return -1;
-    PyObject *type = PyType_FromSpec(&Scene_spec);
+    PyObject *type = PyType_FromSpec(&SplatCloud_spec);
     if (!type) return -1;
-    if (PyModule_AddObject(module, "Scene", type) < 0) {
+    if (PyModule_AddObject(module, "SplatCloud", type) < 0) {
         Py_DECREF(type);
         return -1;
     }
@@ -487,7 +487,7 @@ int module_exec(PyObject *module) {
 
 PyModuleDef_Slot module_slots[] = {{Py_mod_exec, reinterpret_cast<void *>(module_exec)}, {0, nullptr}};
 
-PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_tracer (see core.py).", 0,
+PyModuleDef module_def = {PyModuleDef_HEAD_INIT, "_core", "Native core of splat_tracer (see render/ and pointcloud/).", 0,
                           module_methods, module_slots, nullptr, nullptr, nullptr};
 
 }  // namespace
@@ -497,8 +497,8 @@ const SplatScene *splat::py::as_splat_scene(PyObject *obj) {
     // add-on as bl_ext.*.splat_tracer beside splat_tracer) runs module_exec twice, and
     // a type check against the newest Scene type refused a Scene made by the first. The
     // deallocator identifies the type and its layout whichever module made it.
-    if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(Scene_dealloc)) return nullptr;
-    return reinterpret_cast<SceneObject *>(obj)->scene;
+    if (PyType_GetSlot(Py_TYPE(obj), Py_tp_dealloc) != reinterpret_cast<void *>(SplatCloud_dealloc)) return nullptr;
+    return reinterpret_cast<SplatCloudObject *>(obj)->scene;
 }
 
 PyMODINIT_FUNC PyInit__core(void) { return PyModuleDef_Init(&module_def); }

@@ -1,7 +1,7 @@
 // Python bindings of the neighbour-graph routines (graph.h) that normals.orient() uses:
 // `_core.spatial_order`, `permute_table`, `take_rows`, `graph_weights`, `spanning_forest`,
 // `forest_traversal` and `chain_flips`, and the importer's `first_of_duplicates`
-// (duplicates.h). The caller (splat_tracer/core.py) allocates every output; every input is
+// (duplicates.h). The caller (splat_tracer/pointcloud/) allocates every output; every input is
 // validated here too.
 #include <algorithm>
 #include <cmath>

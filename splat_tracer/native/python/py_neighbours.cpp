@@ -1,8 +1,8 @@
 // Python binding of the neighbour search: `_core.PointIndex` (neighbours.h). Queries take
 // the rows of the indexed points to ask about (the caller walks the tree's order in chunks, which
 // keeps each chunk's queries in the same part of the tree and lets it report progress and
-// cancel between chunks) and fill arrays the caller allocated. splat_tracer/core.py wraps
-// it (core.PointIndex); every input is validated here too.
+// cancel between chunks) and fill arrays the caller allocated. splat_tracer/pointcloud/neighbours.py wraps
+// it (PointIndex); every input is validated here too.
 #include <atomic>
 #include <cmath>
 #include <vector>
@@ -505,7 +505,7 @@ PyType_Slot PointIndex_slots[] = {
     {Py_tp_methods, PointIndex_methods},
     {Py_tp_getset, PointIndex_getset},
     {Py_tp_doc, const_cast<char *>("PointIndex(points, threads=0): a k-d tree of float32 (N,3) points for "
-                                   "k-nearest-neighbour queries (see core.PointIndex).")},
+                                   "k-nearest-neighbour queries (see splat_tracer/pointcloud/neighbours.py).")},
     {0, nullptr},
 };
 

@@ -1,6 +1,6 @@
 // Python bindings of the scene renderer: `_core.Mesh` (a triangle mesh and its BVH) and
 // `_core.RenderScene` (instances of clouds and meshes, materials, lamps; render()).
-// splat_tracer/core.py wraps both; every input is validated here too.
+// splat_tracer/render/scene.py wraps both; every input is validated here too.
 #include <atomic>
 #include <cmath>
 #include <iterator>

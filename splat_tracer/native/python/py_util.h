@@ -497,7 +497,7 @@ inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Cam
     return true;
 }
 
-// The splat scene inside a `_core.Scene` object, or null (no exception set) for anything else.
+// The splat scene inside a `_core.SplatCloud` object, or null (no exception set) for anything else.
 const SplatScene *as_splat_scene(PyObject *obj);
 // Adds `Mesh` and `RenderScene` to the module (py_render.cpp).
 int add_render_types(PyObject *module);

@@ -1,4 +1,4 @@
-// The headlight preview of one splat cloud (core.Scene.render): one camera ray per pixel
+// The headlight preview of one splat cloud (render.splats.SplatCloud.render): one camera ray per pixel
 // centre, the surface the method shows, shaded as base colour x |cos| between the ray and
 // the normal. Its film, tiles and packets are the integrator's (film.h); what stays its own
 // is the scene it reads (a SplatScene in its own frame, not a RenderScene's instances, whose

@@ -1,5 +1,5 @@
 // Materials (a simplified Principled BSDF) and lamps in Blender's units. The packed float
-// rows come from splat_tracer/shading.py: MATERIAL_FIELDS and LIGHT_FIELDS there are the
+// rows come from splat_tracer/render/shading.py: MATERIAL_FIELDS and LIGHT_FIELDS there are the
 // column lists, mirrored by the k* indices here.
 #pragma once
 
