@@ -304,6 +304,105 @@ def test_las_evlr_lengths_are_checked_against_the_file(tmp_path):
             readers.read_cloud(str(path))
 
 
+@pytest.mark.parametrize("kind", ["laz12", "laz14"])
+@pytest.mark.parametrize("chunks, at_end", [(0xF3896B63, False), (0xFFFFFFFF, True), ("one too many", False)])
+def test_laz_chunk_table_count_is_checked_before_lazrs_allocates(tmp_path, monkeypatch, kind, chunks, at_end):
+    """lazrs allocates the number of chunks a LAZ chunk table declares before decoding any
+    entry, and a failed allocation in Rust aborts the process (a fuzzed file: 65 GB asked,
+    Blender gone). The count is checked against the compressed bytes before the table (each
+    chunk takes at least one), wherever lazrs finds the table: at the offset the point data
+    starts with, or at the one in the file's last 8 bytes when that is not written."""
+    import laspy
+
+    good = tmp_path / "good.laz"
+    if kind == "laz12":
+        _write_las(good, RNG.uniform(0, 10, (300, 3)), compress=True)
+    else:
+        _write_las14_with_evlrs(good, compress=True)
+    data = bytearray(good.read_bytes())
+    offset = struct.unpack_from("<I", data, 96)[0]
+    table = struct.unpack_from("<q", data, offset)[0]
+    assert struct.unpack_from("<I", data, table + 4)[0] >= 1  # the real table: one chunk or more
+    if chunks == "one too many":
+        chunks = table - offset - 8 + 1
+    struct.pack_into("<I", data, table + 4, chunks)
+    if at_end:  # the table found through the file's last 8 bytes (the point data's own are -1)
+        struct.pack_into("<q", data, offset, -1)
+        data += struct.pack("<q", table)  # after the EVLRs of LAS 1.4: they stay where the header says
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file whose chunk table cannot be right")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    for read in (readers.read_cloud, importer.load):
+        with pytest.raises(CloudFileError, match=f"its chunk table declares {chunks:,} chunks of points") as err:
+            read(str(path))
+        assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("chunk_size, available", [(3_607_101_776, None), (1_000_000, 8 << 20)])
+def test_laz_chunk_larger_than_memory_is_refused_before_lazrs_decompresses(tmp_path, monkeypatch, chunk_size,
+                                                                           available):
+    """lazrs's parallel decompressor allocates a whole chunk (its declared points times the
+    record length) at once, and a failed allocation in Rust aborts the process: a LAZ VLR
+    whose fixed chunk size was corrupted to 3.6 billion asked for 94 GB (a fuzzed file). A
+    chunk that cannot fit in the memory available is refused, naming it; laspy never reads."""
+    import laspy
+
+    from splat_tracer.util import resources
+
+    good = tmp_path / "good.laz"
+    _write_las(good, RNG.uniform(0, 10, (300, 3)), compress=True)
+    data = bytearray(good.read_bytes())
+    vlr = data.find(b"laszip encoded") - 2  # the VLR header starts with 2 reserved bytes
+    struct.pack_into("<I", data, vlr + 54 + 12, chunk_size)  # the LAZ VLR's chunk size (fixed-size chunks)
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+    monkeypatch.setattr(resources, "_override", available)
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file with a chunk larger than memory")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    with pytest.raises(CloudFileError, match=f"chunk 1 of its 1 declares {chunk_size:,} points") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value) and "memory" in str(err.value)
+
+
+@pytest.mark.parametrize("layer, size", [(6, 0xFFFFFFFF), (0, "one too many")])
+def test_laz_layer_sizes_are_checked_against_their_chunk(tmp_path, monkeypatch, layer, size):
+    """A layered LAZ chunk (LAS 1.4 point formats 6-10) starts with its first point, its
+    point count and each layer's byte size; lazrs zero-fills a buffer of each size before
+    reading it: a fuzzed size of 3.4 GB made a 1 KB file take 10 s and 4 GB of memory to be
+    refused (or abort the process with less memory). Sizes beyond the chunk are refused."""
+    import laspy
+
+    good = tmp_path / "good.laz"
+    _write_las14_with_evlrs(good, compress=True)  # point format 6: one Point14 item, 9 layers
+    data = bytearray(good.read_bytes())
+    offset, record_length = struct.unpack_from("<I", data, 96)[0], struct.unpack_from("<H", data, 105)[0]
+    sizes_at = offset + 8 + record_length + 4
+    sizes = struct.unpack_from("<9I", data, sizes_at)
+    chunk = record_length + 4 + 36 + sum(sizes)
+    if size == "one too many":
+        size = sizes[layer] + 1
+    struct.pack_into("<I", data, sizes_at + 4 * layer, size)
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file whose layers cannot fit in their chunk")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    declared = sum(sizes) - sizes[layer] + size
+    with pytest.raises(CloudFileError, match=f"the layers of chunk 1 of 1 declare {declared:,} bytes but the chunk "
+                                             f"holds {chunk - record_length - 40:,}") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value)
+
+
 def _within(seconds, read, path):
     """read(path) on a thread: its result, its exception, or 'hang' after `seconds`."""
     import threading
