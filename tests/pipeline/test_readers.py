@@ -403,6 +403,42 @@ def test_laz_layer_sizes_are_checked_against_their_chunk(tmp_path, monkeypatch, 
     assert str(path) in str(err.value)
 
 
+@pytest.mark.parametrize("panic", ["file", "any panic while reading"])
+def test_laz_decompressor_panic_is_a_cloud_file_error(tmp_path, monkeypatch, panic):
+    """A LAZ VLR whose chunk size is 0 in a small LAS 1.4 file with an EVLR: lazrs's Rust
+    code panics ('capacity overflow'; a fuzzed file: a remainder by zero), which pyo3
+    raises as PanicException, a BaseException that escaped the reader's `except Exception`.
+    It is a CloudFileError naming the file; so is a panic anywhere in the reading loop."""
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.001, 0.001, 0.001]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = RNG.uniform(0, 10, (40, 3)).T
+    las.evlrs = VLRList([laspy.VLR("test", 1, "one", b"x" * 100)])
+    path = tmp_path / "bad.laz"
+    las.write(str(path), laz_backend=laspy.LazBackend.Lazrs)
+    message = "capacity overflow"
+    if panic == "file":
+        data = bytearray(path.read_bytes())
+        vlr = data.find(b"laszip encoded") - 2
+        struct.pack_into("<I", data, vlr + 54 + 12, 0)  # the LAZ VLR's chunk size
+        path.write_bytes(bytes(data))
+    else:
+        PanicException = type("PanicException", (BaseException,), {})  # as pyo3 makes it
+        message = "index out of bounds"
+
+        def panics(self, *args, **kwargs):
+            raise PanicException(message)
+
+        monkeypatch.setattr(laspy.LasReader, "chunk_iterator", panics)
+    for read in (readers.read_cloud, importer.load):
+        with pytest.raises(CloudFileError, match=f"the decompressor failed on its data: {message}") as err:
+            read(str(path))
+        assert str(path) in str(err.value)
+
+
 def _within(seconds, read, path):
     """read(path) on a thread: its result, its exception, or 'hang' after `seconds`."""
     import threading

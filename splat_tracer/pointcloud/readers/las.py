@@ -59,6 +59,15 @@ _LAZ_BYTE14 = 14
 _LAZ_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}
 
 
+def _is_panic(e: BaseException) -> bool:
+    """Whether `e` is a panic of lazrs's Rust code (a bounds or arithmetic check failing on a
+    corrupt LAZ file: a divisor of zero in a chunk's point count), which pyo3 raises as its
+    PanicException: a BaseException, so that `except Exception` does not catch it; it
+    escaped the import as no CloudFileError. Matched by name: pyo3 makes the class in each
+    extension and exports it from none."""
+    return type(e).__name__ == "PanicException"
+
+
 def _laszip_vlr(path: str, fields: "HeaderFields") -> bytes:
     """The LAZ VLR's body (user ID 'laszip encoded', record 22204), or b'' when the file has
     none (laspy then refuses it). The VLRs' count was checked by read_header."""
@@ -90,8 +99,10 @@ def _check_chunks(path: str, fields: "HeaderFields") -> None:
         with open(path, "rb") as f:
             f.seek(fields.offset_to_points)
             table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
-    except Exception:  # noqa: BLE001 -- no LAZ VLR or no table: laspy's own error names it
-        return
+    except BaseException as e:  # no LAZ VLR or no table: laspy's own error names it
+        if isinstance(e, Exception) or _is_panic(e):
+            return
+        raise
     free = resources.available_memory()
     if free is None:
         return
@@ -315,6 +326,10 @@ def read_las(path: str, progress=None) -> PointCloud:
         raise
     except Exception as e:  # laspy raises LaspyException, ValueError, struct errors...
         raise CloudFileError(f"{path}: not a valid LAS/LAZ file ({e})") from None
+    except BaseException as e:
+        if not _is_panic(e):
+            raise
+        raise CloudFileError(f"{path}: not a valid LAZ file (the decompressor failed on its data: {e})") from None
     if read == 0:
         raise CloudFileError(f"{path}: contains no points")
     if read != header.point_count:
