@@ -154,6 +154,31 @@ def test_text_with_any_line_ending(tmp_path, ending, layout):
         np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
 
 
+@pytest.mark.parametrize("layout", ["xyz", "pts", "csv_header"])
+def test_text_with_a_byte_order_mark_keeps_every_row(tmp_path, layout):
+    """A UTF-8 byte order mark (found by the text fuzz harness's seed): the first row read as
+    '\ufeff1.0 ...', not numbers, so a header, and that point was silently lost (a PTS file's
+    count line was not checked). The mark is not part of the text."""
+    p, _, rgb = _sphere(50)
+    if layout == "xyz":
+        text = _fmt(p)
+    elif layout == "pts":
+        text = f"{len(p) + 1}\n" + _fmt(np.column_stack([p, np.zeros(len(p)), rgb]))  # a count that lies
+    else:
+        text = "X;Y;Z;Red;Green;Blue\n" + _fmt(np.column_stack([p, rgb])).replace(" ", ";")
+    path = tmp_path / "cloud.txt"
+    path.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    assert readers.sniff(str(path)) == "TEXT"
+    if layout == "pts":
+        with pytest.raises(CloudFileError, match=f"its first line declares {len(p) + 1:,} points but {len(p):,} rows"):
+            readers.read_cloud(str(path))
+        return
+    cloud = readers.read_cloud(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+    if layout == "csv_header":
+        np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
+
+
 @pytest.mark.parametrize("content, message", [
     (b"0 0 0\r1 1 1\r2 2\r3 3 3\r", "data line 3 (after 0 header lines) has 2 values"),
     (b"0 0 0\r1 1 1\r2 2 \xe9\r", "byte 16, 0xe9, on line 3"),
