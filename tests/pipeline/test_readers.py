@@ -664,24 +664,33 @@ def test_e57_pose_check(rotation, translation, reason):
 
 # --- Gaussian splatting ------------------------------------------------------------------
 
-def _blanked_e57(path, out, start: bytes, end: bytes, after: bytes):
+def _blanked_e57(path, out, start: bytes, end: bytes, after: bytes, nul_after_xml: bool = False):
     """The E57 file with the first XML span from `start` to `end` (included) that follows
     `after` blanked out with spaces (the XML's length kept), on its logical bytes (the pages
-    without their checksums), each page's checksum written again."""
+    without their checksums), each page's checksum written again. nul_after_xml: the XML's
+    length in the file header counts a NUL after it (libE57 ignores it)."""
     data = path.read_bytes()
     logical = bytearray(b"".join(data[k:k + 1020] for k in range(0, len(data), 1024)))
     a = logical.find(start, logical.find(after))
     b = logical.find(end, a) + len(end)
     assert 0 <= a < b
     logical[a:b] = b" " * (b - a)
+    if nul_after_xml:
+        end_of_xml = logical.rfind(b"</e57Root>") + len(b"</e57Root>")
+        assert end_of_xml + 2 <= len(logical)
+        logical[end_of_xml:end_of_xml + 2] = b"\n\0"
+        struct.pack_into("<Q", logical, 32, struct.unpack_from("<Q", logical, 32)[0] + 1)  # xmlLogicalLength
     pages = [bytes(logical[k:k + 1020]) for k in range(0, len(logical), 1020)]
     out.write_bytes(b"".join(p + struct.pack(">I", _crc32c(p)) for p in pages))
     return out
 
 
-@pytest.mark.parametrize("scan, message", [("south", "the points of scan 1 ('south') have no prototype"),
-                                           ("north", "the points of scan 0 ('north') have no prototype")])
-def test_e57_scan_libe57_would_crash_on_is_refused_by_name(tmp_path, scan, message):
+@pytest.mark.parametrize("scan, nul, message", [
+    ("south", False, "the points of scan 1 ('south') have no prototype"),
+    ("north", False, "the points of scan 0 ('north') have no prototype"),
+    ("south", True, "the points of scan 1 ('south') have no prototype"),  # a NUL after the XML (a fuzzed file)
+])
+def test_e57_scan_libe57_would_crash_on_is_refused_by_name(tmp_path, scan, nul, message):
     """A scan whose points lost their prototype (a fuzzed file): pye57's scan header made
     libE57 dereference a null node, a segmentation fault that takes Blender down. The XML is
     checked first (by the reader and the importer's memory check), naming the scan."""
@@ -690,7 +699,8 @@ def test_e57_scan_libe57_would_crash_on_is_refused_by_name(tmp_path, scan, messa
 
     good = _write_scans(tmp_path / "good.e57", [("north", RNG.normal(size=(30, 3)), [1, 0, 0, 0], [0, 0, 0]),
                                                 ("south", RNG.normal(size=(40, 3)), [1, 0, 0, 0], [5, 0, 0])])
-    path = _blanked_e57(good, tmp_path / "bad.e57", b"<prototype", b"</prototype>", after=f"[{scan}]".encode())
+    path = _blanked_e57(good, tmp_path / "bad.e57", b"<prototype", b"</prototype>", after=f"[{scan}]".encode(),
+                        nul_after_xml=nul)
     index = 0 if scan == "north" else 1
     crash = subprocess.run([sys.executable, "-c", f"import pye57, sys; pye57.E57(sys.argv[1]).get_header({index})",
                             str(path)], capture_output=True)

@@ -57,6 +57,7 @@ def check_structure(path: str) -> None:
         pages = f.read((start % _PAGE_DATA + length) // _PAGE_DATA * _PAGE + _PAGE)
     data = b"".join(pages[k:k + _PAGE_DATA] for k in range(0, len(pages), _PAGE))
     xml = data[start % _PAGE_DATA:start % _PAGE_DATA + length]
+    xml = xml[:xml.rfind(b">") + 1]  # what follows the root element (NULs of a padded length) libE57 ignores
     try:
         root = ElementTree.fromstring(xml)
     except Exception:  # noqa: BLE001 -- not well formed, an unknown encoding...: libE57 says so
