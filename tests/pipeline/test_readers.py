@@ -154,6 +154,22 @@ def test_text_with_any_line_ending(tmp_path, ending, layout):
         np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
 
 
+@pytest.mark.parametrize("content", [
+    "nan 0 0 10 20 30\n1 inf 0 10 20 30\n",            # colours: their range was taken over no row
+    "x y z r g b a\n-inf 1 2 0.5 0.5 0.5 1\n",          # and alpha
+    "2\nnan nan nan 1 2 3 4\nNaN 5 6 7 8 9 10\n",      # PTS: x y z intensity r g b
+])
+def test_text_without_a_finite_row_is_refused_with_a_cloud_file_error(tmp_path, content):
+    """Every row with a NaN or infinite coordinate and colour columns (a fuzzed file): the
+    colours' range was taken over the finite rows, none, and numpy's ValueError escaped. It is
+    refused as a file of no finite point (make_cloud's message)."""
+    path = tmp_path / "cloud.txt"
+    path.write_text(content)
+    with pytest.raises(CloudFileError, match="no point has finite coordinates") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value)
+
+
 @pytest.mark.parametrize("layout", ["xyz", "pts", "csv_header"])
 def test_text_with_a_byte_order_mark_keeps_every_row(tmp_path, layout):
     """A UTF-8 byte order mark (found by the text fuzz harness's seed): the first row read as

@@ -193,7 +193,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     pos = np.column_stack([col["x"], col["y"], col["z"]])
     finite = finite_rows(pos)
     colours = None
-    if "r" in col:
+    if "r" in col and finite.any():  # none finite: make_cloud refuses the file, saying so
         rgb = unit_colours(path, {"red": col["r"][finite], "green": col["g"][finite], "blue": col["b"][finite]},
                             ("red", "green", "blue"))
         alpha = (unit_colours(path, {"alpha": col["a"][finite]}, ("alpha",))[:, 0] if "a" in col
