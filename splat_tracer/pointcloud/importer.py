@@ -29,6 +29,7 @@ from ..util.columns import bounds
 from ..util.progress import ProgressFn, nothing, scaled
 from . import normals, prepare, readers, spacing
 from .cloud import MAX_RADIUS, CloudFileError, PointCloud
+from .readers.e57 import check_structure as check_e57_structure
 from .readers.las import read_header as read_las_header
 from .readers.ply import read_header
 
@@ -168,7 +169,8 @@ def declared_points(path: str, kind: str) -> Optional[int]:
             return sum(e.count for e in header.elements if e.name == "vertex")
         if kind == "LAS":  # its own header check: laspy.open loops on a corrupt count of VLRs
             return read_las_header(path).point_count
-        if kind == "E57":
+        if kind == "E57":  # its own structure check: pye57 crashes on a scan without a prototype
+            check_e57_structure(path)
             import pye57
 
             e57 = pye57.E57(path)

@@ -154,6 +154,47 @@ def test_text_with_any_line_ending(tmp_path, ending, layout):
         np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
 
 
+@pytest.mark.parametrize("content", [
+    "nan 0 0 10 20 30\n1 inf 0 10 20 30\n",            # colours: their range was taken over no row
+    "x y z r g b a\n-inf 1 2 0.5 0.5 0.5 1\n",          # and alpha
+    "2\nnan nan nan 1 2 3 4\nNaN 5 6 7 8 9 10\n",      # PTS: x y z intensity r g b
+])
+def test_text_without_a_finite_row_is_refused_with_a_cloud_file_error(tmp_path, content):
+    """Every row with a NaN or infinite coordinate and colour columns (a fuzzed file): the
+    colours' range was taken over the finite rows, none, and numpy's ValueError escaped. It is
+    refused as a file of no finite point (make_cloud's message)."""
+    path = tmp_path / "cloud.txt"
+    path.write_text(content)
+    with pytest.raises(CloudFileError, match="no point has finite coordinates") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("layout", ["xyz", "pts", "csv_header"])
+def test_text_with_a_byte_order_mark_keeps_every_row(tmp_path, layout):
+    """A UTF-8 byte order mark (found by the text fuzz harness's seed): the first row read as
+    '\ufeff1.0 ...', not numbers, so a header, and that point was silently lost (a PTS file's
+    count line was not checked). The mark is not part of the text."""
+    p, _, rgb = _sphere(50)
+    if layout == "xyz":
+        text = _fmt(p)
+    elif layout == "pts":
+        text = f"{len(p) + 1}\n" + _fmt(np.column_stack([p, np.zeros(len(p)), rgb]))  # a count that lies
+    else:
+        text = "X;Y;Z;Red;Green;Blue\n" + _fmt(np.column_stack([p, rgb])).replace(" ", ";")
+    path = tmp_path / "cloud.txt"
+    path.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    assert readers.sniff(str(path)) == "TEXT"
+    if layout == "pts":
+        with pytest.raises(CloudFileError, match=f"its first line declares {len(p) + 1:,} points but {len(p):,} rows"):
+            readers.read_cloud(str(path))
+        return
+    cloud = readers.read_cloud(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+    if layout == "csv_header":
+        np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
+
+
 @pytest.mark.parametrize("content, message", [
     (b"0 0 0\r1 1 1\r2 2\r3 3 3\r", "data line 3 (after 0 header lines) has 2 values"),
     (b"0 0 0\r1 1 1\r2 2 \xe9\r", "byte 16, 0xe9, on line 3"),
@@ -302,6 +343,141 @@ def test_las_evlr_lengths_are_checked_against_the_file(tmp_path):
         path = _patched(good, tmp_path / "bad.las", "<Q", at, value)
         with pytest.raises(CloudFileError, match=re.escape(message)):
             readers.read_cloud(str(path))
+
+
+@pytest.mark.parametrize("kind", ["laz12", "laz14"])
+@pytest.mark.parametrize("chunks, at_end", [(0xF3896B63, False), (0xFFFFFFFF, True), ("one too many", False)])
+def test_laz_chunk_table_count_is_checked_before_lazrs_allocates(tmp_path, monkeypatch, kind, chunks, at_end):
+    """lazrs allocates the number of chunks a LAZ chunk table declares before decoding any
+    entry, and a failed allocation in Rust aborts the process (a fuzzed file: 65 GB asked,
+    Blender gone). The count is checked against the compressed bytes before the table (each
+    chunk takes at least one), wherever lazrs finds the table: at the offset the point data
+    starts with, or at the one in the file's last 8 bytes when that is not written."""
+    import laspy
+
+    good = tmp_path / "good.laz"
+    if kind == "laz12":
+        _write_las(good, RNG.uniform(0, 10, (300, 3)), compress=True)
+    else:
+        _write_las14_with_evlrs(good, compress=True)
+    data = bytearray(good.read_bytes())
+    offset = struct.unpack_from("<I", data, 96)[0]
+    table = struct.unpack_from("<q", data, offset)[0]
+    assert struct.unpack_from("<I", data, table + 4)[0] >= 1  # the real table: one chunk or more
+    if chunks == "one too many":
+        chunks = table - offset - 8 + 1
+    struct.pack_into("<I", data, table + 4, chunks)
+    if at_end:  # the table found through the file's last 8 bytes (the point data's own are -1)
+        struct.pack_into("<q", data, offset, -1)
+        data += struct.pack("<q", table)  # after the EVLRs of LAS 1.4: they stay where the header says
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file whose chunk table cannot be right")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    for read in (readers.read_cloud, importer.load):
+        with pytest.raises(CloudFileError, match=f"its chunk table declares {chunks:,} chunks of points") as err:
+            read(str(path))
+        assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("chunk_size, available", [(3_607_101_776, None), (1_000_000, 8 << 20)])
+def test_laz_chunk_larger_than_memory_is_refused_before_lazrs_decompresses(tmp_path, monkeypatch, chunk_size,
+                                                                           available):
+    """lazrs's parallel decompressor allocates a whole chunk (its declared points times the
+    record length) at once, and a failed allocation in Rust aborts the process: a LAZ VLR
+    whose fixed chunk size was corrupted to 3.6 billion asked for 94 GB (a fuzzed file). A
+    chunk that cannot fit in the memory available is refused, naming it; laspy never reads."""
+    import laspy
+
+    from splat_tracer.util import resources
+
+    good = tmp_path / "good.laz"
+    _write_las(good, RNG.uniform(0, 10, (300, 3)), compress=True)
+    data = bytearray(good.read_bytes())
+    vlr = data.find(b"laszip encoded") - 2  # the VLR header starts with 2 reserved bytes
+    struct.pack_into("<I", data, vlr + 54 + 12, chunk_size)  # the LAZ VLR's chunk size (fixed-size chunks)
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+    monkeypatch.setattr(resources, "_override", available)
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file with a chunk larger than memory")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    with pytest.raises(CloudFileError, match=f"chunk 1 of its 1 declares {chunk_size:,} points") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value) and "memory" in str(err.value)
+
+
+@pytest.mark.parametrize("layer, size", [(6, 0xFFFFFFFF), (0, "one too many")])
+def test_laz_layer_sizes_are_checked_against_their_chunk(tmp_path, monkeypatch, layer, size):
+    """A layered LAZ chunk (LAS 1.4 point formats 6-10) starts with its first point, its
+    point count and each layer's byte size; lazrs zero-fills a buffer of each size before
+    reading it: a fuzzed size of 3.4 GB made a 1 KB file take 10 s and 4 GB of memory to be
+    refused (or abort the process with less memory). Sizes beyond the chunk are refused."""
+    import laspy
+
+    good = tmp_path / "good.laz"
+    _write_las14_with_evlrs(good, compress=True)  # point format 6: one Point14 item, 9 layers
+    data = bytearray(good.read_bytes())
+    offset, record_length = struct.unpack_from("<I", data, 96)[0], struct.unpack_from("<H", data, 105)[0]
+    sizes_at = offset + 8 + record_length + 4
+    sizes = struct.unpack_from("<9I", data, sizes_at)
+    chunk = record_length + 4 + 36 + sum(sizes)
+    if size == "one too many":
+        size = sizes[layer] + 1
+    struct.pack_into("<I", data, sizes_at + 4 * layer, size)
+    path = tmp_path / "bad.laz"
+    path.write_bytes(bytes(data))
+
+    def untouched(*args, **kwargs):
+        raise AssertionError("laspy was handed a LAZ file whose layers cannot fit in their chunk")
+
+    monkeypatch.setattr(laspy, "open", untouched)
+    declared = sum(sizes) - sizes[layer] + size
+    with pytest.raises(CloudFileError, match=f"the layers of chunk 1 of 1 declare {declared:,} bytes but the chunk "
+                                             f"holds {chunk - record_length - 40:,}") as err:
+        readers.read_cloud(str(path))
+    assert str(path) in str(err.value)
+
+
+@pytest.mark.parametrize("panic", ["file", "any panic while reading"])
+def test_laz_decompressor_panic_is_a_cloud_file_error(tmp_path, monkeypatch, panic):
+    """A LAZ VLR whose chunk size is 0 in a small LAS 1.4 file with an EVLR: lazrs's Rust
+    code panics ('capacity overflow'; a fuzzed file: a remainder by zero), which pyo3
+    raises as PanicException, a BaseException that escaped the reader's `except Exception`.
+    It is a CloudFileError naming the file; so is a panic anywhere in the reading loop."""
+    import laspy
+    from laspy.vlrs.vlrlist import VLRList
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.001, 0.001, 0.001]
+    las = laspy.LasData(header)
+    las.x, las.y, las.z = RNG.uniform(0, 10, (40, 3)).T
+    las.evlrs = VLRList([laspy.VLR("test", 1, "one", b"x" * 100)])
+    path = tmp_path / "bad.laz"
+    las.write(str(path), laz_backend=laspy.LazBackend.Lazrs)
+    message = "capacity overflow"
+    if panic == "file":
+        data = bytearray(path.read_bytes())
+        vlr = data.find(b"laszip encoded") - 2
+        struct.pack_into("<I", data, vlr + 54 + 12, 0)  # the LAZ VLR's chunk size
+        path.write_bytes(bytes(data))
+    else:
+        PanicException = type("PanicException", (BaseException,), {})  # as pyo3 makes it
+        message = "index out of bounds"
+
+        def panics(self, *args, **kwargs):
+            raise PanicException(message)
+
+        monkeypatch.setattr(laspy.LasReader, "chunk_iterator", panics)
+    for read in (readers.read_cloud, importer.load):
+        with pytest.raises(CloudFileError, match=f"the decompressor failed on its data: {message}") as err:
+            read(str(path))
+        assert str(path) in str(err.value)
 
 
 def _within(seconds, read, path):
@@ -503,6 +679,53 @@ def test_e57_pose_check(rotation, translation, reason):
 
 
 # --- Gaussian splatting ------------------------------------------------------------------
+
+def _blanked_e57(path, out, start: bytes, end: bytes, after: bytes, nul_after_xml: bool = False):
+    """The E57 file with the first XML span from `start` to `end` (included) that follows
+    `after` blanked out with spaces (the XML's length kept), on its logical bytes (the pages
+    without their checksums), each page's checksum written again. nul_after_xml: the XML's
+    length in the file header counts a NUL after it (libE57 ignores it)."""
+    data = path.read_bytes()
+    logical = bytearray(b"".join(data[k:k + 1020] for k in range(0, len(data), 1024)))
+    a = logical.find(start, logical.find(after))
+    b = logical.find(end, a) + len(end)
+    assert 0 <= a < b
+    logical[a:b] = b" " * (b - a)
+    if nul_after_xml:
+        end_of_xml = logical.rfind(b"</e57Root>") + len(b"</e57Root>")
+        assert end_of_xml + 2 <= len(logical)
+        logical[end_of_xml:end_of_xml + 2] = b"\n\0"
+        struct.pack_into("<Q", logical, 32, struct.unpack_from("<Q", logical, 32)[0] + 1)  # xmlLogicalLength
+    pages = [bytes(logical[k:k + 1020]) for k in range(0, len(logical), 1020)]
+    out.write_bytes(b"".join(p + struct.pack(">I", _crc32c(p)) for p in pages))
+    return out
+
+
+@pytest.mark.parametrize("scan, nul, message", [
+    ("south", False, "the points of scan 1 ('south') have no prototype"),
+    ("north", False, "the points of scan 0 ('north') have no prototype"),
+    ("south", True, "the points of scan 1 ('south') have no prototype"),  # a NUL after the XML (a fuzzed file)
+])
+def test_e57_scan_libe57_would_crash_on_is_refused_by_name(tmp_path, scan, nul, message):
+    """A scan whose points lost their prototype (a fuzzed file): pye57's scan header made
+    libE57 dereference a null node, a segmentation fault that takes Blender down. The XML is
+    checked first (by the reader and the importer's memory check), naming the scan."""
+    import subprocess
+    import sys
+
+    good = _write_scans(tmp_path / "good.e57", [("north", RNG.normal(size=(30, 3)), [1, 0, 0, 0], [0, 0, 0]),
+                                                ("south", RNG.normal(size=(40, 3)), [1, 0, 0, 0], [5, 0, 0])])
+    path = _blanked_e57(good, tmp_path / "bad.e57", b"<prototype", b"</prototype>", after=f"[{scan}]".encode(),
+                        nul_after_xml=nul)
+    index = 0 if scan == "north" else 1
+    crash = subprocess.run([sys.executable, "-c", f"import pye57, sys; pye57.E57(sys.argv[1]).get_header({index})",
+                            str(path)], capture_output=True)
+    assert crash.returncode < 0  # what libE57 does with it, unguarded: a signal, the process gone
+    for read in (readers.read_cloud, importer.load):
+        with pytest.raises(CloudFileError, match=re.escape(message)) as err:
+            read(str(path))
+        assert str(path) in str(err.value)
+
 
 def _quaternions(matrices):
     from scipy.spatial.transform import Rotation

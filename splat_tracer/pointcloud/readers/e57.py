@@ -10,6 +10,10 @@ not finite) is left out and named; the file is refused, naming them, when no sca
 """
 from __future__ import annotations
 
+import os
+import struct
+import xml.etree.ElementTree as ElementTree
+
 import numpy as np
 
 from ...util.progress import Cancelled
@@ -21,6 +25,55 @@ _EXTRAS = ("intensity", "colorRed", "colorGreen", "colorBlue")
 # E57 records read at a time: progress (and a cancel) between chunks; each chunk's buffers
 # (about 32 MB at 2^20 records of every field) are reused for the next.
 _E57_CHUNK = 1 << 20
+
+
+# The file's pages: 1020 bytes of data and their CRC-32C (ASTM E57 9.3); the file header
+# (the first 48 data bytes): signature, version, physical length, the XML's physical offset
+# and logical length, page size.
+_PAGE, _PAGE_DATA = 1024, 1020
+_FILE_HEADER = struct.Struct("<8sIIQQQQ")
+
+
+def _local(tag: str) -> str:
+    return tag.rsplit("}", 1)[-1]  # an element's name without the E57 namespace
+
+
+def check_structure(path: str) -> None:
+    """What libE57 dereferences without checking, checked in the file's XML first: each scan
+    (data3D's children) must have `points`, a CompressedVector whose `prototype` is a
+    Structure (a scan whose prototype was deleted made pye57's scan header crash the
+    process with a segmentation fault: Blender gone). Raises CloudFileError naming the
+    scan. What it cannot find or parse is left to libE57, which refuses it with an error."""
+    with open(path, "rb") as f:
+        head = f.read(_FILE_HEADER.size)
+        if len(head) < _FILE_HEADER.size:
+            return
+        _, _, _, _, physical, length, _ = _FILE_HEADER.unpack(head)
+        start = physical // _PAGE * _PAGE_DATA + physical % _PAGE  # the XML's logical offset
+        size = os.path.getsize(path)
+        if physical >= size or physical % _PAGE >= _PAGE_DATA or length > size:
+            return  # no XML where the header says: libE57 refuses the file
+        f.seek(start // _PAGE_DATA * _PAGE)  # the pages holding the XML
+        pages = f.read((start % _PAGE_DATA + length) // _PAGE_DATA * _PAGE + _PAGE)
+    data = b"".join(pages[k:k + _PAGE_DATA] for k in range(0, len(pages), _PAGE))
+    xml = data[start % _PAGE_DATA:start % _PAGE_DATA + length]
+    xml = xml[:xml.rfind(b">") + 1]  # what follows the root element (NULs of a padded length) libE57 ignores
+    try:
+        root = ElementTree.fromstring(xml)
+    except Exception:  # noqa: BLE001 -- not well formed, an unknown encoding...: libE57 says so
+        return
+    scans = [child for child in root if _local(child.tag) == "data3D"]
+    for index, scan in enumerate(c for d in scans for c in d):
+        name = next((c.text for c in scan if _local(c.tag) == "name" and c.text), "")
+        label = f"scan {index} ('{name.strip()}')" if name.strip() else f"scan {index}"
+        points = [c for c in scan if _local(c.tag) == "points"]
+        if not points or points[0].get("type") != "CompressedVector":
+            raise CloudFileError(f"{path}: not a valid E57 file: {label} has no points (a CompressedVector) in its "
+                                 "XML (the file is corrupt)")
+        prototype = [c for c in points[0] if _local(c.tag) == "prototype"]
+        if not prototype or prototype[0].get("type") != "Structure":
+            raise CloudFileError(f"{path}: not a valid E57 file: the points of {label} have no prototype (a "
+                                 "Structure naming their fields) in its XML (the file is corrupt)")
 
 
 def _scan_label(header, index: int) -> str:
@@ -79,6 +132,7 @@ def read_e57(path: str, progress=None) -> PointCloud:
     except ImportError:
         raise CloudFileError(f"{path}: is an E57 file, and reading it needs the pye57 package, which is not "
                              "installed") from None
+    check_structure(path)
     try:
         e57 = pye57.E57(path)
     except Exception as e:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...util import resources
 from ...util.columns import in_blocks
 from ...util.progress import Cancelled
 from ..cloud import CloudFileError, PointCloud, colour_channels, make_cloud
@@ -43,12 +44,142 @@ _HEADER_SIZE_13 = 235   # LAS 1.3 adds the start of the waveform records
 _VLR_HEADER = 54        # bytes before each VLR's data
 _EVLR_HEADER = 60       # bytes before each EVLR's data
 _EVLR_LENGTH_AT = 20    # an EVLR's data length (uint64) follows its reserved, user ID and record ID fields
+# A point data format ID with bit 7 set and bit 6 clear: compressed (LAZ), as laspy tells it.
+_LAZ_BITS, _LAZ_COMPRESSED = 0xC0, 0x80
+_CHUNK_TABLE_HEADER = 8  # a LAZ chunk table's version and number of chunks (uint32 each)
+_LASZIP_RECORD_ID = 22204  # the LAZ VLR's record ID (user ID 'laszip encoded')
+# The LAZ VLR (LASzip): compressor (uint16; 3 is the layered compressor of LAS 1.4's point
+# formats 6-10), coder, version, options, chunk size, special EVLRs, then the number of items
+# (uint16 at 32) and each item (type, size, version: uint16 each). Layers per item type in a
+# layered chunk: Point14 9 (XY, Z, classification, flags, intensity, scan angle, user data,
+# point source, GPS time), RGB14 1, RGBNIR14 2, Wavepacket14 1, Byte14 one per byte.
+_LAZ_LAYERED = 3
+_LAZ_VLR_ITEMS_AT = 34
+_LAZ_BYTE14 = 14
+_LAZ_LAYERS = {10: 9, 11: 1, 12: 2, 13: 1}
+
+
+def _is_panic(e: BaseException) -> bool:
+    """Whether `e` is a panic of lazrs's Rust code (a bounds or arithmetic check failing on a
+    corrupt LAZ file: a divisor of zero in a chunk's point count), which pyo3 raises as its
+    PanicException: a BaseException, so that `except Exception` does not catch it; it
+    escaped the import as no CloudFileError. Matched by name: pyo3 makes the class in each
+    extension and exports it from none."""
+    return type(e).__name__ == "PanicException"
+
+
+def _laszip_vlr(path: str, fields: "HeaderFields") -> bytes:
+    """The LAZ VLR's body (user ID 'laszip encoded', record 22204), or b'' when the file has
+    none (laspy then refuses it). The VLRs' count was checked by read_header."""
+    with open(path, "rb") as f:
+        f.seek(fields.header_size)
+        for _ in range(fields.vlrs):
+            head = f.read(_VLR_HEADER)
+            if len(head) < _VLR_HEADER:
+                break
+            record_id, length = struct.unpack_from("<HH", head, 18)
+            body = f.read(length)
+            if head[2:18].rstrip(b"\0") == b"laszip encoded" and record_id == _LASZIP_RECORD_ID:
+                return body
+    return b""
+
+
+def _check_chunks(path: str, fields: "HeaderFields") -> None:
+    """Each chunk of a LAZ file's chunk table must fit in memory once decompressed: lazrs's
+    parallel decompressor allocates a chunk's declared points times the record length at
+    once (a fixed chunk size of 3.6 billion in the LAZ VLR: 94 GB asked, and a failed
+    allocation in Rust aborts the process, Blender with it). A table lazrs cannot read is
+    left for laspy to refuse, and so is a LAZ file without lazrs (another backend, or none)."""
+    try:
+        import lazrs  # laspy's first choice of backend when it is installed
+    except ImportError:
+        return
+    vlr = _laszip_vlr(path, fields)
+    try:
+        with open(path, "rb") as f:
+            f.seek(fields.offset_to_points)
+            table = lazrs.read_chunk_table(f, lazrs.LazVlr(vlr))
+    except BaseException as e:  # no LAZ VLR or no table: laspy's own error names it
+        if isinstance(e, Exception) or _is_panic(e):
+            return
+        raise
+    free = resources.available_memory()
+    if free is None:
+        return
+    budget = free * (1.0 - resources.HEADROOM)
+    for k, (points, _) in enumerate(table):
+        if points * fields.record_length > budget:
+            raise CloudFileError(
+                f"{path}: not a valid LAZ file: chunk {k + 1} of its {len(table):,} declares {points:,} points "
+                f"({points * fields.record_length / 2**30:,.1f} GB to decompress at once) but only "
+                f"{free / 2**30:.1f} GB of memory are available (the file's chunk size or chunk table is corrupt)")
+    _check_layers(path, fields, vlr, table)
+
+
+def _layers(vlr: bytes) -> int:
+    """The number of layers in each chunk of a layered LAZ file (LAS 1.4 point formats 6-10),
+    from the LAZ VLR's items; 0 when the file is not layered or an item is unknown."""
+    if len(vlr) < _LAZ_VLR_ITEMS_AT or struct.unpack_from("<H", vlr, 0)[0] != _LAZ_LAYERED:
+        return 0
+    (count,) = struct.unpack_from("<H", vlr, _LAZ_VLR_ITEMS_AT - 2)
+    items = [struct.unpack_from("<HH", vlr, _LAZ_VLR_ITEMS_AT + 6 * i) for i in range(count)
+             if _LAZ_VLR_ITEMS_AT + 6 * (i + 1) <= len(vlr)]
+    layers = [size if kind == _LAZ_BYTE14 else _LAZ_LAYERS.get(kind) for kind, size in items]
+    return 0 if not layers or None in layers else sum(layers)
+
+
+def _check_layers(path: str, fields: "HeaderFields", vlr: bytes, table: list) -> None:
+    """In a layered LAZ file, each chunk starts with its first point raw, its point count and
+    the byte size of each layer: lazrs zero-fills a buffer of each declared size before
+    reading it, so one size of 4 GB (a uint32) made a 1 KB file take 10 s and 4 GB to be
+    refused, or abort the process where the memory was not there. The sizes must fit in
+    the chunk (its byte count in the chunk table)."""
+    layers = _layers(vlr)
+    if not layers:
+        return
+    at = fields.offset_to_points + 8  # the chunks follow the chunk table's offset
+    with open(path, "rb") as f:
+        for k, (_, size) in enumerate(table):
+            f.seek(at + fields.record_length + 4)
+            raw = f.read(4 * layers)
+            if len(raw) < 4 * layers:
+                return  # beyond the end of the file: lazrs refuses it as it reads
+            declared = sum(struct.unpack(f"<{layers}I", raw))
+            room = size - fields.record_length - 4 - 4 * layers
+            if declared > room:
+                raise CloudFileError(f"{path}: not a valid LAZ file: the layers of chunk {k + 1} of {len(table):,} "
+                                     f"declare {declared:,} bytes but the chunk holds {max(room, 0):,} (the file is "
+                                     "corrupt)")
+            at += size
+
+
+def _check_chunk_table(f, path: str, offset: int, end: int, size: int) -> None:
+    """A LAZ file's chunk table, where lazrs looks for it (its offset is the point data's
+    first 8 bytes, or the file's last 8 when the writer could not go back to write it):
+    its number of chunks must fit between the point data's start and the table, as every
+    chunk takes at least one byte. lazrs allocates the count it reads before decoding a
+    single entry, and a failed allocation in Rust aborts the process (Blender with it)."""
+    f.seek(offset)
+    first = f.read(8)
+    f.seek(max(size - 8, 0))
+    for raw in (first, f.read(8)):
+        if len(raw) < 8:
+            continue
+        (at,) = struct.unpack("<q", raw)
+        if offset + 8 <= at <= end - _CHUNK_TABLE_HEADER:
+            f.seek(at + 4)
+            (chunks,) = struct.unpack("<I", f.read(4))
+            if chunks > at - offset - 8:
+                raise CloudFileError(f"{path}: not a valid LAZ file: its chunk table declares {chunks:,} chunks of "
+                                     f"points, but only {at - offset - 8:,} bytes of compressed points precede it")
+            return
 
 
 @dataclass(frozen=True)
 class HeaderFields:
     """The few header fields that bound what reading the file can do (see read_header)."""
     version: tuple
+    header_size: int
     offset_to_points: int
     vlrs: int
     point_format: int
@@ -115,6 +246,8 @@ def read_header(path: str) -> HeaderFields:
                     raise CloudFileError(f"{path}: not a valid LAS/LAZ file: its EVLR {i + 1} of {evlrs:,} declares "
                                          f"{length:,} bytes of data, which end {at - size:,} bytes beyond the end "
                                          "of the file")
+        if point_format & _LAZ_BITS == _LAZ_COMPRESSED:
+            _check_chunk_table(f, path, offset, evlr_start if evlrs else size, size)
     for axis, value in zip("xyz", numbers[:3]):
         if not (math.isfinite(value) and value != 0):
             raise CloudFileError(f"{bad} {axis} scale is {value!r}: every {axis} coordinate would be "
@@ -123,8 +256,8 @@ def read_header(path: str) -> HeaderFields:
         if not math.isfinite(value):
             raise CloudFileError(f"{bad} {axis} offset is {value!r}: no {axis} coordinate would be a number "
                                  "(the header is corrupt)")
-    return HeaderFields(version, offset, vlrs, point_format, record_length, count, numbers[:3], numbers[3:],
-                     evlr_start, evlrs)
+    return HeaderFields(version, header_size, offset, vlrs, point_format, record_length, count, numbers[:3],
+                        numbers[3:], evlr_start, evlrs)
 
 
 def read_las(path: str, progress=None) -> PointCloud:
@@ -134,7 +267,9 @@ def read_las(path: str, progress=None) -> PointCloud:
     except ImportError:
         raise CloudFileError(f"{path}: is a LAS/LAZ file, and reading it needs the laspy package, which is not "
                              "installed") from None
-    read_header(path)
+    fields = read_header(path)
+    if fields.point_format & _LAZ_BITS == _LAZ_COMPRESSED:
+        _check_chunks(path, fields)
     try:
         with laspy.open(path) as reader:
             header = reader.header
@@ -191,6 +326,10 @@ def read_las(path: str, progress=None) -> PointCloud:
         raise
     except Exception as e:  # laspy raises LaspyException, ValueError, struct errors...
         raise CloudFileError(f"{path}: not a valid LAS/LAZ file ({e})") from None
+    except BaseException as e:
+        if not _is_panic(e):
+            raise
+        raise CloudFileError(f"{path}: not a valid LAZ file (the decompressor failed on its data: {e})") from None
     if read == 0:
         raise CloudFileError(f"{path}: contains no points")
     if read != header.point_count:

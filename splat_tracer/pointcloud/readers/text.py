@@ -121,7 +121,9 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     with open(path, "rb") as f:
         data = f.read()
     try:
-        text = data.decode("utf-8")
+        # utf-8-sig: a byte order mark (Windows tools write one) is not text; kept, it made the
+        # first row '\ufeff1.0 2.0 3.0', a header line, and that point was silently lost.
+        text = data.decode("utf-8-sig")
     except UnicodeDecodeError as e:
         line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
@@ -191,7 +193,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     pos = np.column_stack([col["x"], col["y"], col["z"]])
     finite = finite_rows(pos)
     colours = None
-    if "r" in col:
+    if "r" in col and finite.any():  # none finite: make_cloud refuses the file, saying so
         rgb = unit_colours(path, {"red": col["r"][finite], "green": col["g"][finite], "blue": col["b"][finite]},
                             ("red", "green", "blue"))
         alpha = (unit_colours(path, {"alpha": col["a"][finite]}, ("alpha",))[:, 0] if "a" in col
