@@ -131,9 +131,14 @@ class SplatTracerEngine(bpy.types.RenderEngine):
             self.update_stats("", f"Splat Tracer: {e}")
 
     def view_draw(self, context, depsgraph):
+        width, height = context.region.width, context.region.height
+        if width <= 0 or height <= 0:
+            # A region collapsed to nothing (a dragged split, a minimised area) has no pixels and
+            # its view matrices are NaN: nothing to draw or render. The session keeps what it
+            # has; the first draw at a real size sets that view and rendering resumes.
+            return
         vs = self._viewport_session()
         scene = depsgraph.scene
-        width, height = context.region.width, context.region.height
         vs.set_view(viewport.view_of(scene, depsgraph, context.region, context.region_data, context.space_data))
         images, version = vs.snapshot()
         props = scene.splat_tracer.ab

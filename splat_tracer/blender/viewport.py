@@ -71,7 +71,10 @@ def border_window(width: int, height: int, rect=None, fractions=None) -> Optiona
     rect: (xmin, ymin, xmax, ymax) region pixels (bottom-left origin) the border fractions
     are relative to (the camera frame in the camera view; default the region); fractions:
     (min_x, min_y, max_x, max_y) of the border, or None for no border (the whole region).
-    None when the border lies outside the region (nothing to render)."""
+    None when the border lies outside the region or the region has no pixels (nothing to
+    render)."""
+    if width <= 0 or height <= 0:
+        return None
     if fractions is None:
         return 0, 0, width, height
     rx0, ry0, rx1, ry1 = rect if rect is not None else (0.0, 0.0, float(width), float(height))
@@ -105,7 +108,7 @@ class View:
     def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None) -> "View":
         as_tuple = lambda m: tuple(tuple(float(v) for v in row) for row in _matrix(m))
         if window == "ALL":
-            window = (0, 0, int(width), int(height))
+            window = border_window(int(width), int(height))
         clip = None if clip is None else (float(clip[0]), float(clip[1]))
         return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip)
 
@@ -470,7 +473,7 @@ class ViewportSession:
         if not self.exports or self._view is None or not self._states:
             return
         self.error = None
-        if self._camera is None:
+        if self._camera is None and self._view.window is not None:  # no window: no rays (render_pass)
             self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin,
                                             self._view.clip)
         with self._cond:

@@ -15,6 +15,11 @@ closed guess and get a disc millions of metres wide.
   outlier's spacing is its k-NN distance among all points.
 - k-NN radii are clamped to RADIUS_CAP times the 95th percentile of the inliers' spacing,
   so that an isolated point never becomes a giant disc; the clamped radii are counted.
+- Precision: every point is stored as a float32 offset from the one origin, so a cloud that
+  spans much more than its spacing (two cm-spaced clusters 1e7 m apart) has its points moved
+  by the rounding. The points moved by more than PRECISION_FRACTION of their radius are
+  counted and the cause named in the notes (they are kept: the import cannot split a cloud
+  into objects).
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..util.columns import bounds, rows_outside
+from ..util.columns import bounds, in_blocks, rows_outside
 from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
 from .cloud import MAX_RADIUS, CloudFileError, PointCloud
@@ -55,6 +60,12 @@ RADIUS_CAP = 3.0
 # up to 1e15 square to 1e30, eight orders of magnitude below that. Georeferenced scans
 # are within 1e7 (metres) or 1e10 (millimetres); beyond 1e15 a file holds garbage.
 MAX_COORDINATE = 1e15
+# A point lost precision when float32 rounding moved it by more than this fraction of its
+# splat radius: its disc then visibly leaves its place among its neighbours' (a fifth of it
+# shows as a gap or overlap at a disc's rim). A single cluster recentred by local_frame never
+# comes near it (its offsets' float32 steps are 6e-8 of its extent); two clusters far apart
+# stored from one origin do (1 m steps at 1e7 m, against cm spacing).
+PRECISION_FRACTION = 0.1
 
 
 @dataclass
@@ -75,6 +86,10 @@ class PreparedCloud:
     normal_k: int = 0
     statistical_outliers: int = 0      # points left out by statistical outlier removal
     statistical_ratio: float = 0.0
+    lost_precision: int = 0            # points float32 rounding moved by more than PRECISION_FRACTION x their radius
+    precision_error: float = 0.0       # the largest such move
+    precision_step: float = 0.0        # float32's step at the farthest of them from the origin
+    extent: float = 0.0                # the largest side of the cloud's bounding box
 
     def notes(self, k: int) -> list[str]:
         """What the import changed or found, one sentence each (the import's warnings)."""
@@ -113,9 +128,14 @@ class PreparedCloud:
             notes.append(f"{self.clamped_radii:,} splat radii were reduced to {self.radius_cap:.4g} "
                          f"({RADIUS_CAP:g} x the {RADIUS_CAP_PERCENTILE:g}th percentile of the spacing): "
                          "their points have no close neighbours")
+        if self.lost_precision:
+            notes.append(f"{self.lost_precision:,} points lost precision: the points span {self.extent:.2g} but are "
+                         f"{np.median(self.hood.spacing):.2g} apart, and float32 offsets from one origin cannot hold "
+                         f"both (steps of {self.precision_step:.2g} that far from it; points moved by up to "
+                         f"{self.precision_error:.2g}); import the clusters as separate files, or crop")
         if self.hood.degenerate and c.radii is None:
-            notes.append(f"{self.hood.degenerate} points share their position with {k}+ others; "
-                         "they got the median radius")
+            notes.append(f"{self.hood.degenerate} points share their position with {k}+ others"
+                         + (" after that rounding" if self.lost_precision else "") + "; they got the median radius")
         return notes
 
 
@@ -174,6 +194,18 @@ def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> N
         f"origin (the renderer squares them in float32, whose range ends at 3.4e38){hint}")
 
 
+def _rounding_error(positions: np.ndarray, origin: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """(N,) float32: how far float32 rounding moved each point (its largest coordinate's error),
+    block by block (no (N,3) float64 temporary)."""
+    err = np.empty(len(local), np.float32)
+
+    def block(b: int, e: int) -> None:
+        err[b:e] = np.abs(positions[b:e] - origin - local[b:e]).max(axis=1)
+
+    in_blocks(block, len(local))
+    return err
+
+
 def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
     return cloud.subset(keep)
 
@@ -218,6 +250,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             cloud, bulk = _subset(cloud, keep), bulk[keep]
     _check_float32_safe(cloud.positions, bulk, path)
     origin, local = local_frame(cloud.positions, bulk)
+    rounding = _rounding_error(cloud.positions, origin, local)
+    extent = _span(cloud.positions)[0]
     if needs_normals and cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
         raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
                              f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
@@ -266,4 +300,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         clamped = radii > cap
         prepared.radii = np.minimum(radii, cap)
         prepared.clamped_radii, prepared.radius_cap = int(clamped.sum()), float(cap)
+    lost = rounding > PRECISION_FRACTION * prepared.radii
+    if lost.any():
+        prepared.lost_precision, prepared.precision_error = int(lost.sum()), float(rounding[lost].max())
+        prepared.precision_step = float(np.spacing(np.abs(local[lost]).max()))
+        prepared.extent = extent
     return prepared

@@ -551,3 +551,92 @@ def test_the_render_thread_stops_within_its_timeout_mid_pass(mode):
         assert float(line.split()[2]) < 1.0 and line.endswith("alive False"), line
     else:
         assert "at exit: alive False" in r.stdout, r.stdout
+
+
+# --------------------------------------------------------------------------------------
+# A region collapsed to nothing
+
+class _Engine:
+    """SplatTracerEngine's viewport methods on a stand-in (a RenderEngine cannot be made
+    outside Blender's draw loop), recording its status lines and redraw requests."""
+
+    def __init__(self, cls):
+        self.view_update = cls.view_update.__get__(self)
+        self.view_draw = cls.view_draw.__get__(self)
+        self._viewport_session = cls._viewport_session.__get__(self)
+        self.stats, self.redraws = [], 0
+
+    def update_stats(self, _, text):
+        self.stats.append(text)
+
+    def tag_redraw(self):
+        self.redraws += 1
+
+
+def _viewport_context(bpy, scene, width, height):
+    """What view_draw reads: the region, and matrices as Blender makes them for its size (a
+    0 x 0 region's window matrix is NaN, as calc_matrix_camera gives it; 0 x h is all zeros)."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    cam = scene.camera.evaluated_get(depsgraph)
+    window = np.array(cam.calc_matrix_camera(depsgraph, x=width, y=height), np.float64)
+    view = np.linalg.inv(np.array(cam.matrix_world.normalized(), np.float64))
+    rv3d = SimpleNamespace(window_matrix=window, view_matrix=view, perspective_matrix=window @ view,
+                           is_perspective=True, view_perspective="PERSP")
+    space = SimpleNamespace(clip_start=cam.data.clip_start, clip_end=cam.data.clip_end, use_render_border=False)
+    return SimpleNamespace(region=SimpleNamespace(width=width, height=height), region_data=rv3d, space_data=space)
+
+
+@pytest.mark.parametrize("empty", [(0, 0), (0, 60), (80, 0)])
+def test_a_zero_sized_region_draws_nothing_and_rendering_resumes_when_it_grows(blender, empty_scene, monkeypatch,
+                                                                               empty):
+    import time
+    engine = extension_module("blender.engine")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    bpy.context.view_layer.update()
+    drawn = []
+    monkeypatch.setattr(engine, "_draw_pixels", lambda _e, _s, pixels, w, h: drawn.append((pixels.shape, w, h)))
+    e = _Engine(engine.SplatTracerEngine)
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+
+    def draw_until_done(width, height):
+        deadline = time.time() + 60
+        e.view_draw(_viewport_context(bpy, scene, width, height), depsgraph)
+        while not e._splat_viewport.done and time.time() < deadline:
+            time.sleep(0.02)
+        e.view_draw(_viewport_context(bpy, scene, width, height), depsgraph)
+
+    e.view_update(_viewport_context(bpy, scene, 80, 60), depsgraph)
+    vs = e._splat_viewport
+    try:
+        draw_until_done(80, 60)
+        assert drawn[-1] == ((60, 80, 4), 80, 60) and vs.error is None
+        before = (len(drawn), len(e.stats), e.redraws, vs.generation, vs.counters["renders"])
+        draw_until_done(*empty)  # nothing drawn, rendered, restarted or reported; no exception
+        assert (len(drawn), len(e.stats), e.redraws, vs.generation, vs.counters["renders"]) == before
+        assert vs.error is None
+        draw_until_done(40, 30)  # grown again: the new size renders and is drawn
+        assert vs.latest().pixels.shape == (30, 40, 4) and vs.latest().final and vs.error is None
+        assert drawn[-1] == ((30, 40, 4), 40, 30) and vs.latest().pixels[..., 3].max() > 0
+        assert not any("Splat Tracer:" in s for s in e.stats)
+    finally:
+        vs.close()
+
+
+def test_a_view_without_pixels_renders_nothing_without_an_error(blender, empty_scene):
+    """The session given a 0-wide view (through the API, not view_draw) renders empty passes
+    and needs no camera; a real size afterwards renders."""
+    viewport = extension_module("blender.viewport")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    bpy.context.view_layer.update()
+    assert viewport.border_window(0, 60) is None and viewport.border_window(80, 0, None, (0, 0, 1, 1)) is None
+    full = _f12_view(bpy, scene, 80, 60)
+    vs = viewport.ViewportSession()
+    vs.set_view(viewport.View.of(full.window_matrix, full.view_matrix, 0, 60))
+    vs.update(bpy.context.evaluated_depsgraph_get())
+    image = vs.refine()
+    assert vs.error is None and image.pixels.shape == (60, 0, 4)
+    vs.set_view(full)
+    assert vs.refine().pixels[..., 3].max() > 0 and vs.error is None
+    vs.close()

@@ -473,3 +473,58 @@ def test_a_job_cancelled_midway_in_blender_leaves_nothing(blender, empty_scene, 
     with pytest.raises(progress.Cancelled):
         job.result()
     assert _counts(bpy) == before
+
+
+# --- float32 precision ----------------------------------------------------------------------
+
+def _cluster(centre, axis, n=30, step=0.01):
+    """An n x n grid of `step` spacing around `centre`, in the plane of `axis` and the next axis
+    (so that rounding along `axis` shows)."""
+    u, v = np.meshgrid(np.arange(n) * step, np.arange(n) * step, indexing="ij")
+    p = np.zeros((n * n, 3))
+    p[:, axis], p[:, (axis + 1) % 3] = u.ravel(), v.ravel()
+    return p + centre
+
+
+def _write_xyz(path, p):
+    np.savetxt(path, p, fmt="%.4f")
+    return str(path)
+
+
+@pytest.mark.parametrize("apart, axis", [(1e7, 0), (1e6, 1), (1e7, 2), (1e6, 2)])
+def test_two_clusters_too_far_apart_for_float32_are_named_as_such(tmp_path, apart, axis):
+    """Two cm-spaced clusters `apart` metres apart share one float32 origin: the cloud's steps at
+    that distance (0.03 m at 5e5, 0.5 m at 5e6) move or merge their points. The notes say so and
+    count them, rather than blaming the file for duplicates."""
+    far = np.zeros(3)
+    far[axis] = apart
+    path = _write_xyz(tmp_path / "two.xyz", np.concatenate([_cluster(0.0, axis), _cluster(far, axis)]))
+    prep = importer.load(path)
+    assert prep.lost_precision > 0 and prep.precision_error > 0.001
+    note = next(n for n in prep.notes(8) if "lost precision" in n)
+    assert f"{prep.lost_precision:,} points lost precision" in note
+    assert f"span {apart:.2g}" in note and "0.01 apart" in note and "separate files" in note
+
+
+def test_a_far_cluster_of_a_few_points_is_counted_as_outliers_and_as_lost_precision(tmp_path):
+    """A small cluster 1e7 away is outside the bulk: kept (the origin stays at the bulk) but
+    rounded to 1 m steps; both facts are in the notes."""
+    p = np.concatenate([_cluster(0.0, 0), _cluster([1e7, 0, 0], 0, n=3)])
+    prep = importer.load(_write_xyz(tmp_path / "stray.xyz", p))
+    assert prep.outliers == 9 and prep.lost_precision == 9
+    assert sum("lost precision" in n for n in prep.notes(8)) == 1
+
+
+@pytest.mark.parametrize("centre", [(3e6, 5e6, 100.0), (1e7, -1e6, 0.0), (4e5, 1e7, 1e6)])
+def test_a_georeferenced_cluster_far_from_the_world_origin_imports_silently(tmp_path, centre):
+    """local_frame recentres a single cluster: its float32 offsets keep cm spacing exactly enough."""
+    prep = importer.load(_write_xyz(tmp_path / "geo.xyz", _cluster(np.array(centre), 0, n=60)))
+    assert prep.lost_precision == 0 and not any("precision" in n for n in prep.notes(8))
+    assert len(prep.local) == 3600 and prep.cloud.merged_duplicates == 0
+
+
+def test_clusters_far_apart_along_an_axis_they_are_flat_across_lose_nothing(tmp_path):
+    """Offsets of exactly 0 and +-5e6 are float32 values: nothing moves, nothing is reported."""
+    p = np.concatenate([_cluster(0.0, 0), _cluster([0, 0, 1e7], 0)])  # grids in the xy plane, 1e7 apart in z
+    prep = importer.load(_write_xyz(tmp_path / "flat.xyz", p))
+    assert prep.lost_precision == 0 and not any("precision" in n for n in prep.notes(8))
