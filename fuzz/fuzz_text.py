@@ -104,9 +104,7 @@ def mutate(data: bytes, max_size: int, seed: int) -> bytes:
 
 
 def TestOneInput(data: bytes) -> None:
-    with open(PATH, "wb") as f:
-        f.write(data)
-    reading.import_file(PATH)
+    reading.import_bytes(data, PATH)
 
 
 if __name__ == "__main__":

@@ -44,6 +44,13 @@ def check_prepared(prepared: prepare.PreparedCloud) -> None:
     assert prepared.radii.shape == (m,) and (np.isfinite(prepared.radii) & (prepared.radii > 0)).all()
 
 
+def import_bytes(data: bytes, path: str) -> None:
+    """A fuzzed input, written to `path`, through import_file (the harnesses' one step)."""
+    with open(path, "wb") as f:
+        f.write(data)
+    import_file(path)
+
+
 def import_file(path: str) -> None:
     """The file through the importer's steps, checked (see the module's text)."""
     try:
