@@ -20,12 +20,9 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render
-from geometry import fibonacci_sphere
-from splat_tracer.pointcloud.readers import ply
 
 ROOT = Path(__file__).resolve().parents[2]
 MATRIX_DIR = ROOT / "build" / "matrix"
@@ -94,26 +91,6 @@ def bpy_python(series) -> Path:
         stamp.write_text(pins)
         print(f"\nmatrix: created {venv} in {time.perf_counter() - started:.0f} s")
     return venv / "bin" / "python"
-
-
-@pytest.fixture(scope="module")
-def clouds(tmp_path_factory) -> list[Path]:
-    """One sphere as PLY (normals, no radii: the core's k-NN gives them), LAZ (no normals:
-    estimated by the core too; laspy + lazrs) and E57 (pye57)."""
-    import laspy
-    import pye57
-
-    out = tmp_path_factory.mktemp("clouds")
-    p, n = fibonacci_sphere(5000)
-    ply.write_ply(str(out / "sphere.ply"), p, n)
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.offsets, header.scales = np.zeros(3), np.full(3, 1e-4)  # 0.1 mm steps
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = p.T
-    las.write(str(out / "sphere.laz"), laz_backend=laspy.LazBackend.Lazrs)
-    with pye57.E57(str(out / "sphere.e57"), mode="w") as e57:
-        e57.write_scan_raw({"cartesianX": p[:, 0], "cartesianY": p[:, 1], "cartesianZ": p[:, 2]})
-    return [out / "sphere.ply", out / "sphere.laz", out / "sphere.e57"]
 
 
 def run(python: Path, home: Path, *args: str) -> subprocess.CompletedProcess:

@@ -49,8 +49,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import blender_user_env, check_lit_sphere_render, check_sphere_render, read_exr
-from geometry import fibonacci_sphere, sphere_cloud
-from splat_tracer.pointcloud.readers import ply
+from geometry import sphere_cloud
 from splat_tracer.render.camera import Camera
 from tools import wine
 
@@ -179,26 +178,6 @@ def test_windows_core_in_python_3_13_without_numpy_answers_like_the_linux_core(p
     facts, windows = windows_core_check(pythons["3.13"], inputs, tmp_path)
     assert facts["python"].startswith("3.13.") and facts["numpy"] is None, facts  # the abi3 module, no numpy
     assert_same_answers(linux_answers[1], windows, CORE_ANSWERS)
-
-
-@pytest.fixture(scope="module")
-def clouds(tmp_path_factory) -> list[Path]:
-    """One sphere as PLY (normals; radii by the core's k-NN), LAZ and E57 (no normals:
-    estimated by the core), as test_blender_versions.py makes them."""
-    import laspy
-    import pye57
-
-    out = tmp_path_factory.mktemp("clouds")
-    p, n = fibonacci_sphere(5000)
-    ply.write_ply(str(out / "sphere.ply"), p, n)
-    header = laspy.LasHeader(point_format=3, version="1.2")
-    header.offsets, header.scales = np.zeros(3), np.full(3, 1e-4)
-    las = laspy.LasData(header)
-    las.x, las.y, las.z = p.T
-    las.write(str(out / "sphere.laz"), laz_backend=laspy.LazBackend.Lazrs)
-    with pye57.E57(str(out / "sphere.e57"), mode="w") as e57:
-        e57.write_scan_raw({"cartesianX": p[:, 0], "cartesianY": p[:, 1], "cartesianZ": p[:, 2]})
-    return [out / "sphere.ply", out / "sphere.laz", out / "sphere.e57"]
 
 
 def windows_user_dirs(home: Path) -> dict[str, str]:
