@@ -11,7 +11,8 @@ from ..util.arrays import as_f32, as_indices
 from ..util.columns import bounds, in_blocks
 
 
-def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None,
+                rounding: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
     """Splits float64 (or float32) points into (origin, float32 offsets from it).
 
     The origin is the centre of the bounding box (of the points selected by the boolean
@@ -19,6 +20,8 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     away cannot move it), rounded to a float32 value so that it can be stored exactly
     (e.g. as a Blender object location). Subtracting it in float64 before the cast keeps
     full precision for georeferenced scans (1e5 to 1e7 metres).
+    `rounding`, an (N,) float32 array when given, receives how far the float32 rounding moved
+    each point (its largest coordinate's error), from the same float64 differences.
     """
     pts = np.asarray(points)
     if pts.dtype != np.float32:  # float32 points are subtracted in float64 block by block below: no copy
@@ -35,7 +38,12 @@ def local_frame(points: np.ndarray, bulk: Optional[np.ndarray] = None) -> tuple[
     def block(b: int, e: int) -> None:  # the difference in float64, rounded once, with no float64 temporary
         np.subtract(pts[b:e], origin, out=local[b:e], casting="same_kind")
 
-    in_blocks(block, len(pts))
+    def block_and_rounding(b: int, e: int) -> None:  # a float64 temporary of one block for the error
+        exact = pts[b:e] - origin
+        local[b:e] = exact
+        rounding[b:e] = np.abs(exact - local[b:e]).max(axis=1)
+
+    in_blocks(block if rounding is None else block_and_rounding, len(pts))
     return origin, local
 
 

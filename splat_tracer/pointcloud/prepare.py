@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..util.columns import bounds, in_blocks, rows_outside
+from ..util.columns import bounds, rows_outside
 from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
 from .cloud import MAX_RADIUS, CloudFileError, PointCloud
@@ -178,10 +178,11 @@ def _span(positions: np.ndarray) -> tuple[float, float, float]:
         return float(np.max(hi - lo)), float(lo.min()), float(hi.max())
 
 
-def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> None:
+def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> float:
+    """The cloud's extent (the largest side of its bounding box), when float32 offsets can hold it."""
     extent, lo, hi = _span(positions)
     if extent <= MAX_COORDINATE and max(-lo, hi) <= MAX_COORDINATE:
-        return
+        return extent
     hint = ""
     if not bulk.all() and bulk.any():
         b_extent, b_lo, b_hi = _span(positions[bulk])
@@ -192,18 +193,6 @@ def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> N
         f"{path}: the cloud spans {extent:.3g} (coordinates from {lo:.3g} to {hi:.3g}); coordinates and "
         f"extents beyond {MAX_COORDINATE:.0e} cannot be stored safely as float32 offsets from the import "
         f"origin (the renderer squares them in float32, whose range ends at 3.4e38){hint}")
-
-
-def _rounding_error(positions: np.ndarray, origin: np.ndarray, local: np.ndarray) -> np.ndarray:
-    """(N,) float32: how far float32 rounding moved each point (its largest coordinate's error),
-    block by block (no (N,3) float64 temporary)."""
-    err = np.empty(len(local), np.float32)
-
-    def block(b: int, e: int) -> None:
-        err[b:e] = np.abs(positions[b:e] - origin - local[b:e]).max(axis=1)
-
-    in_blocks(block, len(local))
-    return err
 
 
 def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
@@ -248,10 +237,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         statistical = int(len(keep) - keep.sum())
         if statistical:
             cloud, bulk = _subset(cloud, keep), bulk[keep]
-    _check_float32_safe(cloud.positions, bulk, path)
-    origin, local = local_frame(cloud.positions, bulk)
-    rounding = _rounding_error(cloud.positions, origin, local)
-    extent = _span(cloud.positions)[0]
+    extent = _check_float32_safe(cloud.positions, bulk, path)
+    rounding = np.empty(len(cloud), np.float32)  # how far float32 moved each point (local_frame fills it)
+    origin, local = local_frame(cloud.positions, bulk, rounding)
     if needs_normals and cloud.normals is None and len(cloud) < normals_mod.MIN_POINTS:
         raise CloudFileError(f"{path}: has no normals (nx, ny, nz) and only {len(cloud)} distinct points, too "
                              f"few to estimate them (at least {normals_mod.MIN_POINTS} are needed)")
