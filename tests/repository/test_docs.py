@@ -53,14 +53,20 @@ def markdown_files() -> list[Path]:
     return [f for f in files if f.is_file()]
 
 
-def links(text: str):
-    """(line number, target) of every link and image outside code."""
+def numbered_lines(text: str):
+    """(line number, line, inside a fenced code block) of every line but the fences themselves."""
     in_fence = False
     for number, line in enumerate(text.splitlines(), 1):
         if _FENCE.match(line):
             in_fence = not in_fence
             continue
-        if in_fence:
+        yield number, line, in_fence
+
+
+def links(text: str):
+    """(line number, target) of every link and image outside code."""
+    for number, line, fenced in numbered_lines(text):
+        if fenced:
             continue
         line = _CODE_SPAN.sub("", line)
         for pattern in (_INLINE, _REFERENCE):
@@ -107,12 +113,8 @@ _PYTHON_M = re.compile(r"python[\d.]*\s+-m\s+([\w.<>]+)")
 
 def code_texts(text: str):
     """(line number, text, is a span) of every code span and every fenced line."""
-    in_fence = False
-    for number, line in enumerate(text.splitlines(), 1):
-        if _FENCE.match(line):
-            in_fence = not in_fence
-            continue
-        if in_fence:
+    for number, line, fenced in numbered_lines(text):
+        if fenced:
             yield number, line, False
             continue
         for match in _CODE_SPAN.finditer(line):
