@@ -27,10 +27,15 @@ def _blender(workdir: Path):
 
 
 def render(engine: str, ply_path: Path, view: dict, width: int, height: int, workdir: Path, closed: bool,
-           method: str = "FULL") -> dict:
+           method: str = "FULL", lamp_power: float = 0.0, point_normals: bool = False) -> dict:
     """Renders the cloud in `ply_path` with `engine` ('SPLAT_TRACER' or 'CYCLES') from the
     camera `view` (Camera.look_at arguments). Returns wall seconds of the render call,
-    the threads Blender was told to use, and top-row-first coverage, depth and normals."""
+    the threads Blender was told to use, and top-row-first coverage, depth, normals and the
+    Combined pass (H,W,4).
+    lamp_power > 0: a point lamp of that power (W, radius 0) at the camera, and direct light
+    only (no bounces). point_normals: Cycles shades the spheres with the points'
+    `splat_normal` instead of the sphere's own normal (the file must have colours: that
+    patches the importer's "Splat Cloud" material, which only coloured clouds get)."""
     bpy = _blender(workdir)
     from tests.support.blender_helpers import render_to_exr
     from mathutils import Matrix
@@ -40,6 +45,17 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
     bpy.ops.splat_tracer.import_cloud(filepath=str(ply_path))
     obj = bpy.context.active_object
     obj.splat_tracer.closed = closed
+    if point_normals:
+        from tests.support.blender_helpers import extension_module
+
+        cloud_object = extension_module("blender.cloud_object")
+        material = next(m for m in bpy.data.materials if m.get(cloud_object.MATERIAL_TAG))
+        nodes, links = material.node_tree.nodes, material.node_tree.links
+        normal = nodes.new("ShaderNodeAttribute")
+        normal.attribute_type = "GEOMETRY"
+        normal.attribute_name = cloud_object.NORMAL
+        bsdf = next(n for n in nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+        links.new(normal.outputs["Vector"], bsdf.inputs["Normal"])
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)
     eye, target, up = (np.asarray(view[k], dtype=np.float64) for k in ("eye", "target", "up"))
@@ -53,6 +69,13 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
     cam.data.lens = 12.0 / math.tan(math.radians(view["fov_y"]) / 2)
     cam.data.clip_start, cam.data.clip_end = view["near"], view["far"]
     scene.camera = cam
+    if lamp_power > 0:
+        lamp = bpy.data.objects.new("Headlamp", bpy.data.lights.new("Headlamp", "POINT"))
+        lamp.data.energy = lamp_power
+        lamp.data.shadow_soft_size = 0.0
+        lamp.location = tuple(eye)
+        scene.collection.objects.link(lamp)
+        scene.world = None  # no world light: the lamp alone
     scene.render.engine = engine
     scene.render.film_transparent = True
     if engine == "CYCLES":
@@ -61,6 +84,8 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
         scene.cycles.use_denoising = False
         scene.cycles.pixel_filter_type = "BOX"
         scene.cycles.filter_width = 0.01  # sample the pixel centre, like the truth and our engine
+        if lamp_power > 0:
+            scene.cycles.max_bounces = 0  # direct light from the lamp only
     else:
         scene.splat_tracer.method = method
         scene.splat_tracer.samples = 1  # the pixel centre, like the truth and the Cycles row
@@ -68,4 +93,5 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
     out = render_to_exr(bpy, scene, workdir / f"{engine.lower()}.exr", width, height)
     seconds = time.perf_counter() - t0
     return {"seconds": seconds, "threads": scene.render.threads, "hit": out["depth"].ravel() < 1e9,
-            "depth": out["depth"].ravel().astype(np.float64), "normal": out["normal"].reshape(-1, 3)}
+            "depth": out["depth"].ravel().astype(np.float64), "normal": out["normal"].reshape(-1, 3),
+            "rgba": out["rgba"]}
