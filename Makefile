@@ -133,6 +133,7 @@ bench-quick: build
 	$(VPY) -m benchmarks.frame_time --quick --output build/bench-quick
 	$(VPY) -m benchmarks.viewport_latency --quick
 	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
+	$(VPY) -m benchmarks.real_scans --quick --output build/bench-quick
 
 # Open3D for the import benchmark's comparison rows, in its own environment (its wheel
 # brings dependencies the add-on's environment must not get); it needs libusb at load
@@ -151,6 +152,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) -m benchmarks.frame_time --output benchmarks/results
 	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
 	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
+	$(VPY) -m benchmarks.real_scans --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache
