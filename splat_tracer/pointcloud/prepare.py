@@ -153,14 +153,14 @@ _ORIENTED = {"PROPAGATE": "consistently along the neighbour graph (outward where
              "": ""}
 
 
-def resolve_orientation(cloud: PointCloud, orientation: str = "AUTO") -> str:
-    """The orientation mode asked of normals.orient: AUTO is SCANNER when the file knows
-    its scanners (E57 poses, a PCD's viewpoint), else AUTO (normals.orient decides from the
+def resolve_orientation(orientation: str, scanners: bool, viewpoint: bool = True) -> str:
+    """The orientation mode asked of normals.orient: AUTO is SCANNER when the scanners are
+    known (E57 poses, a PCD's viewpoint), else AUTO (normals.orient decides from the
     geometry, whatever the format: a LAS file may hold an object). SCANNER without
-    scanners is PROPAGATE."""
-    if orientation == "AUTO" and cloud.scanners is not None:
+    scanners, or ORIGIN without the file's origin, is PROPAGATE."""
+    if orientation == "AUTO" and scanners:
         orientation = "SCANNER"
-    if orientation == "SCANNER" and cloud.scanners is None:
+    if (orientation == "SCANNER" and not scanners) or (orientation == "ORIGIN" and not viewpoint):
         orientation = "PROPAGATE"
     return orientation
 
@@ -266,7 +266,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     if needs_normals:
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel, workers)
-        oriented_by = resolve_orientation(cloud, orientation)
+        oriented_by = resolve_orientation(orientation, cloud.scanners is not None)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
         # The file's origin in the offsets' frame (the importer's axes and scale keep it at 0):
         # where a single view's sensor sits (ORIGIN, and AUTO's range-image test).
