@@ -83,7 +83,7 @@ class PreparedCloud:
     normals_estimated: bool = False    # the file had none: PCA over normal_k neighbours
     normals_oriented: str = ""         # the rule that decided the signs when the import chose them (normals.py)
     orientation_evidence: str = ""     # why AUTO chose that rule
-    oriented_by_rule: int = 0          # points whose sign the rule decided; the others took theirs by propagation
+    oriented_by_rule: float = 0.0      # the share of points whose sign the rule decided; the rest by propagation
     ambiguous: int = 0                 # points whose orientation was ambiguous
     normal_k: int = 0
     statistical_outliers: int = 0      # points left out by statistical outlier removal
@@ -104,8 +104,7 @@ class PreparedCloud:
             if self.orientation_evidence:
                 how += f" (decided by {self.orientation_evidence})"
             if self.normals_oriented in ("SCANNER", "ORIGIN", "UP"):
-                share = self.oriented_by_rule / max(len(c), 1)
-                how += f"; {share:.1%} of the points by that rule, the rest from their neighbours"
+                how += f"; {self.oriented_by_rule:.1%} of the points by that rule, the rest from their neighbours"
             if self.normals_estimated:
                 notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
             else:
@@ -261,7 +260,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     # handed the cloud over, as importer.load does; 10M points: 240 MB).
     cloud = replace(cloud, positions=None)
     estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
-    evidence, by_rule = "", 0
+    evidence, by_rule = "", 0.0
     known_spacing = known_cover = None
     if needs_normals:
         step("estimate")(0.0, "neighbour tree")
@@ -276,7 +275,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             viewpoint=-origin)
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
-        oriented_by, evidence, by_rule = result.mode, result.evidence, result.by_rule
+        # (a share: the notes are written after the importer has let go of the arrays)
+        oriented_by, evidence, by_rule = result.mode, result.evidence, result.by_rule / len(result.normals)
     whole = bool(bulk.all())  # no copies of a 10M-point cloud (nor an index of it) when nothing is left out
     inliers = None if whole else np.flatnonzero(bulk)
     radii_tree = tree if whole else None  # the normals' k-d tree when it is the bulk's
