@@ -27,13 +27,19 @@ from ..splat_tracer.util.progress import Cancelled, Job, Steps, TerminalProgress
 
 SCANNER = "scanner_position"  # point attribute: the scanner that saw the point (object-local)
 ORIENTATION_HINT = "splat_tracer_orientation"  # custom property: the file's own orientation mode
+# custom property: the file's origin in the object's own coordinates (where a single view's
+# sensor sits), for Estimate Splat Normals' Automatic and File Origin
+VIEWPOINT = "splat_tracer_file_origin"
 _ORIENTATION_ITEMS = [
-    ("AUTO", "Automatic", "Towards the scanner when the file knows it (E57), upward for aerial data (LAS), "
-                          "else along the neighbour graph"),
+    ("AUTO", "Automatic", "Towards the scanner when the file knows it (E57); else by the cloud's shape, whatever "
+                          "the format: a depth or stereo frame towards the file's origin, a terrain upward, "
+                          "objects outward by visibility, else along the neighbour graph"),
     ("PROPAGATE", "Neighbour Graph", "Consistent along a minimum spanning tree of the neighbours, outward where "
                                      "the surface encloses a volume"),
     ("UP", "Upward", "Towards +Z (aerial scans); walls take their neighbours' side"),
     ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files); else Neighbour Graph"),
+    ("ORIGIN", "File Origin", "Towards the file's origin (0, 0, 0): a depth-camera or stereo frame in its "
+                              "sensor's coordinates"),
 ]
 _TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progress
 # How long a cancel (Esc, or Blender ending the operator: cancel(), which blocks the main
@@ -184,6 +190,7 @@ def create_objects(context, loaded, notes_for, progress=None, consume: bool = Fa
             obj["splat_tracer_source"] = path
             obj["splat_tracer_format"] = prep.cloud.format
             obj[ORIENTATION_HINT] = prep.cloud.orientation
+            obj[VIEWPOINT] = [float(-v) for v in prep.origin]  # the file's (0, 0, 0) in the object's frame
             obj.splat_tracer.closed = prep.hood.closed_guess
             obj["splat_tracer_closed_guess"] = prep.hood.describe()
             notes = notes_for(prep)
@@ -338,7 +345,7 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
     def execute(self, context):
         import numpy as np
 
-        jobs = []  # (name, points, scanners, mode): read here, on the main thread
+        jobs = []  # (name, points, scanners, mode, viewpoint): read here, on the main thread
         for obj in self.clouds(context):
             problem = self.attribute_problem(obj)
             if problem is not None:
@@ -355,24 +362,22 @@ class SPLAT_TRACER_OT_estimate_normals(_Work, bpy.types.Operator):
                 scanners = np.empty(n * 3, np.float32)
                 mesh.attributes[SCANNER].data.foreach_get("vector", scanners)
                 scanners = scanners.reshape(-1, 3).astype(np.float64)
-            mode = self.orientation
-            if mode == "AUTO":
-                mode = obj.get(ORIENTATION_HINT, "PROPAGATE")
-            if mode == "SCANNER" and scanners is None:
-                mode = "PROPAGATE"
-            jobs.append((obj.name, co.reshape(-1, 3).astype(np.float64), scanners, mode))
+            viewpoint = obj.get(VIEWPOINT)
+            viewpoint = None if viewpoint is None else np.array(viewpoint[:3], np.float64)
+            mode = prepare.resolve_orientation(self.orientation, scanners is not None, viewpoint is not None)
+            jobs.append((obj.name, co.reshape(-1, 3).astype(np.float64), scanners, mode, viewpoint))
         normal_k, k, hole_free = self.normal_neighbours, self.neighbours, self.hole_free
 
         def work(progress):
             out = []
-            for i, (name, points, scanners, mode) in enumerate(jobs):
+            for i, (name, points, scanners, mode, viewpoint) in enumerate(jobs):
                 step = Steps(scaled(progress, i / len(jobs), (i + 1) / len(jobs), f"{name}: "),
                              {"normals": 3.0, "radii": 1.0})
                 try:
                     tree = spacing.neighbour_tree(points)
                     result, known, cover = normals.estimate_and_orient(points, normal_k, mode, scanners, radius_k=k,
                                                                        tree=tree, progress=step("normals"),
-                                                                       close_gaps=hole_free)
+                                                                       close_gaps=hole_free, viewpoint=viewpoint)
                     hood = spacing.analyse(points, result.normals, k, progress=step("radii"), tree=tree,
                                            known_spacing=known, close_gaps=hole_free, known_cover=cover)
                     radii = hood.covering if hood.covering is not None else hood.spacing

@@ -8,8 +8,15 @@ eigenvector in closed form with Jacobi rotations where the eigenvalues nearly re
 in chunks of points in the k-d tree's own (spatially coherent) order.
 
 Orientation (the PCA axis has no sign):
-- SCANNER: towards the scanner that saw the point (E57 poses);
-- UP: towards +Z (aerial data: LAS);
+- SCANNER: towards the scanner that saw the point (E57 poses, a PCD's VIEWPOINT);
+- ORIGIN: towards the file's origin (one viewpoint there: a depth-camera or stereo frame);
+- UP: towards +Z (aerial data);
+- AUTO: by the cloud's geometry, whatever its file format (see orient_auto): the scanners
+  when known; else a range image seen from the file's origin is oriented towards it
+  (ORIGIN); else a cloud whose bulk is a terrain (open sheets facing up or down) upward
+  (UP); else each component's side by visibility (rays over the splats of a sample of the
+  cloud: the side from which its points are seen escapes), where that evidence is strong;
+  else as PROPAGATE;
 - PROPAGATE: along the neighbour graph. Hoppe et al.'s minimum spanning tree over the
   k-NN graph with edge weights 1 - |n_i . n_j|, so that the tree runs along smooth parts
   and crosses creases as late as possible, plus a term |n . d| (d: the edge's unit
@@ -24,7 +31,7 @@ Orientation (the PCA axis has no sign):
   spanning_forest by Boruvka's algorithm, forest_traversal, chain_flips), on the cloud
   renumbered so that neighbours lie close in memory: in the import's k-d tree's order, or in
   Morton order (spatial_order) when there is no tree.
-In SCANNER and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
+In SCANNER, ORIGIN and UP modes a point whose rule is unclear (the normal within AMBIGUOUS_RULE of
 perpendicular to the scanner's direction or to +Z: grazing views, walls in aerial data)
 takes its sign by propagation from its neighbours instead: from the anchor fewest tree
 edges away (one as many edges from two anchors takes the sign of whichever the walk reaches
@@ -56,7 +63,46 @@ ACROSS_WEIGHT = 1.0     # the weight of |n . d| against 1 - |n_i . n_j|
 # (faces up, see orient). A closed surface's sum is about 0; a hemisphere's 0.5 (where up
 # and outward agree); a terrain's or a facade's close to 1.
 OPEN_SHEET = 0.5
-MODES = ("PROPAGATE", "UP", "SCANNER")
+MODES = ("AUTO", "PROPAGATE", "UP", "SCANNER", "ORIGIN")
+SAMPLE_SEED = 0  # the range-image test's and visibility's samples: the same cloud, the same answer
+# AUTO's terrain: the open sheets (OPEN_SHEET) whose normals' sum is within 45 degrees of
+# vertical hold at least half the points. Then every point with a clear up is an anchor (as
+# UP): an aerial scan's buildings, trees and cars are seen from above as its ground is.
+TERRAIN_COSINE = 0.7
+TERRAIN_SHARE = 0.5
+# The range-image test (range_image). Its sample: percentiles of a share of 1e5 points are
+# within about 0.1 % of the true ones, far below the margins of the thresholds below.
+VIEW_SAMPLE = 100_000
+VIEW_MIN_POINTS = 100    # fewer: no test (nothing to bin)
+# The median angle between the normals and the lines of sight at most 60 degrees: a sensor
+# measures surfaces it sees at steep angles (a depth camera loses returns beyond about 70
+# degrees); a terrain seen from a file origin at sea level, far below or beside it, is
+# seen almost edge-on.
+VIEW_FACING = 0.5
+VIEW_COVER_CELL = 2.0 / 16  # the coverage's cube map: 16 x 16 cells per face
+VIEW_COVERAGE = 0.9      # a closed surface around the viewpoint covers every direction
+VIEW_CELL = 1.0          # angular cells one sample spacing (k-th neighbour) wide: a few points each
+VIEW_MAX_SLOPE = 10.0    # the depth spread of a cell seen at more than 84 degrees is bounded
+VIEW_DEPTH = 3.0         # sample spacings of noise (depth quantisation) within one layer
+VIEW_FIRST = 0.95        # a second layer (an object's back) holds about half the points
+# Visibility (visibility): its occluders are this many points of the cloud at most (a BVH
+# of 2e5 discs builds in a few hundredths of a second); rays per side and probe; probes per
+# component and in all; the cap of directions (a ray within 20 degrees of the tangent plane
+# meets the neighbours' discs of a curved surface); how far out a ray starts (radii of its
+# probe's disc). A probe's vote is clear when its sides' escape shares differ by at least
+# VISIBILITY_CLEAR and the lesser is at most VISIBILITY_ENCLOSED; a component is decided by at least VISIBILITY_MIN_VOTES clear votes of
+# which VISIBILITY_AGREE agree.
+VISIBILITY_SAMPLE = 200_000
+VISIBILITY_COVER = 2.0
+VISIBILITY_RAYS = 16
+VISIBILITY_PROBES = 64
+VISIBILITY_MAX_PROBES = 8192
+VISIBILITY_CONE = 70.0
+VISIBILITY_START = 2.0
+VISIBILITY_CLEAR = 0.25
+VISIBILITY_ENCLOSED = 0.5
+VISIBILITY_MIN_VOTES = 8
+VISIBILITY_AGREE = 0.8
 _CHUNK = 1 << 15
 
 
@@ -64,8 +110,10 @@ _CHUNK = 1 << 15
 class Orientation:
     normals: np.ndarray      # (N,3) float32 unit, oriented
     ambiguous: np.ndarray    # (N,) bool: the points whose orientation was ambiguous
-    mode: str
+    mode: str                # the rule that decided: SCANNER, ORIGIN, UP, VISIBILITY or PROPAGATE
     components: int          # connected components of the neighbour graph
+    by_rule: int = 0         # points whose sign a rule decided (the others took theirs by propagation)
+    evidence: str = ""       # why AUTO chose its rule, for the import notes (empty: not AUTO)
 
 
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
@@ -104,12 +152,13 @@ def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=Non
 
 def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PROPAGATE", scanners=None,
                         axes=None, radius_k: int = 0, workers: int = -1, tree=None, progress=None,
-                        close_gaps: bool = False):
+                        close_gaps: bool = False, viewpoint=None):
     """(Orientation, spacing or None, cover or None): estimate() then orient() sharing one
     neighbour search (the orientation's graph and, for radius_k in 1..k, each point's
     distance to its radius_k-th nearest other point and, close_gaps, its uncapped
     gap-closing radius: spacing.analyse's known_spacing and known_cover). axes: the file's
-    own unoriented normals (only orient() runs). progress: its first 2/3 the estimation."""
+    own unoriented normals (only orient() runs). progress: its first 2/3 the estimation.
+    viewpoint: the file's origin in these coordinates (orient's)."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
     tree = tree if tree is not None else neighbour_tree(pts, workers)
@@ -126,7 +175,7 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
         axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing,
                         cover=cover)
     result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
-                    graph=graph)
+                    graph=graph, viewpoint=viewpoint)
     return result, None if spacing is None else spacing[1], None if cover is None else cover[1]
 
 
@@ -136,10 +185,12 @@ def _fraction(report, start: float, end: float, message: str):
 
 
 def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", scanners=None,
-           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None) -> Orientation:
+           k: int = GRAPH_K, workers: int = -1, tree=None, progress=None, graph=None,
+           viewpoint=None) -> Orientation:
     """Flips `normals` (unit, any sign) consistently; see the module's text. progress: as
     for estimate. The graph's steps (weights, spanning forest, traversal) are native
-    (graph_weights, spanning_forest, forest_traversal), on `workers` threads."""
+    (graph_weights, spanning_forest, forest_traversal), on `workers` threads. viewpoint:
+    (3,) the file's origin in these coordinates (ORIGIN; AUTO's range-image test)."""
     if mode not in MODES:
         raise ValueError(f"unknown orientation mode {mode!r}")
     pts = np.asarray(points, dtype=np.float64)
@@ -149,35 +200,46 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     unusable = ~np.isfinite(nrm).all(axis=1)
     if unusable.any():
         raise ValueError(f"point {np.flatnonzero(unusable)[0]}: its normal is not finite (cannot be oriented)")
+    if viewpoint is not None:
+        viewpoint = np.asarray(viewpoint, dtype=np.float64).reshape(3)
+    if mode == "ORIGIN":
+        if viewpoint is None:
+            raise ValueError("orientation towards the file's origin needs the origin's position")
+        scanners = viewpoint
+    evidence = ""
+    report = progress or nothing
+    table = None
+    if mode == "AUTO" and scanners is not None:
+        mode, evidence = "SCANNER", "the file's scanner positions"
+    elif mode == "AUTO" and viewpoint is not None and n > k + 1:
+        table = _neighbour_table(pts, k, tree, graph, workers)
+        seen, evidence = range_image(pts, nrm, viewpoint, table)
+        if seen:
+            mode, scanners = "ORIGIN", viewpoint
     # Rules first: where they decide, they are the anchors of the propagation.
     anchor_sign = np.zeros(n, np.int8)
-    if mode == "SCANNER":
+    if mode in ("SCANNER", "ORIGIN"):
         if scanners is None:
             raise ValueError("orientation towards the scanner needs the scanners' positions")
         d = np.asarray(scanners, dtype=np.float64) - pts
         c = np.einsum("ij,ij->i", nrm, d) / np.maximum(np.linalg.norm(d, axis=1), 1e-300)
     elif mode == "UP":
         c = nrm[:, 2]
-    if mode != "PROPAGATE":
+    if mode in ("SCANNER", "ORIGIN", "UP"):
         anchor_sign[c >= AMBIGUOUS_RULE] = 1
         anchor_sign[c <= -AMBIGUOUS_RULE] = -1
         if (anchor_sign != 0).all():
-            return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1)
+            return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1, n,
+                               evidence)
 
     if n < 2:  # no neighbour to agree with: the sign is the rule's, or as it is
         signs = np.where(anchor_sign < 0, -1.0, 1.0)
-        return Orientation((nrm * signs[:, None]).astype(np.float32), anchor_sign == 0, mode, n)
-    report = progress or nothing
+        return Orientation((nrm * signs[:, None]).astype(np.float32), anchor_sign == 0,
+                           "PROPAGATE" if mode == "AUTO" else mode, n, int((anchor_sign != 0).sum()), evidence)
     threads = workers if workers > 0 else 0  # scipy's -1 (all cores) is the core's 0
     report(0.0, "orienting normals: neighbour graph")
-    if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
-        table = graph
-    else:
-        tree = tree if tree is not None else neighbour_tree(pts, workers)
-        order = tree.order  # queried in the tree's order: a leaf of points at a time
-        table = np.empty((n, k + 1), np.int32)
-        table[order, 0] = order
-        table[order, 1:] = tree.knn(order, k)[1]
+    if table is None:
+        table = _neighbour_table(pts, k, tree, graph, workers)
     # The graph's steps run on the cloud renumbered in space: on a
     # file's random order every neighbour is a cache miss (10M points: 42 s instead of 6 s,
     # plus 5 s to renumber).
@@ -187,48 +249,60 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     report(0.03, "orienting normals: neighbour graph")
     # Column 0 of a row is the point itself (or, among duplicate points, one at distance 0).
     nbr = permute_table(table, perm, slice(1, k + 1), threads)
+    del table
     report(0.1, "orienting normals: neighbour graph")
     p, m, anchor_sign = take_rows(pts, perm, threads), take_rows(nrm, perm, threads), anchor_sign[perm]
+    sample = None
+    if mode == "AUTO":  # visibility's sample, with each one's distance to its k-th neighbour
+        rng = np.random.default_rng(SAMPLE_SEED)
+        sample = np.unique(rng.integers(0, n, min(n, VISIBILITY_SAMPLE)))
+        sample_gap = np.linalg.norm(p[sample] - p[nbr[sample, k - 1]], axis=1)
     w = graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
                       _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
     report(0.3, "orienting normals: spanning tree")
     forest = spanning_forest(nbr, w, threads, _fraction(report, 0.3, 0.8, "orienting normals: spanning tree"))
     del nbr, w
     report(0.8, "orienting normals: propagation")
-    n_comp, labels = forest.components, forest.labels
-
-    # A seed for every component the rules leave without an anchor: its point farthest from
-    # the component's centroid (of equally far ones, the last in the caller's order),
-    # oriented away from the centroid.
-    has_anchor = np.zeros(n_comp, bool)
-    has_anchor[labels[anchor_sign != 0]] = True
-    counts = np.bincount(labels, minlength=n_comp)
-    centroid = np.stack([np.bincount(labels, p[:, a], n_comp) for a in range(3)], 1) / counts[:, None]
-    outward = p - centroid[labels]
-    dist = np.einsum("ij,ij->i", outward, outward)
-    farthest = np.zeros(n_comp)
-    np.maximum.at(farthest, labels, dist)
-    candidates = np.flatnonzero(dist == farthest[labels])
-    candidates = candidates[np.lexsort((perm[candidates], labels[candidates]))]  # per component, last index last
-    seeds = candidates[np.r_[labels[candidates][1:] != labels[candidates][:-1], True]]
-    seeds = seeds[~has_anchor[labels[seeds]]]
-    cos_out = np.einsum("ij,ij->i", m[seeds], outward[seeds]) / np.maximum(np.sqrt(dist[seeds]), 1e-300)
-    anchor_sign[seeds] = np.where(cos_out >= 0, 1, -1)
-    flat = seeds[np.abs(cos_out) < AMBIGUOUS_RULE]
-    del outward, dist
-
-    # One breadth-first walk from every anchor at once (as if from a virtual root joined to
-    # each), each point's sign its parent's unless their normals point apart.
-    is_anchor = anchor_sign != 0
-    pred, order = forest_traversal(forest.edges, is_anchor,
-                                   _fraction(report, 0.85, 0.95, "orienting normals: propagation"))
-    del forest
-    parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
-    cos_parent = np.einsum("ij,ij->i", m, m[parent])
-    flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
-    negative = chain_flips(order, parent, flip)
-    ambiguous = ~is_anchor & (np.abs(cos_parent) < AMBIGUOUS_EDGE)
-    del pred, order, parent, cos_parent, flip
+    walk = _Walk(p, m, forest, perm)
+    negative, ambiguous, seeds, flat = walk(anchor_sign, _fraction(report, 0.85, 0.95,
+                                                                   "orienting normals: propagation"))
+    labels, n_comp, counts = walk.labels, walk.n_comp, walk.counts
+    sums = walk.sums(negative)
+    seeded, open_sheet = np.zeros(0, np.int64), np.zeros(0, bool)
+    if len(seeds):
+        seeded = labels[seeds]
+        open_sheet = np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * counts[seeded]
+    if mode == "AUTO":
+        # Visibility first: the components it decides are no terrain (an object's fragments
+        # are open sheets too); then the terrain test on the rest.
+        report(0.95, "orienting normals: visibility")
+        decided, evidence = visibility(p, m, negative, labels, n_comp, sample, sample_gap, threads)
+        terrain = np.zeros(n_comp, bool)
+        terrain[seeded[open_sheet]] = True
+        length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
+        terrain &= (np.abs(sums[:, 2]) >= TERRAIN_COSINE * length) & (decided == 0)
+        share = counts[terrain].sum() / n
+        if share >= TERRAIN_SHARE:  # a terrain's bulk: every point with a clear up takes it (as UP)
+            mode = "UP"
+            evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or down "
+                        "on the whole, which visibility cannot orient")
+            anchor_sign[m[:, 2] >= AMBIGUOUS_RULE] = 1
+            anchor_sign[m[:, 2] <= -AMBIGUOUS_RULE] = -1
+            negative, ambiguous, seeds, flat = walk(anchor_sign, None)
+            sums = walk.sums(negative)
+            if len(seeds):
+                seeded = labels[seeds]
+                open_sheet = (np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded]))
+                              >= OPEN_SHEET * counts[seeded])
+        else:
+            negative ^= (decided < 0)[labels]
+            keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE
+            seeds, open_sheet = seeds[keep], open_sheet[keep]
+            flat = flat[decided[labels[flat]] == 0]
+            mode = "VISIBILITY" if (decided != 0).any() else "PROPAGATE"
+            if mode == "VISIBILITY":
+                sums = walk.sums(negative)
+    by_rule = int((anchor_sign != 0).sum())  # the rules' anchors (walk() took its seeds out again)
 
     # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X). So
     # do open sheets (a terrain, a facade): their normals agree, so their sum is most of
@@ -236,15 +310,12 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     # "outward" from their centroid is just the slope at the farthest corner (a hilly 10M-
     # point terrain came out facing down).
     if len(seeds):
-        signed = np.where(negative, -1.0, 1.0)
-        sums = np.stack([np.bincount(labels, m[:, a] * signed, n_comp) for a in range(3)], 1)
-        seeded = labels[seeds]
-        open_sheet = np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * counts[seeded]
         flat = np.union1d(flat, seeds[open_sheet])
     if len(flat):
-        sums = sums[labels[flat]]
+        fsums = sums[labels[flat]]
         tol = 1e-9 * counts[labels[flat]]
-        key = np.where(np.abs(sums[:, 2]) > tol, sums[:, 2], np.where(np.abs(sums[:, 1]) > tol, sums[:, 1], sums[:, 0]))
+        key = np.where(np.abs(fsums[:, 2]) > tol, fsums[:, 2],
+                       np.where(np.abs(fsums[:, 1]) > tol, fsums[:, 1], fsums[:, 0]))
         turn = np.zeros(n_comp, bool)
         turn[labels[flat]] = key < 0
         negative ^= turn[labels]
@@ -252,4 +323,218 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     flags = np.empty(n, np.uint8)
     flags[perm] = negative.view(np.uint8) | (ambiguous.view(np.uint8) << 1)
     return Orientation(np.where((flags & 1)[:, None] != 0, -nrm, nrm).astype(np.float32), flags >= 2, mode,
-                       int(n_comp))
+                       int(n_comp), by_rule, evidence)
+
+
+def _neighbour_table(pts, k, tree, graph, workers) -> np.ndarray:
+    """(n, k+1) int32: each point itself, then its k nearest (estimate()'s graph when given)."""
+    if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
+        return graph
+    tree = tree if tree is not None else neighbour_tree(pts, workers)
+    order = tree.order  # queried in the tree's order: a leaf of points at a time
+    table = np.empty((len(pts), k + 1), np.int32)
+    table[order, 0] = order
+    table[order, 1:] = tree.knn(order, k)[1]
+    return table
+
+
+class _Walk:
+    """The propagation over one spanning forest, for any set of anchors (AUTO walks twice
+    when it finds a terrain). Arrays in the renumbered order (orient's `perm`)."""
+
+    def __init__(self, p, m, forest, perm):
+        self.p, self.m, self.forest, self.perm = p, m, forest, perm
+        self.n_comp, self.labels = forest.components, forest.labels
+        n_comp, labels = self.n_comp, self.labels
+        self.counts = np.bincount(labels, minlength=n_comp)
+        self.centroid = np.stack([np.bincount(labels, p[:, a], n_comp) for a in range(3)], 1) / self.counts[:, None]
+
+    def sums(self, negative) -> np.ndarray:
+        """(components, 3): each component's oriented normals summed."""
+        signed = np.where(negative, -1.0, 1.0)
+        return np.stack([np.bincount(self.labels, self.m[:, a] * signed, self.n_comp) for a in range(3)], 1)
+
+    def __call__(self, anchor_sign, progress):
+        """(negative, ambiguous, seeds, flat) from the rules' anchors (anchor_sign, changed:
+        the seeds are added to it)."""
+        p, m, labels, n_comp, perm = self.p, self.m, self.labels, self.n_comp, self.perm
+        n = len(p)
+        # A seed for every component the rules leave without an anchor: its point farthest from
+        # the component's centroid (of equally far ones, the last in the caller's order),
+        # oriented away from the centroid.
+        has_anchor = np.zeros(n_comp, bool)
+        has_anchor[labels[anchor_sign != 0]] = True
+        outward = p - self.centroid[labels]
+        dist = np.einsum("ij,ij->i", outward, outward)
+        farthest = np.zeros(n_comp)
+        np.maximum.at(farthest, labels, dist)
+        candidates = np.flatnonzero(dist == farthest[labels])
+        candidates = candidates[np.lexsort((perm[candidates], labels[candidates]))]  # per component, last index last
+        seeds = candidates[np.r_[labels[candidates][1:] != labels[candidates][:-1], True]]
+        seeds = seeds[~has_anchor[labels[seeds]]]
+        cos_out = np.einsum("ij,ij->i", m[seeds], outward[seeds]) / np.maximum(np.sqrt(dist[seeds]), 1e-300)
+        anchor_sign[seeds] = np.where(cos_out >= 0, 1, -1)
+        flat = seeds[np.abs(cos_out) < AMBIGUOUS_RULE]
+        del outward, dist
+
+        # One breadth-first walk from every anchor at once (as if from a virtual root joined to
+        # each), each point's sign its parent's unless their normals point apart.
+        is_anchor = anchor_sign != 0
+        pred, order = forest_traversal(self.forest.edges, is_anchor, progress)
+        parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
+        cos_parent = np.einsum("ij,ij->i", m, m[parent])
+        flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
+        negative = chain_flips(order, parent, flip)
+        ambiguous = ~is_anchor & (np.abs(cos_parent) < AMBIGUOUS_EDGE)
+        anchor_sign[seeds] = 0  # a seed is no rule's
+        return negative, ambiguous, seeds, flat
+
+
+def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """(keys, solid angle) of unit directions `u` binned on a cube map whose cells are `cell`
+    wide on each face (a face at distance 1: cell radians at its centre, half that at its
+    edges), and each cell's solid angle (at its centre). A cube map has no poles: a
+    depth camera looking along an axis is binned as evenly as any other view."""
+    a = np.abs(u)
+    face = np.argmax(a, axis=1)
+    rows = np.arange(len(u))
+    major = a[rows, face]
+    x = u[rows, (face + 1) % 3] / major
+    y = u[rows, (face + 2) % 3] / major
+    cells = int(np.ceil(2.0 / cell))
+    ix = np.clip(np.floor((x + 1) / cell), 0, cells - 1).astype(np.int64)
+    iy = np.clip(np.floor((y + 1) / cell), 0, cells - 1).astype(np.int64)
+    side = face * 2 + (u[rows, face] < 0)
+    cx, cy = (ix + 0.5) * cell - 1, (iy + 0.5) * cell - 1
+    return (side * cells + ix) * cells + iy, cell * cell / (1 + cx * cx + cy * cy) ** 1.5
+
+
+def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
+    """(whether the cloud is one range image seen from `viewpoint`, the evidence in words).
+    A depth-camera or stereo frame, or one terrestrial scan, in its sensor's frame: almost
+    every point is the first surface along its line of sight from there (one layer per
+    direction), seen at angles a sensor measures (not grazing on the whole), and the
+    directions do not cover the whole sphere (a closed object around its own origin, the
+    usual export of a modelled or scanned object, is one layer per direction from there too).
+    Decided on a sample of the points (VIEW_SAMPLE) with the spacing of the sample."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, VIEW_SAMPLE)))
+    d = pts[idx] - viewpoint
+    r = np.linalg.norm(d, axis=1)
+    keep = r > 0
+    idx, d, r = idx[keep], d[keep], r[keep]
+    if len(idx) < VIEW_MIN_POINTS:
+        return False, ""
+    u = d / r[:, None]
+    cos = np.abs(np.einsum("ij,ij->i", np.asarray(normals)[idx], u))
+    facing = float(np.median(cos))
+    if facing < VIEW_FACING:
+        return False, ""
+    _, solid = _cube_cells(u, VIEW_COVER_CELL)
+    keys, first = np.unique(_cube_cells(u, VIEW_COVER_CELL)[0], return_index=True)
+    coverage = float(solid[first].sum() / (4 * np.pi))
+    if coverage >= VIEW_COVERAGE:
+        return False, ""
+    # The sample's spacing (its points are sqrt(n / sample) times farther apart than the
+    # cloud's), and angular cells a few such spacings wide as seen from the viewpoint.
+    gap = np.linalg.norm(pts[idx] - pts[table[idx, -1]], axis=1) * np.sqrt(n / len(idx))
+    cell = VIEW_CELL * float(np.median(gap / r))
+    if not (cell > 0):
+        return False, ""
+    key = _cube_cells(u, min(cell, 0.5))[0]
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    starts = np.r_[0, np.flatnonzero(ks[1:] != ks[:-1]) + 1]
+    nearest = np.empty(len(idx))
+    nearest[order] = np.repeat(np.minimum.reduceat(r[order], starts), np.diff(np.r_[starts, len(ks)]))
+    # The first layer's depth varies across a cell by its width times the slope (the tangent
+    # of the angle of view, bounded: a surface seen edge-on is every depth along the cell).
+    tangent = np.minimum(np.sqrt(np.maximum(1 - cos * cos, 0)) / np.maximum(cos, 1e-9), VIEW_MAX_SLOPE)
+    depth = r * cell * tangent + VIEW_DEPTH * gap
+    share = float((r <= nearest + depth).mean())
+    if share < VIEW_FIRST:
+        return False, ""
+    return True, (f"a range image seen from the file's origin: {share:.1%} of a sample of {len(idx):,} points are "
+                  f"the first surface along their line of sight, median angle of view "
+                  f"{np.degrees(np.arccos(facing)):.0f} deg, {coverage:.0%} of the directions")
+
+
+def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np.ndarray, str]:
+    """((components,) int8: +1 keep, -1 flip, 0 abstain; the evidence in words). The sample's
+    points become splats (radii from their spacing, so that the sample covers the surface);
+    probes among them (VISIBILITY_PROBES per component at most) cast VISIBILITY_RAYS rays
+    into each side of their propagated normal; the side from which more escape is the
+    outside. A component is decided when enough probes see a clear difference and most of
+    them agree; else it abstains (an open sheet: both sides escape)."""
+    from .. import _core
+
+    decided = np.zeros(n_comp, np.int8)
+    n = len(p)
+    if sample is None or len(sample) < VISIBILITY_MIN_VOTES:
+        return decided, ""
+    # A disc of radius gap holds about GRAPH_K points; the sample's discs cover the same area
+    # with n / len(sample) times fewer: sqrt of that times larger, and VISIBILITY_COVER
+    # times again so that random gaps between them close.
+    radii = (VISIBILITY_COVER * gap * np.sqrt(n / (GRAPH_K * len(sample)))).astype(np.float32)
+    ok = radii > 0
+    sample, radii = sample[ok], radii[ok]
+    signed = np.where(negative[sample], -1.0, 1.0)[:, None] * m[sample]
+    splats = _core.SplatCloud(np.ascontiguousarray(p[sample], np.float32), np.ascontiguousarray(signed, np.float32),
+                              np.ascontiguousarray(radii), None, np.zeros(len(sample), np.uint8), threads, None)
+    # Probes: up to VISIBILITY_PROBES of each component's sample points (the sample is random).
+    lab = labels[sample]
+    order = np.argsort(lab, kind="stable")
+    starts = np.r_[0, np.flatnonzero(lab[order][1:] != lab[order][:-1]) + 1]
+    rank = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
+    probes = order[rank < VISIBILITY_PROBES]
+    if len(probes) > VISIBILITY_MAX_PROBES:  # the largest components' first
+        size = np.bincount(lab, minlength=n_comp)
+        probes = probes[np.argsort(-size[lab[probes]], kind="stable")[:VISIBILITY_MAX_PROBES]]
+    nrm = signed[probes]
+    # Directions: a fixed spiral over the cap within VISIBILITY_CONE of the pole, turned to
+    # each probe's normal (and its negation).
+    j = np.arange(VISIBILITY_RAYS) + 0.5
+    z = 1 - (1 - np.cos(np.radians(VISIBILITY_CONE))) * j / VISIBILITY_RAYS
+    phi = j * np.pi * (3 - np.sqrt(5))
+    local = np.column_stack([np.sqrt(1 - z * z) * np.cos(phi), np.sqrt(1 - z * z) * np.sin(phi), z])
+    helper = np.where(np.abs(nrm[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]])
+    t1 = np.cross(nrm, helper)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    t2 = np.cross(nrm, t1)
+    dirs = (local[None, :, :1] * t1[:, None] + local[None, :, 1:2] * t2[:, None] + local[None, :, 2:] * nrm[:, None])
+    escapes = []
+    for side in (1.0, -1.0):
+        # the other side's cap: the directions mirrored in the tangent plane
+        dd = dirs - (1 - side) * local[None, :, 2:] * nrm[:, None]
+        # each ray starts VISIBILITY_START radii out, past its own disc and its neighbours'
+        start = p[sample[probes]][:, None, :] + dd * (VISIBILITY_START * radii[probes])[:, None, None]
+        o = np.ascontiguousarray(start.reshape(-1, 3), np.float32)
+        dv = np.ascontiguousarray(dd.reshape(-1, 3), np.float32)
+        cnt = len(o)
+        t, ids = np.empty(cnt, np.float32), np.empty(cnt, np.int32)
+        splats.trace(o, dv, 0.0, np.inf, t, ids, np.empty(cnt, np.bool_), None, threads, False, None, True)
+        escapes.append((ids < 0).reshape(len(probes), VISIBILITY_RAYS).mean(axis=1))
+    front, back = escapes
+    vote = front - back
+    comp = lab[probes]
+    # A clear vote: one side escapes clearly more, and the other is mostly enclosed (a valley
+    # of a terrain or a room's floor escapes fully downward, and much upward too)
+    enclosed = np.minimum(front, back) <= VISIBILITY_ENCLOSED
+    pos = np.bincount(comp, (vote >= VISIBILITY_CLEAR) & enclosed, n_comp)
+    neg = np.bincount(comp, (vote <= -VISIBILITY_CLEAR) & enclosed, n_comp)
+    votes = pos + neg
+    agree = np.maximum(pos, neg)
+    sure = (votes >= VISIBILITY_MIN_VOTES) & (agree >= VISIBILITY_AGREE * votes)
+    decided[sure] = np.where(pos[sure] > neg[sure], 1, -1)
+    if not sure.any():
+        return decided, (f"visibility abstained: no component's {len(probes):,} probes saw a clear outside "
+                         f"(rays escaping {front.mean():.0%} / {back.mean():.0%} of the time on either side)")
+    chosen = decided[comp]
+    inside = chosen != 0
+    out_share = np.where(chosen > 0, front, back)[inside].mean()
+    in_share = np.where(chosen > 0, back, front)[inside].mean()
+    counts = np.bincount(labels, minlength=n_comp)
+    return decided, (f"visibility: {int(sure.sum()):,} of {n_comp:,} components ({counts[sure].sum() / n:.0%} of the "
+                     f"points), rays from {int(inside.sum()):,} probes escaping {out_share:.0%} of the time on "
+                     f"the side chosen against {in_share:.0%} on the other")

@@ -81,7 +81,9 @@ class PreparedCloud:
     clamped_radii: int = 0             # k-NN radii reduced to radius_cap
     radius_cap: float = 0.0
     normals_estimated: bool = False    # the file had none: PCA over normal_k neighbours
-    normals_oriented: str = ""         # the orientation mode used when the import chose the signs
+    normals_oriented: str = ""         # the rule that decided the signs when the import chose them (normals.py)
+    orientation_evidence: str = ""     # why AUTO chose that rule
+    oriented_by_rule: float = 0.0      # the share of points whose sign the rule decided; the rest by propagation
     ambiguous: int = 0                 # points whose orientation was ambiguous
     normal_k: int = 0
     statistical_outliers: int = 0      # points left out by statistical outlier removal
@@ -97,12 +99,16 @@ class PreparedCloud:
         notes = list(c.notes)
         if c.dropped_rows:
             notes.append(f"{c.dropped_rows:,} rows with non-finite coordinates were dropped")
-        if self.normals_estimated:
-            notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, "
-                         f"oriented {_ORIENTED[self.normals_oriented]}")
-        elif self.normals_oriented:
-            notes.append(f"the file's normal axes have no sign ({c.format}): oriented "
-                         f"{_ORIENTED[self.normals_oriented]}")
+        if self.normals_oriented:
+            how = f"oriented {_ORIENTED[self.normals_oriented]}"
+            if self.orientation_evidence:
+                how += f" (decided by {self.orientation_evidence})"
+            if self.normals_oriented in ("SCANNER", "ORIGIN", "UP"):
+                how += f"; {self.oriented_by_rule:.1%} of the points by that rule, the rest from their neighbours"
+            if self.normals_estimated:
+                notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
+            else:
+                notes.append(f"the file's normal axes have no sign ({c.format}): {how}")
         if self.ambiguous:
             notes.append(f"{self.ambiguous:,} points' normal orientation was ambiguous (a neighbour more than 60 "
                          "degrees off, or a grazing view); check them, or re-estimate with another orientation")
@@ -140,15 +146,20 @@ class PreparedCloud:
 
 
 _ORIENTED = {"PROPAGATE": "consistently along the neighbour graph (outward where the surface encloses a volume)",
-             "UP": "upward (+Z, aerial data)", "SCANNER": "towards the scanner positions", "": ""}
+             "UP": "upward (+Z)", "SCANNER": "towards the scanner positions",
+             "ORIGIN": "towards the file's origin (the sensor of a single view)",
+             "VISIBILITY": "towards the side from which the surface is seen, then along the neighbour graph",
+             "": ""}
 
 
-def resolve_orientation(cloud: PointCloud, orientation: str = "AUTO") -> str:
-    """The orientation mode: AUTO is the file's own hint (SCANNER for E57, UP for LAS),
-    else propagation."""
-    if orientation == "AUTO":
-        orientation = cloud.orientation
-    if orientation == "SCANNER" and cloud.scanners is None:
+def resolve_orientation(orientation: str, scanners: bool, viewpoint: bool = True) -> str:
+    """The orientation mode asked of normals.orient: AUTO is SCANNER when the scanners are
+    known (E57 poses, a PCD's viewpoint), else AUTO (normals.orient decides from the
+    geometry, whatever the format: a LAS file may hold an object). SCANNER without
+    scanners, or ORIGIN without the file's origin, is PROPAGATE."""
+    if orientation == "AUTO" and scanners:
+        orientation = "SCANNER"
+    if (orientation == "SCANNER" and not scanners) or (orientation == "ORIGIN" and not viewpoint):
         orientation = "PROPAGATE"
     return orientation
 
@@ -204,7 +215,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             statistical_ratio: float = 0.0, progress=None, hole_free: bool = True) -> PreparedCloud:
     """Frame, outliers, normals (estimated and oriented when the file has none; oriented
     when their signs are arbitrary), analysis and radii of a cloud; raises CloudFileError
-    naming `path`. orientation: AUTO, PROPAGATE, UP or SCANNER (normals.py).
+    naming `path`. orientation: one of normals.MODES (normals.py).
     statistical_ratio > 0: statistical outlier removal with that many standard deviations
     (spacing.statistical_inliers). progress: progress.ProgressFn (it may raise Cancelled).
     hole_free: k-NN radii raised where gaps between samples would show (spacing.covering_radii)."""
@@ -249,17 +260,23 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     # handed the cloud over, as importer.load does; 10M points: 240 MB).
     cloud = replace(cloud, positions=None)
     estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
+    evidence, by_rule = "", 0.0
     known_spacing = known_cover = None
     if needs_normals:
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel, workers)
-        oriented_by = resolve_orientation(cloud, orientation)
+        oriented_by = resolve_orientation(orientation, cloud.scanners is not None)
         scanners = None if cloud.scanners is None else cloud.scanners - origin
+        # The file's origin in the offsets' frame (the importer's axes and scale keep it at 0):
+        # where a single view's sensor sits (ORIGIN, and AUTO's range-image test).
         result, known_spacing, known_cover = normals_mod.estimate_and_orient(
             rel, normal_k, oriented_by, scanners, cloud.normals, k if bulk.all() else 0, workers, tree,
-            scaled(progress, *step.span("estimate", "orient")), close_gaps=hole_free and cloud.radii is None)
+            scaled(progress, *step.span("estimate", "orient")), close_gaps=hole_free and cloud.radii is None,
+            viewpoint=-origin)
         cloud = replace(cloud, normals=result.normals, oriented=True)
         ambiguous = int(result.ambiguous.sum())
+        # (a share: the notes are written after the importer has let go of the arrays)
+        oriented_by, evidence, by_rule = result.mode, result.evidence, result.by_rule / len(result.normals)
     whole = bool(bulk.all())  # no copies of a 10M-point cloud (nor an index of it) when nothing is left out
     inliers = None if whole else np.flatnonzero(bulk)
     radii_tree = tree if whole else None  # the normals' k-d tree when it is the bulk's
@@ -272,7 +289,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
                              outliers > 0 and drop_outliers, normals_estimated=estimated, normals_oriented=oriented_by,
-                             ambiguous=ambiguous, normal_k=normal_k if estimated else 0,
+                             orientation_evidence=evidence, oriented_by_rule=by_rule, ambiguous=ambiguous, normal_k=normal_k if estimated else 0,
                              statistical_outliers=statistical, statistical_ratio=statistical_ratio)
     if cloud.radii is None:
         base = hood.covering if hood.covering is not None else hood.spacing
