@@ -54,6 +54,15 @@ OUTLIER_REACH = 10.0
 # behind it. Smaller radii are left alone: a small disc among its neighbours' is harmless.
 RADIUS_CAP_PERCENTILE = 95.0
 RADIUS_CAP = 3.0
+# The local cap (local_cap): a disc at most LOCAL_CAP x the median radius of its LOCAL_K
+# nearest. In a sparse region (water in airborne LiDAR, a terrestrial scan's far returns)
+# neighbours are sparse alike and keep their gap-closing discs; a point far from its few
+# neighbours (the 6th of which may lie across the water) would otherwise get a coin many
+# times theirs that floats over them. Only discs above LOCAL_FROM x the median radius are
+# looked at (a search of their own: few points, a few ms); smaller ones cannot be coins.
+LOCAL_K = 8
+LOCAL_CAP = 2.0
+LOCAL_FROM = 2.0
 # The largest coordinate and extent a cloud may have. Points are stored as float32 offsets
 # from a float32 origin, and the renderer squares distances in float32 (and sums squares,
 # and multiplies areas by counts in the BVH's cost), whose range ends at 3.4e38: offsets
@@ -79,6 +88,7 @@ class PreparedCloud:
     first_outlier_row: int = -1        # the first of them, as a row of the file
     outliers_dropped: bool = False
     clamped_radii: int = 0             # k-NN radii reduced to radius_cap
+    locally_capped: int = 0            # radii reduced to LOCAL_CAP x their neighbours' (local_cap)
     radius_cap: float = 0.0
     normals_estimated: bool = False    # the file had none: PCA over normal_k neighbours
     normals_oriented: str = ""         # the rule that decided the signs when the import chose them (normals.py)
@@ -86,6 +96,7 @@ class PreparedCloud:
     oriented_by_rule: float = 0.0      # the share of points whose sign the rule decided; the rest by propagation
     ambiguous: int = 0                 # points whose orientation was ambiguous
     normal_k: int = 0
+    slivers: int = 0                   # estimated normals replaced by their neighbours' consensus (normals.fix_slivers)
     statistical_outliers: int = 0      # points left out by statistical outlier removal
     statistical_ratio: float = 0.0
     lost_precision: int = 0            # points float32 rounding moved by more than PRECISION_FRACTION x their radius
@@ -109,6 +120,9 @@ class PreparedCloud:
                 notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
             else:
                 notes.append(f"the file's normal axes have no sign ({c.format}): {how}")
+        if self.slivers:
+            notes.append(f"{self.slivers:,} estimated normals were more than {normals_mod.SLIVER_ANGLE:g} degrees off "
+                         "their neighbours' (slivers from noise): given their neighbours' consensus normal")
         if self.ambiguous:
             notes.append(f"{self.ambiguous:,} points' normal orientation was ambiguous (a neighbour more than 60 "
                          "degrees off, or a grazing view); check them, or re-estimate with another orientation")
@@ -134,6 +148,9 @@ class PreparedCloud:
             notes.append(f"{self.clamped_radii:,} splat radii were reduced to {self.radius_cap:.4g} "
                          f"({RADIUS_CAP:g} x the {RADIUS_CAP_PERCENTILE:g}th percentile of the spacing): "
                          "their points have no close neighbours")
+        if self.locally_capped:
+            notes.append(f"{self.locally_capped:,} splat radii were reduced to {LOCAL_CAP:g} x the median radius of "
+                         f"their {LOCAL_K} nearest neighbours: their points lie far from those (a sparse region)")
         if self.lost_precision:
             notes.append(f"{self.lost_precision:,} points lost precision: the points span {self.extent:.2g} but are "
                          f"{np.median(self.hood.spacing):.2g} apart, and float32 offsets from one origin cannot hold "
@@ -206,6 +223,26 @@ def _check_float32_safe(positions: np.ndarray, bulk: np.ndarray, path: str) -> f
         f"origin (the renderer squares them in float32, whose range ends at 3.4e38){hint}")
 
 
+def local_cap(radii: np.ndarray, tree, rows=None) -> int:
+    """Reduces, in place, each radius above LOCAL_FROM x the median radius to at most LOCAL_CAP
+    x the median radius of its LOCAL_K nearest neighbours (see LOCAL_CAP); returns how many.
+    tree: a neighbour_tree of the points `rows` of radii (None: all of them); the others (kept
+    outliers) keep their radii."""
+    sub = radii if rows is None else radii[rows]
+    k = min(LOCAL_K, len(sub) - 1)
+    big = np.flatnonzero(sub > LOCAL_FROM * np.median(sub))
+    if k < 1 or not len(big):
+        return 0
+    _, ids = tree.knn(big, k)
+    # Against the neighbours' radii as they were: a capped disc does not shrink the next one's cap.
+    limit = (LOCAL_CAP * np.median(sub[ids], axis=1)).astype(np.float32)
+    over = sub[big] > limit
+    sub[big[over]] = limit[over]
+    if rows is not None:
+        radii[rows] = sub
+    return int(over.sum())
+
+
 def _subset(cloud: PointCloud, keep: np.ndarray) -> PointCloud:
     return cloud.subset(keep)
 
@@ -261,6 +298,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     cloud = replace(cloud, positions=None)
     estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
     evidence, by_rule = "", 0.0
+    slivers = 0
     known_spacing = known_cover = None
     if needs_normals:
         step("estimate")(0.0, "neighbour tree")
@@ -277,9 +315,12 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         ambiguous = int(result.ambiguous.sum())
         # (a share: the notes are written after the importer has let go of the arrays)
         oriented_by, evidence, by_rule = result.mode, result.evidence, result.by_rule / len(result.normals)
+        slivers = result.slivers
     whole = bool(bulk.all())  # no copies of a 10M-point cloud (nor an index of it) when nothing is left out
     inliers = None if whole else np.flatnonzero(bulk)
     radii_tree = tree if whole else None  # the normals' k-d tree when it is the bulk's
+    if radii_tree is None and cloud.radii is None:  # built here (as analyse would) for the local cap too
+        radii_tree = spacing.neighbour_tree(local if whole else local[inliers], workers)
     try:
         hood = spacing.analyse(local if whole else local[inliers], cloud.normals if whole else cloud.normals[inliers],
                                k, workers, progress=step("radii"),
@@ -289,8 +330,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         raise CloudFileError(f"{path}: {e}") from None
     prepared = PreparedCloud(cloud, origin, local, cloud.radii, hood, outliers, first_outlier,
                              outliers > 0 and drop_outliers, normals_estimated=estimated, normals_oriented=oriented_by,
-                             orientation_evidence=evidence, oriented_by_rule=by_rule, ambiguous=ambiguous, normal_k=normal_k if estimated else 0,
-                             statistical_outliers=statistical, statistical_ratio=statistical_ratio)
+                             orientation_evidence=evidence, oriented_by_rule=by_rule, ambiguous=ambiguous,
+                             normal_k=normal_k if estimated else 0, statistical_outliers=statistical,
+                             statistical_ratio=statistical_ratio, slivers=slivers)
     if cloud.radii is None:
         base = hood.covering if hood.covering is not None else hood.spacing
         radii = base  # the bulk is every point (no 10M-point copy); else the strays get theirs below
@@ -303,8 +345,10 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
             radii[strays] = dist[:, kk]
         cap = np.float32(RADIUS_CAP * np.percentile(hood.spacing, RADIUS_CAP_PERCENTILE))
         clamped = radii > cap
-        prepared.radii = np.minimum(radii, cap)
+        radii = np.minimum(radii, cap)
         prepared.clamped_radii, prepared.radius_cap = int(clamped.sum()), float(cap)
+        prepared.locally_capped = local_cap(radii, radii_tree, inliers)
+        prepared.radii = radii
     lost = rounding > PRECISION_FRACTION * prepared.radii
     if lost.any():
         prepared.lost_precision, prepared.precision_error = int(lost.sum()), float(rounding[lost].max())
