@@ -30,7 +30,7 @@ import numpy as np
 from ..util.columns import bounds, rows_outside
 from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
-from .cloud import MAX_RADIUS, CloudFileError, PointCloud
+from .cloud import MAX_RADIUS, CloudFileError, PointCloud, shared_row
 from .neighbours import local_frame
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
@@ -254,7 +254,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel, workers)
         oriented_by = resolve_orientation(cloud, orientation)
-        scanners = None if cloud.scanners is None else cloud.scanners - origin
+        scanners, shared = cloud.scanners, shared_row(cloud.scanners)
+        scanners = (np.broadcast_to(shared - origin, scanners.shape) if shared is not None
+                    else None if scanners is None else scanners - origin)
         result, known_spacing, known_cover = normals_mod.estimate_and_orient(
             rel, normal_k, oriented_by, scanners, cloud.normals, k if bulk.all() else 0, workers, tree,
             scaled(progress, *step.span("estimate", "orient")), close_gaps=hole_free and cloud.radii is None)
