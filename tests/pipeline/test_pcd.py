@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from pypcd4 import Encoding, MetaData, PointCloud as Pcd
 
-from geometry import fibonacci_sphere
+from geometry import depth_frame, fibonacci_sphere, quaternion_matrix
 from splat_tracer.pointcloud import importer, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, linear_colours
 from splat_tracer.pointcloud.readers import pcd
@@ -124,45 +124,17 @@ def test_eight_byte_types_and_fields_of_several_values(tmp_path):
     assert "fields ignored: fpfh (3 values a point)" in read.notes and "fpfh" not in read.attributes
 
 
-def _rotation(q):
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-
-
-def depth_frame(width=160, height=120, focal=120.0):
-    """(N,3) camera-frame points of a depth sensor looking along +z at a back wall, a floor
-    and a slanted box face: one ray a pixel, depth quantised as a Kinect's (steps of
-    0.0028 z^2), NaN where a ray hits nothing within 4 m. Row-major, as an organised PCD."""
-    u, v = np.meshgrid(np.arange(width) - width / 2 + 0.5, np.arange(height) - height / 2 + 0.5)
-    rays = np.column_stack([u.ravel() / focal, v.ravel() / focal, np.ones(u.size)])  # depth 1 along +z
-    planes = [((0.0, 0.0, 1.0), 3.0),         # back wall z = 3
-              ((0.0, 1.0, 0.0), 0.6),         # floor y = 0.6 (y points down in a camera's frame)
-              ((0.6, 0.0, 0.8), 1.6)]         # a slanted face n . p = 1.6
-    depth = np.full(len(rays), np.inf)
-    for n, d in planes:
-        along = rays @ np.asarray(n)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(along > 1e-9, d / along, np.inf)
-        depth = np.minimum(depth, t)
-    depth[depth > 4.0] = np.nan
-    step = 0.0028 * depth ** 2
-    with np.errstate(invalid="ignore"):
-        depth = np.round(depth / step) * step
-    return rays * depth[:, None]
-
-
 def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     q = (0.8, 0.3, -0.4, 0.33)  # qw qx qy qz: a rotation about a skew axis
     t = np.array([12.0, -4.0, 2.5])
     camera = depth_frame()
-    world = camera @ _rotation(q).T + t  # the sensor's frame into the cloud's: its pose, VIEWPOINT
+    world = camera @ quaternion_matrix(q).T + t  # the sensor's frame into the cloud's: its pose, VIEWPOINT
     f32 = world.astype(np.float32)
     viewpoint = (*t, *(np.asarray(q) / np.linalg.norm(q)))
     path = _write(tmp_path / "frame.pcd", {"x": f32[:, 0], "y": f32[:, 1], "z": f32[:, 2]},
                   Encoding.BINARY_COMPRESSED, viewpoint=viewpoint, height=120)
     cloud = readers.read_cloud(path)
+    assert cloud.dropped_rows == np.isnan(camera[:, 0]).sum() > 0  # the holes beyond the sensor's range
     assert cloud.orientation == "SCANNER" and cloud.scanners.strides[0] == 0  # one row, not (N,3)
     assert np.array_equal(cloud.scanners[0], t)
     assert pcd.viewpoint_note(viewpoint) in cloud.notes and "12, -4, 2.5" in pcd.viewpoint_note(viewpoint)
