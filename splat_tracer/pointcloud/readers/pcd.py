@@ -26,6 +26,7 @@ an (N,3) copy.
 from __future__ import annotations
 
 import os
+import re
 import struct
 import warnings
 from dataclasses import dataclass
@@ -47,6 +48,9 @@ _KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWP
 _REQUIRED = ("FIELDS", "SIZE", "TYPE", "WIDTH", "POINTS", "DATA")
 # Versions whose layout is 0.7's (0.6 has no VIEWPOINT, 0.5 no COUNT either: both default);
 # pypcd4's model knows 0.7 only, so the others are handed to it as 0.7.
+# What pypcd4's header pattern reads of a line (words, numbers, whitespace); anything else
+# would silently end the line's values.
+_UNREAD = re.compile(r"[^\w\s.+\-]")
 _VERSIONS = (".5", "0.5", ".6", "0.6", ".7", "0.7")
 _ENCODINGS = ("ascii", "binary", "binary_compressed")
 # The least an ascii value can take: one character and a separator (a space or the newline).
@@ -133,6 +137,10 @@ def read_header(path: str) -> Header:
     lines, offset = _header_lines(path)
     tokens = {}
     for line in lines:
+        bad = _UNREAD.search(line)
+        if bad:  # pypcd4's header pattern would end the line's values there: say so instead
+            raise CloudFileError(f"{path}: not a valid PCD file (the header line '{line[:60]}' has the character "
+                                 f"{bad.group()!r}, which is not part of a name or a number)")
         key, *values = line.split()
         key = key.upper()
         if key not in _KEYS:
@@ -178,6 +186,9 @@ def read_header(path: str) -> Header:
         else:
             what = str(e)
         raise CloudFileError(f"{path}: not a valid PCD file (header {what})") from None
+    if not len(metadata.fields) == len(metadata.size) == len(metadata.type) == len(metadata.count):
+        raise CloudFileError(f"{path}: not a valid PCD file (FIELDS, SIZE, TYPE and COUNT give different numbers of "
+                             "values)")
     for name, kind, size in zip(metadata.fields, metadata.type, metadata.size):
         if (kind, size) not in pypcd4.PCD_TYPE_TO_NUMPY_TYPE:
             raise CloudFileError(f"{path}: the field '{_name(name)}' has TYPE {kind} and SIZE {size}, which is no PCD "
