@@ -139,7 +139,8 @@ def pcd_seeds(out: Path) -> None:
           ("x", "y", "z", "rgb"), [np.float32] * 4, Encoding.BINARY_COMPRESSED, height=4,
           viewpoint=(1.0, -2.0, 3.0, 0.8, 0.2, 0.4, -0.4))
     meta = MetaData.model_validate(dict(fields=("x", "y", "z", "label", "fpfh", "_"), size=(8, 8, 8, 8, 4, 1),
-                                        type=("F", "F", "F", "U", "F", "U"), count=(1, 1, 1, 1, 3, 4), points=n, width=n))
+                                        type=("F", "F", "F", "U", "F", "U"), count=(1, 1, 1, 1, 3, 4),
+                                        points=n, width=n))
     cols = [*p.T.astype(np.float64), np.arange(n, dtype=np.uint64), *rng.random((3, n)).astype(np.float32),
             *np.zeros((4, n), np.uint8)]
     Pcd(meta, np.rec.fromarrays(cols, dtype=meta.build_dtype())).save(str(out / "wide_types_counts.pcd"),

@@ -33,7 +33,8 @@ _ORIENTATION_ITEMS = [
     ("PROPAGATE", "Neighbour Graph", "Consistent along a minimum spanning tree of the neighbours, outward where "
                                      "the surface encloses a volume"),
     ("UP", "Upward", "Towards +Z (aerial scans); walls take their neighbours' side"),
-    ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files, a PCD's VIEWPOINT); else Neighbour Graph"),
+    ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files, a PCD's VIEWPOINT); else "
+                           "Neighbour Graph"),
 ]
 _TIMER_SECONDS = 0.1  # how often the modal operator looks at its worker's progress
 # How long a cancel (Esc, or Blender ending the operator: cancel(), which blocks the main

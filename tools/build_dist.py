@@ -13,8 +13,9 @@ and macos-x64 (default: all four). For each platform:
    Blender 4.2 to 5.2 use; plyfile, laspy, pyquaternion, pypcd4, pydantic and its small
    dependencies, pure Python), listed in the staged manifest, whose `platforms` is that one
    platform. A reader's wheel that PyPI lacks for a platform (pye57 on macOS x64) is left out
-   with a warning: that format is then refused there with a message. numpy is never bundled: Blender has its own. Nor is scipy: the add-on does not
-   use it (the neighbour search and the normals' spanning tree are in the core).
+   with a warning: that format is then refused there with a message. numpy is never
+   bundled: Blender has its own. Nor is scipy: the add-on does not use it (the neighbour
+   search and the normals' spanning tree are in the core).
 3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy
    wheel), `build --split-platforms`: the platform suffix in the name and the generated
    manifest block that extension repositories read.

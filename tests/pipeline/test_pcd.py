@@ -172,8 +172,8 @@ def test_a_count_too_large_for_memory_is_refused_before_reading(tmp_path, monkey
     assert path in str(err.value)
 
 
-HEAD = "VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\n" \
-       "POINTS {n}\nDATA {data}\n"
+HEAD = ("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
+        "VIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {data}\n")
 
 
 def _head(n=3, data="binary"):

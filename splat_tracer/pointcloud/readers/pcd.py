@@ -119,8 +119,8 @@ def _header_lines(path: str) -> tuple[list[str], int]:
             line = raw.decode("ascii").strip()
         except UnicodeDecodeError as e:
             number = head[:at].count(b"\n")
-            raise CloudFileError(f"{path}: the PCD header is not ASCII text (line {number}, byte 0x{raw[e.start]:02x}); "
-                                 "PCD headers are ASCII") from None
+            raise CloudFileError(f"{path}: the PCD header is not ASCII text (line {number}, byte "
+                                 f"0x{raw[e.start]:02x}); PCD headers are ASCII") from None
         if not line or line.startswith("#"):
             continue
         lines.append(line)
@@ -405,8 +405,8 @@ def read_pcd(path: str) -> PointCloud:
         name = packed[0]
         kind, size, _ = fields[name]
         if size != 4:
-            raise CloudFileError(f"{path}: the packed colour field '{name}' has SIZE {size}; a packed colour is 4 bytes "
-                                 "(0xAARRGGBB)")
+            raise CloudFileError(f"{path}: the packed colour field '{name}' has SIZE {size}; a packed colour is "
+                                 "4 bytes (0xAARRGGBB)")
         colours = _packed_colours(path, name, columns[name], kind, notes)
     used = {*_COORDINATES, *_PACKED_COLOURS, *(NORMAL_FIELDS if normals is not None else ())}
     attributes, ignored = {}, []

@@ -233,7 +233,9 @@ def _text_vertices(path: str, header, header_len: int) -> Optional[np.ndarray]:
                 return None
         elif width == 1:  # one list (faces, a range grid): its length, then its items
             values = _numbers(block)
-            if values is None or values.size != counts.sum() or (values[np.cumsum(counts) - counts] != counts - 1).any():
+            if values is None or values.size != counts.sum():
+                return None
+            if (values[np.cumsum(counts) - counts] != counts - 1).any():
                 return None
         else:
             return None
