@@ -108,10 +108,10 @@ test-sanitize: sanitize-tree
 	@echo "test-sanitize: no AddressSanitizer or UndefinedBehaviorSanitizer report"
 
 # --- Fuzzing ----------------------------------------------------------------------------
-# atheris harnesses in fuzz/ (the PLY, LAS/LAZ, E57 and text readers, the import
-# preparation, the native entry points), each for FUZZ_SECONDS / 6 from its seed corpus
+# atheris harnesses in fuzz/ (the PLY, LAS/LAZ, E57, text and PCD readers, the import
+# preparation, the native entry points), each for FUZZ_SECONDS / 7 from its seed corpus
 # fuzz/corpus/<harness>/; the native harness's corpus is then replayed against the
-# sanitizer build (see fuzz/run.py). 120 s: 20 s a harness, 4,000-15,000 files a reader.
+# sanitizer build (see fuzz/run.py). 120 s: 17 s a harness, 4,000-15,000 files a reader.
 FUZZ_SECONDS ?= 120
 
 fuzz: build sanitize-tree

@@ -1,9 +1,9 @@
-"""Writes the seed corpora of the reader harnesses: fuzz/corpus/las/, e57/ and text/.
+"""Writes the seed corpora of the reader harnesses: fuzz/corpus/las/, e57/, text/ and pcd/.
 
     python -m fuzz.make_corpus    (from the root; overwrites the seeds it writes)
 
 Small real files (a few KB each), written by the libraries the importer reads them with
-(laspy + lazrs, pye57) or, for text, in the layouts the text reader meets: the fuzzer
+(laspy + lazrs, pye57, pypcd4) or, for text, in the layouts the text reader meets: the fuzzer
 mutates from these, so each is chosen to open a different path through its reader.
 Point values come from a fixed seed; E57 files carry a fresh GUID each time they are
 written, so remade E57 seeds differ in those bytes only.
@@ -112,8 +112,47 @@ def text_seeds(out: Path) -> None:
     (out / "latin1_header.txt").write_bytes("# relevé\n".encode("latin-1") + files["plain.xyz"].encode())
 
 
+def pcd_seeds(out: Path) -> None:
+    from pypcd4 import Encoding, MetaData, PointCloud as Pcd
+
+    p = _points(7).astype(np.float32)
+    n = len(p)
+    rng = np.random.default_rng(7)
+    rgb = rng.integers(0, 256, (n, 3)).astype(np.uint32)
+    packed = (rgb[:, 0] << 16) | (rgb[:, 1] << 8) | rgb[:, 2]
+    nrm = (p / np.linalg.norm(p, axis=1, keepdims=True)).astype(np.float32)
+    xyz = [p[:, 0], p[:, 1], p[:, 2]]
+
+    def write(name, columns, fields, types, encoding, height=1, viewpoint=None):
+        cloud = Pcd.from_points(columns, fields, types)
+        cloud.metadata = cloud.metadata.derive(width=n // height, height=height,
+                                               viewpoint=viewpoint or (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
+        cloud.save(str(out / name), encoding=encoding)
+
+    write("ascii_rgba.pcd", [*xyz, packed | np.uint32(0xFF000000)], ("x", "y", "z", "rgba"), [np.float32] * 3 +
+          [np.uint32], Encoding.ASCII)
+    write("binary_normals_intensity.pcd", [*xyz, *nrm.T, rng.random(n).astype(np.float32)],
+          ("x", "y", "z", "normal_x", "normal_y", "normal_z", "intensity"), [np.float32] * 7, Encoding.BINARY)
+    holes = p.copy()
+    holes[::5] = np.nan
+    write("compressed_organised_viewpoint.pcd", [holes[:, 0], holes[:, 1], holes[:, 2], packed.view(np.float32)],
+          ("x", "y", "z", "rgb"), [np.float32] * 4, Encoding.BINARY_COMPRESSED, height=4,
+          viewpoint=(1.0, -2.0, 3.0, 0.8, 0.2, 0.4, -0.4))
+    meta = MetaData.model_validate(dict(fields=("x", "y", "z", "label", "fpfh", "_"), size=(8, 8, 8, 8, 4, 1),
+                                        type=("F", "F", "F", "U", "F", "U"), count=(1, 1, 1, 1, 3, 4),
+                                        points=n, width=n))
+    cols = [*p.T.astype(np.float64), np.arange(n, dtype=np.uint64), *rng.random((3, n)).astype(np.float32),
+            *np.zeros((4, n), np.uint8)]
+    Pcd(meta, np.rec.fromarrays(cols, dtype=meta.build_dtype())).save(str(out / "wide_types_counts.pcd"),
+                                                                        encoding=Encoding.BINARY_COMPRESSED)
+    rows = "\n".join(f"{a:.4f}\t{b:.4f}  {c:.4f} {v} " for (a, b, c), v in zip(p, packed | np.uint32(0xFF000000)))
+    (out / "pcl_ascii_float_rgb.pcd").write_text(
+        "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F F\n"
+        f"COUNT 1 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA ascii\n{rows}\n")
+
+
 def main() -> None:
-    for name, write in (("las", las_seeds), ("e57", e57_seeds), ("text", text_seeds)):
+    for name, write in (("las", las_seeds), ("e57", e57_seeds), ("text", text_seeds), ("pcd", pcd_seeds)):
         out = CORPUS / name
         out.mkdir(parents=True, exist_ok=True)
         write(out)

@@ -1,4 +1,4 @@
-"""What the reader harnesses (fuzz_ply, fuzz_las, fuzz_e57, fuzz_text) check of a file's import.
+"""What the reader harnesses (fuzz_ply, fuzz_las, fuzz_e57, fuzz_text, fuzz_pcd) check of a file's import.
 
 import_file(path) takes a file the way the importer does (importer.load): its format sniffed
 from its first bytes, the points its header declares checked against the free memory, the

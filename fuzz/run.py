@@ -6,7 +6,8 @@ Harnesses (one per entry point, each documented in its file): fuzz_ply.py (the P
 and the import preparation behind it), fuzz_prepare.py (the import preparation on fuzzed
 arrays), fuzz_core.py (the native Scene, Mesh and RenderScene entry points), and one per
 other reader, each through the importer's steps (fuzz/reading.py): fuzz_las.py (LAS/LAZ),
-fuzz_e57.py (E57), fuzz_text.py (XYZ/PTS/TXT/CSV). Each runs for seconds / 6 with its seed
+fuzz_e57.py (E57), fuzz_text.py (XYZ/PTS/TXT/CSV), fuzz_pcd.py (PCD). Each runs for
+seconds / 7 with its seed
 corpus fuzz/corpus/<name>/ (read only: what the fuzzer learns goes to
 build/fuzz/corpus/<name>/, kept between runs; fuzz/make_corpus.py writes the readers'
 seeds). An input that runs longer than its harness's timeout (TIMEOUTS) is a finding: a
@@ -30,10 +31,10 @@ from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
-HARNESSES = ("ply", "prepare", "core", "las", "e57", "text")
+HARNESSES = ("ply", "prepare", "core", "las", "e57", "text", "pcd")
 # Seconds one input may take (libFuzzer's -timeout). The readers' seeds import in well under
 # 0.1 s each; the core's inputs render, so they get more.
-TIMEOUTS = {"ply": 60, "prepare": 60, "core": 60, "las": 10, "e57": 10, "text": 10}
+TIMEOUTS = {"ply": 60, "prepare": 60, "core": 60, "las": 10, "e57": 10, "text": 10, "pcd": 10}
 # Longest input (libFuzzer's -max_len; its default is the longest seed): E57 mutations
 # rewrite the XML, which may grow the file by a page or two.
 MAX_LEN = {"e57": 16384}

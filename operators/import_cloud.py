@@ -1,5 +1,5 @@
 """File > Import > Splat Point Cloud, and drag-and-drop of point-cloud files into the 3D
-viewport (PLY incl. Gaussian-splatting PLY, LAS/LAZ, E57, XYZ/PTS/TXT/CSV: the reader is
+viewport (PLY incl. Gaussian-splatting PLY, LAS/LAZ, E57, PCD, XYZ/PTS/TXT/CSV: the reader is
 chosen by the file's content, splat_tracer/pointcloud/readers/); and Estimate Splat
 Normals, which (re)estimates the normals and radii of existing cloud objects.
 
@@ -31,13 +31,13 @@ ORIENTATION_HINT = "splat_tracer_orientation"  # custom property: the file's own
 # sensor sits), for Estimate Splat Normals' Automatic and File Origin
 VIEWPOINT = "splat_tracer_file_origin"
 _ORIENTATION_ITEMS = [
-    ("AUTO", "Automatic", "Towards the scanner when the file knows it (E57); else by the cloud's shape, whatever "
+    ("AUTO", "Automatic", "Towards the scanner when the file knows it (E57, a PCD's VIEWPOINT); else by the cloud's shape, whatever "
                           "the format: a depth or stereo frame towards the file's origin, a terrain upward, "
                           "objects outward by visibility, else along the neighbour graph"),
     ("PROPAGATE", "Neighbour Graph", "Consistent along a minimum spanning tree of the neighbours, outward where "
                                      "the surface encloses a volume"),
     ("UP", "Upward", "Towards +Z (aerial scans); walls take their neighbours' side"),
-    ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files); else Neighbour Graph"),
+    ("SCANNER", "Scanner", "Towards the scanner position of each point (E57 files, a PCD's VIEWPOINT); else Neighbour Graph"),
     ("ORIGIN", "File Origin", "Towards the file's origin (0, 0, 0): a depth-camera or stereo frame in its "
                               "sensor's coordinates"),
 ]
@@ -209,7 +209,7 @@ def create_objects(context, loaded, notes_for, progress=None, consume: bool = Fa
 
 @orientation_helper(axis_forward="Y", axis_up="Z")
 class SPLAT_TRACER_OT_import_cloud(_Work, bpy.types.Operator, ImportHelper):
-    """Import point clouds (PLY, Gaussian-splatting PLY, LAS/LAZ, E57, XYZ/PTS/TXT/CSV) as splat objects, one per file"""
+    """Import point clouds (PLY, Gaussian-splatting PLY, LAS/LAZ, E57, PCD, XYZ/PTS/TXT/CSV) as splat objects, one per file"""
 
     bl_idname = "splat_tracer.import_cloud"
     bl_label = "Import Splat Point Cloud"
@@ -442,4 +442,4 @@ class SPLAT_TRACER_FH_point_cloud(bpy.types.FileHandler):
 
 
 def menu_import(self, context):
-    self.layout.operator(SPLAT_TRACER_OT_import_cloud.bl_idname, text="Splat Point Cloud (.ply, .las, .laz, .e57, .xyz, .pts, .csv)")
+    self.layout.operator(SPLAT_TRACER_OT_import_cloud.bl_idname, text="Splat Point Cloud (.ply, .las, .laz, .e57, .pcd, .xyz, .pts, .csv)")

@@ -9,12 +9,13 @@ and macos-x64 (default: all four). For each platform:
    never the development build of `make build`.
 2. Stages the add-on's files (no tests, benchmarks, native sources or build files), the
    core, and the dependencies Blender does not ship as unmodified PyPI wheels for that
-   platform (lazrs and pye57, compiled, for each Python that Blender 4.2 to 5.2 use;
-   plyfile, laspy and pyquaternion, pure Python), listed in the staged manifest, whose
-   `platforms` is that one platform. A reader's wheel that PyPI lacks for a platform (pye57
-   on macOS x64) is left out with a warning: that format is then refused there with a
-   message. numpy is never bundled: Blender has its own. Nor is scipy: the add-on does not
-   use it (the neighbour search and the normals' spanning tree are in the core).
+   platform (lazrs, pye57, pydantic_core and python-neo-lzf, compiled, for each Python that
+   Blender 4.2 to 5.2 use; plyfile, laspy, pyquaternion, pypcd4, pydantic and its small
+   dependencies, pure Python), listed in the staged manifest, whose `platforms` is that one
+   platform. A reader's wheel that PyPI lacks for a platform (pye57 on macOS x64) is left out
+   with a warning: that format is then refused there with a message. numpy is never
+   bundled: Blender has its own. Nor is scipy: the add-on does not use it (the neighbour
+   search and the normals' spanning tree are in the core).
 3. Validates and zips with Blender's own extension tool (blender_ext.py, from the bpy
    wheel), `build --split-platforms`: the platform suffix in the name and the generated
    manifest block that extension repositories read.
@@ -56,9 +57,15 @@ PLATFORMS = {
 # 5.0, a cp313 one 5.1 and 5.2.
 # The third field: whether the add-on needs it everywhere (True) or only for one reader, which
 # refuses its format with a message where the wheel is missing (False).
+# PCD's pypcd4 brings pydantic (its header model) and python-neo-lzf (binary_compressed):
+# pydantic_core and python-neo-lzf are compiled, the rest pure Python.
 WHEELS = [("plyfile==1.0.3", ("3.11",), True), ("laspy==2.7.0", ("3.11",), False),
           ("lazrs==0.8.2", ("3.11", "3.13"), False), ("pye57==0.4.19", ("3.11", "3.13"), False),
-          ("pyquaternion==0.9.9", ("3.11",), False)]
+          ("pyquaternion==0.9.9", ("3.11",), False),
+          ("pypcd4==1.5.1", ("3.11",), False), ("pydantic==2.14.4", ("3.11",), False),
+          ("pydantic_core==2.50.5", ("3.11", "3.13"), False), ("annotated-types==0.8.0", ("3.11",), False),
+          ("typing-inspection==0.4.5", ("3.11",), False), ("typing_extensions==4.16.0", ("3.11",), False),
+          ("python-neo-lzf==0.3.5", ("3.11", "3.13"), False)]
 PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 # The development core (make build) is never shipped: each stage gets its platform's.
@@ -83,7 +90,9 @@ def fetch_wheels(platform: str) -> list[Path]:
         name, version = requirement.split("==")
         for py in pythons:
             tag = "cp" + py.replace(".", "")
-            pattern = re.compile(rf"{name}-{re.escape(version)}-(py3-none-any|{tag}-{tag}-{platform_pattern})\.whl$")
+            wheel_name = re.escape(re.sub(r"[-_.]+", "_", name))  # a wheel's file name spells it with '_'
+            pattern = re.compile(rf"{wheel_name}-{re.escape(version)}-(py3-none-any|{tag}-{tag}-{platform_pattern})"
+                                 r"\.whl$")
             cached = [w for w in WHEEL_CACHE.glob("*.whl") if pattern.match(w.name)]
             if not cached:
                 platforms = [arg for p in tags for arg in ("--platform", p)]

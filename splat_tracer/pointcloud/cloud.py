@@ -74,7 +74,9 @@ class PointCloud:
     # Per-point attributes kept on the object besides the splat's own (LAS intensity,
     # classification, return number; text intensity): name -> (N,) int32 or float32.
     attributes: dict = field(default_factory=dict)
-    scanners: Optional[np.ndarray] = None  # (N,3) float64: the scanner's position per point (E57 poses)
+    # (N,3) float64: the scanner's position per point (E57 poses); one row broadcast to every
+    # point (shared_row) when one sensor saw them all (a PCD's VIEWPOINT)
+    scanners: Optional[np.ndarray] = None
     orientation: str = "PROPAGATE"   # how to orient estimated normals: PROPAGATE, UP (aerial), SCANNER
     oriented: bool = True            # False: the normals' axes are right but their signs arbitrary
     dropped_rows: int = 0            # rows dropped for non-finite coordinates (text, LAS, E57)
@@ -94,19 +96,35 @@ class PointCloud:
         from dataclasses import replace
 
         keep = np.asarray(keep)
+        shared = shared_row(self.scanners)  # one sensor: broadcast again, neither copied nor moved
+        scanners = None if shared is not None else self.scanners
         if keep.dtype == bool:  # a mask: every array copied a block at a time on all cores
             names = list(self.attributes)
             pos, nrm, col, rad, rows, scn, *attrs = compress(
-                [self.positions, self.normals, self.colours, self.radii, self.rows, self.scanners,
+                [self.positions, self.normals, self.colours, self.radii, self.rows, scanners,
                  *(self.attributes[k] for k in names)], keep, in_place=in_place)
             rows = kept_rows(keep) if self.rows is None else rows
-            return replace(self, positions=pos, normals=nrm, colours=col, radii=rad, rows=rows, scanners=scn,
-                           attributes=dict(zip(names, attrs)))
-        take = (lambda a: None if a is None else a[keep])
-        return replace(self, positions=self.positions[keep], normals=take(self.normals),
-                       colours=take(self.colours), radii=take(self.radii),
-                       rows=keep if self.rows is None else self.rows[keep], scanners=take(self.scanners),
-                       attributes={k: v[keep] for k, v in self.attributes.items()})
+            kept = int(keep.sum())
+        else:
+            take = (lambda a: None if a is None else a[keep])
+            pos, nrm, col, rad, scn = (self.positions[keep], take(self.normals), take(self.colours), take(self.radii),
+                                       take(scanners))
+            rows = keep if self.rows is None else self.rows[keep]
+            names, attrs, kept = list(self.attributes), [v[keep] for v in self.attributes.values()], len(keep)
+        if shared is not None:
+            scn = np.broadcast_to(shared, (kept, 3))
+        return replace(self, positions=pos, normals=nrm, colours=col, radii=rad, rows=rows, scanners=scn,
+                       attributes=dict(zip(names, attrs)))
+
+
+def shared_row(a: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """The (3,) row of a per-point (N,3) array that is one row broadcast to every point (a
+    PCD's sensor position), else None: such an array is mapped by its row and broadcast again
+    (PointCloud.subset, importer.transform, prepare), never copied to N rows (80 MB per
+    million points that all say the same)."""
+    if a is None or a.ndim != 2 or len(a) == 0 or a.strides[0] != 0:
+        return None
+    return a[0]
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ creates Blender data, so that an error or a cancel leaves nothing half-made.
   least `max_points` cells are occupied keeps the point nearest each cell's centre (dense
   parts lose more points than sparse ones), and a fixed-seed random choice among those cells
   makes up the exact count.
-- Memory: the points a file declares (PLY, LAS/LAZ, E57 headers) are checked against the
+- Memory: the points a file declares (PLY, LAS/LAZ, E57, PCD headers) are checked against the
   available memory before anything is read (BYTES_PER_POINT_*).
 """
 from __future__ import annotations
@@ -28,9 +28,10 @@ from ..util import matrices, resources
 from ..util.columns import bounds
 from ..util.progress import ProgressFn, nothing, scaled
 from . import normals, prepare, readers, spacing
-from .cloud import MAX_RADIUS, CloudFileError, PointCloud
+from .cloud import MAX_RADIUS, CloudFileError, PointCloud, shared_row
 from .readers.e57 import check_structure as check_e57_structure
 from .readers.las import read_header as read_las_header
+from .readers.pcd import NORMAL_FIELDS, read_header as read_pcd_header
 from .readers.ply import read_header
 
 # Peak memory of an import per point, measured by benchmarks/import_speed.py at 10M points
@@ -85,7 +86,11 @@ def transform(cloud: PointCloud, axes=None, scale: float = 1.0) -> PointCloud:
     if scale != 1.0:
         pos *= scale
     turn = (lambda a: None if a is None else matrices.transform_rows(a, m).astype(a.dtype))  # noqa: E731
-    scanners = None if cloud.scanners is None else matrices.transform_rows(cloud.scanners, m) * scale
+    scanners, shared = cloud.scanners, shared_row(cloud.scanners)
+    if shared is not None:  # one sensor: its row alone turned
+        scanners = np.broadcast_to(matrices.transform_rows(shared[None], m)[0] * scale, scanners.shape)
+    elif scanners is not None:
+        scanners = matrices.transform_rows(scanners, m) * scale
     radii = None if cloud.radii is None else (cloud.radii * np.float32(scale)).astype(np.float32)
     out = replace(cloud, positions=pos, normals=turn(cloud.normals), scanners=scanners, radii=radii)
     if radii is not None and scale > 1.0:
@@ -161,7 +166,7 @@ def apply_budget(cloud: PointCloud, budget: int, progress: Optional[ProgressFn] 
 
 
 def declared_points(path: str, kind: str) -> Optional[int]:
-    """The points the file's header declares (PLY, LAS/LAZ, E57), None for text (whose size
+    """The points the file's header declares (PLY, LAS/LAZ, E57, PCD), None for text (whose size
     bounds what reading it allocates) or when the header cannot tell (the reader will say why)."""
     try:
         if kind == "PLY":
@@ -169,6 +174,8 @@ def declared_points(path: str, kind: str) -> Optional[int]:
             return sum(e.count for e in header.elements if e.name == "vertex")
         if kind == "LAS":  # its own header check: laspy.open loops on a corrupt count of VLRs
             return read_las_header(path).point_count
+        if kind == "PCD":
+            return read_pcd_header(path).metadata.points
         if kind == "E57":  # its own structure check: pye57 crashes on a scan without a prototype
             check_e57_structure(path)
             import pye57
@@ -209,8 +216,8 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
     path = os.fspath(path)
     name = os.path.basename(path)
     kind = readers.sniff(path)
-    # Only PLY can say from its header whether normals follow; assume the worst elsewhere.
-    check_memory(path, kind, options, estimates_normals=kind != "PLY" or not _ply_has_normals(path))
+    # Only PLY and PCD can say from their headers whether normals follow; assume the worst elsewhere.
+    check_memory(path, kind, options, estimates_normals=not _has_normals(path, kind))
     report(0.0, f"reading {name}")
     cloud = readers.read_cloud(path, options.columns, scaled(progress, 0.0, 0.2, f"{name}: "))
     report(0.2, f"read {len(cloud):,} points")
@@ -231,13 +238,18 @@ def load(path: str, options: Optional[ImportOptions] = None, progress: Optional[
     return prepared
 
 
-def _ply_has_normals(path: str) -> bool:
+def _has_normals(path: str, kind: str) -> bool:
+    """Whether the file's header says it has normals (PLY, PCD; False for the others)."""
     try:
-        _, header = read_header(path)
+        if kind == "PLY":
+            _, header = read_header(path)
+            names = {p.name for e in header.elements if e.name == "vertex" for p in e.properties}
+            return {"nx", "ny", "nz"} <= names
+        if kind == "PCD":
+            return set(NORMAL_FIELDS) <= set(read_pcd_header(path).metadata.fields)
     except CloudFileError:
         return False
-    names = {p.name for e in header.elements if e.name == "vertex" for p in e.properties}
-    return {"nx", "ny", "nz"} <= names
+    return False
 
 
 def load_many(paths, options: Optional[ImportOptions] = None, progress: Optional[ProgressFn] = None) -> list:

@@ -30,7 +30,7 @@ import numpy as np
 from ..util.columns import bounds, rows_outside
 from ..util.progress import Steps, scaled
 from . import normals as normals_mod, spacing
-from .cloud import MAX_RADIUS, CloudFileError, PointCloud
+from .cloud import MAX_RADIUS, CloudFileError, PointCloud, shared_row
 from .neighbours import local_frame
 
 # The bulk's box: 1 % of the points on each side may lie anywhere without moving it.
@@ -304,7 +304,9 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         step("estimate")(0.0, "neighbour tree")
         tree = spacing.neighbour_tree(rel, workers)
         oriented_by = resolve_orientation(orientation, cloud.scanners is not None)
-        scanners = None if cloud.scanners is None else cloud.scanners - origin
+        scanners, shared = cloud.scanners, shared_row(cloud.scanners)
+        scanners = (np.broadcast_to(shared - origin, scanners.shape) if shared is not None
+                    else None if scanners is None else scanners - origin)
         # The file's origin in the offsets' frame (the importer's axes and scale keep it at 0):
         # where a single view's sensor sits (ORIGIN, and AUTO's range-image test).
         result, known_spacing, known_cover = normals_mod.estimate_and_orient(

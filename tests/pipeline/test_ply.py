@@ -461,3 +461,67 @@ def test_non_ascii_bytes_after_ascii_data_are_refused_with_a_message(tmp_path):
     with pytest.raises(CloudFileError, match="follow") as err:
         ply.read_ply(str(path))
     assert str(path) in str(err.value)
+
+
+def _range_scan(path, n=400, grid_first=False, ending="\n", spaces=" "):
+    """An ascii PLY as Stanford's raw range scans are: vertices, then (or first) a
+    'range_grid' element of lists with 0 or 1 vertex index per grid cell."""
+    rng = np.random.default_rng(5)
+    p = np.round(rng.uniform(-0.1, 0.1, (n, 3)), 6).astype(np.float32)
+    rgb = rng.integers(0, 256, (n, 3))
+    cells = 3 * n
+    hit = np.zeros(cells, bool)
+    hit[rng.choice(cells, n, replace=False)] = True
+    grid = [f"1 {i}" if h else "0" for i, h in zip(np.cumsum(hit) - 1, hit)]
+    vertices = [spaces.join(f"{v:g}" for v in row) + spaces + spaces.join(str(c) for c in colour)
+                for row, colour in zip(p, rgb)]
+    head = ["ply", "format ascii 1.0", "obj_info num_cols 60", "element range_grid %d" % cells,
+            "property list uchar int vertex_indices", "element vertex %d" % n, "property float x", "property float y",
+            "property float z", "property uchar red", "property uchar green", "property uchar blue", "end_header"]
+    if not grid_first:  # vertex first, as bun000.ply
+        head = head[:3] + head[5:12] + head[3:5] + head[12:]
+    body = grid + vertices if grid_first else vertices + grid
+    path.write_bytes(ending.join(head + body).encode() + ending.encode())
+    return p, rgb
+
+
+@pytest.mark.parametrize("grid_first", [False, True], ids=["grid_after", "grid_before"])
+@pytest.mark.parametrize("ending, spaces", [("\n", " "), ("\r\n", "\t"), ("\r", "  ")], ids=["lf", "crlf_tab", "cr"])
+def test_ascii_extra_elements_are_skipped_by_numpy_and_named(tmp_path, monkeypatch, grid_first, ending, spaces):
+    """An ascii PLY's vertices are parsed by numpy, not plyfile's value-at-a-time loop, and
+    the element of lists the importer does not use is only checked (a range scan: 1.46 s
+    before, 0.08 s now, for 40,256 vertices and 204,800 grid rows); the notes name it."""
+    from plyfile import PlyData
+
+    path = tmp_path / "scan.ply"
+    p, rgb = _range_scan(path, grid_first=grid_first, ending=ending, spaces=spaces)
+    reference = ply.read_ply(str(path))
+    monkeypatch.setattr(PlyData, "read", lambda *a: pytest.fail("plyfile parsed the data"))
+    cloud = ply.read_ply(str(path))
+    np.testing.assert_array_equal(cloud.positions, p)
+    np.testing.assert_array_equal(cloud.colours, reference.colours)
+    np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb / 255.0), atol=1e-6)
+    assert "elements ignored (only the vertices are points): 'range_grid' (1,200 rows)" in cloud.notes
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda rows: rows.replace(" 0.", " 1.5e-1 0.", 1), "row 0: property 'red': malformed input"),  # a value more
+    (lambda rows: rows.split("\n", 1)[0].rsplit(" ", 1)[0] + "\n" + rows.split("\n", 1)[1],
+     "row 0: property 'blue': early end-of-line"),                                         # a value less
+    (lambda rows: rows.replace("\n1 ", "\n1 2 ", 1), "'range_grid': row "),                 # a grid row too long
+    (lambda rows: rows.replace("\n0\n", "\n\n", 1), "'range_grid': row "),                # a blank row
+    (lambda rows: rows.replace(" 1", " one", 1), "malformed input"),                      # not a number
+    (lambda rows: rows + "0\n", "1 more rows follow"),                                   # a row more
+])
+def test_ascii_rows_that_do_not_fit_are_refused_as_plyfile_says(tmp_path, edit, message):
+    """Where numpy's parse finds a row it cannot take, plyfile reads the file and names the
+    row and the problem, as it did before."""
+    path = tmp_path / "scan.ply"
+    _range_scan(path)
+    head, _, rows = path.read_text().partition("end_header\n")
+    changed = edit(rows)
+    assert changed != rows
+    path.write_text(head + "end_header\n" + changed)
+    with pytest.raises(CloudFileError, match=message) as err:
+        ply.read_ply(str(path))
+    assert str(path) in str(err.value)

@@ -29,10 +29,12 @@ def dist_zip(tmp_path_factory):
 @pytest.fixture(scope="module")
 def clouds(tmp_path_factory) -> list[Path]:
     """One sphere as PLY (normals, no radii: the core's k-NN gives them), LAZ (no normals:
-    estimated by the core too; laspy + lazrs) and E57 (pye57): what the zip is shown to import
-    in every Blender release and under Wine."""
+    estimated by the core too; laspy + lazrs), E57 (pye57) and binary_compressed PCD (pypcd4,
+    pydantic, python-neo-lzf): what the zip is shown to import in every Blender release and
+    under Wine."""
     import laspy
     import pye57
+    from pypcd4 import Encoding, PointCloud as Pcd
 
     out = tmp_path_factory.mktemp("clouds")
     p, n = fibonacci_sphere(5000)
@@ -44,4 +46,5 @@ def clouds(tmp_path_factory) -> list[Path]:
     las.write(str(out / "sphere.laz"), laz_backend=laspy.LazBackend.Lazrs)
     with pye57.E57(str(out / "sphere.e57"), mode="w") as e57:
         e57.write_scan_raw({"cartesianX": p[:, 0], "cartesianY": p[:, 1], "cartesianZ": p[:, 2]})
-    return [out / "sphere.ply", out / "sphere.laz", out / "sphere.e57"]
+    Pcd.from_xyz_points(p.astype(np.float32)).save(str(out / "sphere.pcd"), encoding=Encoding.BINARY_COMPRESSED)
+    return [out / "sphere.ply", out / "sphere.laz", out / "sphere.e57", out / "sphere.pcd"]

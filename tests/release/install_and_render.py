@@ -28,7 +28,9 @@ TOOLS = Path(__file__).resolve().parents[2] / "tools"
 # What the zip bundles (its wheels' modules). The caller's site-packages may have them too
 # (the development venv has all): they are hidden, so that the add-on can only find what
 # the zip installed into the extensions' site-packages.
-BUNDLED = ("plyfile", "laspy", "lazrs", "pye57", "pyquaternion")
+# (typing_extensions, bundled for pydantic, is not hidden: Blender's own modules may use it.)
+BUNDLED = ("plyfile", "laspy", "lazrs", "pye57", "pyquaternion", "pypcd4", "pydantic", "pydantic_core",
+           "annotated_types", "typing_inspection", "lzf")
 # Not bundled and not used by the add-on (its k-nearest neighbours and the normals'
 # spanning tree are in the core), but in the development venv for the tests: hidden the
 # same way, so that an import of it by the add-on fails here as in a Blender without it.

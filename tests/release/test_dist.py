@@ -28,9 +28,10 @@ def test_zip_holds_the_addon_the_portable_core_and_the_wheels_only(dist_zip):
     wheels = {n for n in names if n.startswith("wheels/")}
     assert any("plyfile" in w for w in wheels)
     assert not any(name in w for w in wheels for name in ("numpy", "scipy")), wheels  # Blender's; not used
-    for name in ("laspy", "pyquaternion"):
+    for name in ("laspy", "pyquaternion", "pypcd4", "pydantic-", "annotated_types", "typing_inspection",
+                 "typing_extensions"):
         assert any(name in w for w in wheels), name
-    for name in ("lazrs", "pye57"):
+    for name in ("lazrs", "pye57", "pydantic_core", "python_neo_lzf"):
         assert all(any(name in w and tag in w for w in wheels) for tag in ("cp311", "cp313")), name
     assert all("manylinux" in w or "none-any" in w for w in wheels), wheels
     assert not any(n.startswith(("tests/", "benchmarks/", "tools/", "splat_tracer/native/")) for n in names)

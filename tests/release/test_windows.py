@@ -204,9 +204,10 @@ def test_windows_zip_installs_into_windows_blender_and_renders_like_linux(python
     assert not [line for line in log.splitlines() if re.search(r"\b(Error|ERROR)\b|Traceback", line)], log
     assert "installed with the operator into Blender 5.0.1 (online access: False)" in log, log
     assert "farm_check: scene 'Scene' renders with Splat Tracer" in log
-    for suffix in (".ply", ".laz", ".e57"):
+    for suffix in (".ply", ".laz", ".e57", ".pcd"):
         assert f"imported {suffix}: 5000 points" in log, log
-    for module in ("plyfile", "laspy", "lazrs", "pye57"):  # from the extensions' site-packages (the script checks)
+    # from the extensions' site-packages (the script checks)
+    for module in ("plyfile", "laspy", "lazrs", "pye57", "pypcd4", "lzf", "pydantic_core"):
         assert f"bundled: {module} " in log, f"{module} was not imported from the zip's wheels"
     assert "numpy: 1.26.4" in log and "scipy: not imported" in log, log
     # Blender installed the zip's Windows wheels for its Python.

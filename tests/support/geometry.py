@@ -120,3 +120,34 @@ def ray_box(origins, directions, half: float = 1.0):
     rows = np.arange(len(origins))
     normal[rows, axis] = -np.sign(directions[rows, axis])
     return t, normal
+
+
+def quaternion_matrix(q):
+    """The rotation matrix of a quaternion (w, x, y, z), normalised first."""
+    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def depth_frame(width=160, height=120, focal=120.0):
+    """(N,3) camera-frame points of a depth sensor looking along +z at a back wall, a floor
+    and a slanted box face: one ray a pixel, depth quantised as a Kinect's (steps of
+    0.0028 z^2), NaN where a ray hits nothing within the sensor's range (3.5 m: the back
+    wall's corners are holes). Row-major, as an organised PCD."""
+    u, v = np.meshgrid(np.arange(width) - width / 2 + 0.5, np.arange(height) - height / 2 + 0.5)
+    rays = np.column_stack([u.ravel() / focal, v.ravel() / focal, np.ones(u.size)])  # depth 1 along +z
+    planes = [((0.0, 0.0, 1.0), 3.0),         # back wall z = 3
+              ((0.0, 1.0, 0.0), 0.6),         # floor y = 0.6 (y points down in a camera's frame)
+              ((0.6, 0.0, 0.8), 1.6)]         # a slanted face n . p = 1.6
+    depth = np.full(len(rays), np.inf)
+    for n, d in planes:
+        along = rays @ np.asarray(n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(along > 1e-9, d / along, np.inf)
+        depth = np.minimum(depth, t)
+    depth[depth * np.linalg.norm(rays, axis=1) > 3.5] = np.nan
+    step = 0.0028 * depth ** 2
+    with np.errstate(invalid="ignore"):
+        depth = np.round(depth / step) * step
+    return rays * depth[:, None]

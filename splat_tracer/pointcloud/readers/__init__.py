@@ -4,6 +4,7 @@
   their properties and read by gaussians.read_gaussians.
 - LAS/LAZ (`LASF`): las.read_las (laspy; LAZ decompressed by lazrs).
 - E57 (`ASTM-E57`): e57.read_e57 (pye57).
+- PCD (`# .PCD`, or comments and then a VERSION or FIELDS line): pcd.read_pcd (pypcd4).
 - Text (anything else that decodes as UTF-8 text): XYZ/PTS/TXT/CSV, text.read_text.
 Each builds its cloud with cloud.make_cloud and raises cloud.CloudFileError naming the
 file and the problem.
@@ -15,11 +16,12 @@ import os
 from ..cloud import CloudFileError, PointCloud, check_file
 from .e57 import read_e57
 from .las import read_las
+from .pcd import is_pcd, read_pcd
 from .ply import read_ply
 from .text import read_text
 
-FORMATS = ("PLY", "LAS", "E57", "TEXT")
-EXTENSIONS = (".ply", ".las", ".laz", ".e57", ".xyz", ".pts", ".txt", ".csv")
+FORMATS = ("PLY", "LAS", "E57", "PCD", "TEXT")
+EXTENSIONS = (".ply", ".las", ".laz", ".e57", ".pcd", ".xyz", ".pts", ".txt", ".csv")
 _SNIFF_BYTES = 4096
 _TEXT_SHARE = 0.95  # the share of printable ASCII bytes that makes a non-UTF-8 file text in another encoding
 
@@ -37,6 +39,8 @@ def sniff(path: str) -> str:
         return "LAS"
     if head.startswith(b"ASTM-E57"):
         return "E57"
+    if is_pcd(head):  # before text: an ascii PCD is text too
+        return "PCD"
     if b"\0" not in head:
         try:
             head.decode("utf-8")
@@ -51,7 +55,7 @@ def sniff(path: str) -> str:
                 return "TEXT"
     what = "a PLY header" if head.lower().startswith(b"ply") else f"{head[:8]!r}"
     raise CloudFileError(f"{path}: not a point-cloud format this importer reads (it starts with {what}; "
-                         "known: PLY, LAS/LAZ, E57, and XYZ/PTS/TXT/CSV text)")
+                         "known: PLY, LAS/LAZ, E57, PCD, and XYZ/PTS/TXT/CSV text)")
 
 
 def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
@@ -65,6 +69,8 @@ def read_cloud(path: str, columns: str = "", progress=None) -> PointCloud:
         return read_las(path, progress)
     if kind == "E57":
         return read_e57(path, progress)
+    if kind == "PCD":
+        return read_pcd(path)
     try:
         return read_text(path, columns)
     except CloudFileError as e:
