@@ -146,6 +146,25 @@ def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     assert any("towards the scanner positions" in note for note in prepared.notes(8))
 
 
+def test_the_default_viewpoint_of_an_unorganised_cloud_is_not_a_sensor(tmp_path):
+    # A closed object merged from several views, written with PCL's default VIEWPOINT (the
+    # origin, inside it): oriented towards that origin it would face inwards.
+    p, nrm = fibonacci_sphere(3000, radius=1.0)
+    f32 = p.astype(np.float32)
+    path = _write(tmp_path / "merged.pcd", {"x": f32[:, 0], "y": f32[:, 1], "z": f32[:, 2]})
+    cloud = readers.read_cloud(path)
+    assert cloud.scanners is None and any("PCL's default" in note and "not organised" in note for note in cloud.notes)
+    prepared = importer.load(path)
+    assert prepared.normals_oriented != "SCANNER"
+    outward = np.einsum("ij,ij->i", prepared.cloud.normals, prepared.local.astype(np.float64) + prepared.origin)
+    assert (outward > 0).mean() >= 0.99, (outward > 0).mean()
+    # The same default on an organised frame is its sensor (one view: a depth image).
+    frame = depth_frame().astype(np.float32)
+    organised = readers.read_cloud(_write(tmp_path / "frame.pcd", {"x": frame[:, 0], "y": frame[:, 1],
+                                                                   "z": frame[:, 2]}, height=120))
+    assert organised.scanners is not None and np.array_equal(organised.scanners[0], [0.0, 0.0, 0.0])
+
+
 def test_a_viewpoint_survives_axes_the_budget_and_subsets_as_one_row(tmp_path):
     p = RNG.uniform(-1, 1, (2000, 3)).astype(np.float32)
     path = _write(tmp_path / "cloud.pcd", {"x": p[:, 0], "y": p[:, 1], "z": p[:, 2]},

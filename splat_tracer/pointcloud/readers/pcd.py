@@ -21,7 +21,9 @@ frame) are dropped and counted, and the points keep the file's row numbers (v * 
 VIEWPOINT (tx ty tz qw qx qy qz) is the sensor's pose in the cloud's frame: its position
 (tx ty tz) is every point's scanner position, and estimated normals are oriented towards it
 (the SCANNER orientation, as for an E57 scan). It is one row broadcast to every point, not
-an (N,3) copy.
+an (N,3) copy. PCL's default VIEWPOINT on an unorganised cloud (HEIGHT 1) is not taken as a
+position: writers leave it when they do not know the sensor (a cloud merged from several
+views), and the import's orientation decides from the geometry instead.
 """
 from __future__ import annotations
 
@@ -430,12 +432,20 @@ def read_pcd(path: str) -> PointCloud:
     viewpoint = tuple(float(x) for x in meta.viewpoint)
     scanner = np.asarray(viewpoint[:3], np.float64)
     orientation = "PROPAGATE"
-    if np.isfinite(scanner).all() and np.abs(scanner).max() < 1e300:
-        orientation = "SCANNER"
-        notes.append(viewpoint_note(viewpoint))
-    else:
+    if not (np.isfinite(scanner).all() and np.abs(scanner).max() < 1e300):
         scanner = None
         notes.append(f"the file's VIEWPOINT {viewpoint} is not a position: not used")
+    elif viewpoint == _DEFAULT_VIEWPOINT and meta.height <= 1:
+        # PCL writes its default when nobody set the sensor: an unorganised cloud merged from
+        # several views carries it too, and orienting those towards the origin would turn
+        # them inside out. The orientation decides from the geometry instead (a single view
+        # seen from the file's origin still faces it: normals.range_image).
+        scanner = None
+        notes.append("the file's VIEWPOINT is PCL's default (0, 0, 0, no rotation) and the cloud is not organised: "
+                     "not taken as the sensor's position")
+    else:
+        orientation = "SCANNER"
+        notes.append(viewpoint_note(viewpoint))
     if meta.height > 1:
         notes.append(f"an organised cloud of {meta.width:,} x {meta.height:,} points (rows: v x {meta.width:,} + u)")
     cloud = make_cloud(path, pos, normals, colours, None, attributes, drop_non_finite=True, format="PCD",
