@@ -92,6 +92,7 @@ VIEW_MIN_POINTS = 100    # fewer: no test (nothing to bin)
 # seen almost edge-on.
 VIEW_FACING = 0.5
 VIEW_COVER_CELL = 2.0 / 16  # the coverage's cube map: 16 x 16 cells per face
+VIEW_COVER_POINTS = 8     # sample points a coverage cell holds on a closed surface, at least
 VIEW_COVERAGE = 0.9      # a closed surface around the viewpoint covers every direction
 VIEW_CELL = 1.0          # angular cells one sample spacing (k-th neighbour) wide: a few points each
 VIEW_MAX_SLOPE = 10.0    # the depth spread of a cell seen at more than 84 degrees is bounded
@@ -492,8 +493,11 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     facing = float(np.median(cos))
     if facing < VIEW_FACING:
         return False, ""
-    _, solid = _cube_cells(u, VIEW_COVER_CELL)
-    keys, first = np.unique(_cube_cells(u, VIEW_COVER_CELL)[0], return_index=True)
+    # Cells no finer than a full sphere's share of the sample can fill: a sparse sample of
+    # a closed surface leaves empty cells between its points and would pass for a view.
+    per_face = max(1, min(int(2.0 / VIEW_COVER_CELL), int(np.sqrt(len(u) / (6 * VIEW_COVER_POINTS)))))
+    cells, solid = _cube_cells(u, 2.0 / per_face)
+    keys, first = np.unique(cells, return_index=True)
     coverage = float(solid[first].sum() / (4 * np.pi))
     if coverage >= VIEW_COVERAGE:
         return False, ""
