@@ -53,7 +53,7 @@ class SurfaceResult(NamedTuple):
 class RenderResult(NamedTuple):
     rgba: np.ndarray                # (h, w, 4) float32, top row first
     depth: Optional[np.ndarray]     # (h, w) planar depth along the view axis; 1e10 on background
-    normal: Optional[np.ndarray]    # (h, w, 3) unit normals; zeros on background
+    normal: Optional[np.ndarray]    # (h, w, 3) unit normals (an open cloud's back: turned to the camera); zeros on background
     completed: bool                 # False when progress() asked to stop
 
 

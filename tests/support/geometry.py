@@ -151,3 +151,28 @@ def depth_frame(width=160, height=120, focal=120.0):
     with np.errstate(invalid="ignore"):
         depth = np.round(depth / step) * step
     return rays * depth[:, None]
+
+
+def room_frame(width: int = 160, height: int = 120, focal: float = 140.0, step: float = 0.004,
+                noise: float = 0.0015, seed: int = 0):
+    """A depth camera's frame as a point cloud in the camera's frame (sensor at the origin,
+    looking down +Z, Y down, as PCL stores it): a room corner (back wall z = 3, left wall
+    x = -1, floor y = 0.8) with a box and a ball on the floor, one point per pixel. Depth has
+    sensor noise (sigma `noise` x z^2, as structured light) and is quantised in steps of
+    `step`. Returns (W*H, 3) float64 points, row by row."""
+    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    d = np.stack([(j - width / 2) / focal, (i - height / 2) / focal, np.ones_like(j)], -1).reshape(-1, 3)
+    t = np.full(len(d), np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for axis, value in ((2, 3.0), (0, -1.0), (1, 0.8)):
+            tt = value / d[:, axis]
+            t = np.minimum(t, np.where(tt > 0, tt, np.inf))
+        lo, hi = np.array([0.0, 0.4, 1.8]), np.array([0.5, 0.8, 2.3])  # the box
+        t0, t1 = lo / d, hi / d
+    tn, tf = np.minimum(t0, t1).max(1), np.maximum(t0, t1).min(1)
+    t = np.where((tn <= tf) & (tn > 0), np.minimum(t, tn), t)
+    length = np.linalg.norm(d, axis=1)
+    t = np.minimum(t, ray_sphere(np.zeros_like(d), d / length[:, None], (-0.4, 0.5, 2.0), 0.3) / length)
+    p = d * t[:, None]
+    z = p[:, 2] + np.random.default_rng(seed).normal(0.0, 1.0, len(p)) * noise * p[:, 2] ** 2
+    return d * (np.round(z / step) * step)[:, None]

@@ -178,7 +178,8 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
                               // The whole ray, not cut at the nearest surface so far: the layer's
                               // window may reach past it (its members, and the far phase's exit),
                               // and what the ray sees must not depend on the instances' order.
-                              const bool inside = from.inside == index || (camera_inside && camera_inside[index]);
+                              const bool inside = from.inside == index || (self && from.back) ||
+                                                  (camera_inside && camera_inside[index]);
                               take_splat_hit(index, inst, ray,
                                              find_surface(*inst.splats, local, method, inside,
                                                           self ? from.members : nullptr, self ? from.n_members : 0,
@@ -270,7 +271,8 @@ bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &f
                           if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
                           // Splats block only where the visibility rules put a surface: a fringe
                           // disc (far phase) or the splats the ray starts from never cast a shadow.
-                          const SurfaceHit h = find_surface(*inst.splats, local, method, from.inside == index,
+                          const SurfaceHit h = find_surface(*inst.splats, local, method,
+                                                            from.inside == index || (self && from.back),
                                                             self ? from.members : nullptr,
                                                             self ? from.n_members : 0, false, stats);
                           return blocked = h.valid() && h.t < local.tmax;

@@ -62,6 +62,10 @@ struct Origin {
     const int32_t *members = nullptr;  // or the splats that formed its point
     int n_members = 0;
     int inside = -1;  // the splat cloud a refracted ray travels inside (the swapped-facing rule)
+    // It leaves an open cloud's back on that side (SplatScene::open_back): its queries of that
+    // same cloud swap the facing too. Only of that cloud and only this ray: the next surface
+    // point makes a new Origin.
+    bool back = false;
 };
 
 struct SurfacePoint {
@@ -94,6 +98,11 @@ class RenderScene {
     const std::vector<Light> &lights() const { return lights_; }
     bool any_transparent() const { return any_transparent_; }
     bool any_emission() const { return any_emission_; }  // a material emits light
+    // The point is an open cloud's back (SplatScene::open_back); never a mesh's.
+    bool open_back(const SurfacePoint &sp) const {
+        const Instance &inst = instances_[sp.instance];
+        return inst.splats && inst.splats->open_back(sp.prim, sp.front);
+    }
 
     // Per instance, 1 where a closed cloud encloses `eye`: that cloud's camera rays start
     // inside it. Kept by each render (the integrator), not by the scene: renders of one scene

@@ -246,6 +246,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     const Vec3 wo = ray.d * -1.f;
     // Which side the ray arrived on: for splats the layer's facing, for triangles the winding.
     const bool entering = sp.front;
+    // An open cloud met from behind (SplatScene::open_back) is a back face, as in Cycles:
+    // its normals turn towards the ray below, and so does its Normal pass.
+    const bool open_back = scene_.open_back(sp);
     Vec3 n = sp.ns, ng = sp.ng;
     if (dot(ng, wo) < 0.f) ng = ng * -1.f;
     if (dot(n, wo) < 0.f) n = n * -1.f;  // two-sided shading
@@ -254,7 +257,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
     if (primary && st.camera) {
-        primary->hit = true, primary->t = sp.t, primary->normal = sp.ns;
+        // Cycles writes a back face's normal turned towards the viewer (it flips N with Ng).
+        primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
         primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
     }
@@ -271,6 +275,15 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
+    } else if (open_back) {
+        // Rays leaving an open sheet's back on that side (lamps, sky, reflection, diffuse:
+        // every ray but the refracted one) meet the neighbouring discs from their front.
+        // Wrong-hit elimination, which ignores back-facing discs only, would take those for
+        // a surface: the sheet shadowed itself (a depth frame oriented away from its sensor,
+        // lit from the sensor's side: 35-40 % of its pixels black). On this side the sheet's
+        // back is its outside: these rays query it with the facing swapped (Origin::back), the
+        // mirror image of what rays leaving its front see.
+        here.back = true;
     }
     auto spawn = [&](Vec3 dir) {
         Ray r;
@@ -299,6 +312,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         next.*counter += 1;
         next.from = here;
         next.from.inside = inside;
+        next.from.back = here.back && kind != kVisTransmission;  // a refracted ray crosses to the front
         next.throughput = st.throughput * luminance(weight);
         // Lamps are seen only along a chain of mirror/glass rays from the camera: after a
         // diffuse or rough bounce, a lamp seen through a mirror is a caustic, which light
@@ -320,8 +334,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (lobes.delta) {
         const Vec3 spec = lobes.specular(cos_o);
         if (luminance(spec) > 0.f && st.glossy < cfg.glossy_bounces)
-            follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside,
-                   &Tally::reflection, true);
+            follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside, &Tally::reflection, true);
         Vec3 wt;
         const Vec3 trans = lobes.transmission(cos_o);
         if (luminance(trans) > 0.f && st.transmission < cfg.transmission_bounces && refract(wo, n, lobes.eta, &wt))
@@ -344,8 +357,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
             if (dot(wi, ng) > 0.f)
-                follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse,
-                       st.from.inside, &Tally::diffuse, false);
+                follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
+                       &Tally::diffuse, false);
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             const Vec3 wi = reflect(wo, m);

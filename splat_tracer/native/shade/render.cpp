@@ -19,7 +19,8 @@ void Renderer::render_tile(size_t tile) const {
 }
 
 // A headlight (a light at the eye): radiance = base colour x |cos| between the ray and the
-// splat normal.
+// splat normal. An open cloud seen from behind is a back face (SplatScene::open_back): its
+// normal is written turned towards the ray, as Cycles writes a back face's.
 void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &hit) const {
     const size_t p = size_t(row) * film_.w + col;
     float *rgba = film_.combined + 4 * p;
@@ -29,7 +30,7 @@ void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &h
         if (film_.normal) std::fill(film_.normal + 3 * p, film_.normal + 3 * p + 3, 0.f);
         return;
     }
-    const Vec3 n = hit.normal;
+    const Vec3 n = scene_.open_back(hit.id, hit.front) ? hit.normal * -1.f : hit.normal;
     const Vec3 c = hit.colour * std::fabs(dot(n, ray.d));
     rgba[0] = c.x, rgba[1] = c.y, rgba[2] = c.z, rgba[3] = 1.f;
     if (film_.depth) film_.depth[p] = float(camera_.planar_depth(ray, hit.t));

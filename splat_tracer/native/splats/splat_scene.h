@@ -47,6 +47,12 @@ class SplatScene {
     Vec3 normal(int32_t id) const { return splats_[slot_[id]].n; }
     float radius(int32_t id) const { return splats_[slot_[id]].r; }
     bool closed(int32_t id) const { return closed_[id] != 0; }
+    // A hit on splat `id` from the side its normal does not face, on an open cloud: a one-sided
+    // scan seen from behind (or oriented the wrong way, as depth frames come). Shading treats it
+    // as Cycles treats a back face (the normal turned towards the ray), and rays leaving it on
+    // that side see the sheet with its facing swapped (docs/ALGORITHM.md, "Open clouds are
+    // two-sided"). On a closed cloud a back hit is the method's business (a wrong hit, an exit).
+    bool open_back(int32_t id, bool front) const { return !front && !closed(id); }
     bool any_closed() const { return any_closed_; }    // the far phase has work here
     bool has_colours() const { return has_colours_; }  // per-point colours were given
     Vec3 colour(int32_t id) const { return has_colours_ ? colours_[id] : Vec3(1.f, 1.f, 1.f); }

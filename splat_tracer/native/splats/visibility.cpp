@@ -42,10 +42,15 @@ void resolve_layer(const SplatScene &scene, const LayerQuery &q, const Method &m
             if (q.hits[idx[k]].dist < q.hits[chosen].dist) chosen = idx[k];
     } else if (m.position == PositionRule::NearPhase) {
         // Walk the members in ray order, two at a time: concave keeps the nearer hit,
-        // convex the farther one; the survivor meets the next member.
+        // convex the farther one; the survivor meets the next member. Convex and concave
+        // as the ray sees them: an open cloud's back layer (SplatScene::open_back) is judged
+        // with its normals turned towards the ray -- a ridge seen from behind is a valley --
+        // so that its back shows the surface point its front would (a closed cloud's back
+        // layers, exits, keep the rule as it was).
+        const float towards = scene.open_back(q.hits[q.first].id, q.facing) ? -1.f : 1.f;
         for (int k = 1; k < n; ++k) {
             const PackedSplat &a = scene.splat(q.hits[chosen].slot), &b = scene.splat(q.hits[idx[k]].slot);
-            if (near_phase_convex(a.c, a.n, b.c, b.n)) chosen = idx[k];
+            if (near_phase_convex(a.c, a.n * towards, b.c, b.n * towards)) chosen = idx[k];
         }
     }
 
