@@ -200,3 +200,13 @@ def test_the_core_refuses_a_bad_lens_tuple_and_the_pinhole_preview_refuses_a_len
     with pytest.raises(ValueError, match="RenderScene.render"):
         cloud.render(cam.with_lens(Lens(0.1, 1.0)), 4, 4)
     assert cam.with_lens(Lens(0.0, 1.0)).lens is None  # a closed aperture is the pinhole
+
+
+def test_the_lens_image_is_the_same_in_packets_ray_by_ray_and_on_any_thread_count():
+    lens = Lens(0.1, F, blades=5, rotation=0.4)
+    cam = Camera(np.eye(4), (-HALF, HALF, -HALF, HALF), (0.01, 1000.0), False, lens)
+    stage = _half_plane(Z, 0)
+    settings = RenderSettings(samples=8, max_bounces=0)
+    ref = stage.render(cam, W, W, settings, Method(), threads=1).passes["Combined"]
+    for kw in (dict(packets=False, threads=2), dict(threads=2, tile_size=8)):
+        np.testing.assert_array_equal(stage.render(cam, W, W, settings, Method(), **kw).passes["Combined"], ref)
