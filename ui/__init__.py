@@ -322,14 +322,18 @@ classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_vis
            SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world, SPLAT_TRACER_PT_viewport_ab)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
-# show for; the ones that show for the built-in BLENDER_RENDER also make sense here.
+# show for; the ones that show for the built-in BLENDER_RENDER also make sense here, and so
+# do these, whose settings the engine honours as Cycles does (Cycles shows its own copies).
+_HONOURED_PANELS = ("DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture")  # the camera's Depth of Field
 _extended_panels = []
 
 
 def _extend_builtin_panels():
     for panel in bpy.types.Panel.__subclasses__():
         engines = getattr(panel, "COMPAT_ENGINES", None)
-        if isinstance(engines, set) and "BLENDER_RENDER" in engines and ENGINE not in engines:
+        if not isinstance(engines, set) or ENGINE in engines:
+            continue
+        if "BLENDER_RENDER" in engines or panel.__name__ in _HONOURED_PANELS:
             engines.add(ENGINE)
             _extended_panels.append(panel)
 

@@ -1,7 +1,8 @@
 """The viewport's Rendered mode: Blender's view -> core camera, what a depsgraph update
 changes, and a progressive session that renders into a buffer.
 
-Everything here except `view_of` (which reads the 3D view) and `update_from_depsgraph` is
+Everything here except `view_of` and `view_lens` (which read the 3D view and the camera) and
+`update_from_depsgraph` is
 plain Python over numpy and the core, and is tested headless; the engine's view_draw only
 draws the session's latest buffer with the `gpu` module (engine.py).
 
@@ -23,7 +24,7 @@ from typing import Iterable, Optional
 import numpy as np
 
 from ..render import ab, shading
-from ..render.camera import Camera
+from ..render.camera import Camera, Lens
 from ..render.method import Method
 from ..render.scene import RenderScene
 from ..util import matrices
@@ -40,7 +41,7 @@ def _matrix(m) -> np.ndarray:
     return a
 
 
-def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=None) -> Camera:
+def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=None, lens=None) -> Camera:
     """The core camera of a 3D view: `window_matrix` is its projection (view space to clip
     space, RegionView3D.window_matrix) and `view_matrix` maps world to view space
     (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
@@ -48,8 +49,10 @@ def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=No
     into window_matrix's x and y rows, which its float32 keeps to float precision. `clip`:
     the view's clipping range (start, end) in double, which a float32 perspective matrix
     loses for ranges of about 1e8 and more (None: read from window_matrix). `origin`: the
-    scene's local-frame origin (float64 world position)."""
-    return Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin, clip)
+    scene's local-frame origin (float64 world position). `lens`: the scene camera's depth
+    of field in the camera view (render.camera.Lens), None elsewhere."""
+    camera = Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin, clip)
+    return camera.with_lens(lens) if lens is not None else camera
 
 
 def region_rect(perspective_matrix, world_points, width: int, height: int) -> tuple[float, float, float, float]:
@@ -94,8 +97,10 @@ def border_window(width: int, height: int, rect=None, fractions=None) -> Optiona
 @dataclass(frozen=True)
 class View:
     """What the viewport shows: its matrices (nested tuples or arrays), region size, the
-    rendered window (None: an empty border, nothing rendered) and the clipping range
-    (start, end) in double (None: read from window_matrix)."""
+    rendered window (None: an empty border, nothing rendered), the clipping range
+    (start, end) in double (None: read from window_matrix) and the lens (the scene
+    camera's depth of field in the camera view, as Cycles' viewport has it; None: a
+    pinhole). A change of any of them renders again."""
 
     window_matrix: tuple
     view_matrix: tuple
@@ -103,14 +108,15 @@ class View:
     height: int
     window: Optional[tuple] = None
     clip: Optional[tuple] = None
+    lens: Optional[Lens] = None
 
     @classmethod
-    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None) -> "View":
+    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None, lens=None) -> "View":
         as_tuple = lambda m: tuple(tuple(float(v) for v in row) for row in _matrix(m))
         if window == "ALL":
             window = border_window(int(width), int(height))
         clip = None if clip is None else (float(clip[0]), float(clip[1]))
-        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip)
+        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip, lens)
 
 
 def view_clip(scene, depsgraph, rv3d, space) -> Optional[tuple]:
@@ -146,7 +152,16 @@ def view_of(scene, depsgraph, region, rv3d, space) -> View:
         fractions = ((space.render_border_min_x, space.render_border_min_y, space.render_border_max_x,
                       space.render_border_max_y) if space.use_render_border else None)
     return View.of(window_matrix, view_matrix, width, height, border_window(width, height, rect, fractions),
-                   view_clip(scene, depsgraph, rv3d, space))
+                   view_clip(scene, depsgraph, rv3d, space), view_lens(scene, depsgraph, rv3d))
+
+
+def view_lens(scene, depsgraph, rv3d) -> Optional[Lens]:
+    """The depth of field a 3D view renders: the scene camera's in the camera view (as
+    Cycles' viewport does), none in any other view."""
+    from . import export
+    if rv3d.view_perspective != "CAMERA" or scene.camera is None or scene.camera.type != "CAMERA":
+        return None
+    return export.camera_lens(scene.camera.evaluated_get(depsgraph), depsgraph)
 
 
 # --------------------------------------------------------------------------------------
@@ -475,7 +490,7 @@ class ViewportSession:
         self.error = None
         if self._camera is None and self._view.window is not None:  # no window: no rays (render_pass)
             self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin,
-                                            self._view.clip)
+                                            self._view.clip, self._view.lens)
         with self._cond:
             for name in names if names is not None else list(self._states):
                 variant, settings, threads, _ = self._states[name]

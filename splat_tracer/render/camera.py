@@ -45,6 +45,64 @@ def _numbers(values, name: str, count: int) -> tuple:
     return out
 
 
+# Cycles clamps the f-stop and the focus distance from below so that neither divides by 0
+# (blender/camera.cpp: max(fstop, 1e-5); scene/camera.cpp: max(focaldistance, 1e-5)).
+MIN_FSTOP = 1e-5
+MIN_FOCUS_DISTANCE = 1e-5
+
+
+@dataclass(frozen=True)
+class Lens:
+    """A thin lens (depth of field), as Cycles models Blender's camera: rays leave a point
+    of the aperture and meet the pinhole ray of their pixel position on the plane in focus.
+
+    radius: the aperture's radius in camera-space units (from_fstop gives Blender's).
+    focus_distance: the plane in focus, along the view axis from the camera (an
+    orthographic camera's too). blades: 0 (or 1, 2) for a disc, 3 or more for a regular
+    polygon whose corners lie on the circle at angles rotation + (2k + 1) pi / blades from
+    the camera's x axis (Cycles' regular_polygon_sample). rotation: radians. ratio: the
+    anamorphic ratio: the aperture's x extent is divided by it.
+    """
+
+    radius: float
+    focus_distance: float
+    blades: int = 0
+    rotation: float = 0.0
+    ratio: float = 1.0
+
+    def __post_init__(self):
+        radius, focus, rotation, ratio = _numbers((self.radius, self.focus_distance, self.rotation, self.ratio),
+                                                  "radius, focus_distance, rotation and ratio", 4)
+        try:
+            blades = int(self.blades)
+        except (TypeError, ValueError):
+            raise ValueError(f"blades must be an integer, got {self.blades!r}") from None
+        if not (radius >= 0 and focus > 0 and ratio > 0 and 0 <= blades <= 65536):
+            raise ValueError(f"need radius >= 0, focus_distance > 0, ratio > 0 and 0 <= blades <= 65536, got "
+                             f"{self.radius!r}, {self.focus_distance!r}, {self.ratio!r}, {self.blades!r}")
+        object.__setattr__(self, "radius", radius)
+        object.__setattr__(self, "focus_distance", focus)
+        object.__setattr__(self, "blades", blades if blades >= 3 else 0)  # fewer than 3: a disc (Cycles)
+        object.__setattr__(self, "rotation", rotation)
+        object.__setattr__(self, "ratio", ratio)
+
+    @classmethod
+    def from_fstop(cls, fstop: float, focal_length: float, focus_distance: float, blades: int = 0,
+                   rotation: float = 0.0, ratio: float = 1.0, orthographic: bool = False) -> "Lens":
+        """Blender's Depth of Field settings as Cycles reads them (blender/camera.cpp): the
+        aperture radius is the focal length (mm, read as 1e-3 scene units whatever the
+        unit scale, as Cycles does) over twice the f-stop; an orthographic camera's is
+        1 / (2 f-stop) scene units. The sensor and its fit play no part. Both the f-stop
+        and the focus distance are clamped to 1e-5 from below, as Cycles clamps them."""
+        stop = max(float(fstop), MIN_FSTOP)
+        radius = 1.0 / (2.0 * stop) if orthographic else (float(focal_length) * 1e-3) / (2.0 * stop)
+        return cls(radius, max(float(focus_distance), MIN_FOCUS_DISTANCE), blades, rotation, ratio)
+
+    def native(self) -> tuple:
+        """The `lens` argument the core's scene render takes."""
+        return (self.radius, self.focus_distance, self.blades, self.rotation, self.ratio)
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole or orthographic camera, as the core consumes it: its parameters in double
@@ -56,7 +114,8 @@ class Camera:
     the scene's local frame. frustum: (left, right, bottom, top) of the image on the plane
     at unit distance in front of a pinhole camera, or on the view plane of an orthographic
     one (scene units). clip: (start, end) distances along the view axis between which rays
-    run (start may be negative for an orthographic camera). position / forward: camera
+    run (start may be negative for an orthographic camera). lens: a thin lens (depth of
+    field; its units are camera space's), or None for a pinhole. position / forward: camera
     centre and unit view axis, for planar depth.
     """
 
@@ -64,6 +123,7 @@ class Camera:
     frustum: tuple
     clip: tuple
     orthographic: bool = False
+    lens: Optional[Lens] = None
 
     def __post_init__(self):
         m = np.array(self.local_from_camera, dtype=np.float64)
@@ -82,6 +142,10 @@ class Camera:
         object.__setattr__(self, "frustum", (left, right, bottom, top))
         object.__setattr__(self, "clip", (start, end))
         object.__setattr__(self, "orthographic", bool(self.orthographic))
+        if self.lens is not None and not isinstance(self.lens, Lens):
+            raise TypeError(f"lens must be a Lens or None, got {type(self.lens).__name__}")
+        if self.lens is not None and self.lens.radius == 0:
+            object.__setattr__(self, "lens", None)  # a closed aperture is a pinhole
 
     @property
     def position(self) -> np.ndarray:
@@ -93,17 +157,22 @@ class Camera:
         return -axis / np.linalg.norm(axis)
 
     def native(self) -> tuple:
-        """The arguments the core's render calls take for the camera."""
+        """The arguments the core's render calls take for the camera (its lens apart:
+        `lens.native()`)."""
         return self.local_from_camera, np.array([*self.frustum, *self.clip], np.float64), self.orthographic
+
+    def with_lens(self, lens: Optional[Lens]) -> "Camera":
+        """This camera with another lens (None: a pinhole)."""
+        return Camera(self.local_from_camera, self.frustum, self.clip, self.orthographic, lens)
 
     @classmethod
     def from_frustum(cls, world_from_camera, frustum, clip, orthographic: bool = False,
-                     origin=(0.0, 0.0, 0.0)) -> "Camera":
+                     origin=(0.0, 0.0, 0.0), lens: Optional[Lens] = None) -> "Camera":
         """From the camera's world matrix (looking down its local -Z; scale is not removed)
         and its parameters (see the class); `origin` is the scene's local-frame origin."""
         m = np.array(world_from_camera, dtype=np.float64).reshape(4, 4)
         m[:3, 3] -= np.asarray(origin, dtype=np.float64)
-        return cls(m, frustum, clip, orthographic)
+        return cls(m, frustum, clip, orthographic, lens)
 
     @classmethod
     def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0), clip=None) -> "Camera":
@@ -175,7 +244,7 @@ class Camera:
     def rays(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
         """Pixel-centre rays (origins on the near plane, unit directions), row-major from
         the top row: the same rays `SplatCloud.render` traces (the core's Camera::ray), for
-        use with `SplatCloud.trace`."""
+        use with `SplatCloud.trace`. The pinhole's rays: the lens is not sampled here."""
         j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
         left, right, bottom, top = self.frustum
         u = (left + (right - left) * (j / width)).ravel()

@@ -176,5 +176,5 @@ class RenderScene:
             *camera.native(), int(width), int(height),
             (int(x0), int(y0), int(w), int(h)), settings.pack(), method, self.world.radiance(),
             bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
-            tile_size=tile_size, packets=packets, **optional)
+            tile_size=tile_size, packets=packets, lens=camera.lens.native() if camera.lens else None, **optional)
         return FrameResult(buffers, bool(done), counters)

@@ -171,6 +171,9 @@ class SplatCloud:
         called from this thread every ~50 ms; returning True stops the render. packets:
         4x4 pixels traced as one packet (False: pixel by pixel; the same image).
         """
+        if camera.lens is not None:
+            raise ValueError("SplatCloud.render traces one ray per pixel centre through a pinhole; a camera with a "
+                             "lens (depth of field) renders through RenderScene.render, which samples the lens")
         x0, y0, w, h = window_rect(window, width, height)
         rgba = np.empty((h, w, 4), np.float32)
         dep = np.empty((h, w), np.float32) if depth else None

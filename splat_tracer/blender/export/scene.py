@@ -14,13 +14,15 @@ that single-precision coordinates are finest where the viewer is (georeferenced 
 from __future__ import annotations
 
 import hashlib
+import math
 from dataclasses import dataclass, field
+from typing import Optional
 
 import bpy
 import numpy as np
 
 from ...render import shading
-from ...render.camera import Camera
+from ...render.camera import Camera, Lens
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
 from ...util import resources
@@ -412,7 +414,41 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
     r = scene.render
     frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
     return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
-                               data.type == "ORTHO", origin)
+                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph))
+
+
+def camera_lens(cam, depsgraph: bpy.types.Depsgraph) -> Optional[Lens]:
+    """The camera's Depth of Field (camera.data.dof) as Cycles reads it, or None when it is
+    off (a pinhole): Lens.from_fstop's aperture, Blender's blades, rotation and ratio, and
+    the focus distance or the focus object's (or bone's) distance along the view axis."""
+    data = cam.data
+    dof = data.dof
+    if not dof.use_dof:
+        return None
+    return Lens.from_fstop(dof.aperture_fstop, data.lens, focus_distance(cam, depsgraph), dof.aperture_blades,
+                           dof.aperture_rotation, dof.aperture_ratio, orthographic=data.type == "ORTHO")
+
+
+def focus_distance(cam, depsgraph: bpy.types.Depsgraph) -> float:
+    """Cycles' blender_camera_focal_distance: the Focus Distance, or with a Focus Object the
+    distance from the camera to its origin (to its bone's head with a Focus Bone) along
+    the camera's view axis. In double from Blender's matrices (a scene far from the world
+    origin keeps its precision), without numpy's BLAS (util/matrices.py)."""
+    dof = cam.data.dof
+    target = dof.focus_object
+    if target is None:
+        return float(dof.focus_distance)
+    target = target.evaluated_get(depsgraph)
+    point = target.matrix_world.translation
+    if target.pose is not None and dof.focus_subtarget:
+        bone = target.pose.bones.get(dof.focus_subtarget)
+        if bone is not None:
+            point = target.matrix_world @ bone.head  # the bone's matrix's translation: its head
+    m = cam.matrix_world
+    axis = [float(m[r][2]) for r in range(3)]
+    length = math.sqrt(sum(a * a for a in axis))
+    offset = [float(m[r][3]) - float(point[r]) for r in range(3)]
+    return abs(sum(a * o for a, o in zip(axis, offset))) / length if length > 0 else float(dof.focus_distance)
 
 
 def camera_origin(depsgraph: bpy.types.Depsgraph) -> np.ndarray:

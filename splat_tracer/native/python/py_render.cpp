@@ -202,18 +202,18 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
-                                   "tile_size", "packets", nullptr};
+                                   "tile_size", "packets", "lens", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
-             *progress = Py_None;
+             *progress = Py_None, *olens = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1;
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOip", const_cast<char **>(kwlist),
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipO", const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
-                                     &packets))
+                                     &packets, &olens))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -244,7 +244,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     Camera cam;
     CameraViews cam_views;
-    if (!parse_camera(om, ofrustum, orthographic, cam, cam_views)) return nullptr;
+    if (!parse_camera(om, ofrustum, orthographic, cam, cam_views) || !parse_lens(olens, cam)) return nullptr;
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -303,7 +303,8 @@ PyMethodDef RenderScene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
-     "threads=0, progress=None, tile_size=32, packets=True)\n--\n\nRenders a window; returns (completed, counters)."},
+     "threads=0, progress=None, tile_size=32, packets=True, lens=None)\n--\n\nRenders a window; returns (completed, "
+     "counters). lens: None (a pinhole) or (radius, focus_distance, blades, rotation, ratio)."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -497,6 +497,27 @@ inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Cam
     return true;
 }
 
+// A camera's thin lens (render.camera.Lens.native()): None (a pinhole) or (radius,
+// focus_distance, blades, rotation, ratio), finite, radius >= 0, focus distance and ratio
+// > 0, blades 0 or 3..kMaxBlades. Sets an exception and returns false otherwise.
+inline bool parse_lens(PyObject *olens, Camera &cam) {
+    if (olens == Py_None) return true;
+    if (!PyTuple_Check(olens)) return PyErr_Format(PyExc_TypeError, "lens must be None or a tuple (Lens.native())"), false;
+    double radius, focus, rotation, ratio;
+    int blades;
+    if (!PyArg_ParseTuple(olens, "ddidd;lens must be Lens.native(): (radius, focus_distance, blades, rotation, ratio)",
+                          &radius, &focus, &blades, &rotation, &ratio))
+        return false;
+    constexpr int kMaxBlades = 1 << 16;  // Blender allows 16; anything more is a disc to float precision
+    if (!(std::isfinite(radius) && std::isfinite(focus) && std::isfinite(rotation) && std::isfinite(ratio)) ||
+        !(radius >= 0.0 && focus > 0.0 && ratio > 0.0) || !(blades == 0 || (blades >= 3 && blades <= kMaxBlades)))
+        return PyErr_Format(PyExc_ValueError, "lens out of range: need finite values, radius >= 0, focus_distance > 0, "
+                                              "ratio > 0 and blades 0 or 3..%d", kMaxBlades), false;
+    cam.lens_radius = radius, cam.focus_distance = focus, cam.blades = blades, cam.blade_rotation = rotation;
+    cam.aperture_ratio = ratio;
+    return true;
+}
+
 // The splat scene inside a `_core.SplatCloud` object, or null (no exception set) for anything else.
 const SplatScene *as_splat_scene(PyObject *obj);
 // Adds `Mesh` and `RenderScene` to the module (py_render.cpp).

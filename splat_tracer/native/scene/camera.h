@@ -1,6 +1,8 @@
 // Camera rays from the camera's own parameters, in double precision: a pinhole or an
 // orthographic camera, its image rectangle (sensor fit, lens shift and any view zoom
-// already folded in by whoever built it: render.camera.Camera) and its clipping range.
+// already folded in by whoever built it: render.camera.Camera), its clipping range and
+// optionally a thin lens (depth of field), whose rays are those of Cycles'
+// camera_sample_perspective and camera_sample_orthographic.
 // No projection matrix is inverted: with a clipping range of 1e8 or more, a float32
 // projection (Blender's) unprojects its far plane to w = 0, and even a double one loses
 // the far plane at the ranges Blender allows (1e-6 to 3.4e38).
@@ -22,6 +24,14 @@ struct Camera {
     bool orthographic = false;
     double position[3];  // the camera's centre (local frame)
     double forward[3];   // unit view axis: planar depth = (p - position) . forward
+    // The thin lens (render.camera.Lens), in camera space; lens_radius 0: a pinhole.
+    double lens_radius = 0.0;     // the aperture's radius (scene units)
+    double focus_distance = 1.0;  // the plane in focus, along the view axis from the camera
+    int blades = 0;               // 0: a disc; >= 3: a regular polygon
+    double blade_rotation = 0.0;  // radians
+    double aperture_ratio = 1.0;  // anamorphic: the aperture's x extent is divided by it
+
+    bool has_lens() const { return lens_radius > 0.0; }
 
     // position and forward from local_from_camera; false when its view axis has no length.
     bool derive_axes() {
@@ -44,6 +54,47 @@ struct Camera {
         // along -Z.
         const double dir[3] = {orthographic ? 0.0 : u, orthographic ? 0.0 : v, -1.0};
         const double start[3] = {orthographic ? u : u * clip_start, orthographic ? v : v * clip_start, -clip_start};
+        const double *m = local_from_camera;
+        double o[3], d[3];
+        for (int r = 0; r < 3; ++r) {
+            o[r] = m[4 * r] * start[0] + m[4 * r + 1] * start[1] + m[4 * r + 2] * start[2] + m[4 * r + 3];
+            d[r] = m[4 * r] * dir[0] + m[4 * r + 1] * dir[1] + m[4 * r + 2] * dir[2];
+        }
+        const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+        Ray ray;
+        ray.o = Vec3(float(o[0]), float(o[1]), float(o[2]));
+        ray.d = Vec3(float(d[0] / len), float(d[1] / len), float(d[2] / len));
+        ray.tmin = 0.f;
+        ray.tmax = float((clip_end - clip_start) * len);  // inf beyond float's range: unclipped
+        return ray;
+    }
+
+    // ray() through the point (lx, ly) of the lens (camera space: shade/film.h's
+    // lens_point): it leaves that point towards where the pinhole ray meets the plane in
+    // focus (for an orthographic camera, the plane focus_distance in front of the camera),
+    // starts where Cycles' starts (on the near plane: the perspective ray clip_start along
+    // the view axis of its pinhole ray, as Cycles' z_inv measures it) and runs as far.
+    Ray ray_through_lens(double px, double py, int width, int height, double lx, double ly) const {
+        const double fx = px / width, fy = 1.0 - py / height;
+        const double u = frustum[0] + (frustum[1] - frustum[0]) * fx;
+        const double v = frustum[2] + (frustum[3] - frustum[2]) * fy;
+        const double f = focus_distance;
+        double dir[3], start[3];  // camera space
+        if (orthographic) {
+            // A unit direction from (u + lx, v + ly, 0) to (u, v, -f), started on the near plane.
+            const double len = std::sqrt(lx * lx + ly * ly + f * f);
+            dir[0] = -lx / len, dir[1] = -ly / len, dir[2] = -f / len;
+            const double reach = clip_start / -dir[2];
+            start[0] = u + lx + dir[0] * reach, start[1] = v + ly + dir[1] * reach, start[2] = -clip_start;
+        } else {
+            // From (lx, ly, 0) to f (u, v, -1), scaled to the length of (u, v, -1) so that
+            // the clip distances measure it as they measure the pinhole ray.
+            dir[0] = u * f - lx, dir[1] = v * f - ly, dir[2] = -f;
+            const double scale = std::sqrt(u * u + v * v + 1.0) /
+                                 std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+            for (double &c : dir) c *= scale;
+            start[0] = lx + dir[0] * clip_start, start[1] = ly + dir[1] * clip_start, start[2] = dir[2] * clip_start;
+        }
         const double *m = local_from_camera;
         double o[3], d[3];
         for (int r = 0; r < 3; ++r) {

@@ -10,6 +10,7 @@
 
 #include "base/ray.h"
 #include "scene/camera.h"
+#include "shade/sampling.h"
 #include "splats/visibility.h"
 
 namespace splat {
@@ -73,6 +74,25 @@ inline void block_rays(const Camera &camera, const Film &film, const int *cols, 
                        double dy, Ray *rays) {
     for (int k = 0; k < n; ++k)
         rays[k] = camera.ray(film.x0 + cols[k] + 0.5 + dx, film.y0 + rows[k] + 0.5 + dy, film.width, film.height);
+}
+
+// The point of a camera's lens (camera-space x, y) for uniform numbers u1, u2 in [0, 1):
+// Cycles' camera_sample_aperture -- a uniform point of the unit disc (concentric map) or of
+// the polygon of camera.blades corners, its x divided by the aperture ratio -- times the
+// aperture's radius.
+inline void lens_point(const Camera &camera, float u1, float u2, double *x, double *y) {
+    float bx, by;
+    if (camera.blades >= 3) sample_polygon(camera.blades, float(camera.blade_rotation), u1, u2, &bx, &by);
+    else sample_disk(u1, u2, &bx, &by);
+    *x = double(bx) / camera.aperture_ratio * camera.lens_radius, *y = double(by) * camera.lens_radius;
+}
+
+// block_rays() through the lens: pixel k's ray leaves the lens at (lens[2k], lens[2k + 1]).
+inline void block_lens_rays(const Camera &camera, const Film &film, const int *cols, const int *rows, int n,
+                            double dx, double dy, const double *lens, Ray *rays) {
+    for (int k = 0; k < n; ++k)
+        rays[k] = camera.ray_through_lens(film.x0 + cols[k] + 0.5 + dx, film.y0 + rows[k] + 0.5 + dy, film.width,
+                                          film.height, lens[2 * k], lens[2 * k + 1]);
 }
 
 }  // namespace splat

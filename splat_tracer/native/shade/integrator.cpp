@@ -159,14 +159,25 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         r2_point(uint32_t(s), &ux, &uy);
         const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
         Ray rays[kPacketRays];
-        block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
+        if (camera_.has_lens()) {
+            // Each pixel's sample goes through its own point of the lens, from a stream of its
+            // own: the path's random numbers are the pinhole render's, and more samples
+            // converge the blur.
+            double lens[2 * kPacketRays];
+            for (int k = 0; k < n; ++k) {
+                Sampler lens_rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed ^ kLensStream);
+                const float u1 = lens_rng.next(), u2 = lens_rng.next();
+                lens_point(camera_, u1, u2, &lens[2 * k], &lens[2 * k + 1]);
+            }
+            block_lens_rays(camera_, film_, cols, rows, n, fx, fy, lens, rays);
+        } else {
+            block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
+        }
         SurfacePoint hits[kPacketRays];
         if (settings_.packets)
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
-            const uint32_t pixel_id =
-                uint32_t(film_.y0 + rows[k]) * uint32_t(film_.width) + uint32_t(film_.x0 + cols[k]);
-            Sampler rng(pixel_id, uint32_t(s), settings_.seed);
+            Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
             Primary prim;
             ++tally.camera;
             const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);

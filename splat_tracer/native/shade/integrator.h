@@ -65,6 +65,13 @@ class Integrator {
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
+    // The id of the pixel in window column `col`, row `row`: its random numbers' key.
+    uint32_t pixel_id_of(int col, int row) const {
+        return uint32_t(film_.y0 + row) * uint32_t(film_.width) + uint32_t(film_.x0 + col);
+    }
+    // Salt of the seed for the lens points' stream (any constant unlike the others: the
+    // hash decorrelates it from the path's stream of the same pixel and sample).
+    static constexpr uint32_t kLensStream = 0x6c656e73u;  // "lens"
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
 
     const RenderScene &scene_;

@@ -76,6 +76,23 @@ inline void sample_disk(float u1, float u2, float *x, float *y) {
     *x = r * std::cos(phi), *y = r * std::sin(phi);
 }
 
+// Uniform point of the regular polygon with `corners` corners on the unit circle, at angles
+// rotation + (2k + 1) pi / corners: Cycles' regular_polygon_sample (a corner's triangle
+// picked by u1, a uniform point of it), so that a polygonal aperture's bokeh has Cycles'
+// shape and orientation.
+inline void sample_polygon(int corners, float rotation, float u1, float u2, float *x, float *y) {
+    const float n = float(corners);
+    const float corner = std::floor(u1 * n);
+    float u = u1 * n - corner, v = u2;
+    u = std::sqrt(u);  // uniform barycentric weights of the triangle
+    v = v * u;
+    u = 1.f - u;
+    const float angle = kPi / n;
+    const float px = (u + v) * std::cos(angle), py = (u - v) * std::sin(angle);
+    const float r = rotation + corner * 2.f * angle, cr = std::cos(r), sr = std::sin(r);
+    *x = cr * px - sr * py, *y = sr * px + cr * py;
+}
+
 // Uniform direction in the cone of half-angle acos(cos_max) about unit axis.
 inline Vec3 sample_cone(Vec3 axis, float cos_max, float u1, float u2) {
     const float c = 1.f - u1 * (1.f - cos_max), s = std::sqrt(std::fmax(0.f, 1.f - c * c)), phi = 2.f * kPi * u2;
