@@ -42,7 +42,9 @@ steps are 2.85e-3 z^2: 6 cm at 4.5 m, eight times the pixel spacing there) turn 
 into terraces and risers at the scale of a few samples, and a fit over 16 neighbours gives
 the terrace's normal (45 degrees off on a wall turned 35 degrees from the camera) or the
 riser's (a sliver, standing out of the wall). The terraces need neighbourhoods of 128 points
-and more (not done: measured in the commit that added fix_slivers); the slivers are mended:
+and more: where the depth is quantised (quantised_depth: one coordinate axis in few steps,
+shared by neighbours, coarse against the spacing), a point whose neighbourhood spans fewer than
+QUANT_SPAN steps takes a fit over a wider one (adaptive_normals). The slivers are mended:
 a point whose normal is more than SLIVER_ANGLE off the consensus of its GRAPH_K nearest (the
 dominant axis of their normals, sign-free), where those agree among themselves (the
 consensus explains at least SLIVER_COHERENCE of their spread: not a crease, where they
