@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from frames import depth_frame
 from geometry import fibonacci_sphere
 from splat_tracer.pointcloud import importer, normals
 
@@ -61,42 +62,6 @@ def terrain(n, seed=0):
     up = np.column_stack([-1.2 * a * np.cos(a * xy[:, 0] + seed) * np.cos(b * xy[:, 1]),
                           1.2 * b * np.sin(a * xy[:, 0] + seed) * np.sin(b * xy[:, 1]), np.ones(n)])
     return np.column_stack([xy, z]), up / np.linalg.norm(up, axis=1, keepdims=True)
-
-
-def depth_frame(width=160, height=120, forward=-1.0):
-    """A depth camera's frame at the origin looking along forward x Z (y up for -Z, down for
-    +Z as PCL's frames): a floor, a back wall, a side wall and a box, depth quantised as a
-    structured-light sensor's (steps in disparity: 1/1200 per metre^-1, 2 cm at 5 m).
-    Returns the points and their true normals (facing the camera)."""
-    ys, xs = np.mgrid[0:height, 0:width]
-    t = np.tan(np.radians(30))
-    d = np.stack([(2 * (xs + 0.5) / width - 1) * t, (1 - 2 * (ys + 0.5) / height) * t * height / width,
-                  -np.ones(xs.shape)], -1).reshape(-1, 3)
-    best, nrm = np.full(len(d), np.inf), np.zeros_like(d)
-    for n_, c in ((np.array([0, 1.0, 0]), -1.2), (np.array([0, 0, 1.0]), -4.0), (np.array([1.0, 0, 0]), 1.5)):
-        dn = d @ n_
-        with np.errstate(divide="ignore", invalid="ignore"):
-            hit = c / dn
-        ok = (hit > 0) & (hit < best)
-        best[ok], nrm[ok] = hit[ok], n_
-    lo, hi = np.array([-0.1, -1.2, -2.9]), np.array([0.7, -0.2, -2.1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1, t2 = lo / d, hi / d
-    near, far = np.minimum(t1, t2).max(1), np.maximum(t1, t2).min(1)
-    box = (near <= far) & (near > 0) & (near < best)
-    axis = np.argmax(np.minimum(t1, t2), 1)
-    rows = np.arange(len(d))
-    face = np.zeros_like(d)
-    face[rows, axis] = -np.sign(d[rows, axis])
-    best[box], nrm[box] = near[box], face[box]
-    seen = np.isfinite(best)
-    p, nrm = d[seen] * best[seen, None], nrm[seen]
-    z = -p[:, 2]
-    p *= (1.0 / (np.round(1200.0 / z) / 1200.0) / z)[:, None]  # the quantised depth
-    nrm = np.where((np.einsum("ij,ij->i", nrm, -p) < 0)[:, None], -nrm, nrm)
-    if forward > 0:  # PCL's camera frame: the view along +Z, y down (a half turn about x)
-        p, nrm = p * [1, -1, -1], nrm * [1, -1, -1]
-    return p, nrm
 
 
 def open_box(n=40000, seed=1):
