@@ -84,6 +84,12 @@ SAMPLE_SEED = 0  # the range-image test's and visibility's samples: the same clo
 # UP): an aerial scan's buildings, trees and cars are seen from above as its ground is.
 TERRAIN_COSINE = 0.7
 TERRAIN_SHARE = 0.5
+# And the cloud is flat: its relief (the 1st to 99th percentile of its heights) at most this
+# share of its wider horizontal side. Terrains are wide for their relief (autzen's airborne
+# tile: 0.08; a mountain tile of 1 km rises a few hundred metres); a single view of an object
+# from above is about as deep as it is wide (the Stanford bunny's range scans: 0.62 and 0.75,
+# and two of them registered faced inwards on 2 % of the points under the upward rule).
+TERRAIN_RELIEF = 0.5
 # The range-image test (range_image). Its sample: percentiles of a share of 1e5 points are
 # within about 0.1 % of the true ones, far below the margins of the thresholds below.
 VIEW_SAMPLE = 100_000
@@ -93,9 +99,12 @@ VIEW_MIN_POINTS = 100    # fewer: no test (nothing to bin)
 # degrees); a terrain seen from a file origin at sea level, far below or beside it, is
 # seen almost edge-on.
 VIEW_FACING = 0.5
-VIEW_COVER_CELL = 2.0 / 16  # the coverage's cube map: 16 x 16 cells per face
-VIEW_COVER_POINTS = 8     # sample points a coverage cell holds on a closed surface, at least
-VIEW_COVERAGE = 0.9      # a closed surface around the viewpoint covers every direction
+# The lines of sight's cone (half-angle, degrees) holding all but VIEW_CONE_PERCENTILE % of
+# the sample: wider than any depth or stereo camera's field of view (a Kinect's diagonal half-
+# angle is 35, wide-angle stereo about 60) and narrower than a half space, which an object
+# around its origin always exceeds. The percentile lets a few stray returns lie outside.
+VIEW_CONE = 80.0
+VIEW_CONE_PERCENTILE = 1.0
 VIEW_CELL = 1.0          # angular cells one sample spacing (k-th neighbour) wide: a few points each
 VIEW_MAX_SLOPE = 10.0    # the depth spread of a cell seen at more than 84 degrees is bounded
 VIEW_DEPTH = 3.0         # sample spacings of noise (depth quantisation) within one layer
@@ -466,7 +475,9 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         terrain[seeded[open_sheet]] = True
         length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
         terrain &= (np.abs(sums[:, 2]) >= TERRAIN_COSINE * length) & (decided == 0)
-        share = counts[terrain].sum() / n
+        lo, hi = np.percentile(p[sample], (1.0, 99.0), axis=0)
+        level = hi[2] - lo[2] <= TERRAIN_RELIEF * max(hi[0] - lo[0], hi[1] - lo[1])
+        share = counts[terrain].sum() / n if level else 0.0
         if share >= TERRAIN_SHARE:  # a terrain's bulk: every point with a clear up takes it (as UP)
             mode = "UP"
             evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or down "
@@ -596,11 +607,11 @@ def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
 
 def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     """(whether the cloud is one range image seen from `viewpoint`, the evidence in words).
-    A depth-camera or stereo frame, or one terrestrial scan, in its sensor's frame: almost
-    every point is the first surface along its line of sight from there (one layer per
-    direction), seen at angles a sensor measures (not grazing on the whole), and the
-    directions do not cover the whole sphere (a closed object around its own origin, the
-    usual export of a modelled or scanned object, is one layer per direction from there too).
+    A depth-camera or stereo frame in its sensor's frame: almost every point is the first
+    surface along its line of sight from there (one layer per direction), seen at angles a
+    sensor measures (not grazing on the whole), and the lines of sight fit in a cone of at
+    most VIEW_CONE degrees around their mean (a camera's field of view; an object around its
+    own origin spreads over more than a hemisphere).
     Decided on a sample of the points (VIEW_SAMPLE) with the spacing of the sample."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -616,13 +627,15 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     facing = float(np.median(cos))
     if facing < VIEW_FACING:
         return False, ""
-    # Cells no finer than a full sphere's share of the sample can fill: a sparse sample of
-    # a closed surface leaves empty cells between its points and would pass for a view.
-    per_face = max(1, min(int(2.0 / VIEW_COVER_CELL), int(np.sqrt(len(u) / (6 * VIEW_COVER_POINTS)))))
-    cells, solid = _cube_cells(u, 2.0 / per_face)
-    keys, first = np.unique(cells, return_index=True)
-    coverage = float(solid[first].sum() / (4 * np.pi))
-    if coverage >= VIEW_COVERAGE:
+    # A sensor sees its scene from outside: the lines of sight fit in a cone narrower than a
+    # half space. An object centred on its own origin (the usual export of a scanned or
+    # modelled object) is one layer per direction from there too, and its directions spread
+    # over more than a hemisphere, even with its bottom missing: oriented towards the origin
+    # it would face inwards.
+    axis = u.sum(axis=0)
+    axis /= max(float(np.linalg.norm(axis)), 1e-300)
+    cone = float(np.degrees(np.arccos(np.clip(np.percentile(u @ axis, VIEW_CONE_PERCENTILE), -1.0, 1.0))))
+    if not cone <= VIEW_CONE:
         return False, ""
     # The sample's spacing (its points are sqrt(n / sample) times farther apart than the
     # cloud's), and angular cells a few such spacings wide as seen from the viewpoint.
@@ -645,7 +658,7 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
         return False, ""
     return True, (f"a range image seen from the file's origin: {share:.1%} of a sample of {len(idx):,} points are "
                   f"the first surface along their line of sight, median angle of view "
-                  f"{np.degrees(np.arccos(facing)):.0f} deg, {coverage:.0%} of the directions")
+                  f"{np.degrees(np.arccos(facing)):.0f} deg, lines of sight within {cone:.0f} deg of their mean")
 
 
 def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np.ndarray, str]:

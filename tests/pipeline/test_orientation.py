@@ -134,13 +134,30 @@ def test_a_closed_object_with_a_hole_in_fragments_faces_outward_by_visibility(tm
     assert _right(nrm, out) == 1.0
 
 
-def test_a_room_seen_from_inside_faces_inward(tmp_path):
-    """Rays from the floor escape downward through nothing: visibility alone would turn the
-    room inside-out. The origin's rule comes first."""
+def test_a_room_seen_from_inside_faces_inward_from_the_file_origin(tmp_path):
+    """Rays from the floor escape downward through nothing: visibility alone turns the room
+    inside-out. Its lines of sight from the origin spread over more than a half space, as an
+    object's around its own origin do (below), so AUTO does not take it for one view; the
+    File Origin mode orients it."""
     p, inward = open_box()
-    prepared, pos, nrm = _load(_write_xyz(tmp_path / "room.xyz", p))
+    path = _write_xyz(tmp_path / "room.xyz", p)
+    prepared, pos, nrm = _load(path)
+    assert prepared.normals_oriented != "ORIGIN"
+    prepared = importer.load(path, importer.ImportOptions(orientation="ORIGIN"))
     assert prepared.normals_oriented == "ORIGIN"
-    assert _right(nrm, inward) == 1.0
+    assert _right(prepared.cloud.normals.astype(np.float64), inward) == 1.0
+
+
+@pytest.mark.parametrize("bottom", (-0.5, 0.0))
+def test_an_object_around_its_origin_without_its_bottom_faces_outward(tmp_path, bottom):
+    """A scanned object exported centred on its origin, its underside never seen: one layer
+    per direction from the origin, but no camera's view (the lines of sight spread over a
+    half space or more). Taken for a depth frame, it faced inwards on every point."""
+    p, out = fibonacci_sphere(20000, 1.0)
+    keep = p[:, 2] > bottom
+    prepared, pos, nrm = _load(_write_xyz(tmp_path / "cap.xyz", p[keep]))
+    assert prepared.normals_oriented != "ORIGIN"
+    assert _right(nrm, out[keep]) == 1.0
 
 
 def test_a_closed_object_around_its_own_origin_faces_outward(tmp_path):
