@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from frames import depth_frame
+from frames import box_room_frame
 from geometry import fibonacci_sphere
 from splat_tracer.pointcloud import importer, normals
 
@@ -116,7 +116,7 @@ def test_a_terrain_faces_up_whatever_its_format(tmp_path, suffix):
 def test_a_depth_frame_faces_its_sensor_at_the_origin(tmp_path, forward):
     """No viewpoint in the file: the range image seen from the origin is recognised. Looking
     along +Z (PCL's frames), the open-sheet rule turned every normal away (0 %)."""
-    p, truth = depth_frame(forward=forward)
+    p, truth = box_room_frame(forward=forward)
     prepared, pos, nrm = _load(_write_xyz(tmp_path / "frame.xyz", p))
     assert prepared.normals_oriented == "ORIGIN"
     facing = float((np.einsum("ij,ij->i", nrm, -pos) > 0).mean())
