@@ -13,6 +13,14 @@ def fibonacci_sphere(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
     return normals * radius + np.asarray(centre, dtype=np.float64), normals
 
 
+def random_sphere(n: int, radius: float = 1.0, seed: int = 0):
+    """n points drawn uniformly at random on a sphere about the origin (seeded), with their
+    exact normals."""
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return p * radius, p
+
+
 def sphere_cloud(n: int, radius: float = 1.0, seed: int = 0):
     """A closed unit-sphere splat cloud: (centres, normals, radii), randomly rotated by `seed`.
     Radii are 1.5x the mean spacing sqrt(4 pi r^2 / n), so the discs overlap without holes."""
