@@ -123,7 +123,8 @@ LAMP_POWER = 100.0
 # A second light for the core's renders: the same lamp moved 30 degrees about the view's up
 # axis around the bulk's centre, casting shadows. A lamp at the camera hides what the issue
 # saw on depth frames oriented away from their sensor (their discs shadowing each other
-# under any other light); this one shows it, with the scene's real shadows beside it.
+# under any other light); this one shows it, with the scene's real shadows beside it (Cycles
+# renders it too, so the real shadows have a reference).
 OFFSET_DEGREES = 30.0
 
 
@@ -319,7 +320,7 @@ def core_calibration() -> float:
 
 
 def blender_frame(workdir: Path, name: str, world_points, normals, radii, view, width, height,
-                  closed: bool) -> dict:
+                  closed: bool, lamp=None) -> dict:
     """Cycles on the same points as spheres (the importer's Mesh to Points) shaded with the
     point normals, lit by the same lamp at the camera (blender_runs.render)."""
     from benchmarks import blender_runs
@@ -330,7 +331,7 @@ def blender_frame(workdir: Path, name: str, world_points, normals, radii, view, 
     grey = np.full((len(world_points), 3), 0.8, np.float32)
     ply.write_ply(str(path), world_points, normals, colours=grey, radii=radii)
     out = blender_runs.render("CYCLES", path, view, width, height, workdir, closed, lamp_power=LAMP_POWER,
-                              point_normals=True)
+                              point_normals=True, lamp_position=lamp)
     h = height
     return {"seconds": out["seconds"], "rgba": out["rgba"], "depth": out["depth"].reshape(h, width),
             "normal": out["normal"].reshape(h, width, 3)}
@@ -445,6 +446,8 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
         world = prepared.local.astype(np.float64) + prepared.origin
         frames["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
                                          height, bool(prepared.hood.closed_guess))
+        offset["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
+                                         height, bool(prepared.hood.closed_guess), lamp=lamp)
     row["renderers"] = {}
     for label, frame in frames.items():
         s = frame_scores(frame, directions, cam.forward, calibrations["cycles" if label == "cycles" else "core"])
@@ -461,7 +464,7 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
             hit = np.asarray(cam.position, np.float64) + directions * along[..., None]
             to_lamp = np.linalg.norm(hit - lamp, axis=-1)
             shade = relative_shade(f["rgba"][..., :3].astype(np.float64).mean(axis=2), to_lamp,
-                                   calibrations["core"])
+                                   calibrations["cycles" if label == "cycles" else "core"])
             s["near_black_offset_pct"] = 100 * near_black_share(covered, shade)
         row["renderers"][label] = s
         print(f"    {label:8s} facing away {s['facing_away_pct']:5.1f} %, near-black {s['near_black_pct']:5.1f} %, "
@@ -489,8 +492,8 @@ def markdown(rows: list, meta: dict) -> str:
              f"Import: median of {meta['repeat']} runs (range). Render: one run each (Cycles' includes its "
              f"scene sync and BVH build). Near-black: below {NEAR_BLACK:g} x a facing surface's light; "
              f"pinholes: enclosed uncovered regions of at most {PINHOLE_PIXELS} px. The core also renders with the lamp "
-             f"turned {OFFSET_DEGREES:g} deg about the view's up axis around the bulk's centre, casting shadows (its "
-             f"near-black share counts the scene's real shadows too; Cycles not run so). Total {meta['seconds']:.0f} s.",
+             f"turned {OFFSET_DEGREES:g} deg about the view's up axis around the bulk's centre, casting shadows, and "
+             f"so does Cycles (that near-black share counts the scene's real shadows too). Total {meta['seconds']:.0f} s.",
              "",
              "| scan | points | import s | renderer | facing away % | near-black % | near-black, lamp 30° off % | "
              "pinholes % | normal error deg | silhouette % | depth error % | render s |",
