@@ -88,7 +88,7 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
             scene.cycles.max_bounces = 0  # direct light from the lamp only
     else:
         scene.splat_tracer.method = method
-        scene.splat_tracer.samples = 1  # the pixel centre, like the truth and the Cycles row
+        scene.cycles.samples = 1  # the pixel centre, like the truth and the Cycles row
     t0 = time.perf_counter()
     out = render_to_exr(bpy, scene, workdir / f"{engine.lower()}.exr", width, height)
     seconds = time.perf_counter() - t0
