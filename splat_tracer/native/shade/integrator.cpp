@@ -38,6 +38,7 @@ struct Integrator::Primary {
     int splats = 0;
     float alpha = 1.f;
     float lit = 0, unshadowed = 0;  // direct light with and without shadows (luminance)
+    bool catcher = false;  // the first opaque surface is a shadow catcher's
 };
 
 namespace {
@@ -125,7 +126,9 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
                                               float(camera.position[2])))),
-      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
+      lit_scene_(!scene.lights().empty() || scene.any_emission() ||
+                 (luminance(settings.world) > 0.f &&
+                  (settings.world_visibility & (kVisDiffuse | kVisGlossy | kVisTransmission)))) {}
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     Tally tally;
@@ -150,7 +153,15 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         Vec3 sum, diffcol, emit, shadow;
         float alpha = 0;
         Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
+        // With shadow catchers (Cycles' film passes of the same names): the samples whose
+        // first surface is not a catcher (the matte: colour, alpha); the catcher's samples
+        // shaded with everything and as if only catchers were there; their count; the
+        // world seen by the camera behind the catcher or past everything.
+        Vec3 matte, catcher_full, catcher_only, background;
+        float matte_alpha = 0, catcher_samples = 0;
     } acc[kPacketRays];
+    const bool catchers = scene_.any_catcher();
+    const Vec3 backdrop = world_seen(kVisCamera);
     for (int s = 0; s < samples; ++s) {
         // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
         // stop (the viewport closing, Python exiting) must not wait for it.
@@ -178,12 +189,31 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
             Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
+            const Sampler replay = rng;  // a catcher-only path takes the same numbers
             Primary prim;
             ++tally.camera;
             const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
             Pixel &a = acc[k];
             a.sum = a.sum + c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
             a.alpha += prim.alpha;
+            if (catchers) {
+                if (prim.catcher) {
+                    // Cycles' shadow catcher split: the same camera ray again, in a scene of
+                    // catchers only, with the same random numbers, so that where nothing else
+                    // changes the catcher's light both paths are the same path (a ratio of
+                    // exactly 1: no noise outside the shadows).
+                    PathState alone;
+                    alone.from.catcher_only = true;
+                    Sampler same = replay;
+                    ++tally.camera;
+                    a.catcher_only = a.catcher_only + radiance(rays[k], alone, same, nullptr, tally);
+                    a.catcher_full = a.catcher_full + c, a.catcher_samples += 1.f;
+                    a.background = a.background + backdrop;
+                } else {
+                    a.matte = a.matte + c * prim.alpha, a.matte_alpha += prim.alpha;
+                    if (!prim.hit) a.background = a.background + backdrop;
+                }
+            }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
@@ -194,13 +224,19 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
     for (int k = 0; k < n; ++k) {
         const Pixel &a = acc[k];
         const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
-        if (film_.combined) {
-            float *o = film_.combined + 4 * p;
-            o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
-        }
         auto put3 = [&](float *buf, Vec3 v) {
             if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
         };
+        if (catchers) {
+            write_catcher(a.alpha * inv, a.matte * inv, a.matte_alpha * inv, a.catcher_full, a.catcher_only,
+                          a.catcher_samples, a.background * inv, p);
+        } else {
+            if (film_.combined) {
+                float *o = film_.combined + 4 * p;
+                o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+            }
+            put3(film_.shadow_catcher, Vec3(1, 1, 1));  // no catcher: nothing to darken
+        }
         put3(film_.diffcol, a.diffcol * inv);
         put3(film_.emit, a.emit * inv);
         put3(film_.shadow, a.shadow * inv);
@@ -209,6 +245,41 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
         if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
     }
+}
+
+// Combined and the Shadow Catcher pass of a pixel of a scene with shadow catchers, formed as
+// Cycles' film does (kernel/film/read.h: film_calculate_shadow_catcher and
+// film_calculate_shadow_catcher_matte_with_shadow). The catcher's shadow is the ratio of its
+// light with everything to its light with catchers only (1 where it has no sample, per
+// channel 1 where the catcher alone is black), alpha-overed on white by the pixel's
+// coverage. Combined is the matte -- everything but the catcher -- and, without the Shadow
+// Catcher pass (Cycles' approximate shadow catcher), the shadow's strength as alpha:
+// 1 - average(shadow) where the matte does not cover; on an opaque film, the world behind
+// it shows through that alpha instead (alpha 1).
+void Integrator::write_catcher(float alpha, Vec3 matte, float matte_alpha, Vec3 full, Vec3 alone,
+                               float catcher_samples, Vec3 background, size_t p) const {
+    Vec3 shadow(1, 1, 1);
+    if (catcher_samples > 0.f) {
+        auto ratio = [](float a, float b) { return b != 0.f ? a / b : 1.f; };
+        shadow = Vec3(ratio(full.x, alone.x), ratio(full.y, alone.y), ratio(full.z, alone.z));
+        const float covered = std::clamp(alpha, 0.f, 1.f);
+        shadow = Vec3(1, 1, 1) * (1.f - covered) + shadow * covered;
+    }
+    if (film_.shadow_catcher) {
+        float *o = film_.shadow_catcher + 3 * p;
+        o[0] = shadow.x, o[1] = shadow.y, o[2] = shadow.z;
+    }
+    if (!film_.combined) return;
+    float *o = film_.combined + 4 * p;
+    const float ma = std::clamp(matte_alpha, 0.f, 1.f);
+    Vec3 rgb = matte;
+    float out_alpha = matte_alpha;
+    if (!film_.shadow_catcher) {
+        const float strength = 1.f - std::clamp((shadow.x + shadow.y + shadow.z) / 3.f, 0.f, 1.f);
+        out_alpha = (1.f - ma) * strength + ma;
+        if (!settings_.film_transparent) rgb = rgb + background * (1.f - out_alpha), out_alpha = 1.f;
+    }
+    o[0] = rgb.x, o[1] = rgb.y, o[2] = rgb.z, o[3] = out_alpha;
 }
 
 Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
@@ -233,7 +304,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
-            return cfg.world + lamps;
+            return world_seen(st.kind) + lamps;
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -246,12 +317,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
-                         inside_after_crossing(passed, st.from.inside)};
+                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
-        if (!(ray.tmax > 0.f)) return cfg.world;
+        if (!(ray.tmax > 0.f)) return world_seen(st.kind);
     }
 
     const Vec3 wo = ray.d * -1.f;
@@ -272,6 +343,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
         primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
+        primary->catcher = scene_.instance(sp.instance).shadow_catcher;
     }
     Vec3 L = mat.emission + lamps;  // emission is two-sided, like Cycles' Emission shader
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
@@ -282,7 +354,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only};
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
@@ -353,8 +425,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     }
 
     // Sky light by ambient occlusion replaces the diffuse bounce.
-    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(cfg.world) > 0.f)
-        L = L + diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally);
+    const Vec3 sky = world_seen(kVisDiffuse);
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f)
+        L = L + diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally);
 
     // One sampled continuation among the lobes that are not traced exactly.
     const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
@@ -471,7 +544,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
         t = t * (1.f - a);
         previous = sp;
         from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
-                      inside_after_crossing(previous, from.inside)};
+                      inside_after_crossing(previous, from.inside), false, from.catcher_only};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;

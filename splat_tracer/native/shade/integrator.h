@@ -23,6 +23,10 @@ struct IntegratorSettings : FrameSettings {
         transparent_bounces = 8;
     uint32_t seed = 0;
     Vec3 world;  // background radiance
+    // Ray kinds that see the world (World > Settings > Ray Visibility; kVis* bits). A kind
+    // left out meets black where it leaves the scene -- camera rays keep alpha 1 on an opaque
+    // film, as in Cycles.
+    uint32_t world_visibility = kVisCamera | kVisDiffuse | kVisGlossy | kVisTransmission;
     bool film_transparent = false;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
@@ -64,6 +68,8 @@ class Integrator {
                       const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
+    void write_catcher(float alpha, Vec3 matte, float matte_alpha, Vec3 full, Vec3 alone,
+                       float catcher_samples, Vec3 background, size_t p) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // The id of the pixel in window column `col`, row `row`: its random numbers' key.
     uint32_t pixel_id_of(int col, int row) const {
@@ -73,6 +79,10 @@ class Integrator {
     // hash decorrelates it from the path's stream of the same pixel and sample).
     static constexpr uint32_t kLensStream = 0x6c656e73u;  // "lens"
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
+    // The world's radiance for a ray of `kind` that leaves the scene (0 if hidden from it).
+    Vec3 world_seen(uint32_t kind) const {
+        return (settings_.world_visibility & kind) ? settings_.world : Vec3();
+    }
 
     const RenderScene &scene_;
     const Camera &camera_;
