@@ -151,6 +151,7 @@ class RenderScene:
             # Only a scene with a catcher passes the column: one without is the core's as before.
             shadow_catcher=np.ascontiguousarray(col(7, np.uint8)) if any(r[7] for r in rows) else None)
         self.geometry_count = len(geometries)
+        self.shadow_catchers = sum(bool(r[7]) for r in rows)  # instances that are shadow catchers
 
     def render(self, camera: Camera, width: int, height: int, settings: RenderSettings = RenderSettings(),
                method: Method = Method(), passes: Sequence[str] = ("Combined",),

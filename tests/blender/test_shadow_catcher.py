@@ -291,6 +291,21 @@ def test_a_scanned_floor_can_be_the_catcher_and_a_mesh_can_be_held_out(blender, 
     assert (plain["Combined"][..., 3][on_floor] == 1.0).all()  # an ordinary floor again
 
 
+def test_the_headlight_says_that_catchers_catch_nothing(blender, empty_scene, tmp_path):
+    bpy = blender
+    floor = plane(bpy, "Floor", 4.0, (0, 0, 0), principled(bpy, "Grey"))
+    add_camera(bpy, empty_scene, (0, 0, 5), (0, 0, 0))
+    empty_scene.render.resolution_x, empty_scene.render.resolution_y = 32, 24
+    session = sys.modules[next(m for m in sys.modules if m.endswith("splat_tracer.blender.session"))]
+    method = empty_scene.splat_tracer.core_method()
+    floor.is_shadow_catcher = True
+    lines = session.render_frame(bpy.context.evaluated_depsgraph_get(), method).report.lines
+    assert any("shadow catchers are left out" in line for line in lines), lines  # no light: the headlight
+    floor.is_shadow_catcher = False
+    lines = session.render_frame(bpy.context.evaluated_depsgraph_get(), method).report.lines
+    assert not any("shadow catcher" in line for line in lines), lines
+
+
 def test_instances_take_catcher_and_holdout_from_their_instancer_and_indirect_only_hides_from_camera(
         blender, empty_scene):
     bpy = blender
