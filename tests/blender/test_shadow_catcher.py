@@ -194,6 +194,8 @@ def test_an_opaque_film_shows_the_world_darkened_by_the_shadow_as_cycles(renders
     print("world behind the shadow: ours", shade(ours), "Cycles", shade(cycles))
     assert shade(ours) == pytest.approx(shade(cycles), abs=WORLD * ALPHA_TOL)
     assert shade(cycles) < WORLD * 0.6
+    # The opaque floor of before shows itself (lit: 0.97), not the world, outside the shadow.
+    assert abs(renders("plain")["Combined"][..., 0][masks["outside"]].mean() - WORLD) > 0.3
 
 
 def test_holdout_on_the_scan_cuts_alpha_as_in_cycles(renders):
