@@ -63,16 +63,32 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         scene = context.scene
+        # Samples, noise threshold, time limit, filter and seed are Cycles' own settings (the one
+        # place they are kept), drawn here because Cycles' panels hide for other engines.
+        cycles = getattr(scene, "cycles", None)
+        if cycles is None:
+            layout.label(text="Cycles add-on off: its sampling settings cannot be read", icon="INFO")
+            layout.prop(scene.splat_tracer, "samples")
+        else:
+            for heading, prefix, samples in (("Viewport", "preview_", "preview_samples"), ("Render", "", "samples")):
+                col = layout.column(heading=heading)
+                row = col.row(heading="Noise Threshold")
+                row.prop(cycles, f"use_{prefix}adaptive_sampling", text="")
+                sub = row.row()
+                sub.active = getattr(cycles, f"use_{prefix}adaptive_sampling")
+                sub.prop(cycles, f"{prefix}adaptive_threshold", text="")
+                col.prop(cycles, samples, text="Max Samples" if sub.active else "Samples")
+                sub = col.column()
+                sub.active = getattr(cycles, f"use_{prefix}adaptive_sampling")
+                sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
+                if not prefix:
+                    col.prop(cycles, "time_limit")
         col = layout.column()
-        col.prop(scene.splat_tracer, "samples")
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")
         sub = col.column()
         sub.active = scene.splat_tracer.sky_light == "AO"
         sub.prop(scene.splat_tracer, "ao_samples")
-        # The filter, seed and bounces are Cycles' own settings, read when the add-on is on;
-        # shown here because Cycles' panels hide for other engines.
-        cycles = getattr(scene, "cycles", None)
         col = layout.column()
         if cycles is not None:
             col.prop(cycles, "pixel_filter_type", text="Pixel Filter")
@@ -102,6 +118,11 @@ class SPLAT_TRACER_PT_light_paths(SplatTracerPanel, bpy.types.Panel):
         col.prop(cycles, "glossy_bounces", text="Glossy")
         col.prop(cycles, "transmission_bounces", text="Transmission")
         col.prop(cycles, "transparent_max_bounces", text="Transparent")
+        col = layout.column(heading="Clamping")
+        col.prop(cycles, "sample_clamp_direct", text="Direct Light")
+        col.prop(cycles, "sample_clamp_indirect", text="Indirect Light")
+        col = layout.column(heading="Caustics")
+        col.prop(cycles, "blur_glossy", text="Filter Glossy")
 
 
 class SPLAT_TRACER_PT_performance(SplatTracerPanel, bpy.types.Panel):

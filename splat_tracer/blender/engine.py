@@ -118,7 +118,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         s = frame.stats
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "
                               f"{s['reused']} geometries ({s['build_seconds']:.2f} s), rendered in "
-                              f"{s['render_seconds']:.2f} s")
+                              f"{s['render_seconds']:.2f} s" + (f"; {s['sampling']}" if s["sampling"] else ""))
 
     # -- the viewport's Rendered mode ---------------------------------------------------
     # view_update / view_draw run on Blender's main thread; the session renders on its own

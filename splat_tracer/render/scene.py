@@ -84,7 +84,9 @@ class Instance:
 class FrameResult(NamedTuple):
     passes: dict      # pass name -> (h, w[, c]) float32 array, top row first
     completed: bool   # False when progress() asked to stop
-    counters: dict    # rays traced by kind, and the queries' work
+    counters: dict    # rays traced by kind, and the queries' work; samples_reached (the most any pixel
+                      # took: below the samples when the time limit cut), samples_taken (over all
+                      # pixels), time_limited
 
 
 class RenderScene:

@@ -533,10 +533,15 @@ def _seed(cycles, frame: int) -> int:
     return zlib.crc32(struct.pack("<ii", int(cycles.seed), int(frame)))
 
 
-def render_settings_of(scene) -> shading.RenderSettings:
-    """The engine's RenderSettings: samples and shadow samples are its own settings
-    (scene.splat_tracer); filter, bounces and seed are Cycles' when the Cycles add-on is on
-    (else the contract's defaults and Blackman-Harris); the filter width is Blender's."""
+def render_settings_of(scene, viewport: bool = False) -> shading.RenderSettings:
+    """The engine's RenderSettings. Samples and noise control are Cycles' (the one place
+    they are kept, so a scene set up for Cycles samples the same way): Samples or, for the
+    viewport, Viewport Samples; adaptive sampling (Noise Threshold, Min Samples: the render's
+    or the viewport's), Time Limit (renders only, as in Cycles), Clamp Direct/Indirect and
+    Filter Glossy; so are the filter, bounces and seed. With the Cycles add-on off, the
+    engine's own legacy Samples and none of the rest (the contract's defaults and
+    Blackman-Harris). Shadow and AO samples are the engine's own; the filter width is
+    Blender's."""
     settings = scene.splat_tracer
     width = min(max(float(scene.render.filter_size), _FILTER_WIDTH[0]), _FILTER_WIDTH[1])
     fields = dict(samples=int(settings.samples), shadow_samples=int(settings.shadow_samples), filter_width=width,
@@ -547,7 +552,26 @@ def render_settings_of(scene) -> shading.RenderSettings:
         fields["pixel_filter"] = cycles.pixel_filter_type
         fields.update({key: min(int(getattr(cycles, prop)), _MAX_BOUNCES) for key, prop in _BOUNCES.items()})
         fields["seed"] = _seed(cycles, scene.frame_current)
+        fields.update(sampling_of(cycles, viewport))
     return shading.RenderSettings(**fields)
+
+
+_MAX_SAMPLES = 1 << 16  # RenderSettings' limit; Cycles' Viewport Samples 0 (no limit) reads as this
+
+
+def sampling_of(cycles, viewport: bool = False) -> dict:
+    """RenderSettings fields from Cycles' Sampling and Light Paths panels (scene.cycles)."""
+    prefix = "preview_" if viewport else ""
+    samples = int(cycles.preview_samples if viewport else cycles.samples)
+    return dict(
+        samples=min(samples, _MAX_SAMPLES) if samples > 0 else _MAX_SAMPLES,
+        adaptive=bool(getattr(cycles, f"use_{prefix}adaptive_sampling")),
+        adaptive_threshold=max(float(getattr(cycles, f"{prefix}adaptive_threshold")), 0.0),
+        adaptive_min_samples=min(max(int(getattr(cycles, f"{prefix}adaptive_min_samples")), 0), _MAX_SAMPLES),
+        time_limit=0.0 if viewport else max(float(cycles.time_limit), 0.0),
+        clamp_direct=max(float(cycles.sample_clamp_direct), 0.0),
+        clamp_indirect=max(float(cycles.sample_clamp_indirect), 0.0),
+        filter_glossy=max(float(cycles.blur_glossy), 0.0))
 
 
 _RAYS = ("camera", "diffuse", "glossy", "transmission", "shadow")

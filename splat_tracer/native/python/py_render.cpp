@@ -1,7 +1,9 @@
 // Python bindings of the scene renderer: `_core.Mesh` (a triangle mesh and its BVH) and
 // `_core.RenderScene` (instances of clouds and meshes, materials, lamps; render()).
 // splat_tracer/render/scene.py wraps both; every input is validated here too.
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <iterator>
 #include <memory>
@@ -223,12 +225,20 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     IntegratorSettings cfg;
     unsigned int seed = 0;
-    int headlight = 0, sky_ao = 0;
-    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppi;settings must be RenderSettings.pack()", &cfg.samples,
+    int headlight = 0, sky_ao = 0, adaptive = 0;
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppifffpfid;settings must be RenderSettings.pack()", &cfg.samples,
                           &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
                           &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
-                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples))
+                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples, &cfg.clamp_direct,
+                          &cfg.clamp_indirect, &cfg.filter_glossy, &adaptive, &cfg.adaptive_threshold,
+                          &cfg.adaptive_min_samples, &cfg.time_limit))
         return nullptr;
+    cfg.adaptive = adaptive != 0;
+    for (float v : {cfg.clamp_direct, cfg.clamp_indirect, cfg.filter_glossy, cfg.adaptive_threshold})
+        if (!(std::isfinite(v) && v >= 0.f))
+            return PyErr_Format(PyExc_ValueError, "clamps, filter glossy and the noise threshold must be finite, >= 0");
+    if (!(std::isfinite(cfg.time_limit) && cfg.time_limit >= 0.0) || cfg.adaptive_min_samples < 0)
+        return PyErr_Format(PyExc_ValueError, "the time limit and minimum samples must be >= 0");
     if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
     cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
@@ -287,17 +297,61 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (PyObject *type = run_native([&] { integrator = std::make_unique<Integrator>(scene, cam, film, cfg, counters); },
                                     message))
         return PyErr_SetString(type, message.c_str()), nullptr;
-    const int done = run_tiles(integrator->tile_count(), threads > 0 ? threads : obj->threads, progress,
-                               [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
-    if (done < 0) return nullptr;
+    const size_t tiles = integrator->tile_count();
+    const int n_threads = threads > 0 ? threads : obj->threads;
+    int done = 0, reached = cfg.samples;  // reached: the samples of the pixels that went furthest
+    unsigned long long taken = (unsigned long long)cfg.samples * (unsigned long long)w * (unsigned long long)h;
+    bool time_limited = false;
+    if (!cfg.progressive()) {
+        done = run_tiles(tiles, n_threads, progress,
+                         [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
+        if (done < 0) return nullptr;
+    } else {
+        // Rounds of samples over the whole image, as Cycles' render scheduler: each ends where
+        // a convergence check is due (adaptive sampling); with a time limit the first round is
+        // one sample, and each next one as many as the time left fits at the last round's
+        // pace (at most 4x the last, in case the pace was measured on a fast round), so the
+        // limit is passed by at most about one sample's time.
+        using Clock = std::chrono::steady_clock;
+        const auto start = Clock::now();
+        const size_t total = tiles * size_t(cfg.samples);
+        int s = 0, round = cfg.time_limit > 0.0 ? 1 : cfg.samples;
+        done = 1;
+        while (s < cfg.samples) {
+            const int n = integrator->align_samples(s, std::min(round, cfg.samples - s));
+            const auto round_start = Clock::now();
+            done = run_tiles(
+                tiles, n_threads, progress,
+                [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile_samples(t, s, s + n, &stop); },
+                tiles * size_t(s), size_t(n), total);
+            if (done < 0) return nullptr;
+            if (done == 0) break;
+            s += n;
+            if (integrator->need_check(s - 1) && integrator->check_convergence() == 0) break;
+            if (cfg.time_limit > 0.0) {
+                const auto now = Clock::now();
+                const double elapsed = std::chrono::duration<double>(now - start).count();
+                if (elapsed >= cfg.time_limit) {
+                    time_limited = s < cfg.samples;
+                    break;
+                }
+                const double pace = std::chrono::duration<double>(now - round_start).count() / n;
+                const double fit = pace > 0.0 ? (cfg.time_limit - elapsed) / pace : double(cfg.samples);
+                round = int(std::clamp(fit, 1.0, 4.0 * n));
+            }
+        }
+        reached = s;
+        taken = integrator->finish();
+    }
     auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
-    return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,
+    return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:i,s:K,s:O})", done ? Py_True : Py_False,
                          "camera_rays", n(counters.camera), "shadow_rays", n(counters.shadow), "reflection_rays",
                          n(counters.reflection), "refraction_rays", n(counters.refraction), "diffuse_rays",
                          n(counters.diffuse), "transparent_rays", n(counters.transparent), "nodes", n(counters.nodes),
                          "disc_tests", n(counters.discs), "triangle_tests", n(counters.triangles), "layer_queries",
                          n(counters.layer_queries), "far_rejections", n(counters.far_rejections), "interpolations",
-                         n(counters.interpolations));
+                         n(counters.interpolations), "samples_reached", reached, "samples_taken", taken,
+                         "time_limited", time_limited ? Py_True : Py_False);
 }
 
 PyObject *RenderScene_instances(PyObject *self, void *) {

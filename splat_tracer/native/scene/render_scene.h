@@ -58,7 +58,7 @@ struct Instance {
     uint32_t visibility = kVisAll;
     bool holdout = false;        // camera rays that see it get alpha 0
     // Object > Visibility > Shadow Catcher: it receives the other objects' shadows and
-    // reflections but is itself left out of Combined (the integrator's shade_block).
+    // reflections but is itself left out of Combined (the integrator's write_catcher).
     bool shadow_catcher = false;
     float pass_index = 0;        // Object Index pass
     AABB bounds;                 // in the scene frame

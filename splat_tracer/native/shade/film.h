@@ -34,7 +34,7 @@ struct Film {
     float *index = nullptr, *splat_count = nullptr;                // 1 float each
     // 3 floats: Cycles' Shadow Catcher pass (what a photograph is multiplied by: 1 unshadowed).
     // Asked for, it also makes Combined leave the catcher's shadow out, as Cycles does when
-    // the pass is on (integrator.cpp, shade_block).
+    // the pass is on (integrator.cpp, write_catcher).
     float *shadow_catcher = nullptr;
 };
 
