@@ -178,14 +178,18 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer, "use_pass_diffuse_color", text="Diffuse Color")
         col.prop(view_layer, "use_pass_emit", text="Emission")
         col.prop(view_layer, "use_pass_shadow", text="Shadow")
+        if hasattr(view_layer, "cycles"):
+            col.prop(view_layer.cycles, "use_pass_shadow_catcher", text="Shadow Catcher")
         col = layout.column(heading="Debug")
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
 
 
 class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
-    """Ray visibility and holdout, as Cycles reads them (its own panel hides for other engines)."""
+    """Mask (shadow catcher, holdout) and ray visibility, as Cycles reads them, inside
+    Blender's Object > Visibility panel (Cycles' own copy hides for other engines)."""
     bl_label = "Ray Visibility"
     bl_context = "object"
+    bl_parent_id = "OBJECT_PT_visibility"
 
     @classmethod
     def poll(cls, context):
@@ -196,11 +200,13 @@ class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         obj = context.object
+        col = layout.column(heading="Mask")
+        col.prop(obj, "is_shadow_catcher")
+        col.prop(obj, "is_holdout")
         col = layout.column(heading="Ray Visibility")
         for prop, text in (("visible_camera", "Camera"), ("visible_diffuse", "Diffuse"), ("visible_glossy", "Glossy"),
                            ("visible_transmission", "Transmission"), ("visible_shadow", "Shadow")):
             col.prop(obj, prop, text=text)
-        layout.prop(obj, "is_holdout")
         layout.prop(obj, "pass_index")
 
 
@@ -337,10 +343,31 @@ class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
         _draw_surface(self.layout, context.world, "OUTPUT_WORLD", "Surface")
 
 
+class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
+    """Cycles' world ray visibility (the Cycles add-on's property group), less Volume
+    Scatter: no volumes are rendered."""
+    bl_label = "Ray Visibility"
+    bl_context = "world"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None and hasattr(context.world, "cycles_visibility")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        visibility = context.world.cycles_visibility
+        col = layout.column()
+        for prop in ("camera", "diffuse", "glossy", "transmission"):
+            col.prop(visibility, prop)
+
+
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world, SPLAT_TRACER_PT_viewport_ab)
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
+           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
 # show for; the ones that show for the built-in BLENDER_RENDER also make sense here, and so

@@ -128,6 +128,8 @@ def lit_settings(scene, exported, settings: shading.RenderSettings, headlight: O
                         "(Splat Tracer > Lighting)")
     if headlight:
         settings = replace(settings, headlight=True)
+        if exported.render_scene.shadow_catchers:
+            report.once("the headlight casts no shadow: shadow catchers are left out of the image entirely")
     return settings, bool(headlight)
 
 

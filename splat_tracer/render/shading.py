@@ -161,15 +161,26 @@ class Light:
 # --------------------------------------------------------------------------------------
 # World and render settings.
 
+WORLD_RAYS = ("camera", "diffuse", "glossy", "transmission")  # ray kinds the world may be hidden from
+
+
 @dataclass(frozen=True)
 class World:
     """The background: a uniform radiance (colour x strength) seen by rays that leave the
     scene, which also lights it (through diffuse bounces). `transparent`: camera rays that
-    miss get alpha 0 (Film > Transparent)."""
+    miss get alpha 0 (Film > Transparent). `visibility`: the ray kinds that see it (World >
+    Ray Visibility: 'camera', 'diffuse', 'glossy', 'transmission'); a kind left out meets
+    black instead -- camera rays on an opaque film keep alpha 1, as in Cycles."""
 
     colour: Sequence[float] = (0.05, 0.05, 0.05)
     strength: float = 1.0
     transparent: bool = False
+    visibility: frozenset = frozenset(WORLD_RAYS)
+
+    def __post_init__(self):
+        unknown = set(self.visibility) - set(WORLD_RAYS)
+        if unknown:
+            raise ValueError(f"unknown world ray visibility {sorted(unknown)}; use {list(WORLD_RAYS)}")
 
     def radiance(self) -> tuple:
         return tuple(float(c) * float(self.strength) for c in self.colour)
@@ -288,6 +299,7 @@ PASSES = {
     "Shadow": 3,       # direct light received / direct light unshadowed (1: fully lit or no lamp)
     "IndexOB": 1,      # the object's pass index, pixel-centre sample
     "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
+    "Shadow Catcher": 3,  # Cycles': what the background is multiplied by (1: no shadow); see RenderScene.render
 }
 
 

@@ -390,7 +390,8 @@ def test_visibility_flags_and_holdout(blender, empty_scene, es):
         assert es.object_visibility(obj, view_layer) == from_eval
         return from_eval
 
-    assert flags() == dict(camera=True, diffuse=True, glossy=False, transmission=True, shadow=False, holdout=False)
+    assert flags() == dict(camera=True, diffuse=True, glossy=False, transmission=True, shadow=False, holdout=False,
+                           shadow_catcher=False)
     view_layer.layer_collection.children["Held"].holdout = True
     assert flags()["holdout"]
     view_layer.layer_collection.children["Held"].holdout = False

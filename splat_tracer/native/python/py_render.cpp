@@ -108,18 +108,18 @@ Affine affine_of(const float *row) {
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   nullptr};
-    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight;
+                                   "shadow_catcher", nullptr};
+    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|i", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
     const Py_ssize_t n_geo = PyTuple_Size(geometries);
-    View idx, w, o, range, vis, holdout, pass, mat, light;
+    View idx, w, o, range, vis, holdout, pass, mat, light, catcher;
     Py_ssize_t s1[1] = {-1};
     if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
     const Py_ssize_t n = idx.dim(0);
@@ -130,7 +130,8 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         !get_array(ovis, "visibility", 'i', 1, sn, false, vis) ||
         !get_array(ohold, "holdout", 'B', 1, sn, false, holdout) ||
         !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
-        !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light))
+        !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light) ||
+        (ocatch != Py_None && !get_array(ocatch, "shadow_catcher", 'B', 1, sn, false, catcher)))
         return nullptr;
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
@@ -156,6 +157,7 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.material_offset = first, inst.material_count = count;
         inst.visibility = uint32_t(vis.data<int32_t>()[i]) & kVisAll;
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
+        inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
     }
     std::vector<Material> materials(static_cast<size_t>(n_mat));
@@ -204,18 +206,18 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
-                                   "tile_size", "packets", "lens", nullptr};
+                                   "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
-             *progress = Py_None, *olens = Py_None;
+             *progress = Py_None, *olens = Py_None, *ocatcher = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
-        packets = 1;
+        packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipO", const_cast<char **>(kwlist),
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOi", const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
-                                     &packets, &olens))
+                                     &packets, &olens, &ocatcher, &world_visibility))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -249,6 +251,9 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!parse_method(ometh, cfg.method)) return nullptr;
     cfg.world = Vec3(world[0], world[1], world[2]);
     cfg.film_transparent = transparent != 0;
+    if (world_visibility < 0 || world_visibility > int(kVisAll))
+        return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
+    cfg.world_visibility = uint32_t(world_visibility);
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
@@ -267,7 +272,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     } outs[] = {{ocomb, "combined", 4, &film.combined, {}},   {odepth, "depth", 1, &film.depth, {}},
                 {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
                 {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
-                {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}}};
+                {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}},
+                {ocatcher, "shadow_catcher", 3, &film.shadow_catcher, {}}};
     for (Out &out : outs) {
         if (out.obj == Py_None) continue;
         Py_ssize_t shape[3] = {h, w, out.channels};
@@ -357,8 +363,10 @@ PyMethodDef RenderScene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
-     "threads=0, progress=None, tile_size=32, packets=True, lens=None)\n--\n\nRenders a window; returns (completed, "
-     "counters). lens: None (a pinhole) or (radius, focus_distance, blades, rotation, ratio)."},
+     "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15)\n--\n\n"
+     "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
+     "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
     {nullptr, nullptr, 0, nullptr},
 };
 
@@ -373,7 +381,7 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None)")},
     {0, nullptr},
 };
 

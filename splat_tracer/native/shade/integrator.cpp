@@ -41,6 +41,7 @@ struct Integrator::Primary {
     int splats = 0;
     float alpha = 1.f;
     float lit = 0, unshadowed = 0;  // direct light with and without shadows (luminance)
+    bool catcher = false;  // the first opaque surface is a shadow catcher's
 };
 
 struct Integrator::Pixel {
@@ -48,6 +49,7 @@ struct Integrator::Pixel {
     Vec3 half;  // progressive rendering: the class-A samples' sum, times 2
     float alpha = 0;
     Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
+    CatcherSums catcher;  // scenes with shadow catchers only
 };
 
 namespace {
@@ -154,7 +156,9 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
                                               float(camera.position[2])))),
-      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f),
+      lit_scene_(!scene.lights().empty() || scene.any_emission() ||
+                 (luminance(settings.world) > 0.f &&
+                  (settings.world_visibility & (kVisDiffuse | kVisGlossy | kVisTransmission)))),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
@@ -164,6 +168,8 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
         half_.assign(pixels, Vec3());
         taken_.assign(pixels, 0u);
         converged_.assign(pixels, uint8_t(0));
+        // Combined and the Shadow Catcher pass are formed from these sums in finish().
+        if (scene.any_catcher()) catcher_.assign(pixels, CatcherSums());
         // The buffers hold sums until finish().
         auto zero = [&](float *buf, int channels) {
             if (buf) std::fill(buf, buf + pixels * size_t(channels), 0.f);
@@ -197,16 +203,22 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
     Pixel acc[kPacketRays];
     if (!shade_samples(cols, rows, n, 0, samples, acc, tally, stop)) return;
     const float inv = 1.f / float(samples);
+    const bool catchers = scene_.any_catcher();
     for (int k = 0; k < n; ++k) {
         const Pixel &a = acc[k];
         const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
-        if (film_.combined) {
-            float *o = film_.combined + 4 * p;
-            o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
-        }
         auto put3 = [&](float *buf, Vec3 v) {
             if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
         };
+        if (catchers) {
+            write_catcher(a.catcher, inv, a.alpha * inv, p);
+        } else {
+            if (film_.combined) {
+                float *o = film_.combined + 4 * p;
+                o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+            }
+            put3(film_.shadow_catcher, Vec3(1, 1, 1));  // no catcher: nothing to darken
+        }
         put3(film_.diffcol, a.diffcol * inv);
         put3(film_.emit, a.emit * inv);
         put3(film_.shadow, a.shadow * inv);
@@ -219,10 +231,13 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
 
 // Samples [s0, s1) of n pixels (cols[k], rows[k]) added to acc: sample by sample, the n
 // camera rays' first hits in one packet query (settings.packets), then each pixel's path.
+// Sample s takes the same random numbers whichever round renders it.
 bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
                                const std::atomic<bool> *stop) const {
     const int samples = settings_.samples;
     const bool half = settings_.adaptive;
+    const bool catchers = scene_.any_catcher();
+    const Vec3 backdrop = world_seen(kVisCamera);
     for (int s = s0; s < s1; ++s) {
         // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
         // stop (the viewport closing, Python exiting) must not wait for it.
@@ -250,6 +265,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
             Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
+            const Sampler replay = rng;  // a catcher-only path takes the same numbers
             Primary prim;
             ++tally.camera;
             const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
@@ -258,6 +274,26 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             a.sum = a.sum + v;
             if (half && sample_is_class_a(uint32_t(s))) a.half = a.half + v * 2.f;
             a.alpha += prim.alpha;
+            if (catchers) {
+                if (prim.catcher) {
+                    // Cycles' shadow catcher split: the same camera ray again, in a scene of
+                    // catchers only, with the same random numbers, so that where nothing else
+                    // changes the catcher's light both paths are the same path (a ratio of
+                    // exactly 1: no noise outside the shadows).
+                    PathState alone;
+                    alone.from.catcher_only = true;
+                    Sampler same = replay;
+                    ++tally.camera;
+                    CatcherSums &cs = a.catcher;
+                    cs.alone = cs.alone + radiance(rays[k], alone, same, nullptr, tally);
+                    cs.full = cs.full + c, cs.samples += 1.f;
+                    cs.background = cs.background + backdrop;
+                } else {
+                    CatcherSums &cs = a.catcher;
+                    cs.matte = cs.matte + v, cs.matte_alpha += prim.alpha;
+                    if (!prim.hit) cs.background = cs.background + backdrop;
+                }
+            }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
@@ -290,6 +326,7 @@ void Integrator::render_tile_samples(size_t tile, int s0, int s1, const std::ato
             };
             add3(film_.diffcol, a.diffcol), add3(film_.emit, a.emit), add3(film_.shadow, a.shadow);
             half_[p] = half_[p] + a.half;
+            if (!catcher_.empty()) catcher_[p].add(a.catcher);
             taken_[p] += uint32_t(s1 - s0);
             if (s0 == 0) {  // the centre sample's passes
                 if (film_.normal) {
@@ -364,12 +401,60 @@ uint64_t Integrator::finish() {
         total += taken_[p];
         if (!taken_[p]) continue;  // never sampled: a stopped render, discarded by the caller
         const float inv = 1.f / float(taken_[p]);
-        for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
+        // Until here Combined held every sample's full path, the catcher's included: the
+        // adaptive check's estimate, as in Cycles, which measures the noise of Combined "as if
+        // there were no catchers in the scene" (kernel/film/light_passes.h).
+        if (!catcher_.empty()) {
+            write_catcher(catcher_[p], inv, film_.combined[4 * p + 3] * inv, p);
+        } else {
+            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
+            if (film_.shadow_catcher)
+                for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
+        }
         for (float *buf : {film_.diffcol, film_.emit, film_.shadow})
             if (buf)
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
     }
     return total;
+}
+
+// Combined and the Shadow Catcher pass of a pixel of a scene with shadow catchers, formed as
+// Cycles' film does (kernel/film/read.h: film_calculate_shadow_catcher and
+// film_calculate_shadow_catcher_matte_with_shadow). The catcher's shadow is the ratio of its
+// light with everything to its light with catchers only (1 where it has no sample, per
+// channel 1 where the catcher alone is black), alpha-overed on white by the pixel's
+// coverage. Combined is the matte -- everything but the catcher -- and, without the Shadow
+// Catcher pass (Cycles' approximate shadow catcher), the shadow's strength as alpha:
+// 1 - average(shadow) where the matte does not cover; on an opaque film, the world behind
+// it shows through that alpha instead (alpha 1). `sums` over the pixel's samples, `inv` one
+// over their count, `alpha` the pixel's (mean) alpha.
+void Integrator::write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const {
+    const Vec3 matte = sums.matte * inv, background = sums.background * inv;
+    const float matte_alpha = sums.matte_alpha * inv;
+    Vec3 shadow(1, 1, 1);
+    if (sums.samples > 0.f) {
+        // A ratio of sums: the count cancels.
+        auto ratio = [](float a, float b) { return b != 0.f ? a / b : 1.f; };
+        const Vec3 full = sums.full, alone = sums.alone;
+        shadow = Vec3(ratio(full.x, alone.x), ratio(full.y, alone.y), ratio(full.z, alone.z));
+        const float covered = std::clamp(alpha, 0.f, 1.f);
+        shadow = Vec3(1, 1, 1) * (1.f - covered) + shadow * covered;
+    }
+    if (film_.shadow_catcher) {
+        float *o = film_.shadow_catcher + 3 * p;
+        o[0] = shadow.x, o[1] = shadow.y, o[2] = shadow.z;
+    }
+    if (!film_.combined) return;
+    float *o = film_.combined + 4 * p;
+    const float ma = std::clamp(matte_alpha, 0.f, 1.f);
+    Vec3 rgb = matte;
+    float out_alpha = matte_alpha;
+    if (!film_.shadow_catcher) {
+        const float strength = 1.f - std::clamp((shadow.x + shadow.y + shadow.z) / 3.f, 0.f, 1.f);
+        out_alpha = (1.f - ma) * strength + ma;
+        if (!settings_.film_transparent) rgb = rgb + background * (1.f - out_alpha), out_alpha = 1.f;
+    }
+    o[0] = rgb.x, o[1] = rgb.y, o[2] = rgb.z, o[3] = out_alpha;
 }
 
 Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
@@ -396,7 +481,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             }
             // Cycles clamps light that a ray finds with the ray's bounce - 1: light reaching
             // the first surface is direct, whether sampled there or found by its bounce ray.
-            return clamped(cfg.world, st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
+            return clamped(world_seen(st.kind), st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -409,12 +494,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
-                         inside_after_crossing(passed, st.from.inside)};
+                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
-        if (!(ray.tmax > 0.f)) return clamped(cfg.world, st.weight, st.bounces > 1);
+        if (!(ray.tmax > 0.f)) return clamped(world_seen(st.kind), st.weight, st.bounces > 1);
     }
 
     const Vec3 wo = ray.d * -1.f;
@@ -444,6 +529,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
         primary->diffcol = diffuse_albedo, primary->emit = emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
+        primary->catcher = scene_.instance(sp.instance).shadow_catcher;
     }
     // Emission is two-sided, like Cycles' Emission shader.
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
@@ -455,7 +541,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only};
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
@@ -533,9 +619,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     }
 
     // Sky light by ambient occlusion replaces the diffuse bounce.
-    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(cfg.world) > 0.f)
-        L = L + clamped(diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally), st.weight,
-                        st.bounces > 0);
+    const Vec3 sky = world_seen(kVisDiffuse);
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f)
+        L = L + clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
 
     // One sampled continuation among the lobes that are not traced exactly.
     const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
@@ -675,7 +761,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
         t = t * (1.f - a);
         previous = sp;
         from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
-                      inside_after_crossing(previous, from.inside)};
+                      inside_after_crossing(previous, from.inside), false, from.catcher_only};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;

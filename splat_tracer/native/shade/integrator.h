@@ -24,6 +24,10 @@ struct IntegratorSettings : FrameSettings {
         transparent_bounces = 8;
     uint32_t seed = 0;
     Vec3 world;  // background radiance
+    // Ray kinds that see the world (World > Settings > Ray Visibility; kVis* bits). A kind
+    // left out meets black where it leaves the scene -- camera rays keep alpha 1 on an opaque
+    // film, as in Cycles.
+    uint32_t world_visibility = kVisCamera | kVisDiffuse | kVisGlossy | kVisTransmission;
     bool film_transparent = false;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
@@ -85,6 +89,20 @@ class Integrator {
     struct Primary;     // what the passes want from the camera ray's first hit
     struct Lobes;       // a material's lobes at one point
     struct Pixel;       // one pixel's sums over its samples
+    // With shadow catchers (Cycles' film passes of the same names): the samples whose first
+    // surface is not a catcher (the matte: colour, alpha); the catcher's samples shaded with
+    // everything and as if only catchers were there; their count; the world seen by the
+    // camera behind the catcher or past everything. Sums over samples, like every pass.
+    // (Complete here: the progressive film keeps one per pixel.)
+    struct CatcherSums {
+        Vec3 matte, full, alone, background;
+        float matte_alpha = 0, samples = 0;
+        void add(const CatcherSums &o) {
+            matte = matte + o.matte, full = full + o.full, alone = alone + o.alone;
+            background = background + o.background;
+            matte_alpha += o.matte_alpha, samples += o.samples;
+        }
+    };
 
     // `first`: the ray's first hit, already found (the camera packet's), else null.
     Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
@@ -96,6 +114,7 @@ class Integrator {
                       bool indirect) const;
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
+    void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // Samples [s0, s1) of n pixels added to acc; false when stopped.
     bool shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
@@ -117,6 +136,10 @@ class Integrator {
     // hash decorrelates it from the path's stream of the same pixel and sample).
     static constexpr uint32_t kLensStream = 0x6c656e73u;  // "lens"
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
+    // The world's radiance for a ray of `kind` that leaves the scene (0 if hidden from it).
+    Vec3 world_seen(uint32_t kind) const {
+        return (settings_.world_visibility & kind) ? settings_.world : Vec3();
+    }
 
     const RenderScene &scene_;
     const Camera &camera_;
@@ -134,6 +157,8 @@ class Integrator {
     std::vector<Vec3> half_;
     std::vector<uint32_t> taken_;
     std::vector<uint8_t> converged_;
+    // Progressive rendering of a scene with shadow catchers: each pixel's catcher sums.
+    std::vector<CatcherSums> catcher_;
 };
 
 }  // namespace splat
