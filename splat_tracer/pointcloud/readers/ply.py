@@ -7,6 +7,7 @@ and the problem, so that the importer can refuse it before creating anything.
 from __future__ import annotations
 
 import io
+import mmap
 import os
 import re
 from typing import Optional
@@ -174,13 +175,15 @@ def _text_vertices(path: str, header, header_len: int) -> Optional[np.ndarray]:
     vertex = header["vertex"]
     if any(hasattr(p, "list_dtype") for p in vertex.properties):
         return None
-    with open(path, "rb") as f:
-        f.seek(header_len)
-        data = f.read()
-    if b"\r" in data:  # plyfile reads lines ended by CR LF, LF or CR (the file opened with newline='')
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    table = parse_numbers(data)
-    del data  # the values are what is needed from here on
+    # The file mapped, not read: the parser reads the pages in place, on all cores (reading
+    # 138 MB into bytes first cost 0.08 s, a fifth of the whole read).
+    with open(path, "rb") as f, mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+        if mapped.find(b"\r", header_len) >= 0:
+            # plyfile reads lines ended by CR LF, LF or CR (the file opened with newline='')
+            table = parse_numbers(mapped[header_len:].replace(b"\r\n", b"\n").replace(b"\r", b"\n"))
+        else:
+            with memoryview(mapped) as whole, whole[header_len:] as data:  # released before the map closes
+                table = parse_numbers(data)
     per_line, offsets = table.per_line, table.offsets()
     total = sum(e.count for e in elements)
     if len(per_line) < total or per_line[total:].any():  # rows missing, or more rows follow
@@ -205,11 +208,13 @@ def _text_vertices(path: str, header, header_len: int) -> Optional[np.ndarray]:
             for i, prop in enumerate(element.properties):
                 column = values[:, i]
                 kind = np.dtype(prop.dtype())
-                if kind.kind in "ui":  # plyfile refuses '1.5' or 300 for an integer type: let it say so
-                    limits = np.iinfo(kind)
-                    if not ((column == np.round(column)) & (column >= limits.min) & (column <= limits.max)).all():
-                        return None
-                out[prop.name] = column
+                with np.errstate(invalid="ignore"):  # NaN into an integer: refused just below
+                    out[prop.name] = column
+                # plyfile refuses '1.5' or 300 for an integer type: let it say so. A value kept
+                # by the cast is an integer within the type's range (PLY's integers have at most
+                # 32 bits: every one is exact in float64).
+                if np.dtype(prop.dtype()).kind in "ui" and not (out[prop.name] == column).all():
+                    return None
             continue
         if (counts == 0).any():
             return None

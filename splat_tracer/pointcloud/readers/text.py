@@ -128,12 +128,13 @@ def read_text(path: str, columns: str = "") -> PointCloud:
         line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
                              "other point-cloud format; save it as UTF-8 or ASCII") from None
-    if text.count("\r") != text.count("\r\n"):
+    if "\r" in text and text.count("\r") != text.count("\r\n"):
         # Lines ended by a lone CR (classic Mac OS, some exporters): every row would be one
         # line. CR LF is left alone: its CR is whitespace to the parse below.
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     decimal_comma = _decimal_comma(path, text)
-    text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
+    if any(c in text for c in ",;\t"):  # (a scan for each is far quicker than a translation that changes nothing)
+        text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
     # The header: lines before the first one made of numbers only.
     offset, header, first = 0, [], None
     for _ in range(_HEADER_LINES + 1):
