@@ -24,8 +24,11 @@ EDGE = [
     "1e-99999999999999999999", "0e99999999999999", "0.000000000000000000000000000001e30",
     "0." + "0" * 400 + "1e400", "1" * 800 + "e-800", "3." + "1415926535897932384626433832795028841971" * 20,
     "9007199254740993", "9007199254740992.5", "0.1", "0.30000000000000004", "123456789012345678901234567890",
-    "4503599627370496.5", "4503599627370497.5", "2.0000000000000002", "1.00000000000000011102230246251565404236316680908203125",
-    "1.00000000000000011102230246251565404236316680908203124", "1.00000000000000011102230246251565404236316680908203126",
+    "4503599627370496.5", "4503599627370497.5", "2.0000000000000002",
+    # halfway between 1 and the next float64, and a hair either side
+    "1.00000000000000011102230246251565404236316680908203125",
+    "1.00000000000000011102230246251565404236316680908203124",
+    "1.00000000000000011102230246251565404236316680908203126",
 ]
 # numpy reads these too, but its NaN has no sign: compared as NaN.
 NANS = ["nan", "NaN", "NAN", "-nan", "+nan", "nAn"]
@@ -151,12 +154,13 @@ def test_bad_arguments_raise():
 @pytest.mark.parametrize("name, content, message", [
     # A short row followed by a long one holds as many numbers as the rows should: the rows
     # are checked one by one, not by their total, and the short one is named.
-    ("shifted.xyz", b"0 0 0\n1 1\n2 2 2 2\n3 3 3\n", "data line 2 (after 0 header lines) has 2 values where the first row "
-                                                   "has 3"),
+    ("shifted.xyz", b"0 0 0\n1 1\n2 2 2 2\n3 3 3\n",
+     "data line 2 (after 0 header lines) has 2 values where the first row has 3"),
     ("shifted.pcd", b"# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 3\n"
                     b"HEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 3\nDATA ascii\n0 0 0\n1 1 1 1\n2 2\n",
      "data line 2 has 4 values where the header declares 3"),
-    ("word.xyz", b"x y z\n0 0 0\n1 nan(2) 1\n", "data line 2 (after 1 header lines) is not all numbers ('1 nan(2) 1')"),
+    ("word.xyz", b"x y z\n0 0 0\n1 nan(2) 1\n",
+     "data line 2 (after 1 header lines) is not all numbers ('1 nan(2) 1')"),
 ])
 def test_rows_of_the_wrong_length_are_named_by_their_line(tmp_path, name, content, message):
     path = tmp_path / name
@@ -167,7 +171,8 @@ def test_rows_of_the_wrong_length_are_named_by_their_line(tmp_path, name, conten
 
 def test_ascii_ply_rows_of_the_wrong_length_fall_back_to_plyfile(tmp_path):
     """A vertex row one value short, then one long: plyfile reads the rows and says what is wrong."""
-    head = b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n"
+    head = (b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+            b"end_header\n")
     path = tmp_path / "shifted.ply"
     path.write_bytes(head + b"0 0 0\n1 1\n2 2 2 2\n")
     with pytest.raises(CloudFileError, match="not a valid PLY file"):

@@ -176,7 +176,8 @@ void NumberTable::copy(double *values, int64_t *per_line, int64_t *bad_lines, in
             const NumberChunk &c = chunks[i];
             std::copy(c.values.begin(), c.values.end(), values + at_value[i]);
             std::copy(c.per_line.begin(), c.per_line.end(), per_line + at_line[i]);
-            for (size_t k = 0; k < c.bad_lines.size(); ++k) bad_lines[at_bad[i] + k] = c.bad_lines[k] + int64_t(at_line[i]);
+            for (size_t k = 0; k < c.bad_lines.size(); ++k)
+                bad_lines[at_bad[i] + k] = c.bad_lines[k] + int64_t(at_line[i]);  // numbered over the whole text
         },
         [](size_t) { return true; });
 }

@@ -1,8 +1,10 @@
 """Reading point clouds with normals from PLY files (ascii, binary little/big endian).
 
-Parsing is plyfile's (a maintained PLY library); this module checks what the file means
-for a splat renderer and turns every problem into a `CloudFileError` that names the file
-and the problem, so that the importer can refuse it before creating anything.
+Parsing is plyfile's (a maintained PLY library), but for the rows of an ascii file, which
+the core's number parser reads (readers/numbers.py, _text_vertices); this module checks
+what the file means for a splat renderer and turns every problem into a `CloudFileError`
+that names the file and the problem, so that the importer can refuse it before creating
+anything.
 """
 from __future__ import annotations
 
