@@ -482,6 +482,7 @@ int module_exec(PyObject *module) {
     if (PyModule_AddIntConstant(module, "PACKET_RAYS", kPacketRays) < 0) return -1;
     if (add_neighbour_types(module) < 0) return -1;
     if (add_graph_functions(module) < 0) return -1;
+    if (add_number_functions(module) < 0) return -1;
     return add_render_types(module);
 }
 

@@ -531,5 +531,7 @@ int add_render_types(PyObject *module);
 int add_neighbour_types(PyObject *module);
 // Adds the neighbour-graph functions (py_graph.cpp).
 int add_graph_functions(PyObject *module);
+// Adds `parse_numbers` (py_numbers.cpp).
+int add_number_functions(PyObject *module);
 
 }  // namespace splat::py

@@ -5,10 +5,10 @@ own MetaData.parse_header (its pydantic model). Every count and size the header 
 is checked against the file before any data is read: pypcd4 allocates the declared points
 and the declared decompressed size before it reads them, so a corrupt header in a small
 file would otherwise ask for gigabytes. binary and binary_compressed data are decoded by
-pypcd4; ascii data by numpy here (whitespace-separated, as PCL splits a line: pypcd4's
-reader takes exactly one space between values and refuses the tabs, runs of spaces and
-trailing spaces other writers leave; and numbers are read in float64, so that a packed
-colour PCL writes as its integer, 4285098345, keeps every bit).
+pypcd4; ascii data here, by the core's number parser (readers/numbers.py), whitespace-separated
+as PCL splits a line (pypcd4's reader takes exactly one space between values and refuses
+the tabs, runs of spaces and trailing spaces other writers leave), in float64, so that a
+packed colour PCL writes as its integer, 4285098345, keeps every bit.
 
 Fields: x y z; normal_x normal_y normal_z (PCL orients them towards the viewpoint when it
 estimates them: taken as oriented, like a PLY's); a packed colour `rgb` or `rgba`, four bytes
@@ -30,14 +30,13 @@ from __future__ import annotations
 import os
 import re
 import struct
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...util.columns import in_blocks
 from ..cloud import CloudFileError, PointCloud, check_file, linear_colours, make_cloud
-from .text import values_per_line
+from .numbers import parse_numbers
 
 MAGIC = b"# .PCD"  # the comment PCL writes first; a header may also start with VERSION or FIELDS
 # Keys that can start a PCD header (after optional comments): what the sniffing accepts.
@@ -257,21 +256,16 @@ def _read_ascii(path: str, header: Header) -> dict:
     with open(path, "rb") as f:
         f.seek(header.offset)
         data = f.read()
-    try:
-        text = data.decode("ascii")
-    except UnicodeDecodeError as e:
-        raise CloudFileError(f"{path}: the ascii data are not ASCII text (byte 0x{data[e.start]:02x} at offset "
-                             f"{header.offset + e.start:,})") from None
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")  # numpy warns (DeprecationWarning) where a value is not a number
-        try:
-            values = np.fromstring(text, sep=" ")
-        except (DeprecationWarning, ValueError):
-            values = None
+    if not data.isascii():
+        e = data.decode("ascii", errors="replace").index("\ufffd")  # the first byte that is not ASCII
+        raise CloudFileError(f"{path}: the ascii data are not ASCII text (byte 0x{data[e]:02x} at offset "
+                             f"{header.offset + e:,})")
+    parsed = parse_numbers(data)
     n, count = meta.points, header.values
-    per_line = values_per_line(data)
-    if values is None or len(per_line) != n or (per_line != count).any():
-        lines = [line.split() for line in text.splitlines()]
+    per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank
+    if not parsed.ok or len(per_line) != n or (per_line != count).any():
+        # The error path only: name the first row that is wrong, as a person reads the text.
+        lines = [line.split() for line in data.decode("ascii").splitlines()]
         lines = [(k, t) for k, t in enumerate(lines) if t]
         for k, t in lines:
             bad = [v for v in t if not _is_number(v)]
@@ -280,6 +274,7 @@ def _read_ascii(path: str, header: Header) -> dict:
                         else f"has '{bad[0][:20]}', which is not a number")
                 raise CloudFileError(f"{path}: data line {k + 1} {what}")
         raise CloudFileError(f"{path}: the header declares {n:,} points but {len(lines):,} rows of data follow")
+    values = parsed.values
     table = values.reshape(n, count)
     out, at = {}, 0
     for name, c in zip(meta.fields, meta.count):

@@ -2,12 +2,12 @@
 from __future__ import annotations
 
 import re
-import warnings
 
 import numpy as np
 
 from ...util.columns import finite_rows
 from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
+from .numbers import parse_numbers
 
 # Column names a header line may use (lower case), to the roles below.
 _NAMES = {
@@ -29,22 +29,6 @@ _NUMERIC_LINE = re.compile(r"^[\d\s;,.+\-eE]*\d[\d\s;,.+\-eE]*$")  # digits and 
 _COMMA_DECIMAL = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")        # one comma between digits: 10,50  -0,5
 _HEADER_LINES = 100  # at most this many lines before the data are taken as a header
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
-
-
-def values_per_line(data: bytes, blank: bool = False) -> np.ndarray:
-    """How many whitespace-separated values each line that is not blank holds (lines end at
-    LF; CR and tab are whitespace), computed over the bytes at once: the check that a
-    parse of the whole block as one stream of numbers (np.fromstring) put each number in its
-    row (a short row followed by a long one sums to the right count). blank: every line,
-    blank ones (0) included; a last line without its LF counts when it is not empty."""
-    b = np.frombuffer(data, np.uint8)
-    newline = b == 10
-    space = newline | (b == 32) | (b == 9) | (b == 13)
-    starts = ~space
-    starts[1:] &= space[:-1]  # a value starts after whitespace or at the beginning
-    lines = int(newline.sum()) + (len(b) > 0 and b[-1] != 10)
-    counts = np.bincount(np.cumsum(newline)[starts], minlength=lines)  # values on each line, by its number
-    return counts if blank else counts[counts > 0]
 
 
 def _is_numbers(tokens) -> bool:
@@ -144,12 +128,13 @@ def read_text(path: str, columns: str = "") -> PointCloud:
         line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
                              "other point-cloud format; save it as UTF-8 or ASCII") from None
-    if text.count("\r") != text.count("\r\n"):
+    if "\r" in text and text.count("\r") != text.count("\r\n"):
         # Lines ended by a lone CR (classic Mac OS, some exporters): every row would be one
         # line. CR LF is left alone: its CR is whitespace to the parse below.
         text = text.replace("\r\n", "\n").replace("\r", "\n")
     decimal_comma = _decimal_comma(path, text)
-    text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
+    if any(c in text for c in ",;\t"):  # (a scan for each is far quicker than a translation that changes nothing)
+        text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
     # The header: lines before the first one made of numbers only.
     offset, header, first = 0, [], None
     for _ in range(_HEADER_LINES + 1):
@@ -171,14 +156,10 @@ def read_text(path: str, columns: str = "") -> PointCloud:
                              f"{_HEADER_LINES} lines; not a point-cloud text file")
     count = len(first)
     body = text[offset:]
-    rows = len(re.findall(r"^[ \r]*\S", body, re.MULTILINE))
-    with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        try:
-            values = np.fromstring(body, sep=" ")
-        except (DeprecationWarning, ValueError):
-            values = None
-    if values is None or values.size != rows * count:
+    parsed = parse_numbers(body.encode("utf-8"))
+    per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank
+    rows = len(per_line)
+    if not parsed.ok or (per_line != count).any():
         for k, line in enumerate(body.splitlines()):  # the error path only: find the row to name
             tokens = line.split()
             if tokens and (len(tokens) != count or not _is_numbers(tokens)):
@@ -186,7 +167,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
                         else f"is not all numbers ('{line.strip()[:60]}')")
                 raise CloudFileError(f"{path}: data line {k + 1} (after {len(header)} header lines) {what}")
         raise CloudFileError(f"{path}: the rows could not be read as {count} numbers each")
-    table = values.reshape(rows, count)
+    table = parsed.values.reshape(rows, count)
     # A PTS file's first line is its point count: it must not lie.
     if len(header) == 1 and len(header[0]) == 1 and header[0][0].isdigit() and int(header[0][0]) != rows:
         raise CloudFileError(f"{path}: its first line declares {int(header[0][0]):,} points but {rows:,} rows "
