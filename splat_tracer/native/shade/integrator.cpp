@@ -28,6 +28,10 @@ struct Integrator::PathState {
     Origin from;
     float throughput = 1.f;
     bool specular = true;  // camera, mirror or clear-glass ray: it may see the lamps themselves
+    // A sampled reflection from `mis_from`, with density `mis_pdf`, where mesh lights were
+    // sampled too: emission it meets on them is weighed by MIS. 0: emission counts in full.
+    float mis_pdf = 0.f;
+    Vec3 mis_from;
 };
 
 struct Integrator::Primary {
@@ -125,7 +129,10 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
                                               float(camera.position[2])))),
-      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f) {}
+      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f),
+      mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
+                       ? &scene.mesh_lights()
+                       : nullptr) {}
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     Tally tally;
@@ -273,7 +280,21 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
     }
-    Vec3 L = mat.emission + lamps;  // emission is two-sided, like Cycles' Emission shader
+    Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
+    if (st.mis_pdf > 0.f) {
+        // Shadow rays could have found this point too: the power heuristic shares it between
+        // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
+        const float area_pdf = mesh_lights_->area_pdf(sp.instance, mat, sp.front);
+        if (area_pdf > 0.f) {
+            const Vec3 to = sp.p - st.mis_from;
+            const float light_pdf =
+                area_pdf * dot(to, to) / std::fabs(dot(sp.ng, ray.d)) * float(cfg.shadow_samples);
+            emitted = emitted * (cfg.mesh_light_strategy == IntegratorSettings::kLightOnly
+                                     ? 0.f
+                                     : power_heuristic(st.mis_pdf, light_pdf));
+        }
+    }
+    Vec3 L = emitted + lamps;
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
     // Where rays leave this point from: the splats that formed it are excluded (the paper's
@@ -306,7 +327,20 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         return r;
     };
 
-    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, rng, st.camera ? primary : nullptr, tally);
+    // How the path goes on below: one sampled continuation among the lobes that are not traced
+    // exactly, picked by these weights. Known before the light sampling, whose MIS needs them.
+    const bool continues = lit_scene_ && st.bounces < cfg.max_bounces && st.bounces < kMaxDepth;
+    float w_diffuse = 0.f, w_glossy = 0.f, w_trans = 0.f, pick[2] = {0.f, 0.f};
+    if (continues) {
+        w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
+        w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
+        w_trans = !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o))
+                                                                              : 0.f;
+    }
+    const float w_sum = w_diffuse + w_glossy + w_trans;
+    if (w_sum > 0.f) pick[0] = w_diffuse / w_sum, pick[1] = w_glossy / w_sum;
+
+    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, pick, rng, st.camera ? primary : nullptr, tally);
 
     // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
     // can bring any back, so none is traced.
@@ -314,8 +348,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (st.bounces >= cfg.max_bounces || st.bounces >= kMaxDepth) return L;
 
     // Continues the path with `weight`, by Russian roulette when its throughput is small.
+    // mis_pdf: the density of a sampled reflection, when mesh lights were sampled here too.
     auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
-                      uint64_t Tally::*count, bool specular) {
+                      uint64_t Tally::*count, bool specular, float mis_pdf = 0.f) {
         PathState next = st;
         next.camera = false;
         next.kind = kind;
@@ -330,6 +365,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         // sampling cannot find and which would only add fireflies (not traced, like the
         // glass's shadow).
         next.specular = st.specular && specular;
+        next.mis_pdf = mis_pdf, next.mis_from = sp.p;
         if (next.throughput < kRouletteThroughput) {
             const float survive = next.throughput / kRouletteThroughput;
             if (!(rng.next() < survive)) return;
@@ -357,11 +393,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         L = L + diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally);
 
     // One sampled continuation among the lobes that are not traced exactly.
-    const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
-    const float w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
-    const float w_trans =
-        !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
-    const float w_sum = w_diffuse + w_glossy + w_trans;
+    auto mis_pdf = [&](Vec3 wi) { return mesh_lights_ ? reflection_pdf(lobes, n, wo, cos_o, wi, pick) : 0.f; };
     if (w_sum > 0.f) {
         float u = rng.next() * w_sum;
         const float u1 = rng.next(), u2 = rng.next();
@@ -369,7 +401,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             const Vec3 wi = sample_cosine(n, u1, u2);
             if (dot(wi, ng) > 0.f)
                 follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
-                       &Tally::diffuse, false);
+                       &Tally::diffuse, false, mis_pdf(wi));
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             const Vec3 wi = reflect(wo, m);
@@ -377,7 +409,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                 // VNDF sampling: the estimator is F(wo.m) G1(wi).
                 const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
                 follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
-                       &Tally::reflection, false);
+                       &Tally::reflection, false, mis_pdf(wi));
             }
         } else {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
@@ -392,15 +424,46 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     return L;
 }
 
+Ray Integrator::shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance) {
+    Ray r;
+    r.o = sp.p + ng * sp.offset;
+    r.d = wi;
+    r.tmin = 0.f;
+    // Stop just short of the light's surface: a lamp is not geometry here, and an emissive
+    // triangle must not shadow itself.
+    r.tmax = std::isinf(distance) ? kInfinity : distance * (1.f - 1e-4f);
+    return r;
+}
+
+float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const float pick[2]) {
+    const float cos_i = dot(n, wi);
+    if (!(cos_i > 0.f)) return 0.f;
+    float pdf = pick[0] * cos_i * (1.f / kPi);  // cosine-weighted diffuse
+    if (pick[1] > 0.f) {
+        // VNDF sampling reflected about m: D_wo(m) / (4 wo.m) = G1(wo) D(m) / (4 cos_o).
+        const Vec3 h = normalize(wo + wi);
+        pdf += pick[1] * ggx_g1(cos_o, lobes.alpha) * ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) / (4.f * cos_o);
+    }
+    return pdf;
+}
+
 Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                              const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const {
+                              const Lobes &lobes, const float pick[2], Sampler &rng, Primary *primary,
+                              Tally &tally) const {
     const std::vector<Light> &lights = scene_.lights();
-    if (lights.empty()) return Vec3();  // no lamp: no shadow ray, no work
+    if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
     const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
     const int k = settings_.shadow_samples;
     const float share = 1.f / float(k);
+    // The reflection towards wi (cos_i = n . wi > 0): the diffuse and the glossy lobe.
+    auto glossy_brdf = [&](Vec3 wi, float cos_i) {
+        const Vec3 h = normalize(wo + wi);
+        const float ch = std::fmax(dot(n, h), 0.f);
+        const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+        return lobes.specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
+    };
     Vec3 L;
     for (const Light &light : lights) {
         for (int s = 0; s < k; ++s) {
@@ -410,26 +473,40 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             const float cos_i = dot(n, ls.wi);
             if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
             Vec3 f = diffuse;
-            if (glossy) {
-                const Vec3 h = normalize(wo + ls.wi);
-                const float ch = std::fmax(dot(n, h), 0.f);
-                const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-                f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
-                            (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
-            }
+            if (glossy) f = f + glossy_brdf(ls.wi, cos_i);
             const Vec3 c = f * ls.irradiance * (cos_i * share);
             if (!(luminance(c) > 0.f)) continue;
             Vec3 visible(1, 1, 1);
             if (light.cast_shadow) {
-                Ray r;
-                r.o = sp.p + ng * sp.offset;
-                r.d = ls.wi;
-                r.tmin = 0.f;
-                // Stop just short of the lamp's surface: a lamp is not geometry here.
-                r.tmax = std::isinf(ls.distance) ? kInfinity : ls.distance * (1.f - 1e-4f);
                 ++tally.shadow;
-                visible = shadow_transmittance(r, from, tally);
+                visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
             }
+            L = L + c * visible;
+            if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
+        }
+    }
+    // Emissive triangles: a point of one picked by power, weighed against the chance that
+    // the path's own sampled reflection finds it (the weight its emission gets in radiance()).
+    if (mesh_lights_) {
+        const bool light_only = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly;
+        for (int s = 0; s < k; ++s) {
+            const float u0 = rng.next(), u1 = rng.next(), u2 = rng.next();
+            const MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
+            if (!ls.valid) continue;
+            const float cos_i = dot(n, ls.wi);
+            if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
+            // As Cycles excludes them: an emitter hidden from diffuse (glossy) rays lights no
+            // diffuse (glossy) lobe -- the rays of that lobe could never meet it either.
+            const uint32_t seen_by = scene_.instance(ls.instance).visibility;
+            Vec3 f = seen_by & kVisDiffuse ? diffuse : Vec3();
+            if (glossy && (seen_by & kVisGlossy)) f = f + glossy_brdf(ls.wi, cos_i);
+            const float light_pdf = ls.pdf * float(k);
+            const float weight =
+                light_only ? 1.f : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, ls.wi, pick));
+            const Vec3 c = f * ls.emission * (cos_i * weight / light_pdf);
+            if (!(luminance(c) > 0.f)) continue;
+            ++tally.shadow;
+            const Vec3 visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
             L = L + c * visible;
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }

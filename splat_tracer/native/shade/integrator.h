@@ -31,6 +31,12 @@ struct IntegratorSettings : FrameSettings {
     // occlusion rays bring the world's radiance where they escape; no diffuse bounce rays.
     bool sky_ao = false;
     int ao_samples = 1;
+    // How emissive triangles light other surfaces: both shadow rays aimed at them and the
+    // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
+    // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
+    // material whose Emission Sampling is None). The last two exist to verify the first.
+    enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
+    int mesh_light_strategy = kMis;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -60,8 +66,15 @@ class Integrator {
     Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
                   const SurfacePoint *first = nullptr) const;
     // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`.
+    // `pick`: the probabilities that the path goes on by a sampled diffuse and glossy
+    // reflection (0 when it ends here), which the mesh lights' MIS weights need.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                      const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally) const;
+                      const Lobes &lobes, const float pick[2], Sampler &rng, Primary *primary, Tally &tally) const;
+    // The density with which the path's sampled reflection at a point goes in direction wi
+    // (solid angle): the lobe picks times their densities.
+    static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const float pick[2]);
+    // A shadow ray from the surface point towards wi, ending just short of `distance`.
+    static Ray shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance);
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
@@ -82,6 +95,7 @@ class Integrator {
     PixelFilter filter_;
     const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
+    const MeshLights *mesh_lights_;  // sampled emissive triangles, or null (none, or not sampled)
 };
 
 }  // namespace splat
