@@ -273,7 +273,7 @@ PASSES = {
     "Normal": 3,       # world-space shading normal, pixel-centre sample
     "DiffCol": 3,      # albedo of the diffuse lobe, averaged over the samples
     "Emit": 3,         # emitted radiance seen by camera rays, averaged
-    "Shadow": 3,       # direct light received / direct light unshadowed (1: fully lit or no lamp)
+    "Shadow": 3,       # lamps' direct light received / unshadowed (1: fully lit or no lamp; not mesh lights)
     "IndexOB": 1,      # the object's pass index, pixel-centre sample
     "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
 }

@@ -506,9 +506,9 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             const Vec3 c = f * ls.emission * (cos_i * weight / light_pdf);
             if (!(luminance(c) > 0.f)) continue;
             ++tally.shadow;
-            const Vec3 visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
-            L = L + c * visible;
-            if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
+            // Not in the Shadow pass, which is the lamps' (a closed emitter's far side, shadowed
+            // by its near side, would darken it everywhere).
+            L = L + c * shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
         }
     }
     return L;
