@@ -7,8 +7,6 @@
 
 namespace splat {
 
-constexpr float kEdgeOnCosine = 1e-6f;
-
 MeshLights::MeshLights(const std::vector<Instance> &instances, const std::vector<Material> &materials)
     : sampled_(instances.size(), 0) {
     for (size_t i = 0; i < instances.size(); ++i) {
@@ -71,9 +69,6 @@ MeshLightSample MeshLights::sample(Vec3 p, float u0, float u1, float u2) const {
     const float cn = dot(e.n, s.wi);  // < 0: p is on the front side
     const float cos_l = std::fabs(cn);
     const int side = cn < 0.f ? 1 : 2;
-    // A point in the triangle's own plane (on another triangle of a flat panel) sees it edge
-    // on: a cosine within the rounding of unit vectors (a few 1e-8) is that, not light; any
-    // light at a cosine of 1e-6 is 1e-6 of a facing one.
     if (!(cos_l > kEdgeOnCosine)) return s;
     s.distance = dist;
     s.emission = e.emission;

@@ -18,6 +18,11 @@ namespace splat {
 
 struct Instance;
 
+// A point in a triangle's own plane (on another triangle of a flat panel) sees it edge on: a
+// cosine within the rounding of unit vectors (a few 1e-8) is that, not light, and is never
+// sampled (any light at a cosine of 1e-6 is 1e-6 of a facing one's).
+constexpr float kEdgeOnCosine = 1e-6f;
+
 // One point chosen on an emissive triangle, seen from a shading point.
 struct MeshLightSample {
     Vec3 wi;             // unit, from the shading point towards the light point

@@ -284,11 +284,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (st.mis_pdf > 0.f) {
         // Shadow rays could have found this point too: the power heuristic shares it between
         // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
+        // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
         const float area_pdf = mesh_lights_->area_pdf(sp.instance, mat, sp.front);
-        if (area_pdf > 0.f) {
+        const float cos_l = std::fabs(dot(sp.ng, ray.d));
+        if (area_pdf > 0.f && cos_l > kEdgeOnCosine) {
             const Vec3 to = sp.p - st.mis_from;
-            const float light_pdf =
-                area_pdf * dot(to, to) / std::fabs(dot(sp.ng, ray.d)) * float(cfg.shadow_samples);
+            const float light_pdf = area_pdf * dot(to, to) / cos_l * float(cfg.shadow_samples);
             emitted = emitted * (cfg.mesh_light_strategy == IntegratorSettings::kLightOnly
                                      ? 0.f
                                      : power_heuristic(st.mis_pdf, light_pdf));
