@@ -27,13 +27,13 @@ def _blender(workdir: Path):
 
 
 def render(engine: str, ply_path: Path, view: dict, width: int, height: int, workdir: Path, closed: bool,
-           method: str = "FULL", lamp_power: float = 0.0, point_normals: bool = False) -> dict:
+           method: str = "FULL", lamp_power: float = 0.0, point_normals: bool = False, lamp_position=None) -> dict:
     """Renders the cloud in `ply_path` with `engine` ('SPLAT_TRACER' or 'CYCLES') from the
     camera `view` (Camera.look_at arguments). Returns wall seconds of the render call,
     the threads Blender was told to use, and top-row-first coverage, depth, normals and the
     Combined pass (H,W,4).
     lamp_power > 0: a point lamp of that power (W, radius 0) at the camera, and direct light
-    only (no bounces). point_normals: Cycles shades the spheres with the points'
+    only (no bounces); lamp_position: that lamp there instead (world coordinates). point_normals: Cycles shades the spheres with the points'
     `splat_normal` instead of the sphere's own normal (the file must have colours: that
     patches the importer's "Splat Cloud" material, which only coloured clouds get)."""
     bpy = _blender(workdir)
@@ -73,7 +73,7 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
         lamp = bpy.data.objects.new("Headlamp", bpy.data.lights.new("Headlamp", "POINT"))
         lamp.data.energy = lamp_power
         lamp.data.shadow_soft_size = 0.0
-        lamp.location = tuple(eye)
+        lamp.location = tuple(eye) if lamp_position is None else tuple(float(x) for x in lamp_position)
         scene.collection.objects.link(lamp)
         scene.world = None  # no world light: the lamp alone
     scene.render.engine = engine
@@ -88,7 +88,7 @@ def render(engine: str, ply_path: Path, view: dict, width: int, height: int, wor
             scene.cycles.max_bounces = 0  # direct light from the lamp only
     else:
         scene.splat_tracer.method = method
-        scene.splat_tracer.samples = 1  # the pixel centre, like the truth and the Cycles row
+        scene.cycles.samples = 1  # the pixel centre, like the truth and the Cycles row
     t0 = time.perf_counter()
     out = render_to_exr(bpy, scene, workdir / f"{engine.lower()}.exr", width, height)
     seconds = time.perf_counter() - t0

@@ -81,7 +81,6 @@ def frame(bpy, scene, engine: str, samples: int, path: Path, session) -> dict:
 
     scene.render.engine = engine
     scene.cycles.samples = samples
-    scene.splat_tracer.samples = samples
     t0 = time.perf_counter()
     render_to_exr(bpy, scene, path, *scene_size(scene), passes=False)
     seconds = time.perf_counter() - t0

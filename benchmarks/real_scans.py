@@ -120,6 +120,12 @@ REFERENCE_SAMPLES = 1_000_000  # mesh points for the nearest-surface normal: 0.1
 # The lamp at the camera (Blender's watts); the scores divide by a calibration render, so its
 # power only has to keep values far above float noise and far below overflow.
 LAMP_POWER = 100.0
+# A second light for the core's renders: the same lamp moved 30 degrees about the view's up
+# axis around the bulk's centre, casting shadows. A lamp at the camera hides what the issue
+# saw on depth frames oriented away from their sensor (their discs shadowing each other
+# under any other light); this one shows it, with the scene's real shadows beside it (Cycles
+# renders it too, so the real shadows have a reference).
+OFFSET_DEGREES = 30.0
 
 
 def source_url(scan: Scan, path: str) -> str:
@@ -264,8 +270,20 @@ CORE_SETTINGS = dict(samples=1, pixel_filter="BOX", filter_width=0.01, max_bounc
                      glossy_bounces=0, transmission_bounces=0)
 
 
-def core_frame(prepared, view: dict, width: int, height: int, method: str) -> dict:
-    """The prepared cloud through the core's scene renderer with the lamp at the camera."""
+def offset_lamp(view: dict, centre: np.ndarray) -> np.ndarray:
+    """The camera's position turned OFFSET_DEGREES about the view's up axis around `centre`."""
+    up = np.asarray(view["up"], np.float64)
+    up /= np.linalg.norm(up)
+    v = np.asarray(view["eye"], np.float64) - centre
+    a = np.radians(OFFSET_DEGREES)
+    # Rodrigues' rotation of v about up
+    turned = v * np.cos(a) + np.cross(up, v) * np.sin(a) + up * (up @ v) * (1 - np.cos(a))
+    return centre + turned
+
+
+def core_frame(prepared, view: dict, width: int, height: int, method: str, lamp=None) -> dict:
+    """The prepared cloud through the core's scene renderer with the lamp at the camera, or
+    at `lamp` (world coordinates) casting shadows."""
     from splat_tracer.render.camera import Camera
     from splat_tracer.render.method import Method
     from splat_tracer.render.scene import Instance, RenderScene
@@ -276,8 +294,9 @@ def core_frame(prepared, view: dict, width: int, height: int, method: str) -> di
     cam = Camera.look_at(**{**view, "eye": view["eye"] - origin, "target": view["target"] - origin})
     t0 = time.perf_counter()
     cloud = SplatCloud(prepared.local, prepared.cloud.normals, prepared.radii, closed=prepared.hood.closed_guess)
-    scene = RenderScene([Instance(cloud)], [Light("POINT", power=LAMP_POWER, position=tuple(cam.position),
-                                                  cast_shadow=False)],
+    light = (Light("POINT", power=LAMP_POWER, position=tuple(cam.position), cast_shadow=False) if lamp is None else
+             Light("POINT", power=LAMP_POWER, position=tuple(np.asarray(lamp, np.float64) - origin), cast_shadow=True))
+    scene = RenderScene([Instance(cloud)], [light],
                         World(colour=(0.0, 0.0, 0.0), transparent=True))
     out = scene.render(cam, width, height, RenderSettings(**CORE_SETTINGS), Method.preset(method),
                        passes=("Depth", "Normal"))
@@ -301,7 +320,7 @@ def core_calibration() -> float:
 
 
 def blender_frame(workdir: Path, name: str, world_points, normals, radii, view, width, height,
-                  closed: bool) -> dict:
+                  closed: bool, lamp=None) -> dict:
     """Cycles on the same points as spheres (the importer's Mesh to Points) shaded with the
     point normals, lit by the same lamp at the camera (blender_runs.render)."""
     from benchmarks import blender_runs
@@ -312,7 +331,7 @@ def blender_frame(workdir: Path, name: str, world_points, normals, radii, view, 
     grey = np.full((len(world_points), 3), 0.8, np.float32)
     ply.write_ply(str(path), world_points, normals, colours=grey, radii=radii)
     out = blender_runs.render("CYCLES", path, view, width, height, workdir, closed, lamp_power=LAMP_POWER,
-                              point_normals=True)
+                              point_normals=True, lamp_position=lamp)
     h = height
     return {"seconds": out["seconds"], "rgba": out["rgba"], "depth": out["depth"].reshape(h, width),
             "normal": out["normal"].reshape(h, width, 3)}
@@ -400,6 +419,11 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
     d64 = d.astype(np.float64)
     d64 /= np.linalg.norm(d64, axis=1, keepdims=True)
     directions = d64.reshape(height, width, 3)
+    # The import's orientation, before any shading turns a back hit towards the ray: the share
+    # of all imported normals on the camera's side (the camera is at the sensor for the
+    # depth frames and the E57, above the LAS).
+    towards = np.asarray(cam.position, np.float64) - (prepared.local.astype(np.float64) + prepared.origin)
+    row["facing_camera_pct"] = float(100 * (np.einsum("ij,ij->i", prepared.cloud.normals, towards) > 0).mean())
     truth = None
     if scan.kind == "reference" and mesh is not None:
         from benchmarks import meshes, truth as truth_mod
@@ -409,16 +433,21 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
                                d64, cam.position, cam.forward)
         row.update(importer_normal_error(prepared, vertices, triangles))
         row["raw_normals"] = "from the file" if not prepared.normals_estimated else "none in the file"
-    frames = {}
+    frames, offset = {}, {}
     renderers = [("full", "FULL"), ("general", "GENERAL")]
+    world_points = prepared.local.astype(np.float64) + prepared.origin
+    lamp = offset_lamp(view, np.median(world_points, axis=0))
     for label, method in renderers:
         frames[label] = core_frame(prepared, view, width, height, method)
+        offset[label] = core_frame(prepared, view, width, height, method, lamp=lamp)
     if args.cycles:
         if "cycles" not in calibrations:
             calibrations["cycles"] = cycles_calibration(tmp)
         world = prepared.local.astype(np.float64) + prepared.origin
         frames["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
                                          height, bool(prepared.hood.closed_guess))
+        offset["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
+                                         height, bool(prepared.hood.closed_guess), lamp=lamp)
     row["renderers"] = {}
     for label, frame in frames.items():
         s = frame_scores(frame, directions, cam.forward, calibrations["cycles" if label == "cycles" else "core"])
@@ -428,9 +457,20 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
 
             s.update(scoring.score(truth, frame["covered"].ravel(), frame["depth"].ravel(),
                                    frame["normal"].reshape(-1, 3), d64, float(np.median(prepared.radii))))
+        if label in offset:  # the offset lamp: distances from it, not from the camera
+            f = offset[label]
+            covered = f["depth"] < 1e9
+            along = np.where(covered, f["depth"], 0.0) / (directions @ cam.forward)
+            hit = np.asarray(cam.position, np.float64) + directions * along[..., None]
+            to_lamp = np.linalg.norm(hit - lamp, axis=-1)
+            shade = relative_shade(f["rgba"][..., :3].astype(np.float64).mean(axis=2), to_lamp,
+                                   calibrations["cycles" if label == "cycles" else "core"])
+            s["near_black_offset_pct"] = 100 * near_black_share(covered, shade)
         row["renderers"][label] = s
         print(f"    {label:8s} facing away {s['facing_away_pct']:5.1f} %, near-black {s['near_black_pct']:5.1f} %, "
               f"pinholes {s['pinholes_pct']:5.2f} %"
+              + (f", near-black with the lamp {OFFSET_DEGREES:g} deg off {s['near_black_offset_pct']:5.1f} %"
+                 if "near_black_offset_pct" in s else "")
               + (f", normal {s['normal_mean_deg']:.2f} deg, silhouette {s['silhouette_pct']:.2f} %, "
                  f"depth {100 * s['depth_mean_rel']:.3f} %" if truth is not None else "")
               + f", render {s['render_s']:.2f} s", flush=True)
@@ -451,23 +491,33 @@ def markdown(rows: list, meta: dict) -> str:
              f"1 sample at the pixel centre, a point lamp at the camera; Cycles {meta.get('cycles', 'not run')}. "
              f"Import: median of {meta['repeat']} runs (range). Render: one run each (Cycles' includes its "
              f"scene sync and BVH build). Near-black: below {NEAR_BLACK:g} x a facing surface's light; "
-             f"pinholes: enclosed uncovered regions of at most {PINHOLE_PIXELS} px. Total {meta['seconds']:.0f} s.",
+             f"pinholes: enclosed uncovered regions of at most {PINHOLE_PIXELS} px. The core also renders with the lamp "
+             f"turned {OFFSET_DEGREES:g} deg about the view's up axis around the bulk's centre, casting shadows, and "
+             f"so does Cycles (that near-black share counts the scene's real shadows too). Total {meta['seconds']:.0f} s.",
              "",
-             "| scan | points | import s | renderer | facing away % | near-black % | pinholes % | normal error deg | "
-             "silhouette % | depth error % | render s |",
-             "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| scan | points | import s | renderer | facing away % | near-black % | near-black, lamp 30° off % | "
+             "pinholes % | normal error deg | silhouette % | depth error % | render s |",
+             "|---|---:|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         if "error" in r or "missing" in r:
-            lines.append(f"| {r['scan']} | - | - | {r.get('error') or 'not in the cache'} | | | | | | | |")
+            lines.append(f"| {r['scan']} | - | - | {r.get('error') or 'not in the cache'} | | | | | | | | |")
             continue
         imp = f"{r['import_s']:.2f} ({r['import_min_s']:.2f}-{r['import_max_s']:.2f})"
         for i, (label, s) in enumerate(r["renderers"].items()):
             name = {"full": "full", "general": "general", "cycles": "Cycles spheres"}[label]
             lines.append(f"| {r['scan'] if i == 0 else ''} | {r['points'] if i == 0 else ''} | {imp if i == 0 else ''} "
                          f"| {name} | {fmt(s['facing_away_pct'])} | {fmt(s['near_black_pct'])} | "
+                         f"{fmt(s.get('near_black_offset_pct'))} | "
                          f"{fmt(s['pinholes_pct'], 2)} | {fmt(s.get('normal_mean_deg'), 2)} | "
                          f"{fmt(s.get('silhouette_pct'), 2)} | {fmt(s.get('depth_mean_rel'), 3, 100)} | "
                          f"{s['render_s']:.2f} |")
+    oriented = [r for r in rows if "facing_camera_pct" in r]
+    if oriented:
+        lines += ["", "The import's orientation: the share of all imported normals on the camera's side (before "
+                  "shading turns an open cloud's back hits towards the ray), and the rule that decided it:", "",
+                  "| scan | facing the camera % | oriented by |", "|---|---:|---|"]
+        lines += [f"| {r['scan']} | {r['facing_camera_pct']:.2f} | "
+                  f"{r['oriented'] if r['normals_estimated'] else 'the file'} |" for r in oriented]
     ref = [r for r in rows if "import_normal_deg" in r]
     if ref:
         lines += ["", "The importer's own normals against the mesh's at the nearest surface point (signs included):",
@@ -521,7 +571,9 @@ IMAGE_SCANS = ("bun000+bun045", "milk_cartoon_all_small_clorox", "pumpA")
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="bun000 only, 160x120, core only, one import")
-    ap.add_argument("--output", default=str(HERE / "results"), help="where real_scans.md/.json and the images go")
+    ap.add_argument("--output", default=None, help="where real_scans.md/.json and the images go (default: "
+                    "benchmarks/results; with --quick, build/bench-quick, so a quick run never overwrites the docs' "
+                    "figures)")
     ap.add_argument("--scans", default=None, help=f"the cache (default: ${CACHE_ENV}, else {DEFAULT_CACHE})")
     ap.add_argument("--no-cycles", dest="cycles", action="store_false", help="skip Cycles")
     ap.add_argument("--repeat", type=int, default=None, help="imports per scan (default 3, quick 1)")
@@ -542,7 +594,7 @@ def main(argv=None) -> int:
             for f, p in m:
                 print(f"  {f}: github.com/{s.repo} commit {s.commit}, {p}\n    {source_url(s, p)}")
     present = [s for s in scans if not missing(s, cache)]
-    out_dir = Path(args.output)
+    out_dir = Path(args.output or (HERE.parent / "build" / "bench-quick" if args.quick else HERE / "results"))
     rows = []
     if present:
         mesh = reference_mesh()

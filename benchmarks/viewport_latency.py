@@ -46,7 +46,7 @@ def main(argv=None) -> int:
 
     viewport = sys.modules[dev_extension.ADDON_MODULE + ".splat_tracer.blender.viewport"]
     scene, n_splats = demo.build_scene(bpy, 3, width, height)
-    scene.splat_tracer.samples = 16
+    scene.cycles.samples = scene.cycles.preview_samples = 16
     bpy.context.view_layer.update()
 
     def view(turn_deg: float):

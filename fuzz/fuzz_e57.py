@@ -22,7 +22,6 @@ import os
 import random
 import re
 import struct
-import sys
 import tempfile
 
 import atheris
@@ -144,10 +143,5 @@ def mutate(data: bytes, max_size: int, seed: int) -> bytes:
     return out if len(out) <= max_size else atheris.Mutate(data, max_size)
 
 
-def TestOneInput(data: bytes) -> None:
-    reading.import_bytes(data, PATH)
-
-
 if __name__ == "__main__":
-    atheris.Setup(sys.argv, TestOneInput, custom_mutator=mutate)
-    atheris.Fuzz()
+    reading.fuzz(PATH, mutate)

@@ -17,7 +17,6 @@ reader loop or allocate what the header alone declares is a finding (fuzz/run.py
 import os
 import random
 import struct
-import sys
 import tempfile
 
 import atheris
@@ -89,10 +88,5 @@ def mutate(data: bytes, max_size: int, seed: int) -> bytes:
     return atheris.Mutate(data, max_size)
 
 
-def TestOneInput(data: bytes) -> None:
-    reading.import_bytes(data, PATH)
-
-
 if __name__ == "__main__":
-    atheris.Setup(sys.argv, TestOneInput, custom_mutator=mutate)
-    atheris.Fuzz()
+    reading.fuzz(PATH, mutate)

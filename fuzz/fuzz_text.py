@@ -17,7 +17,6 @@ Seed corpus: fuzz/corpus/text/ (fuzz/make_corpus.py writes them).
 import os
 import random
 import re
-import sys
 import tempfile
 
 import atheris
@@ -103,10 +102,5 @@ def mutate(data: bytes, max_size: int, seed: int) -> bytes:
     return atheris.Mutate(data, max_size)
 
 
-def TestOneInput(data: bytes) -> None:
-    reading.import_bytes(data, PATH)
-
-
 if __name__ == "__main__":
-    atheris.Setup(sys.argv, TestOneInput, custom_mutator=mutate)
-    atheris.Fuzz()
+    reading.fuzz(PATH, mutate)

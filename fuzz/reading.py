@@ -51,6 +51,17 @@ def import_bytes(data: bytes, path: str) -> None:
     import_file(path)
 
 
+def fuzz(path: str, mutate) -> None:
+    """A reader harness's run: libFuzzer's inputs (changed by `mutate`, the harness's own
+    custom mutator) imported through import_bytes at `path`."""
+    import sys
+
+    import atheris
+
+    atheris.Setup(sys.argv, lambda data: import_bytes(data, path), custom_mutator=mutate)
+    atheris.Fuzz()
+
+
 def import_file(path: str) -> None:
     """The file through the importer's steps, checked (see the module's text)."""
     try:

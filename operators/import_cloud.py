@@ -26,7 +26,6 @@ from ..splat_tracer.pointcloud.readers import ply
 from ..splat_tracer.util.progress import Cancelled, Job, Steps, TerminalProgress, scaled
 
 SCANNER = "scanner_position"  # point attribute: the scanner that saw the point (object-local)
-ORIENTATION_HINT = "splat_tracer_orientation"  # custom property: the file's own orientation mode
 # custom property: the file's origin in the object's own coordinates (where a single view's
 # sensor sits), for Estimate Splat Normals' Automatic and File Origin
 VIEWPOINT = "splat_tracer_file_origin"
@@ -189,7 +188,6 @@ def create_objects(context, loaded, notes_for, progress=None, consume: bool = Fa
             created.append(obj)
             obj["splat_tracer_source"] = path
             obj["splat_tracer_format"] = prep.cloud.format
-            obj[ORIENTATION_HINT] = prep.cloud.orientation
             obj[VIEWPOINT] = [float(-v) for v in prep.origin]  # the file's (0, 0, 0) in the object's frame
             obj.splat_tracer.closed = prep.hood.closed_guess
             obj["splat_tracer_closed_guess"] = prep.hood.describe()

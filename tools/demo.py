@@ -157,7 +157,7 @@ def main(argv=None) -> int:
 
     dev_extension.enable_from_source(BUILD)
     scene, n_splats = build_scene(bpy, args.levels, args.width, args.height)
-    scene.splat_tracer.samples = args.samples
+    scene.cycles.samples = scene.cycles.preview_samples = args.samples
     seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
     print(f"demo: {n_splats:,} splats and a {len(bpy.data.objects['Floor'].data.polygons)}-quad floor, "
           f"{args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s -> {args.output}")

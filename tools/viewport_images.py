@@ -44,7 +44,7 @@ def main(argv=None) -> int:
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy, sun.rotation_euler = 3.0, (math.radians(40), math.radians(-15), math.radians(30))
     scene.collection.objects.link(sun)
-    scene.splat_tracer.samples = 8
+    scene.cycles.samples = scene.cycles.preview_samples = 8
     props = scene.splat_tracer.ab
     props.mode = "SPLIT"           # A: the General preset, B: the scene's (Full)
     props.a.method = "GENERAL"

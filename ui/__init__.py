@@ -63,16 +63,32 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         scene = context.scene
+        # Samples, noise threshold, time limit, filter and seed are Cycles' own settings (the one
+        # place they are kept), drawn here because Cycles' panels hide for other engines.
+        cycles = getattr(scene, "cycles", None)
+        if cycles is None:
+            layout.label(text="Cycles add-on off: its sampling settings cannot be read", icon="INFO")
+            layout.prop(scene.splat_tracer, "samples")
+        else:
+            for heading, prefix, samples in (("Viewport", "preview_", "preview_samples"), ("Render", "", "samples")):
+                col = layout.column(heading=heading)
+                row = col.row(heading="Noise Threshold")
+                row.prop(cycles, f"use_{prefix}adaptive_sampling", text="")
+                sub = row.row()
+                sub.active = getattr(cycles, f"use_{prefix}adaptive_sampling")
+                sub.prop(cycles, f"{prefix}adaptive_threshold", text="")
+                col.prop(cycles, samples, text="Max Samples" if sub.active else "Samples")
+                sub = col.column()
+                sub.active = getattr(cycles, f"use_{prefix}adaptive_sampling")
+                sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
+                if not prefix:
+                    col.prop(cycles, "time_limit")
         col = layout.column()
-        col.prop(scene.splat_tracer, "samples")
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")
         sub = col.column()
         sub.active = scene.splat_tracer.sky_light == "AO"
         sub.prop(scene.splat_tracer, "ao_samples")
-        # The filter, seed and bounces are Cycles' own settings, read when the add-on is on;
-        # shown here because Cycles' panels hide for other engines.
-        cycles = getattr(scene, "cycles", None)
         col = layout.column()
         if cycles is not None:
             col.prop(cycles, "pixel_filter_type", text="Pixel Filter")
@@ -102,6 +118,11 @@ class SPLAT_TRACER_PT_light_paths(SplatTracerPanel, bpy.types.Panel):
         col.prop(cycles, "glossy_bounces", text="Glossy")
         col.prop(cycles, "transmission_bounces", text="Transmission")
         col.prop(cycles, "transparent_max_bounces", text="Transparent")
+        col = layout.column(heading="Clamping")
+        col.prop(cycles, "sample_clamp_direct", text="Direct Light")
+        col.prop(cycles, "sample_clamp_indirect", text="Indirect Light")
+        col = layout.column(heading="Caustics")
+        col.prop(cycles, "blur_glossy", text="Filter Glossy")
 
 
 class SPLAT_TRACER_PT_performance(SplatTracerPanel, bpy.types.Panel):
@@ -157,14 +178,18 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer, "use_pass_diffuse_color", text="Diffuse Color")
         col.prop(view_layer, "use_pass_emit", text="Emission")
         col.prop(view_layer, "use_pass_shadow", text="Shadow")
+        if hasattr(view_layer, "cycles"):
+            col.prop(view_layer.cycles, "use_pass_shadow_catcher", text="Shadow Catcher")
         col = layout.column(heading="Debug")
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
 
 
 class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
-    """Ray visibility and holdout, as Cycles reads them (its own panel hides for other engines)."""
+    """Mask (shadow catcher, holdout) and ray visibility, as Cycles reads them, inside
+    Blender's Object > Visibility panel (Cycles' own copy hides for other engines)."""
     bl_label = "Ray Visibility"
     bl_context = "object"
+    bl_parent_id = "OBJECT_PT_visibility"
 
     @classmethod
     def poll(cls, context):
@@ -175,11 +200,13 @@ class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         obj = context.object
+        col = layout.column(heading="Mask")
+        col.prop(obj, "is_shadow_catcher")
+        col.prop(obj, "is_holdout")
         col = layout.column(heading="Ray Visibility")
         for prop, text in (("visible_camera", "Camera"), ("visible_diffuse", "Diffuse"), ("visible_glossy", "Glossy"),
                            ("visible_transmission", "Transmission"), ("visible_shadow", "Shadow")):
             col.prop(obj, prop, text=text)
-        layout.prop(obj, "is_holdout")
         layout.prop(obj, "pass_index")
 
 
@@ -316,10 +343,31 @@ class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
         _draw_surface(self.layout, context.world, "OUTPUT_WORLD", "Surface")
 
 
+class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
+    """Cycles' world ray visibility (the Cycles add-on's property group), less Volume
+    Scatter: no volumes are rendered."""
+    bl_label = "Ray Visibility"
+    bl_context = "world"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None and hasattr(context.world, "cycles_visibility")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        visibility = context.world.cycles_visibility
+        col = layout.column()
+        for prop in ("camera", "diffuse", "glossy", "transmission"):
+            col.prop(visibility, prop)
+
+
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world, SPLAT_TRACER_PT_viewport_ab)
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
+           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
 # show for; the ones that show for the built-in BLENDER_RENDER also make sense here, and so

@@ -19,8 +19,8 @@ from . import session, viewport
 # Blender's own engines give it, or the compositor's Render Layers node shows it as a
 # different socket and links made for Cycles (an ID Mask on Object Index) are lost.
 _NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
-# Blender's passes this engine writes: (view-layer switch, the core's pass name, Blender's
-# pass name, channels, channel ids, type).
+# Blender's passes this engine writes: (view-layer switch -- dotted for an add-on's
+# property group -- the core's pass name, Blender's pass name, channels, channel ids, type).
 _PASSES = (
     ("use_pass_z", "Depth", "Depth", 1, "Z", "VALUE"),
     ("use_pass_normal", "Normal", "Normal", 3, "XYZ", "VECTOR"),
@@ -28,14 +28,24 @@ _PASSES = (
     ("use_pass_emit", "Emit", "Emission" if _NEW_PASS_NAMES else "Emit", 3, "RGB", "COLOR"),
     ("use_pass_shadow", "Shadow", "Shadow", 3, "RGB", "COLOR"),
     ("use_pass_object_index", "IndexOB", "Object Index" if _NEW_PASS_NAMES else "IndexOB", 1, "X", "VALUE"),
+    # Cycles' own switch (view_layer.cycles, the Cycles add-on's), name and channels.
+    ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )
 SPLAT_COUNT = "Splat Count"  # debug pass: the splats that formed each surface point
 _BLENDER_NAME = {core_name: blender_name for _, core_name, blender_name, *_ in _PASSES}
 
 
+def _switch(view_layer, prop: str) -> bool:
+    """A pass's switch on the view layer ('cycles.use_pass_...': off when the Cycles add-on,
+    which owns it, is not enabled)."""
+    owner, _, name = prop.rpartition(".")
+    group = getattr(view_layer, owner, None) if owner else view_layer
+    return bool(getattr(group, name, False))
+
+
 def wanted_passes(view_layer) -> tuple:
     """The core's names of the passes the view layer asks for."""
-    names = [name for prop, name, *_ in _PASSES if getattr(view_layer, prop)]
+    names = [name for prop, name, *_ in _PASSES if _switch(view_layer, prop)]
     if view_layer.splat_tracer.use_pass_splat_count:
         names.append(SPLAT_COUNT)
     return tuple(names)
@@ -57,7 +67,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for prop, _, name, channels, ids, kind in _PASSES:
-            if getattr(renderlayer, prop):
+            if _switch(renderlayer, prop):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
@@ -108,7 +118,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         s = frame.stats
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "
                               f"{s['reused']} geometries ({s['build_seconds']:.2f} s), rendered in "
-                              f"{s['render_seconds']:.2f} s")
+                              f"{s['render_seconds']:.2f} s" + (f"; {s['sampling']}" if s["sampling"] else ""))
 
     # -- the viewport's Rendered mode ---------------------------------------------------
     # view_update / view_draw run on Blender's main thread; the session renders on its own

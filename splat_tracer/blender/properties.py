@@ -196,11 +196,18 @@ class SplatTracerSceneSettings(_VisibilitySettings, bpy.types.PropertyGroup):
         name="AO Samples", default=1, min=1, soft_max=16, max=1024,
         description="Occlusion rays per diffuse point and camera sample, with Ambient Occlusion sky light",
     )
+    # Samples are Cycles' (scene.cycles.samples, preview_samples): one place for a setting both
+    # engines have. This was the engine's own before; kept so that an old file's value can be
+    # moved there when it loads (migrate_samples), and read only while the Cycles add-on is off.
     samples: bpy.props.IntProperty(
-        name="Samples",
-        description="Camera rays per pixel: anti-aliasing, and every soft shadow, glossy reflection and diffuse "
-                    "bounce shares them (more is smoother and slower)",
+        name="Samples (without Cycles)",
+        description="Camera rays per pixel when the Cycles add-on is off; otherwise Cycles' Samples are used "
+                    "(Sampling panel)",
         default=shading.RenderSettings.samples, min=1, soft_max=1024, max=_MAX_SAMPLES,
+    )
+    samples_in_cycles: bpy.props.BoolProperty(
+        name="Samples in Cycles", default=False, options={"HIDDEN"},
+        description="The samples are Cycles' settings: an older file's own samples were moved there",
     )
     shadow_samples: bpy.props.IntProperty(
         name="Shadow Samples",
@@ -231,6 +238,38 @@ class SplatTracerObjectSettings(bpy.types.PropertyGroup):
     )
 
 
+def migrate_samples(scene) -> bool:
+    """Moves a scene's samples from the engine's old setting into Cycles' (Samples and
+    Viewport Samples: the engine used one value for both), once, for a scene that used the
+    engine: it renders with it, or its samples were set. True when moved."""
+    props = scene.splat_tracer
+    if props.samples_in_cycles:
+        return False
+    cycles = getattr(scene, "cycles", None)
+    if cycles is None:
+        return False  # nowhere to move them to: the legacy value stays the one read
+    props.samples_in_cycles = True
+    if scene.render.engine != "SPLAT_TRACER" and not props.is_property_set("samples"):
+        return False
+    cycles.samples = cycles.preview_samples = int(props.samples)
+    return True
+
+
+@bpy.app.handlers.persistent
+def _on_load_post(*_args):
+    for scene in bpy.data.scenes:
+        migrate_samples(scene)
+
+
+@bpy.app.handlers.persistent
+def _on_save_pre(*_args):
+    # A scene made in this version keeps its samples in Cycles from the start: marked before
+    # it is saved, so that loading it again never takes it for an old file.
+    for scene in bpy.data.scenes:
+        if getattr(scene, "cycles", None) is not None:
+            scene.splat_tracer.samples_in_cycles = True
+
+
 classes = (SplatTracerABSlot, SplatTracerAB, SplatTracerSceneSettings, SplatTracerViewLayerSettings,
            SplatTracerObjectSettings)
 
@@ -241,9 +280,14 @@ def register():
     bpy.types.Scene.splat_tracer = bpy.props.PointerProperty(type=SplatTracerSceneSettings)
     bpy.types.ViewLayer.splat_tracer = bpy.props.PointerProperty(type=SplatTracerViewLayerSettings)
     bpy.types.Object.splat_tracer = bpy.props.PointerProperty(type=SplatTracerObjectSettings)
+    bpy.app.handlers.load_post.append(_on_load_post)
+    bpy.app.handlers.save_pre.append(_on_save_pre)
 
 
 def unregister():
+    for handlers, handler in ((bpy.app.handlers.load_post, _on_load_post), (bpy.app.handlers.save_pre, _on_save_pre)):
+        if handler in handlers:
+            handlers.remove(handler)
     del bpy.types.Object.splat_tracer
     del bpy.types.ViewLayer.splat_tracer
     del bpy.types.Scene.splat_tracer

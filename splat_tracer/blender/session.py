@@ -128,7 +128,24 @@ def lit_settings(scene, exported, settings: shading.RenderSettings, headlight: O
                         "(Splat Tracer > Lighting)")
     if headlight:
         settings = replace(settings, headlight=True)
+        if exported.render_scene.shadow_catchers:
+            report.once("the headlight casts no shadow: shadow catchers are left out of the image entirely")
     return settings, bool(headlight)
+
+
+def sampling_summary(settings: shading.RenderSettings, counters: dict, pixels: int) -> str:
+    """What the render report says of the samples: how many a pixel took on average when
+    adaptive sampling stopped pixels early (and the share saved), and where a time limit
+    cut; empty when every pixel took every sample."""
+    parts = []
+    taken, reached = counters.get("samples_taken", 0), counters.get("samples_reached", settings.samples)
+    if counters.get("time_limited"):
+        parts.append(f"time limit {settings.time_limit:g} s reached after {reached} of {settings.samples} samples")
+    if settings.adaptive and pixels and taken < settings.samples * pixels and not counters.get("time_limited"):
+        mean = taken / pixels
+        parts.append(f"adaptive sampling: {mean:.1f} samples per pixel on average, of {settings.samples} "
+                     f"({100.0 * (1.0 - mean / settings.samples):.0f} % saved)")
+    return "; ".join(parts)
 
 
 def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None, stats=None,
@@ -173,6 +190,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
                        view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
                        completed=result.completed,
+                       sampling=sampling_summary(settings, result.counters, w * h),
                        **result.counters)
     CACHE.end_frame(keep)
     HISTORY.append(frame_stats)

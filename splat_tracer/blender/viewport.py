@@ -440,7 +440,8 @@ class ViewportSession:
             self.exports, self.report, self._export_state = exports, report, export_state
         self._variants = variants
         first = self.exports[variants[0].radius_factor]
-        settings, _ = lit_settings(scene, first, export_shading.render_settings_of(scene), None, self.report)
+        settings, _ = lit_settings(scene, first, export_shading.render_settings_of(scene, viewport=True), None,
+                                    self.report)
         threads = int(scene.render.threads)
         states = {v.name: (v, settings, threads, id(self.exports[v.radius_factor].render_scene)) for v in variants}
         stale = [name for name, state in states.items() if exported_now or self._states.get(name) != state]

@@ -77,7 +77,6 @@ class PointCloud:
     # (N,3) float64: the scanner's position per point (E57 poses); one row broadcast to every
     # point (shared_row) when one sensor saw them all (a PCD's VIEWPOINT)
     scanners: Optional[np.ndarray] = None
-    orientation: str = "PROPAGATE"   # how to orient estimated normals: PROPAGATE, UP (aerial), SCANNER
     oriented: bool = True            # False: the normals' axes are right but their signs arbitrary
     dropped_rows: int = 0            # rows dropped for non-finite coordinates (text, LAS, E57)
     dropped_radii: int = 0           # rows dropped for a radius beyond MAX_RADIUS (a 3DGS scale of 88)
@@ -249,7 +248,7 @@ def make_cloud(path: str, positions: np.ndarray, normals=None, colours=None, rad
     """The checks and clean-up every reader shares: rows with non-finite coordinates dropped
     and counted (drop_non_finite; else the caller has refused them), normals made unit and
     rows with a zero or non-finite normal dropped and counted, exact duplicate positions
-    merged into their first row. `fields` are PointCloud's other fields (format, orientation,
+    merged into their first row. `fields` are PointCloud's other fields (format,
     oriented, notes). Raises CloudFileError naming `path` when nothing usable is left.
     The readers hand over arrays of their own, which are changed in place: float32 normals
     made unit, and the rows dropped compacted away in every per-point array (positions,

@@ -42,7 +42,9 @@ steps are 2.85e-3 z^2: 6 cm at 4.5 m, eight times the pixel spacing there) turn 
 into terraces and risers at the scale of a few samples, and a fit over 16 neighbours gives
 the terrace's normal (45 degrees off on a wall turned 35 degrees from the camera) or the
 riser's (a sliver, standing out of the wall). The terraces need neighbourhoods of 128 points
-and more (not done: measured in the commit that added fix_slivers); the slivers are mended:
+and more: where the depth is quantised (quantised_depth: one coordinate axis in few steps,
+shared by neighbours, coarse against the spacing), a point whose neighbourhood spans fewer than
+QUANT_SPAN steps takes a fit over a wider one (adaptive_normals). The slivers are mended:
 a point whose normal is more than SLIVER_ANGLE off the consensus of its GRAPH_K nearest (the
 dominant axis of their normals, sign-free), where those agree among themselves (the
 consensus explains at least SLIVER_COHERENCE of their spread: not a crease, where they
@@ -82,6 +84,12 @@ SAMPLE_SEED = 0  # the range-image test's and visibility's samples: the same clo
 # UP): an aerial scan's buildings, trees and cars are seen from above as its ground is.
 TERRAIN_COSINE = 0.7
 TERRAIN_SHARE = 0.5
+# And the cloud is flat: its relief (the 1st to 99th percentile of its heights) at most this
+# share of its wider horizontal side. Terrains are wide for their relief (autzen's airborne
+# tile: 0.08; a mountain tile of 1 km rises a few hundred metres); a single view of an object
+# from above is about as deep as it is wide (the Stanford bunny's range scans: 0.62 and 0.75,
+# and two of them registered faced inwards on 2 % of the points under the upward rule).
+TERRAIN_RELIEF = 0.5
 # The range-image test (range_image). Its sample: percentiles of a share of 1e5 points are
 # within about 0.1 % of the true ones, far below the margins of the thresholds below.
 VIEW_SAMPLE = 100_000
@@ -91,9 +99,12 @@ VIEW_MIN_POINTS = 100    # fewer: no test (nothing to bin)
 # degrees); a terrain seen from a file origin at sea level, far below or beside it, is
 # seen almost edge-on.
 VIEW_FACING = 0.5
-VIEW_COVER_CELL = 2.0 / 16  # the coverage's cube map: 16 x 16 cells per face
-VIEW_COVER_POINTS = 8     # sample points a coverage cell holds on a closed surface, at least
-VIEW_COVERAGE = 0.9      # a closed surface around the viewpoint covers every direction
+# The lines of sight's cone (half-angle, degrees) holding all but VIEW_CONE_PERCENTILE % of
+# the sample: wider than any depth or stereo camera's field of view (a Kinect's diagonal half-
+# angle is 35, wide-angle stereo about 60) and narrower than a half space, which an object
+# around its origin always exceeds. The percentile lets a few stray returns lie outside.
+VIEW_CONE = 80.0
+VIEW_CONE_PERCENTILE = 1.0
 VIEW_CELL = 1.0          # angular cells one sample spacing (k-th neighbour) wide: a few points each
 VIEW_MAX_SLOPE = 10.0    # the depth spread of a cell seen at more than 84 degrees is bounded
 VIEW_DEPTH = 3.0         # sample spacings of noise (depth quantisation) within one layer
@@ -125,6 +136,34 @@ SLIVER_ANGLE = 30.0     # degrees: the issue's measure of a sliver standing out 
 # (3 passes: 3.25 %), fandisk +0.13 degrees.
 SLIVER_COHERENCE = 0.6
 SLIVER_PASSES = 2
+# Depth quantisation (quantised_depth, adaptive_normals). The detector looks at QUANT_SAMPLE
+# points and their GRAPH_K nearest. A coordinate axis is quantised when at least QUANT_EQUAL
+# of the sample have a neighbour at exactly their coordinate on it, the cloud takes at least
+# QUANT_MIN_LEVELS distinct values on it (a staircase needs steps: one plane at z = 0 is
+# none), and the median gap between a sample point's value and the next is at least
+# QUANT_RATIO times its distance to its nearest neighbour (then a fit over DEFAULT_K
+# neighbours, about 4.5 spacings across, spans fewer than 3 levels on a surface turned 10
+# degrees from the axis, and its normal can be off by that much). Measured (equal share,
+# ratio): the depth z of PCL's Kinect and stereo frames 91-100 %, 0.61-6.5; their x and y
+# 32-95 %, at most 0.015; airborne LAS (1 cm steps) z 39 %, 0.02; the E57 at most 6 %,
+# 0.007; bun000's scan lines (x, a lateral grid: points on the surface, not moved) 6 %,
+# 0.48, and its y and z (ASCII decimals) 27-29 %, 0.004. Exactly one axis must be quantised
+# (a depth sensor's; a lattice is quantised along all three).
+QUANT_SAMPLE = 20_000
+QUANT_EQUAL = 0.5
+QUANT_MIN_LEVELS = 10
+QUANT_RATIO = 0.25
+# Adaptive neighbourhoods (adaptive_normals): a point keeps its DEFAULT_K fit when its
+# neighbourhood spans at least QUANT_SPAN local depth steps (4 levels: two terraces and the
+# risers between them, whose mean slope is the surface's); else the fit of the nearest point
+# of a random subsample of 1/2, 1/4, ... 1/QUANT_MAX_FRACTION of the cloud over its own
+# DEFAULT_K nearest in the subsample (the same number of points over a disc twice, four
+# times ... as large: 32 to 1024 neighbours' reach at the cost of 16), the first that spans
+# as many steps. Measured on tests/support/frames.kinect_frame (noise 0.3 steps, walls at
+# 2-5 m): mean error 54.7 degrees at 16 neighbours; spans of 2 steps 11.1, 3 steps 6.1;
+# fraction up to 1/64 (a wall turned 35 degrees at 5 m spans 3 steps over about 40 pixels).
+QUANT_SPAN = 3.0
+QUANT_MAX_FRACTION = 64
 _CHUNK = 1 << 15
 
 
@@ -137,6 +176,8 @@ class Orientation:
     by_rule: int = 0         # points whose sign a rule decided (the others took theirs by propagation)
     evidence: str = ""       # why AUTO chose its rule, for the import notes (empty: not AUTO)
     slivers: int = 0         # normals replaced by their neighbours' consensus (fix_slivers)
+    quantised: str = ""      # the depth quantisation found (quantised_depth), in words; "": none
+    adaptive: dict = None    # neighbourhood reach (points) -> how many normals were fitted over it
 
 
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
@@ -196,18 +237,109 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
             if close_gaps and 2 <= spacing_mod.COVER_K <= k:
                 cover = (spacing_mod.COVER_K, np.empty(n, np.float32))
     slivers = 0
+    quantised, adaptive = "", None
     if estimating:
         axes = estimate(pts, k, workers, tree, progress=scaled(progress, 0.0, share), graph=graph, spacing=spacing,
                         cover=cover)
         if graph is not None:
+            axis, levels, quantised = quantised_depth(pts, graph)
+            if axis >= 0:
+                adaptive = adaptive_normals(pts, axes, tree, axis, levels, k)
             fixed = fix_slivers(axes, graph)
             for _ in range(SLIVER_PASSES - 1):
                 fixed |= fix_slivers(axes, graph)
             slivers = int(fixed.sum())
     result = orient(pts, axes, mode, scanners, workers=workers, tree=tree, progress=scaled(progress, share, 1.0),
                     graph=graph, viewpoint=viewpoint)
-    result.slivers = slivers
+    result.slivers, result.quantised, result.adaptive = slivers, quantised, adaptive
     return result, None if spacing is None else spacing[1], None if cover is None else cover[1]
+
+
+def quantised_depth(points: np.ndarray, graph: np.ndarray) -> tuple[int, np.ndarray, str]:
+    """(axis, levels, evidence): the coordinate axis along which the depth is quantised (see
+    QUANT_*; -1: none), the cloud's distinct values along it (sorted; empty when none) and
+    the finding in words. graph: (N, 1 + m) the point, then its m nearest."""
+    pts = np.asarray(points)
+    n = len(pts)
+    found = (-1, np.zeros(0), "")
+    if n < QUANT_MIN_LEVELS or graph.shape[1] < 2:
+        return found
+    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, QUANT_SAMPLE)))
+    nbr = graph[idx, 1:]
+    gap = np.linalg.norm(pts[idx] - pts[nbr[:, 0]], axis=1)
+    quantised = []
+    for axis in range(3):
+        depth = pts[:, axis]
+        equal = float((depth[nbr] == depth[idx, None]).any(axis=1).mean())
+        if equal < QUANT_EQUAL:  # no sort of the cloud's coordinates then
+            continue
+        levels = np.unique(depth)
+        if len(levels) < QUANT_MIN_LEVELS:
+            continue
+        step = local_steps(levels, depth[idx])
+        ratio = float(np.median(np.where(np.isfinite(step) & (gap > 0), step / np.maximum(gap, 1e-300), 0.0)))
+        if ratio >= QUANT_RATIO:
+            quantised.append((axis, levels, f"{'xyz'[axis]} takes {len(levels):,} distinct values, {equal:.0%} of a "
+                                            f"sample's points share theirs with a neighbour, steps a median {ratio:.2g} "
+                                            "point spacings"))
+    # One axis: a sensor's depth. Several: a lattice (voxel centres, a grid), whose faces
+    # along the axes are one level each: no staircase to span, and the search for more
+    # levels would spread their fits over the edges.
+    return quantised[0] if len(quantised) == 1 else found
+
+
+def local_steps(levels: np.ndarray, depth: np.ndarray) -> np.ndarray:
+    """Each depth's distance to the nearest other of the sorted distinct `levels` (it is one
+    of them): the quantisation step there (inf with a single level)."""
+    gaps = np.diff(levels)
+    i = np.searchsorted(levels, depth)
+    return np.minimum(np.r_[gaps, np.inf][i], np.r_[np.inf, gaps][i])
+
+
+def _spans(depth: np.ndarray, rows: np.ndarray, ids: np.ndarray, need: np.ndarray) -> np.ndarray:
+    """(len(rows),) bool: the depths of each row and its neighbours `ids` span at least the
+    row's `need` (depth and need: per point)."""
+    d = depth[ids]
+    own = depth[rows]
+    return np.maximum(d.max(axis=1), own) - np.minimum(d.min(axis=1), own) >= need[rows]
+
+
+def adaptive_normals(points: np.ndarray, normals: np.ndarray, tree, axis: int, levels: np.ndarray, k: int) -> dict:
+    """Refits, in place, the (N,3) `normals` (PCA over the k nearest, by `tree`) of the points
+    whose neighbourhood spans fewer than QUANT_SPAN depth steps along `axis` over wider
+    neighbourhoods of subsamples (see QUANT_SPAN); returns {reach: count} (reach: the points
+    of the full cloud a fit's neighbourhood spans, k for the points kept)."""
+    pts = np.asarray(points)
+    n = len(pts)
+    depth = np.ascontiguousarray(pts[:, axis])
+    # Slightly less than the span asked, so that float rounding of equal steps cannot miss it.
+    need = QUANT_SPAN * local_steps(levels, depth) * (1 - 1e-9)
+    order = tree.order
+    short = np.zeros(n, bool)
+    for start in range(0, n, _CHUNK):
+        rows = order[start:start + _CHUNK]
+        short[rows] = ~_spans(depth, rows, tree.knn(rows, k)[1], need)
+    counts = {k: int(n - short.sum())}
+    rest = np.flatnonzero(short)
+    key = np.random.default_rng(SAMPLE_SEED).random(n)
+    fraction = 2
+    while len(rest) and fraction <= QUANT_MAX_FRACTION:
+        sub = np.flatnonzero(key < 1.0 / fraction)  # nested: each subsample holds the next
+        if len(sub) <= k:
+            break
+        index = PointIndex(pts[sub], tree.threads)
+        fits, spans = np.empty((len(sub), 3)), np.empty(len(sub), bool)
+        for start in range(0, len(sub), _CHUNK):
+            rows = index.order[start:start + _CHUNK]
+            fits[rows], graph, _, _ = index.pca(rows, k, k + 1)
+            spans[rows] = _spans(depth[sub], rows, graph[:, 1:], need[sub])
+        nearest = index.knn_at(pts[rest], 1)[1][:, 0]
+        take = spans[nearest] if fraction < QUANT_MAX_FRACTION else np.ones(len(rest), bool)
+        normals[rest[take]] = fits[nearest[take]]
+        counts[k * fraction] = int(take.sum())
+        rest = rest[~take]
+        fraction *= 2
+    return {reach: c for reach, c in counts.items() if c}
 
 
 def fix_slivers(normals: np.ndarray, graph: np.ndarray) -> np.ndarray:
@@ -343,7 +475,9 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         terrain[seeded[open_sheet]] = True
         length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
         terrain &= (np.abs(sums[:, 2]) >= TERRAIN_COSINE * length) & (decided == 0)
-        share = counts[terrain].sum() / n
+        lo, hi = np.percentile(p[sample], (1.0, 99.0), axis=0)
+        level = hi[2] - lo[2] <= TERRAIN_RELIEF * max(hi[0] - lo[0], hi[1] - lo[1])
+        share = counts[terrain].sum() / n if level else 0.0
         if share >= TERRAIN_SHARE:  # a terrain's bulk: every point with a clear up takes it (as UP)
             mode = "UP"
             evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or down "
@@ -473,11 +607,11 @@ def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
 
 def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     """(whether the cloud is one range image seen from `viewpoint`, the evidence in words).
-    A depth-camera or stereo frame, or one terrestrial scan, in its sensor's frame: almost
-    every point is the first surface along its line of sight from there (one layer per
-    direction), seen at angles a sensor measures (not grazing on the whole), and the
-    directions do not cover the whole sphere (a closed object around its own origin, the
-    usual export of a modelled or scanned object, is one layer per direction from there too).
+    A depth-camera or stereo frame in its sensor's frame: almost every point is the first
+    surface along its line of sight from there (one layer per direction), seen at angles a
+    sensor measures (not grazing on the whole), and the lines of sight fit in a cone of at
+    most VIEW_CONE degrees around their mean (a camera's field of view; an object around its
+    own origin spreads over more than a hemisphere).
     Decided on a sample of the points (VIEW_SAMPLE) with the spacing of the sample."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
@@ -493,13 +627,15 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     facing = float(np.median(cos))
     if facing < VIEW_FACING:
         return False, ""
-    # Cells no finer than a full sphere's share of the sample can fill: a sparse sample of
-    # a closed surface leaves empty cells between its points and would pass for a view.
-    per_face = max(1, min(int(2.0 / VIEW_COVER_CELL), int(np.sqrt(len(u) / (6 * VIEW_COVER_POINTS)))))
-    cells, solid = _cube_cells(u, 2.0 / per_face)
-    keys, first = np.unique(cells, return_index=True)
-    coverage = float(solid[first].sum() / (4 * np.pi))
-    if coverage >= VIEW_COVERAGE:
+    # A sensor sees its scene from outside: the lines of sight fit in a cone narrower than a
+    # half space. An object centred on its own origin (the usual export of a scanned or
+    # modelled object) is one layer per direction from there too, and its directions spread
+    # over more than a hemisphere, even with its bottom missing: oriented towards the origin
+    # it would face inwards.
+    axis = u.sum(axis=0)
+    axis /= max(float(np.linalg.norm(axis)), 1e-300)
+    cone = float(np.degrees(np.arccos(np.clip(np.percentile(u @ axis, VIEW_CONE_PERCENTILE), -1.0, 1.0))))
+    if not cone <= VIEW_CONE:
         return False, ""
     # The sample's spacing (its points are sqrt(n / sample) times farther apart than the
     # cloud's), and angular cells a few such spacings wide as seen from the viewpoint.
@@ -522,7 +658,7 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
         return False, ""
     return True, (f"a range image seen from the file's origin: {share:.1%} of a sample of {len(idx):,} points are "
                   f"the first surface along their line of sight, median angle of view "
-                  f"{np.degrees(np.arccos(facing)):.0f} deg, {coverage:.0%} of the directions")
+                  f"{np.degrees(np.arccos(facing)):.0f} deg, lines of sight within {cone:.0f} deg of their mean")
 
 
 def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np.ndarray, str]:

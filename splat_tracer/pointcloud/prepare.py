@@ -24,6 +24,7 @@ closed guess and get a disc millions of metres wide.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Optional
 
 import numpy as np
 
@@ -97,6 +98,8 @@ class PreparedCloud:
     ambiguous: int = 0                 # points whose orientation was ambiguous
     normal_k: int = 0
     slivers: int = 0                   # estimated normals replaced by their neighbours' consensus (normals.fix_slivers)
+    quantised: str = ""                # the depth quantisation found (normals.quantised_depth), in words
+    adaptive: Optional[dict] = None    # neighbourhood reach -> normals fitted over it (normals.adaptive_normals)
     statistical_outliers: int = 0      # points left out by statistical outlier removal
     statistical_ratio: float = 0.0
     lost_precision: int = 0            # points float32 rounding moved by more than PRECISION_FRACTION x their radius
@@ -120,6 +123,11 @@ class PreparedCloud:
                 notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
             else:
                 notes.append(f"the file's normal axes have no sign ({c.format}): {how}")
+        if self.adaptive:
+            sizes = ", ".join(f"{count:,} over {reach:,}" for reach, count in sorted(self.adaptive.items()))
+            notes.append(f"depth quantisation found ({self.quantised}): normals fitted over neighbourhoods wide "
+                         f"enough to span {normals_mod.QUANT_SPAN:g} depth steps (points over neighbours' reach: "
+                         f"{sizes})")
         if self.slivers:
             notes.append(f"{self.slivers:,} estimated normals were more than {normals_mod.SLIVER_ANGLE:g} degrees off "
                          "their neighbours' (slivers from noise): given their neighbours' consensus normal")
@@ -298,7 +306,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
     cloud = replace(cloud, positions=None)
     estimated, oriented_by, ambiguous, tree = cloud.normals is None, "", 0, None
     evidence, by_rule = "", 0.0
-    slivers = 0
+    slivers, quantised, adaptive = 0, "", None
     known_spacing = known_cover = None
     if needs_normals:
         step("estimate")(0.0, "neighbour tree")
@@ -317,7 +325,7 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
         ambiguous = int(result.ambiguous.sum())
         # (a share: the notes are written after the importer has let go of the arrays)
         oriented_by, evidence, by_rule = result.mode, result.evidence, result.by_rule / len(result.normals)
-        slivers = result.slivers
+        slivers, quantised, adaptive = result.slivers, result.quantised, result.adaptive
     whole = bool(bulk.all())  # no copies of a 10M-point cloud (nor an index of it) when nothing is left out
     inliers = None if whole else np.flatnonzero(bulk)
     radii_tree = tree if whole else None  # the normals' k-d tree when it is the bulk's
@@ -334,7 +342,8 @@ def prepare(cloud: PointCloud, path: str, k: int = spacing.DEFAULT_K, drop_outli
                              outliers > 0 and drop_outliers, normals_estimated=estimated, normals_oriented=oriented_by,
                              orientation_evidence=evidence, oriented_by_rule=by_rule, ambiguous=ambiguous,
                              normal_k=normal_k if estimated else 0, statistical_outliers=statistical,
-                             statistical_ratio=statistical_ratio, slivers=slivers)
+                             statistical_ratio=statistical_ratio, slivers=slivers, quantised=quantised,
+                             adaptive=adaptive)
     if cloud.radii is None:
         base = hood.covering if hood.covering is not None else hood.spacing
         radii = base  # the bulk is every point (no 10M-point copy); else the strays get theirs below

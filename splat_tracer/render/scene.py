@@ -68,7 +68,9 @@ class Instance:
     matrix: 4x4 object-to-local transform (any affine: scale, shear, mirror). materials: the
     object's slots (a cloud uses the first). visibility: ray kinds that see it (keys of
     RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
-    pass_index: the Object Index pass value."""
+    pass_index: the Object Index pass value. shadow_catcher: it receives the other
+    instances' shadows and reflections but is left out of Combined (Cycles' shadow catcher;
+    see RenderScene.render)."""
 
     geometry: object
     matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -76,12 +78,15 @@ class Instance:
     visibility: frozenset = frozenset(RAY_VISIBILITY)
     holdout: bool = False
     pass_index: int = 0
+    shadow_catcher: bool = False
 
 
 class FrameResult(NamedTuple):
     passes: dict      # pass name -> (h, w[, c]) float32 array, top row first
     completed: bool   # False when progress() asked to stop
-    counters: dict    # rays traced by kind, and the queries' work
+    counters: dict    # rays traced by kind, and the queries' work; samples_reached (the most any pixel
+                      # took: below the samples when the time limit cut), samples_taken (over all
+                      # pixels), time_limited
 
 
 class RenderScene:
@@ -126,7 +131,8 @@ class RenderScene:
                 if not isinstance(mat, Material):
                     raise TypeError(f"instance materials must be shading.Material objects, got {type(mat).__name__}")
             rows.append((index_of[id(native)], m[:3].ravel(), inv[:3].ravel(), (len(materials), len(mats)),
-                         sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index))
+                         sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index,
+                         inst.shadow_catcher))
             materials.extend(mats)
         n = len(rows)
         col = lambda k, dtype: np.array([r[k] for r in rows], dtype).reshape((n,) + np.shape(rows[0][k]) if n else (0,))
@@ -143,8 +149,11 @@ class RenderScene:
             np.ascontiguousarray(col(6, np.float32)),
             np.ascontiguousarray(np.array([m.pack() for m in materials], np.float32).reshape(-1, len(MATERIAL_FIELDS))),
             np.ascontiguousarray(np.array([l.pack() for l in lights], np.float32).reshape(-1, len(LIGHT_FIELDS))),
-            threads)
+            threads,
+            # Only a scene with a catcher passes the column: one without is the core's as before.
+            shadow_catcher=np.ascontiguousarray(col(7, np.uint8)) if any(r[7] for r in rows) else None)
         self.geometry_count = len(geometries)
+        self.shadow_catchers = sum(bool(r[7]) for r in rows)  # instances that are shadow catchers
 
     def mesh_lights(self) -> list:
         """The emissive mesh triangles sampled as lights, as (instance index, triangle index,
@@ -161,7 +170,14 @@ class RenderScene:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
-        ray; the same image)."""
+        ray; the same image).
+
+        With shadow-catcher instances, Combined is formed as Cycles forms it: the catcher is
+        left out, and its shadow (its light with everything / its light with catchers only)
+        becomes alpha on a transparent film (1 - the shadow's average, so that Alpha Over
+        onto a photograph darkens it), or darkens the world behind it on an opaque film. With
+        the "Shadow Catcher" pass asked for, Combined leaves the shadow out entirely (the
+        catcher is a hole) and the pass holds it, to multiply the photograph by."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -177,11 +193,12 @@ class RenderScene:
             c = PASSES[name]
             buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
         key = {"Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit", "Shadow": "shadow",
-               "IndexOB": "index", "Splat Count": "splat_count"}
+               "IndexOB": "index", "Splat Count": "splat_count", "Shadow Catcher": "shadow_catcher"}
         optional = {key[name]: buf for name, buf in buffers.items() if name != "Combined"}
         done, counters = self._scene.render(
             *camera.native(), int(width), int(height),
             (int(x0), int(y0), int(w), int(h)), settings.pack(), method, self.world.radiance(),
             bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
-            tile_size=tile_size, packets=packets, lens=camera.lens.native() if camera.lens else None, **optional)
+            tile_size=tile_size, packets=packets, lens=camera.lens.native() if camera.lens else None,
+            world_visibility=sum(RAY_VISIBILITY[k] for k in self.world.visibility), **optional)
         return FrameResult(buffers, bool(done), counters)

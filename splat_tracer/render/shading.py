@@ -186,15 +186,26 @@ class Light:
 # --------------------------------------------------------------------------------------
 # World and render settings.
 
+WORLD_RAYS = ("camera", "diffuse", "glossy", "transmission")  # ray kinds the world may be hidden from
+
+
 @dataclass(frozen=True)
 class World:
     """The background: a uniform radiance (colour x strength) seen by rays that leave the
     scene, which also lights it (through diffuse bounces). `transparent`: camera rays that
-    miss get alpha 0 (Film > Transparent)."""
+    miss get alpha 0 (Film > Transparent). `visibility`: the ray kinds that see it (World >
+    Ray Visibility: 'camera', 'diffuse', 'glossy', 'transmission'); a kind left out meets
+    black instead -- camera rays on an opaque film keep alpha 1, as in Cycles."""
 
     colour: Sequence[float] = (0.05, 0.05, 0.05)
     strength: float = 1.0
     transparent: bool = False
+    visibility: frozenset = frozenset(WORLD_RAYS)
+
+    def __post_init__(self):
+        unknown = set(self.visibility) - set(WORLD_RAYS)
+        if unknown:
+            raise ValueError(f"unknown world ray visibility {sorted(unknown)}; use {list(WORLD_RAYS)}")
 
     def radiance(self) -> tuple:
         return tuple(float(c) * float(self.strength) for c in self.colour)
@@ -223,6 +234,22 @@ class RenderSettings:
         "MIS" (shadow rays aimed at them and the rays that meet them, weighed by multiple
         importance sampling, as Cycles), "LIGHT" (shadow rays only) or "BSDF" (the rays that
         meet them only). The last two are for verifying the first; all three converge alike.
+
+    Noise control, Cycles' settings with Cycles' meaning (0 turns each off):
+    clamp_direct / clamp_indirect: Cycles' Clamp Direct / Indirect. A sample's contribution
+        (the light a path brings, times the path's weight) whose R + G + B exceeds 3x the
+        clamp is scaled down to it. Direct: light reaching the first surface the camera
+        sees (its lamps sampled there, or emission and world found by its bounce ray) and
+        what the camera sees itself; indirect: everything deeper.
+    filter_glossy: Cycles' Filter Glossy. After a bounce into a direction of pdf p (the
+        smallest so far), glossy lobes get at least the roughness (alpha) sqrt(1 - p / filter_glossy) / 2.
+    adaptive: Cycles' adaptive sampling. A pixel stops sampling once its noise estimate
+        (the difference between the estimate of all its samples and of half of them) is
+        below the noise threshold; `adaptive_parameters` gives the values used.
+    adaptive_threshold: Cycles' Noise Threshold; 0: automatic (from the samples).
+    adaptive_min_samples: Cycles' Min Samples; 0: automatic (from the threshold).
+    time_limit: Cycles' Time Limit in seconds: sampling stops once it has taken that long
+        (the samples reached are in FrameResult.counters).
     """
 
     samples: int = 16
@@ -238,6 +265,13 @@ class RenderSettings:
     headlight: bool = False
     sky_ao: bool = False
     ao_samples: int = 1
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 0.0
+    filter_glossy: float = 0.0
+    adaptive: bool = False
+    adaptive_threshold: float = 0.0
+    adaptive_min_samples: int = 0
+    time_limit: float = 0.0
     mesh_light_strategy: str = "MIS"
 
     def __post_init__(self):
@@ -258,12 +292,35 @@ class RenderSettings:
                      "transparent_bounces"):
             if not 0 <= getattr(self, name) <= 1024:
                 raise ValueError(f"{name} must be in 0..1024")
+        for name in ("clamp_direct", "clamp_indirect", "filter_glossy", "adaptive_threshold", "time_limit"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be finite and >= 0, got {value!r}")
+        if not 0 <= self.adaptive_min_samples <= 1 << 16:
+            raise ValueError(f"adaptive_min_samples must be in 0..65536, got {self.adaptive_min_samples!r}")
+
+    def adaptive_parameters(self) -> tuple[float, int]:
+        """(threshold, min_samples) that adaptive sampling uses, as Cycles'
+        Integrator::get_adaptive_sampling derives them: a threshold of 0 is
+        max(0.001, 1 / samples); min samples of 0 is max(4, ceil(16 / threshold^0.3)), else
+        at least 4; then the threshold is multiplied by 5 (Cycles' "arbitrary factor" that
+        keeps its values like those of its former error measure)."""
+        threshold = self.adaptive_threshold if self.adaptive_threshold > 0 else max(0.001, 1.0 / self.samples)
+        if self.adaptive_min_samples == 0:
+            # Cycles computes this in float32: ceilf(16.0f / powf(threshold, 0.3f)).
+            t = np.float32(threshold)
+            min_samples = max(4, int(np.ceil(np.float32(16.0) / np.power(t, np.float32(0.3)))))
+        else:
+            min_samples = max(4, self.adaptive_min_samples)
+        return float(np.float32(threshold) * np.float32(5.0)), min_samples
 
     def pack(self) -> tuple:
         return (self.samples, PIXEL_FILTERS.index(self.pixel_filter), float(self.filter_width), self.shadow_samples,
                 self.max_bounces, self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces,
                 self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight), bool(self.sky_ao),
-                self.ao_samples, MESH_LIGHT_STRATEGIES.index(self.mesh_light_strategy))
+                self.ao_samples, float(self.clamp_direct), float(self.clamp_indirect), float(self.filter_glossy),
+                bool(self.adaptive), *(self.adaptive_parameters() if self.adaptive else (0.0, 0)),
+                float(self.time_limit), MESH_LIGHT_STRATEGIES.index(self.mesh_light_strategy))
 
 
 # Passes the core can write, by the name Blender shows, with their channel count.
@@ -276,6 +333,7 @@ PASSES = {
     "Shadow": 3,       # lamps' direct light received / unshadowed (1: fully lit or no lamp; not mesh lights)
     "IndexOB": 1,      # the object's pass index, pixel-centre sample
     "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
+    "Shadow Catcher": 3,  # Cycles': what the background is multiplied by (1: no shadow); see RenderScene.render
 }
 
 

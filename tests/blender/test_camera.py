@@ -32,7 +32,7 @@ def _scene(bpy, scene, kind="PERSP", shift=(0.0, 0.0)):
     add_camera(bpy, scene, (0.5, -6.0, 3.5), (math.radians(60), 0, math.radians(4)), type=kind, lens=35,
                ortho_scale=7.0, shift_x=shift[0], shift_y=shift[1])
     scene.render.resolution_x, scene.render.resolution_y = W, H
-    scene.splat_tracer.samples = 1
+    scene.cycles.samples = scene.cycles.preview_samples = 1
     scene.render.film_transparent = True  # alpha: what the camera sees
     scene.view_layers[0].use_pass_z = True
     return scene.camera

@@ -55,7 +55,6 @@ def _setup(bpy, scene, depth: float, fstop=None, focus=2.0, kind="PERSP", **came
     dof.use_dof = fstop is not None
     dof.aperture_fstop = fstop or 2.8
     dof.focus_distance = focus
-    scene.splat_tracer.samples = SAMPLES
     scene.cycles.samples, scene.cycles.device = SAMPLES, "CPU"
     scene.cycles.use_denoising = False
     scene.cycles.use_adaptive_sampling = False

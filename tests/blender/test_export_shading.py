@@ -353,8 +353,8 @@ def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, rep
 def test_render_settings_from_the_scene_and_cycles(blender, empty_scene, es):
     scene = empty_scene
     s = es.render_settings_of(scene)
-    assert (s.samples, s.shadow_samples) == (16, 1)
-    scene.splat_tracer.samples, scene.splat_tracer.shadow_samples = 64, 4
+    assert (s.samples, s.shadow_samples) == (scene.cycles.samples, 1)  # Cycles' Samples
+    scene.cycles.samples, scene.splat_tracer.shadow_samples = 64, 4
     scene.render.filter_size = 2.0
     cycles = scene.cycles
     cycles.pixel_filter_type = "GAUSSIAN"
@@ -390,7 +390,8 @@ def test_visibility_flags_and_holdout(blender, empty_scene, es):
         assert es.object_visibility(obj, view_layer) == from_eval
         return from_eval
 
-    assert flags() == dict(camera=True, diffuse=True, glossy=False, transmission=True, shadow=False, holdout=False)
+    assert flags() == dict(camera=True, diffuse=True, glossy=False, transmission=True, shadow=False, holdout=False,
+                           shadow_catcher=False)
     view_layer.layer_collection.children["Held"].holdout = True
     assert flags()["holdout"]
     view_layer.layer_collection.children["Held"].holdout = False

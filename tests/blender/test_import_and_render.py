@@ -398,7 +398,7 @@ scene = bpy.context.scene
 add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
 scene.render.engine = "SPLAT_TRACER"
 scene.render.resolution_x, scene.render.resolution_y = 320, 240
-scene.splat_tracer.samples = 64
+scene.cycles.samples = 64
 session = extension_module("blender.session")
 real = session.render_frame
 def stopping(depsgraph, method, passes=("Combined",), progress=None, **kw):
@@ -482,7 +482,7 @@ def test_points_own_alpha_renders_through_the_importer_material(blender, empty_s
     add_camera(bpy, scene, (0.0, -6.0, 0.0), (math.radians(90), 0.0, 0.0))
     scene.render.film_transparent = True
     scene.splat_tracer.lighting = "HEADLIGHT"
-    scene.splat_tracer.samples = 64
+    scene.cycles.samples = 64
     out = render_to_exr(bpy, scene, tmp_path / "veil.exr", 64, 48, passes=False)
     centre = out["rgba"][18:30, 26:38]
     # Front and back of the sphere: each a quarter opaque, so 1 - 0.75^2 of the camera samples stop.

@@ -137,7 +137,7 @@ def cube_in_blender(blender, empty_scene, tmp_path):
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 320, 240, 100
     # One sample per pixel, at its centre: these tests compare coverage with the analytic
     # cube pixel by pixel (anti-aliasing spreads an edge over the filter's 1.5 px).
-    scene.splat_tracer.samples = 1
+    scene.cycles.samples = 1
     origins, dirs, _ = blender_camera_rays(np.array(cam.matrix_world), 320, 240)
     t, _ = ray_box(origins, dirs)
     return scene, radii, origins, dirs, t

@@ -74,7 +74,6 @@ def build(bpy):
     scene.view_settings.view_transform = "Standard"
     scene.render.filter_size = c.filter_width = 0.01
     c.device, c.samples, c.use_denoising, c.use_adaptive_sampling = "CPU", 32, False, False
-    scene.splat_tracer.samples = 4
     return scene, cloud, twin
 
 
@@ -124,9 +123,11 @@ def test_an_open_scan_seen_from_behind_renders_as_cycles_renders_a_back_face(ble
     scene, cloud, twin = build(bpy)
     twin.hide_render = True
     scene.render.engine = "SPLAT_TRACER"
+    scene.cycles.samples = 4  # Cycles' setting, read by both engines
     ours = render_to_exr(bpy, scene, tmp_path / "ours.exr", W, H)
     twin.hide_render, cloud.hide_render = False, True
     scene.render.engine = "CYCLES"
+    scene.cycles.samples = 32
     cycles = render_to_exr(bpy, scene, tmp_path / "cycles.exr", W, H)
     twin.data.materials[0] = diffuse(bpy, one_sided=True)
     wrong = render_to_exr(bpy, scene, tmp_path / "one_sided.exr", W, H)

@@ -229,10 +229,11 @@ def lamp_scene_renders(bpy, kind, folder: Path) -> dict:
     scene.render.filter_size = scene.cycles.filter_width = 0.01  # pixel-centre samples in both
     scene.cycles.device, scene.cycles.samples = "CPU", CYCLES_SAMPLES
     scene.cycles.use_denoising = scene.cycles.use_adaptive_sampling = False
-    scene.splat_tracer.samples, scene.splat_tracer.shadow_samples = OURS_SAMPLES, 4
+    scene.splat_tracer.shadow_samples = 4
     scene.view_layers[0].use_pass_object_index = True
     out = {}
     scene.render.engine = "SPLAT_TRACER"
+    scene.cycles.samples = OURS_SAMPLES  # the samples are Cycles' setting, read by both
     twin.hide_render = True
     out["ours"] = render(bpy, scene, folder / f"{kind.lower()}_ours.exr")["ViewLayer"]
     out["ours_stats"] = stats()
@@ -240,6 +241,7 @@ def lamp_scene_renders(bpy, kind, folder: Path) -> dict:
     out["unshadowed"] = render(bpy, scene, folder / f"{kind.lower()}_unshadowed.exr")["ViewLayer"]
     cloud.visible_shadow = sphere.visible_shadow = True
     scene.render.engine = "CYCLES"
+    scene.cycles.samples = CYCLES_SAMPLES
     twin.hide_render, cloud.hide_render = False, True
     t0 = time.perf_counter()
     out["cycles"] = render(bpy, scene, folder / f"{kind.lower()}_cycles.exr")["ViewLayer"]
@@ -486,7 +488,7 @@ def small_scene(bpy, scene):
     scene.frame_start, scene.frame_end = 1, 2
     scene.frame_set(1)
     scene.render.resolution_x, scene.render.resolution_y = 80, 60
-    scene.splat_tracer.samples = 2
+    scene.cycles.samples = 2
 
 
 def test_an_animation_where_only_the_camera_moves_builds_its_geometry_once(blender, empty_scene, tmp_path):
@@ -660,7 +662,7 @@ def counters_scene(bpy, scene, material):
     add_camera(bpy, scene, (0, -5, 2.5), (math.radians(70), 0, 0))
     black_world(bpy, scene)
     scene.render.resolution_x, scene.render.resolution_y = 80, 60
-    scene.splat_tracer.samples = 4
+    scene.cycles.samples = 4
 
 
 def diffuse_bsdf(bpy, name="Matte"):
@@ -826,7 +828,7 @@ def mirror_scene(bpy, scene):
     scene.world = bpy.data.worlds.new("Grey")
     scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.05, 0.05, 0.05, 1)
     scene.view_layers[0].use_pass_object_index = True
-    scene.splat_tracer.samples = 1  # one ray per pixel: a wrong hit is a whole pixel, not a quarter
+    scene.cycles.samples = 1  # one ray per pixel: a wrong hit is a whole pixel, not a quarter
 
 
 def speckles(rgb, mask) -> int:

@@ -76,7 +76,7 @@ def good_scene(bpy, scene, headlight=True):
     add_camera(bpy, scene, (0, -5, 0), (math.radians(90), 0, 0))
     if headlight:
         scene.splat_tracer.lighting = "HEADLIGHT"
-    scene.splat_tracer.samples = 4
+    scene.cycles.samples = 4
     return a, b
 
 

@@ -153,7 +153,7 @@ def _scene(bpy, scene):
     sun = lamp(bpy, "SUN", rotation=(math.radians(30), 0, 0), energy=3.0)
     add_camera(bpy, scene, (0, -6, 0), (math.radians(90), 0, 0))
     scene.render.resolution_x, scene.render.resolution_y = 80, 60
-    scene.splat_tracer.samples = 4
+    scene.cycles.samples = scene.cycles.preview_samples = 4
     return grey, ball, box, sun
 
 
@@ -252,7 +252,7 @@ def test_each_change_rebuilds_only_what_it_must(blender, empty_scene):
             changes, delta = delta_of(change, scene_setting=True)
             assert changes.settings and not changes.export, changes.reasons
             assert delta["exports"] == 0 and delta["geometry_builds"] == 0 and delta["renders"] == passes
-        changes, delta = delta_of(lambda: setattr(scene.splat_tracer, "samples", 16), scene_setting=True)
+        changes, delta = delta_of(lambda: setattr(scene.cycles, "preview_samples", 16), scene_setting=True)
         assert delta["exports"] == 0 and delta["renders"] == len(viewport.pass_schedule(16))
 
         # A material, a lamp, a transform: exported again, no geometry built.
@@ -293,7 +293,7 @@ def test_progressive_passes_converge_to_the_f12_image(blender, empty_scene):
     viewport, session_module = extension_module("blender.viewport"), extension_module("blender.session")
     bpy, scene = blender, empty_scene
     _scene(bpy, scene)
-    scene.splat_tracer.samples = 8
+    scene.cycles.samples = scene.cycles.preview_samples = 8
     bpy.context.view_layer.update()
     depsgraph = bpy.context.evaluated_depsgraph_get()
     f12 = session_module.render_frame(depsgraph, scene.splat_tracer.core_method()).passes["Combined"]

@@ -1,6 +1,7 @@
 """Noise and sparse regions (issue 27): slivers mended and counted, sparse radii bounded."""
 import numpy as np
 
+import frames
 from splat_tracer.pointcloud import normals, prepare
 from splat_tracer.pointcloud.cloud import make_cloud
 from splat_tracer.render.camera import Camera
@@ -89,3 +90,52 @@ def test_sparse_border_radii_bounded_without_pinholes():
     covered = img.depth < 1e9
     assert covered.mean() > 0.5
     assert _pinholes(covered) == 0
+
+
+def _angle(n, truth):
+    cos = np.abs(np.einsum("ij,ij->i", n, truth)) / np.linalg.norm(n, axis=1)
+    return np.degrees(np.arccos(np.clip(cos, 0, 1)))
+
+
+def test_quantised_depth_gets_adaptive_neighbourhoods():
+    # A Kinect-like frame (disparity steps, 57 degrees over 640 pixels, noise of 0.3 steps),
+    # cropped to its centre: oblique walls at 2-5 m and a turned box. Measured when written
+    # (degrees, mean and 90th percentile): 16 neighbours 57.2, 76.0; adaptive 6.7, 12.9.
+    p, truth = frames.kinect_frame(noise=0.3)
+    centre = (np.abs(p[:, 0] / p[:, 2]) < 0.35) & (np.abs(p[:, 1] / p[:, 2]) < 0.25)
+    p, truth = p[centre], truth[centre]
+    before = _angle(normals.estimate(p), truth)
+    prep = prepare.prepare(make_cloud("frame.xyz", p), "frame.xyz")
+    after = _angle(prep.cloud.normals.astype(np.float64), truth)
+    assert before.mean() > 40
+    assert after.mean() < 10 and np.percentile(after, 90) < 20, (after.mean(), np.percentile(after, 90))
+    assert prep.quantised.startswith("z takes")
+    assert sum(prep.adaptive.values()) == len(p) and max(prep.adaptive) > normals.DEFAULT_K
+    note = next(s for s in prep.notes(6) if "depth quantisation" in s)
+    assert "over 1,024" in note or "over 512" in note, note
+
+
+def test_continuous_clouds_are_not_quantised(monkeypatch):
+    # A laser-like terrain (continuous coordinates) and an axis-aligned plane sampled on a
+    # grid (every z equal: one level, no staircase; x and y steps of one spacing, but no
+    # neighbour shares them... except along the rows, and steps = spacing): no adaptive
+    # neighbourhoods, the normals bit for bit those of the import without the detector.
+    rng = np.random.default_rng(7)
+    xy = rng.uniform(0, 30, (20000, 2))
+    terrain = np.column_stack([xy, np.sin(xy[:, 0] / 3) + rng.normal(0, 0.01, len(xy))])
+    g = np.stack(np.meshgrid(np.arange(100.0), np.arange(100.0)), -1).reshape(-1, 2)
+    plane = np.column_stack([g + rng.uniform(-0.2, 0.2, g.shape), np.zeros(len(g))])
+    for p in (terrain, plane):
+        assert normals.quantised_depth(p, normals_graph(p))[0] == -1
+        prep = prepare.prepare(make_cloud("cloud.xyz", p), "cloud.xyz")
+        assert prep.adaptive is None and not any("quantisation" in s for s in prep.notes(6))
+        with monkeypatch.context() as m:
+            m.setattr(normals, "adaptive_normals", None)  # never called
+            again = prepare.prepare(make_cloud("cloud.xyz", p), "cloud.xyz")
+        assert np.array_equal(prep.cloud.normals, again.cloud.normals)
+
+
+def normals_graph(p):
+    graph = np.empty((len(p), normals.GRAPH_K + 1), np.int32)
+    normals.estimate(p, graph=graph)
+    return graph

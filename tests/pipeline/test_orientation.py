@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from frames import box_room_frame
 from geometry import fibonacci_sphere
 from splat_tracer.pointcloud import importer, normals
 
@@ -61,42 +62,6 @@ def terrain(n, seed=0):
     up = np.column_stack([-1.2 * a * np.cos(a * xy[:, 0] + seed) * np.cos(b * xy[:, 1]),
                           1.2 * b * np.sin(a * xy[:, 0] + seed) * np.sin(b * xy[:, 1]), np.ones(n)])
     return np.column_stack([xy, z]), up / np.linalg.norm(up, axis=1, keepdims=True)
-
-
-def depth_frame(width=160, height=120, forward=-1.0):
-    """A depth camera's frame at the origin looking along forward x Z (y up for -Z, down for
-    +Z as PCL's frames): a floor, a back wall, a side wall and a box, depth quantised as a
-    structured-light sensor's (steps in disparity: 1/1200 per metre^-1, 2 cm at 5 m).
-    Returns the points and their true normals (facing the camera)."""
-    ys, xs = np.mgrid[0:height, 0:width]
-    t = np.tan(np.radians(30))
-    d = np.stack([(2 * (xs + 0.5) / width - 1) * t, (1 - 2 * (ys + 0.5) / height) * t * height / width,
-                  -np.ones(xs.shape)], -1).reshape(-1, 3)
-    best, nrm = np.full(len(d), np.inf), np.zeros_like(d)
-    for n_, c in ((np.array([0, 1.0, 0]), -1.2), (np.array([0, 0, 1.0]), -4.0), (np.array([1.0, 0, 0]), 1.5)):
-        dn = d @ n_
-        with np.errstate(divide="ignore", invalid="ignore"):
-            hit = c / dn
-        ok = (hit > 0) & (hit < best)
-        best[ok], nrm[ok] = hit[ok], n_
-    lo, hi = np.array([-0.1, -1.2, -2.9]), np.array([0.7, -0.2, -2.1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t1, t2 = lo / d, hi / d
-    near, far = np.minimum(t1, t2).max(1), np.maximum(t1, t2).min(1)
-    box = (near <= far) & (near > 0) & (near < best)
-    axis = np.argmax(np.minimum(t1, t2), 1)
-    rows = np.arange(len(d))
-    face = np.zeros_like(d)
-    face[rows, axis] = -np.sign(d[rows, axis])
-    best[box], nrm[box] = near[box], face[box]
-    seen = np.isfinite(best)
-    p, nrm = d[seen] * best[seen, None], nrm[seen]
-    z = -p[:, 2]
-    p *= (1.0 / (np.round(1200.0 / z) / 1200.0) / z)[:, None]  # the quantised depth
-    nrm = np.where((np.einsum("ij,ij->i", nrm, -p) < 0)[:, None], -nrm, nrm)
-    if forward > 0:  # PCL's camera frame: the view along +Z, y down (a half turn about x)
-        p, nrm = p * [1, -1, -1], nrm * [1, -1, -1]
-    return p, nrm
 
 
 def open_box(n=40000, seed=1):
@@ -151,7 +116,7 @@ def test_a_terrain_faces_up_whatever_its_format(tmp_path, suffix):
 def test_a_depth_frame_faces_its_sensor_at_the_origin(tmp_path, forward):
     """No viewpoint in the file: the range image seen from the origin is recognised. Looking
     along +Z (PCL's frames), the open-sheet rule turned every normal away (0 %)."""
-    p, truth = depth_frame(forward=forward)
+    p, truth = box_room_frame(forward=forward)
     prepared, pos, nrm = _load(_write_xyz(tmp_path / "frame.xyz", p))
     assert prepared.normals_oriented == "ORIGIN"
     facing = float((np.einsum("ij,ij->i", nrm, -pos) > 0).mean())
@@ -169,13 +134,30 @@ def test_a_closed_object_with_a_hole_in_fragments_faces_outward_by_visibility(tm
     assert _right(nrm, out) == 1.0
 
 
-def test_a_room_seen_from_inside_faces_inward(tmp_path):
-    """Rays from the floor escape downward through nothing: visibility alone would turn the
-    room inside-out. The origin's rule comes first."""
+def test_a_room_seen_from_inside_faces_inward_from_the_file_origin(tmp_path):
+    """Rays from the floor escape downward through nothing: visibility alone turns the room
+    inside-out. Its lines of sight from the origin spread over more than a half space, as an
+    object's around its own origin do (below), so AUTO does not take it for one view; the
+    File Origin mode orients it."""
     p, inward = open_box()
-    prepared, pos, nrm = _load(_write_xyz(tmp_path / "room.xyz", p))
+    path = _write_xyz(tmp_path / "room.xyz", p)
+    prepared, pos, nrm = _load(path)
+    assert prepared.normals_oriented != "ORIGIN"
+    prepared = importer.load(path, importer.ImportOptions(orientation="ORIGIN"))
     assert prepared.normals_oriented == "ORIGIN"
-    assert _right(nrm, inward) == 1.0
+    assert _right(prepared.cloud.normals.astype(np.float64), inward) == 1.0
+
+
+@pytest.mark.parametrize("bottom", (-0.5, 0.0))
+def test_an_object_around_its_origin_without_its_bottom_faces_outward(tmp_path, bottom):
+    """A scanned object exported centred on its origin, its underside never seen: one layer
+    per direction from the origin, but no camera's view (the lines of sight spread over a
+    half space or more). Taken for a depth frame, it faced inwards on every point."""
+    p, out = fibonacci_sphere(20000, 1.0)
+    keep = p[:, 2] > bottom
+    prepared, pos, nrm = _load(_write_xyz(tmp_path / "cap.xyz", p[keep]))
+    assert prepared.normals_oriented != "ORIGIN"
+    assert _right(nrm, out[keep]) == 1.0
 
 
 def test_a_closed_object_around_its_own_origin_faces_outward(tmp_path):

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from pypcd4 import Encoding, MetaData, PointCloud as Pcd
 
-from geometry import depth_frame, fibonacci_sphere, quaternion_matrix
+from frames import slanted_wall_frame
+from geometry import fibonacci_sphere, quaternion_matrix
 from splat_tracer.pointcloud import importer, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, linear_colours
 from splat_tracer.pointcloud.readers import pcd
@@ -127,7 +128,7 @@ def test_eight_byte_types_and_fields_of_several_values(tmp_path):
 def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     q = (0.8, 0.3, -0.4, 0.33)  # qw qx qy qz: a rotation about a skew axis
     t = np.array([12.0, -4.0, 2.5])
-    camera = depth_frame()
+    camera, _ = slanted_wall_frame()
     world = camera @ quaternion_matrix(q).T + t  # the sensor's frame into the cloud's: its pose, VIEWPOINT
     f32 = world.astype(np.float32)
     viewpoint = (*t, *(np.asarray(q) / np.linalg.norm(q)))
@@ -135,7 +136,7 @@ def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
                   Encoding.BINARY_COMPRESSED, viewpoint=viewpoint, height=120)
     cloud = readers.read_cloud(path)
     assert cloud.dropped_rows == np.isnan(camera[:, 0]).sum() > 0  # the holes beyond the sensor's range
-    assert cloud.orientation == "SCANNER" and cloud.scanners.strides[0] == 0  # one row, not (N,3)
+    assert cloud.scanners.strides[0] == 0  # one row, not (N,3)
     assert np.array_equal(cloud.scanners[0], t)
     assert pcd.viewpoint_note(viewpoint) in cloud.notes and "12, -4, 2.5" in pcd.viewpoint_note(viewpoint)
     prepared = importer.load(path)
@@ -159,7 +160,7 @@ def test_the_default_viewpoint_of_an_unorganised_cloud_is_not_a_sensor(tmp_path)
     outward = np.einsum("ij,ij->i", prepared.cloud.normals, prepared.local.astype(np.float64) + prepared.origin)
     assert (outward > 0).mean() >= 0.99, (outward > 0).mean()
     # The same default on an organised frame is its sensor (one view: a depth image).
-    frame = depth_frame().astype(np.float32)
+    frame = slanted_wall_frame()[0].astype(np.float32)
     organised = readers.read_cloud(_write(tmp_path / "frame.pcd", {"x": frame[:, 0], "y": frame[:, 1],
                                                                    "z": frame[:, 2]}, height=120))
     assert organised.scanners is not None and np.array_equal(organised.scanners[0], [0.0, 0.0, 0.0])

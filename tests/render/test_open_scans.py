@@ -3,7 +3,7 @@ normals face away from where it is seen from -- a depth frame oriented away from
 renders as the same scan oriented towards it, under the headlight and under lamps, with
 mirror and glass materials; closed clouds keep their one-sided rules. Plain core, no Blender.
 
-The stand-in is a quantised, noisy depth frame (geometry.room_frame) imported as a file
+The stand-in is a quantised, noisy depth frame (frames.ball_corner_frame) imported as a file
 without normals would be (prepare.prepare: PCA normals, k-NN radii), then oriented all away
 from the sensor or all towards it.
 """
@@ -20,7 +20,8 @@ from splat_tracer.render.scene import Instance, Mesh, RenderScene
 from splat_tracer.render.shading import Light, Material, RenderSettings, World
 from splat_tracer.render.splats import SplatCloud
 
-from geometry import room_frame, sphere_cloud
+from frames import ball_corner_frame
+from geometry import sphere_cloud
 
 W, H = 160, 120
 FULL = Method.preset("FULL")
@@ -33,7 +34,7 @@ MAX_NEAR_BLACK = 0.02
 @pytest.fixture(scope="module")
 def frame():
     """(local positions, normals facing away from the sensor, radii, camera at the sensor)."""
-    points = room_frame()
+    points, _ = ball_corner_frame()
     prepared = prepare.prepare(make_cloud("depth frame", points.copy(), format="TEXT"), "depth frame")
     n = prepared.cloud.normals.astype(np.float64)
     seen_from = prepared.local + prepared.origin  # the sensor is the file's origin

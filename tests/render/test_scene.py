@@ -678,11 +678,11 @@ def ball_over_floor():
     cam = ortho_down(width=6.0, height=6.0)
     sun = Light(type="SUN", power=3.0, direction=(0.5, 0.0, -1.0))
 
-    def frame(**options):
+    def frame(floor_options=None, transparent=False, passes=("Combined", "Shadow", "IndexOB"), **options):
         instances = [Instance(cloud, pass_index=1, **options), Instance(floor, materials=(LAMBERT,),
-                                                                        pass_index=2)]
-        return render(instances, [sun], world=World(colour=(0.1, 0.1, 0.1)), cam=cam, w=60, h=60,
-                      passes=("Combined", "Shadow", "IndexOB")).passes
+                                                                        pass_index=2, **(floor_options or {}))]
+        return render(instances, [sun], world=World(colour=(0.1, 0.1, 0.1), transparent=transparent), cam=cam,
+                      w=60, h=60, passes=passes).passes
 
     xy = pixel_points(cam, 60, 60)
     ball = np.hypot(xy[..., 0], xy[..., 1]) < 0.95
@@ -745,6 +745,78 @@ def test_object_hidden_from_glossy_rays_is_not_in_the_mirror():
     assert counts["all"][0] >= 30
     assert counts["no glossy"][0] == 0
     assert counts["all"][1] == counts["no glossy"][1] > 0.9 * red_disc.sum()
+
+
+def test_a_catcher_floor_keeps_only_the_ball_s_shadow(ball_over_floor):
+    """The floor as a shadow catcher, lit by the sun only (no bounce): its light with the
+    ball over its light without is exactly 0 in the shadow and 1 elsewhere (both paths of
+    a sample take the same random numbers). Transparent film: the floor has no colour, alpha
+    1 in the shadow and 0 elsewhere; the ball is as without the catcher. Opaque film: the
+    world shows where the floor was, black in the shadow. With the Shadow Catcher pass: the
+    floor is a hole and the pass holds the shadow."""
+    frame, ball, shadow = ball_over_floor
+    catcher = {"shadow_catcher": True}
+    plain = frame(transparent=True)
+    floor = (plain["IndexOB"] == 2) & ~binary_dilation(ball, iterations=3)
+    lit = floor & ~binary_dilation(plain["Shadow"][..., 0] < 1, iterations=2)
+    assert shadow.sum() > 50 and lit.sum() > 1000
+    caught = frame(catcher, transparent=True)["Combined"]
+    assert np.all(caught[..., :3][floor] == 0)
+    assert np.all(caught[..., 3][shadow] == 1) and np.all(caught[..., 3][lit] == 0)
+    assert np.array_equal(caught[ball], plain["Combined"][ball])
+    opaque = frame(catcher)["Combined"]
+    assert np.all(opaque[..., 3] == 1)
+    assert np.all(opaque[..., :3][shadow] == 0) and np.allclose(opaque[..., :3][lit], 0.1)
+    passes = frame(catcher, transparent=True, passes=("Combined", "Shadow Catcher"))
+    assert np.all(passes["Combined"][floor] == 0)
+    assert np.all(passes["Shadow Catcher"][shadow] == 0) and np.all(passes["Shadow Catcher"][lit] == 1)
+    assert np.all(passes["Shadow Catcher"][ball] == 1)  # no catcher sample there
+    # Without any catcher the pass is all 1, and Combined what it was.
+    plain_pass = frame(transparent=True, passes=("Combined", "Shadow Catcher"))
+    assert np.all(plain_pass["Shadow Catcher"] == 1)
+    assert np.array_equal(plain_pass["Combined"], plain["Combined"])
+
+
+def test_a_catcher_cloud_that_nothing_shadows_vanishes(ball_over_floor):
+    """The flag works on splat clouds too: the ball (a cloud) as the catcher, with nothing
+    between it and the sun, is left out of Combined everywhere (its own shading is the same
+    with and without the floor) -- it still hides the floor behind it."""
+    frame, ball, _ = ball_over_floor
+    rgba = frame(transparent=True, shadow_catcher=True)["Combined"]
+    assert np.all(rgba[..., 3][ball] == 0) and np.all(rgba[..., :3][ball] == 0)
+
+
+def test_world_ray_visibility_hides_it_from_each_kind_of_ray():
+    """World > Ray Visibility, as Cycles: a mirror ball reflects the world unless glossy rays
+    may not see it; a glass ball shows it through unless transmission rays may not; a
+    plane is lit by it unless diffuse rays may not (by bounces or by the sky-AO light); the
+    camera sees it as background unless hidden (black; alpha 1 on an opaque film, 0 on a
+    transparent one)."""
+    from splat_tracer.render.shading import WORLD_RAYS
+
+    sky = World(colour=(0.3, 0.3, 0.3))
+    cam = ortho_down(width=3.0, height=3.0)
+    xy = pixel_points(cam, 30, 30)
+    disc = np.hypot(xy[..., 0], xy[..., 1]) < 0.9
+    corner = np.hypot(xy[..., 0], xy[..., 1]) > 1.2
+
+    def seen(material, hidden=(), transparent=False, **settings):
+        world = World(colour=sky.colour, transparent=transparent, visibility=frozenset(WORLD_RAYS) - set(hidden))
+        return render([Instance(uv_sphere(), materials=(material,))], [], world=world, cam=cam, w=30, h=30,
+                      **settings).passes["Combined"]
+
+    assert seen(MIRROR)[..., 0][disc].min() > 0.25 and np.all(seen(MIRROR, ["glossy"])[..., :3][disc] == 0)
+    assert seen(GLASS)[..., 0][disc].mean() > 0.2 and seen(GLASS, ["transmission"])[..., 0][disc].mean() < 0.05
+    for ao in (False, True):
+        assert seen(LAMBERT, diffuse_bounces=1, sky_ao=ao)[..., 0][disc].mean() > 0.1
+        assert np.all(seen(LAMBERT, ["diffuse"], diffuse_bounces=1, sky_ao=ao)[..., :3][disc] == 0)
+    shown = seen(LAMBERT, diffuse_bounces=1)
+    assert np.allclose(shown[corner], (0.3, 0.3, 0.3, 1.0))
+    hidden = seen(LAMBERT, ["camera"], diffuse_bounces=1)
+    assert np.all(hidden[corner] == (0, 0, 0, 1)) and np.array_equal(hidden[disc], shown[disc])
+    assert np.all(seen(LAMBERT, ["camera"], transparent=True, diffuse_bounces=1)[corner] == 0)
+    with pytest.raises(ValueError, match="world ray visibility"):
+        World(visibility=frozenset({"scatter"}))
 
 
 # --------------------------------------------------------------------------------------

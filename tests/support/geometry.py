@@ -13,6 +13,14 @@ def fibonacci_sphere(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
     return normals * radius + np.asarray(centre, dtype=np.float64), normals
 
 
+def random_sphere(n: int, radius: float = 1.0, seed: int = 0):
+    """n points drawn uniformly at random on a sphere about the origin (seeded), with their
+    exact normals."""
+    p = np.random.default_rng(seed).normal(size=(n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    return p * radius, p
+
+
 def sphere_cloud(n: int, radius: float = 1.0, seed: int = 0):
     """A closed unit-sphere splat cloud: (centres, normals, radii), randomly rotated by `seed`.
     Radii are 1.5x the mean spacing sqrt(4 pi r^2 / n), so the discs overlap without holes."""
@@ -104,13 +112,14 @@ def cube_cloud(per_edge: int, half: float = 1.0, on_edges: bool = False):
     return np.concatenate(pts), np.concatenate(nrm)
 
 
-def ray_box(origins, directions, half: float = 1.0):
-    """Nearest positive hit distance on the cube [-half, half]^3 (inf on a miss), and the
-    face normal there."""
+def ray_box(origins, directions, half: float = 1.0, lo=None, hi=None):
+    """Nearest positive hit distance on the cube [-half, half]^3, or the axis-aligned box
+    from lo to hi (inf on a miss), and the face normal there (the slabs method)."""
+    lo, hi = (-half, half) if lo is None else (np.asarray(lo, np.float64), np.asarray(hi, np.float64))
     with np.errstate(divide="ignore", invalid="ignore"):
         inv = 1.0 / directions
-        t0 = (-half - origins) * inv
-        t1 = (half - origins) * inv
+        t0 = (lo - origins) * inv
+        t1 = (hi - origins) * inv
     tn = np.minimum(t0, t1).max(axis=1)
     tf = np.maximum(t0, t1).min(axis=1)
     hit = (tn <= tf) & (tf > 0) & (tn > 0)
@@ -129,50 +138,3 @@ def quaternion_matrix(q):
                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
-
-def depth_frame(width=160, height=120, focal=120.0):
-    """(N,3) camera-frame points of a depth sensor looking along +z at a back wall, a floor
-    and a slanted box face: one ray a pixel, depth quantised as a Kinect's (steps of
-    0.0028 z^2), NaN where a ray hits nothing within the sensor's range (3.5 m: the back
-    wall's corners are holes). Row-major, as an organised PCD."""
-    u, v = np.meshgrid(np.arange(width) - width / 2 + 0.5, np.arange(height) - height / 2 + 0.5)
-    rays = np.column_stack([u.ravel() / focal, v.ravel() / focal, np.ones(u.size)])  # depth 1 along +z
-    planes = [((0.0, 0.0, 1.0), 3.0),         # back wall z = 3
-              ((0.0, 1.0, 0.0), 0.6),         # floor y = 0.6 (y points down in a camera's frame)
-              ((0.6, 0.0, 0.8), 1.6)]         # a slanted face n . p = 1.6
-    depth = np.full(len(rays), np.inf)
-    for n, d in planes:
-        along = rays @ np.asarray(n)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(along > 1e-9, d / along, np.inf)
-        depth = np.minimum(depth, t)
-    depth[depth * np.linalg.norm(rays, axis=1) > 3.5] = np.nan
-    step = 0.0028 * depth ** 2
-    with np.errstate(invalid="ignore"):
-        depth = np.round(depth / step) * step
-    return rays * depth[:, None]
-
-
-def room_frame(width: int = 160, height: int = 120, focal: float = 140.0, step: float = 0.004,
-                noise: float = 0.0015, seed: int = 0):
-    """A depth camera's frame as a point cloud in the camera's frame (sensor at the origin,
-    looking down +Z, Y down, as PCL stores it): a room corner (back wall z = 3, left wall
-    x = -1, floor y = 0.8) with a box and a ball on the floor, one point per pixel. Depth has
-    sensor noise (sigma `noise` x z^2, as structured light) and is quantised in steps of
-    `step`. Returns (W*H, 3) float64 points, row by row."""
-    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-    d = np.stack([(j - width / 2) / focal, (i - height / 2) / focal, np.ones_like(j)], -1).reshape(-1, 3)
-    t = np.full(len(d), np.inf)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for axis, value in ((2, 3.0), (0, -1.0), (1, 0.8)):
-            tt = value / d[:, axis]
-            t = np.minimum(t, np.where(tt > 0, tt, np.inf))
-        lo, hi = np.array([0.0, 0.4, 1.8]), np.array([0.5, 0.8, 2.3])  # the box
-        t0, t1 = lo / d, hi / d
-    tn, tf = np.minimum(t0, t1).max(1), np.maximum(t0, t1).min(1)
-    t = np.where((tn <= tf) & (tn > 0), np.minimum(t, tn), t)
-    length = np.linalg.norm(d, axis=1)
-    t = np.minimum(t, ray_sphere(np.zeros_like(d), d / length[:, None], (-0.4, 0.5, 2.0), 0.3) / length)
-    p = d * t[:, None]
-    z = p[:, 2] + np.random.default_rng(seed).normal(0.0, 1.0, len(p)) * noise * p[:, 2] ** 2
-    return d * (np.round(z / step) * step)[:, None]

@@ -489,16 +489,30 @@ def _background(node, sockets: _Sockets) -> tuple:
     return sockets.colour(node, "Color"), strength
 
 
+def world_visibility(world, report: shading.Report) -> frozenset:
+    """The ray kinds that see the world: Cycles' World > Settings > Ray Visibility
+    (world.cycles_visibility, there when the Cycles add-on is on; else all). Volume Scatter
+    has no rays here (no volumes) and is said once when turned off."""
+    vis = getattr(world, "cycles_visibility", None)
+    if vis is None:
+        return frozenset(shading.WORLD_RAYS)
+    if not getattr(vis, "scatter", True):
+        report.once(f"world '{world.name}': Ray Visibility > Volume Scatter is ignored (no volumes are rendered)")
+    return frozenset(k for k in shading.WORLD_RAYS if getattr(vis, k))
+
+
 def world_of(scene, report: shading.Report) -> shading.World:
     """The engine's World: the Background feeding the World Output Cycles renders (its
     colour and strength), or the world's viewport colour without nodes; black without a
-    world. Transparency is Film > Transparent."""
+    world. Transparency is Film > Transparent; which rays see it, the world's Ray
+    Visibility."""
     transparent = bool(scene.render.film_transparent)
     world = scene.world
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
-    viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, transparent=transparent)
+    film = dict(transparent=transparent, visibility=world_visibility(world, report))
+    viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, **film)
     tree = _node_tree(world)
     if tree is None:
         return viewport
@@ -506,15 +520,14 @@ def world_of(scene, report: shading.Report) -> shading.World:
     source = _upstream(output.inputs["Surface"]) if output is not None else None
     if source is None:
         sockets.say(": nothing is connected to a World Output's Surface; rendered black, as Cycles does")
-        return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
+        return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, **film)
     if sockets.linked_inputs(output, ["Volume"]):
         sockets.say(": Volume is ignored")
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
         return viewport
     colour, strength = _background(source[0], sockets)
-    return shading.World(colour=tuple(max(float(c), 0.0) for c in colour), strength=max(strength, 0.0),
-                         transparent=transparent)
+    return shading.World(colour=tuple(max(float(c), 0.0) for c in colour), strength=max(strength, 0.0), **film)
 
 
 # --------------------------------------------------------------------------------------
@@ -535,10 +548,15 @@ def _seed(cycles, frame: int) -> int:
     return zlib.crc32(struct.pack("<ii", int(cycles.seed), int(frame)))
 
 
-def render_settings_of(scene) -> shading.RenderSettings:
-    """The engine's RenderSettings: samples and shadow samples are its own settings
-    (scene.splat_tracer); filter, bounces and seed are Cycles' when the Cycles add-on is on
-    (else the contract's defaults and Blackman-Harris); the filter width is Blender's."""
+def render_settings_of(scene, viewport: bool = False) -> shading.RenderSettings:
+    """The engine's RenderSettings. Samples and noise control are Cycles' (the one place
+    they are kept, so a scene set up for Cycles samples the same way): Samples or, for the
+    viewport, Viewport Samples; adaptive sampling (Noise Threshold, Min Samples: the render's
+    or the viewport's), Time Limit (renders only, as in Cycles), Clamp Direct/Indirect and
+    Filter Glossy; so are the filter, bounces and seed. With the Cycles add-on off, the
+    engine's own legacy Samples and none of the rest (the contract's defaults and
+    Blackman-Harris). Shadow and AO samples are the engine's own; the filter width is
+    Blender's."""
     settings = scene.splat_tracer
     width = min(max(float(scene.render.filter_size), _FILTER_WIDTH[0]), _FILTER_WIDTH[1])
     fields = dict(samples=int(settings.samples), shadow_samples=int(settings.shadow_samples), filter_width=width,
@@ -549,31 +567,64 @@ def render_settings_of(scene) -> shading.RenderSettings:
         fields["pixel_filter"] = cycles.pixel_filter_type
         fields.update({key: min(int(getattr(cycles, prop)), _MAX_BOUNCES) for key, prop in _BOUNCES.items()})
         fields["seed"] = _seed(cycles, scene.frame_current)
+        fields.update(sampling_of(cycles, viewport))
     return shading.RenderSettings(**fields)
+
+
+_MAX_SAMPLES = 1 << 16  # RenderSettings' limit; Cycles' Viewport Samples 0 (no limit) reads as this
+
+
+def sampling_of(cycles, viewport: bool = False) -> dict:
+    """RenderSettings fields from Cycles' Sampling and Light Paths panels (scene.cycles)."""
+    prefix = "preview_" if viewport else ""
+    samples = int(cycles.preview_samples if viewport else cycles.samples)
+    return dict(
+        samples=min(samples, _MAX_SAMPLES) if samples > 0 else _MAX_SAMPLES,
+        adaptive=bool(getattr(cycles, f"use_{prefix}adaptive_sampling")),
+        adaptive_threshold=max(float(getattr(cycles, f"{prefix}adaptive_threshold")), 0.0),
+        adaptive_min_samples=min(max(int(getattr(cycles, f"{prefix}adaptive_min_samples")), 0), _MAX_SAMPLES),
+        time_limit=0.0 if viewport else max(float(cycles.time_limit), 0.0),
+        clamp_direct=max(float(cycles.sample_clamp_direct), 0.0),
+        clamp_indirect=max(float(cycles.sample_clamp_indirect), 0.0),
+        filter_glossy=max(float(cycles.blur_glossy), 0.0))
 
 
 _RAYS = ("camera", "diffuse", "glossy", "transmission", "shadow")
 
 
-def _holdout(obj, view_layer) -> bool:
-    """The object's holdout (its own, or its collection's in the view layer). holdout_get
-    finds an evaluated object only in the evaluated view layer (depsgraph.view_layer_eval),
+def _in_layer(obj, view_layer, getter: str) -> bool:
+    """A view-layer flag of the object's collections (holdout_get, indirect_only_get). They
+    find an evaluated object only in the evaluated view layer (depsgraph.view_layer_eval),
     and an original one only in the original: both are asked, so either layer works."""
     candidates = [obj] + ([obj.original] if obj.original is not None and obj.original != obj else [])
-    return bool(obj.is_holdout) or any(o.holdout_get(view_layer=view_layer) for o in candidates)
+    return any(getattr(o, getter)(view_layer=view_layer) for o in candidates)
+
+
+def _holdout(obj, view_layer) -> bool:
+    """The object's holdout (its own, or its collection's in the view layer)."""
+    return bool(obj.is_holdout) or _in_layer(obj, view_layer, "holdout_get")
 
 
 def object_visibility(obj_eval, view_layer, parent=None) -> dict:
     """Ray visibility of an object: {'camera', 'diffuse', 'glossy', 'transmission',
     'shadow': bool (Object Properties > Visibility > Ray Visibility), 'holdout': bool (the
-    object's Holdout, or its collection's Holdout in `view_layer`)}.
+    object's Holdout, or its collection's Holdout in `view_layer`), 'shadow_catcher': bool
+    (Visibility > Mask > Shadow Catcher)}.
 
     `parent`: for an instance (depsgraph.object_instances, is_instance), the object that
     instances it: as in Cycles, a ray sees the instance only if it sees the parent too, and
-    the parent's holdout holds it out."""
+    the parent's holdout holds it out and its Shadow Catcher makes it one. A collection set
+    to Indirect Only in the view layer hides the objects it holds (the instancer's, for an
+    instance) from camera rays unless they are held out -- Cycles' rule."""
     flags = {ray: bool(getattr(obj_eval, f"visible_{ray}")) for ray in _RAYS}
     flags["holdout"] = _holdout(obj_eval, view_layer)
+    flags["shadow_catcher"] = bool(obj_eval.is_shadow_catcher)
     if parent is not None and parent != obj_eval:
         outer = object_visibility(parent, view_layer)
-        flags = {key: (flags[key] or outer[key]) if key == "holdout" else (flags[key] and outer[key]) for key in flags}
+        flags = {key: (flags[key] or outer[key]) if key in _EITHER else (flags[key] and outer[key]) for key in flags}
+    elif not flags["holdout"] and _in_layer(obj_eval, view_layer, "indirect_only_get"):
+        flags["camera"] = False
     return flags
+
+
+_EITHER = ("holdout", "shadow_catcher")  # an instance has these if it or its instancer has them

@@ -1,7 +1,9 @@
 // Python bindings of the scene renderer: `_core.Mesh` (a triangle mesh and its BVH) and
 // `_core.RenderScene` (instances of clouds and meshes, materials, lamps; render()).
 // splat_tracer/render/scene.py wraps both; every input is validated here too.
+#include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <iterator>
 #include <memory>
@@ -106,18 +108,18 @@ Affine affine_of(const float *row) {
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   nullptr};
-    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight;
+                                   "shadow_catcher", nullptr};
+    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|i", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
     const Py_ssize_t n_geo = PyTuple_Size(geometries);
-    View idx, w, o, range, vis, holdout, pass, mat, light;
+    View idx, w, o, range, vis, holdout, pass, mat, light, catcher;
     Py_ssize_t s1[1] = {-1};
     if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
     const Py_ssize_t n = idx.dim(0);
@@ -128,7 +130,8 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         !get_array(ovis, "visibility", 'i', 1, sn, false, vis) ||
         !get_array(ohold, "holdout", 'B', 1, sn, false, holdout) ||
         !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
-        !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light))
+        !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light) ||
+        (ocatch != Py_None && !get_array(ocatch, "shadow_catcher", 'B', 1, sn, false, catcher)))
         return nullptr;
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
@@ -154,6 +157,7 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.material_offset = first, inst.material_count = count;
         inst.visibility = uint32_t(vis.data<int32_t>()[i]) & kVisAll;
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
+        inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
     }
     std::vector<Material> materials(static_cast<size_t>(n_mat));
@@ -202,18 +206,18 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
-                                   "tile_size", "packets", "lens", nullptr};
+                                   "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
-             *progress = Py_None, *olens = Py_None;
+             *progress = Py_None, *olens = Py_None, *ocatcher = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
-        packets = 1;
+        packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipO", const_cast<char **>(kwlist),
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOi", const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
-                                     &packets, &olens))
+                                     &packets, &olens, &ocatcher, &world_visibility))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -221,13 +225,20 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
 
     IntegratorSettings cfg;
     unsigned int seed = 0;
-    int headlight = 0, sky_ao = 0;
-    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppii;settings must be RenderSettings.pack()", &cfg.samples,
+    int headlight = 0, sky_ao = 0, adaptive = 0;
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppifffpfidi;settings must be RenderSettings.pack()", &cfg.samples,
                           &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
                           &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
-                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples,
-                          &cfg.mesh_light_strategy))
+                          &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples, &cfg.clamp_direct,
+                          &cfg.clamp_indirect, &cfg.filter_glossy, &adaptive, &cfg.adaptive_threshold,
+                          &cfg.adaptive_min_samples, &cfg.time_limit, &cfg.mesh_light_strategy))
         return nullptr;
+    cfg.adaptive = adaptive != 0;
+    for (float v : {cfg.clamp_direct, cfg.clamp_indirect, cfg.filter_glossy, cfg.adaptive_threshold})
+        if (!(std::isfinite(v) && v >= 0.f))
+            return PyErr_Format(PyExc_ValueError, "clamps, filter glossy and the noise threshold must be finite, >= 0");
+    if (!(std::isfinite(cfg.time_limit) && cfg.time_limit >= 0.0) || cfg.adaptive_min_samples < 0)
+        return PyErr_Format(PyExc_ValueError, "the time limit and minimum samples must be >= 0");
     if (cfg.mesh_light_strategy < 0 || cfg.mesh_light_strategy > 2)
         return PyErr_Format(PyExc_ValueError, "mesh_light_strategy must be 0..2 (see shading.RenderSettings)");
     if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
@@ -242,6 +253,9 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (!parse_method(ometh, cfg.method)) return nullptr;
     cfg.world = Vec3(world[0], world[1], world[2]);
     cfg.film_transparent = transparent != 0;
+    if (world_visibility < 0 || world_visibility > int(kVisAll))
+        return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
+    cfg.world_visibility = uint32_t(world_visibility);
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
@@ -260,7 +274,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     } outs[] = {{ocomb, "combined", 4, &film.combined, {}},   {odepth, "depth", 1, &film.depth, {}},
                 {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
                 {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
-                {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}}};
+                {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}},
+                {ocatcher, "shadow_catcher", 3, &film.shadow_catcher, {}}};
     for (Out &out : outs) {
         if (out.obj == Py_None) continue;
         Py_ssize_t shape[3] = {h, w, out.channels};
@@ -284,17 +299,61 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (PyObject *type = run_native([&] { integrator = std::make_unique<Integrator>(scene, cam, film, cfg, counters); },
                                     message))
         return PyErr_SetString(type, message.c_str()), nullptr;
-    const int done = run_tiles(integrator->tile_count(), threads > 0 ? threads : obj->threads, progress,
-                               [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
-    if (done < 0) return nullptr;
+    const size_t tiles = integrator->tile_count();
+    const int n_threads = threads > 0 ? threads : obj->threads;
+    int done = 0, reached = cfg.samples;  // reached: the samples of the pixels that went furthest
+    unsigned long long taken = (unsigned long long)cfg.samples * (unsigned long long)w * (unsigned long long)h;
+    bool time_limited = false;
+    if (!cfg.progressive()) {
+        done = run_tiles(tiles, n_threads, progress,
+                         [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile(t, &stop); });
+        if (done < 0) return nullptr;
+    } else {
+        // Rounds of samples over the whole image, as Cycles' render scheduler: each ends where
+        // a convergence check is due (adaptive sampling); with a time limit the first round is
+        // one sample, and each next one as many as the time left fits at the last round's
+        // pace (at most 4x the last, in case the pace was measured on a fast round), so the
+        // limit is passed by at most about one sample's time.
+        using Clock = std::chrono::steady_clock;
+        const auto start = Clock::now();
+        const size_t total = tiles * size_t(cfg.samples);
+        int s = 0, round = cfg.time_limit > 0.0 ? 1 : cfg.samples;
+        done = 1;
+        while (s < cfg.samples) {
+            const int n = integrator->align_samples(s, std::min(round, cfg.samples - s));
+            const auto round_start = Clock::now();
+            done = run_tiles(
+                tiles, n_threads, progress,
+                [&](size_t t, const std::atomic<bool> &stop) { integrator->render_tile_samples(t, s, s + n, &stop); },
+                tiles * size_t(s), size_t(n), total);
+            if (done < 0) return nullptr;
+            if (done == 0) break;
+            s += n;
+            if (integrator->need_check(s - 1) && integrator->check_convergence() == 0) break;
+            if (cfg.time_limit > 0.0) {
+                const auto now = Clock::now();
+                const double elapsed = std::chrono::duration<double>(now - start).count();
+                if (elapsed >= cfg.time_limit) {
+                    time_limited = s < cfg.samples;
+                    break;
+                }
+                const double pace = std::chrono::duration<double>(now - round_start).count() / n;
+                const double fit = pace > 0.0 ? (cfg.time_limit - elapsed) / pace : double(cfg.samples);
+                round = int(std::clamp(fit, 1.0, 4.0 * n));
+            }
+        }
+        reached = s;
+        taken = integrator->finish();
+    }
     auto n = [](const std::atomic<uint64_t> &a) { return (unsigned long long)a.load(); };
-    return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K})", done ? Py_True : Py_False,
+    return Py_BuildValue("(O{s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:K,s:i,s:K,s:O})", done ? Py_True : Py_False,
                          "camera_rays", n(counters.camera), "shadow_rays", n(counters.shadow), "reflection_rays",
                          n(counters.reflection), "refraction_rays", n(counters.refraction), "diffuse_rays",
                          n(counters.diffuse), "transparent_rays", n(counters.transparent), "nodes", n(counters.nodes),
                          "disc_tests", n(counters.discs), "triangle_tests", n(counters.triangles), "layer_queries",
                          n(counters.layer_queries), "far_rejections", n(counters.far_rejections), "interpolations",
-                         n(counters.interpolations));
+                         n(counters.interpolations), "samples_reached", reached, "samples_taken", taken,
+                         "time_limited", time_limited ? Py_True : Py_False);
 }
 
 PyObject *RenderScene_instances(PyObject *self, void *) {
@@ -324,8 +383,10 @@ PyMethodDef RenderScene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
-     "threads=0, progress=None, tile_size=32, packets=True, lens=None)\n--\n\nRenders a window; returns (completed, "
-     "counters). lens: None (a pinhole) or (radius, focus_distance, blades, rotation, ratio)."},
+     "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15)\n--\n\n"
+     "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
+     "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
     {nullptr, nullptr, 0, nullptr},
 };
 
@@ -340,7 +401,7 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None)")},
     {0, nullptr},
 };
 

@@ -389,9 +389,12 @@ inline bool parse_method(PyObject *obj, Method &m) {
 // progress(done, total); it returns True to stop. An exception from it stops the work and
 // is re-raised. Once a stop is asked (or Python is exiting) `stop` is set: a long tile may
 // end early with its pixels unfinished. Returns 1 when every tile was done, 0 when stopped,
-// -1 with an exception set (RuntimeError when Python is exiting).
+// -1 with an exception set (RuntimeError when Python is exiting). A render in rounds (one
+// run_tiles each) reports progress(base + done * scale, total) instead.
 template <class Task>
-int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
+int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task, size_t base = 0, size_t scale = 1,
+              size_t total = 0) {
+    if (total == 0) total = tiles;
     bool callback_failed = false, completed = false, exit_stop = false;
     std::atomic<bool> stop{false};
     GilRelease gil;
@@ -401,7 +404,8 @@ int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
             exit_stop = true, go_on = false;
         } else if (progress != Py_None) {
             gil.take();
-            PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(done), Py_ssize_t(tiles));
+            PyObject *res =
+                PyObject_CallFunction(progress, "nn", Py_ssize_t(base + done * scale), Py_ssize_t(total));
             if (!res) {
                 callback_failed = true, go_on = false;
             } else {
@@ -429,7 +433,8 @@ int run_tiles(size_t tiles, int threads, PyObject *progress, Task &&task) {
     // give), since the callback may release the GIL and want it back.
     if (progress != Py_None && completed && !error_type) {
         gil.take();
-        PyObject *res = PyObject_CallFunction(progress, "nn", Py_ssize_t(tiles), Py_ssize_t(tiles));
+        PyObject *res =
+            PyObject_CallFunction(progress, "nn", Py_ssize_t(base + tiles * scale), Py_ssize_t(total));
         if (res) Py_DECREF(res);
         else callback_failed = true;
         gil.give();

@@ -54,19 +54,7 @@ struct Camera {
         // along -Z.
         const double dir[3] = {orthographic ? 0.0 : u, orthographic ? 0.0 : v, -1.0};
         const double start[3] = {orthographic ? u : u * clip_start, orthographic ? v : v * clip_start, -clip_start};
-        const double *m = local_from_camera;
-        double o[3], d[3];
-        for (int r = 0; r < 3; ++r) {
-            o[r] = m[4 * r] * start[0] + m[4 * r + 1] * start[1] + m[4 * r + 2] * start[2] + m[4 * r + 3];
-            d[r] = m[4 * r] * dir[0] + m[4 * r + 1] * dir[1] + m[4 * r + 2] * dir[2];
-        }
-        const double len = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-        Ray ray;
-        ray.o = Vec3(float(o[0]), float(o[1]), float(o[2]));
-        ray.d = Vec3(float(d[0] / len), float(d[1] / len), float(d[2] / len));
-        ray.tmin = 0.f;
-        ray.tmax = float((clip_end - clip_start) * len);  // inf beyond float's range: unclipped
-        return ray;
+        return local_ray(start, dir);
     }
 
     // ray() through the point (lx, ly) of the lens (camera space: shade/film.h's
@@ -95,6 +83,12 @@ struct Camera {
             for (double &c : dir) c *= scale;
             start[0] = lx + dir[0] * clip_start, start[1] = ly + dir[1] * clip_start, start[2] = dir[2] * clip_start;
         }
+        return local_ray(start, dir);
+    }
+
+    // A camera-space ray (its start and its unnormalised direction, whose length the clip
+    // distances measure) in the scene's local space, in float.
+    Ray local_ray(const double start[3], const double dir[3]) const {
         const double *m = local_from_camera;
         double o[3], d[3];
         for (int r = 0; r < 3; ++r) {

@@ -17,6 +17,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
         Instance &inst = instances_[i];
+        if (inst.shadow_catcher) inst.visibility |= (inst.visibility & kVisAll) << kCatcherShift, any_catcher_ = true;
         const AABB local = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
         AABB world;
         if (!local.empty()) {
@@ -76,6 +77,7 @@ template <class Visit>
 void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                                     TraversalStats *stats, Visit &&visit) const {
     if (instances_.empty()) return;
+    if (from.catcher_only) ray_kind <<= kCatcherShift;  // only shadow catchers are seen
     const Vec3 inv_d(1.f / ray.d.x, 1.f / ray.d.y, 1.f / ray.d.z);
     traverse_bvh(
         top_, ray, limit,

@@ -28,6 +28,12 @@ enum RayVisibility : uint32_t {
     kVisShadow = 16,
     kVisAll = 31,
 };
+// A shadow catcher's ray visibility is held twice: its own bits, and the same bits this many
+// places higher. A ray of a catcher-only path (Origin::catcher_only: the path that shades a
+// catcher as if nothing else were in the scene, the denominator of the Shadow Catcher pass)
+// asks for its kind shifted up, so that only catchers answer it -- in the same test that
+// ray visibility already makes. Cycles' SHADOW_CATCHER_VISIBILITY_SHIFT, for the same reason.
+constexpr uint32_t kCatcherShift = 5;
 
 struct Affine {  // row-major 3x4: p' = M p + t
     float m[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
@@ -52,6 +58,9 @@ struct Instance {
     int material_offset = 0, material_count = 1;  // the instance's slots in the material table
     uint32_t visibility = kVisAll;
     bool holdout = false;        // camera rays that see it get alpha 0
+    // Object > Visibility > Shadow Catcher: it receives the other objects' shadows and
+    // reflections but is itself left out of Combined (the integrator's write_catcher).
+    bool shadow_catcher = false;
     float pass_index = 0;        // Object Index pass
     AABB bounds;                 // in the scene frame
 
@@ -70,6 +79,9 @@ struct Origin {
     // same cloud swap the facing too. Only of that cloud and only this ray: the next surface
     // point makes a new Origin.
     bool back = false;
+    // The ray belongs to a catcher-only path: only shadow catchers are in its scene
+    // (kCatcherShift). Unlike the fields above, it is the path's, and carried along it.
+    bool catcher_only = false;
 };
 
 struct SurfacePoint {
@@ -103,6 +115,7 @@ class RenderScene {
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }
     bool any_emission() const { return any_emission_; }  // a material emits light
+    bool any_catcher() const { return any_catcher_; }    // an instance is a shadow catcher
     // The point is an open cloud's back (SplatScene::open_back); never a mesh's.
     bool open_back(const SurfacePoint &sp) const {
         const Instance &inst = instances_[sp.instance];
@@ -140,7 +153,7 @@ class RenderScene {
     std::vector<Light> lights_;
     MeshLights mesh_lights_;
     BVH top_;
-    bool any_transparent_ = false, any_emission_ = false;
+    bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false;
 };
 
 }  // namespace splat

@@ -32,6 +32,10 @@ struct Film {
     float *normal = nullptr;    // 3 floats: the surface normal, world orientation
     float *diffcol = nullptr, *emit = nullptr, *shadow = nullptr;  // 3 floats each
     float *index = nullptr, *splat_count = nullptr;                // 1 float each
+    // 3 floats: Cycles' Shadow Catcher pass (what a photograph is multiplied by: 1 unshadowed).
+    // Asked for, it also makes Combined leave the catcher's shadow out, as Cycles does when
+    // the pass is on (integrator.cpp, write_catcher).
+    float *shadow_catcher = nullptr;
 };
 
 // What both renderers take the same way.

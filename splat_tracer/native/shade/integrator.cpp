@@ -32,6 +32,9 @@ struct Integrator::PathState {
     // sampled too: emission it meets on them is weighed by MIS. 0: emission counts in full.
     float mis_pdf = 0.f;
     Vec3 mis_from;
+    Vec3 weight{1.f, 1.f, 1.f};  // the product of the bounces' weights: what the pixel gets of light found here
+    // Cycles' min_ray_pdf: the smallest pdf of the directions sampled so far (Filter Glossy).
+    float min_pdf = kInfinity;
 };
 
 struct Integrator::Primary {
@@ -42,6 +45,15 @@ struct Integrator::Primary {
     int splats = 0;
     float alpha = 1.f;
     float lit = 0, unshadowed = 0;  // direct light with and without shadows (luminance)
+    bool catcher = false;  // the first opaque surface is a shadow catcher's
+};
+
+struct Integrator::Pixel {
+    Vec3 sum, diffcol, emit, shadow;
+    Vec3 half;  // progressive rendering: the class-A samples' sum, times 2
+    float alpha = 0;
+    Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
+    CatcherSums catcher;  // scenes with shadow catchers only
 };
 
 namespace {
@@ -58,6 +70,20 @@ bool refract(Vec3 wo, Vec3 n, float eta, Vec3 *wt) {
 }
 
 Vec3 schlick(Vec3 f0, float c) { return f0 + (Vec3(1, 1, 1) - f0) * schlick_weight(c); }
+
+// Cycles' sample_is_class_A: splits the samples into two halves whose estimates are
+// compared for adaptive sampling (Christensen et al., progressive multi-jittered sequences).
+bool sample_is_class_a(uint32_t s) {
+    uint32_t bits = s & 0xaaaaaaaau, count = 0;
+    for (; bits; bits &= bits - 1) ++count;
+    return (count & 1u) != 0;
+}
+
+// The pdf of the GGX reflection lobe's VNDF sampling, for the direction wi (both about n).
+float ggx_reflection_pdf(Vec3 n, Vec3 wo, Vec3 wi, float cos_o, float alpha) {
+    const Vec3 h = normalize(wo + wi);
+    return ggx_g1(cos_o, alpha) * ggx_d(std::fmax(dot(n, h), 0.f), alpha) / (4.f * cos_o);
+}
 
 }  // namespace
 
@@ -112,6 +138,18 @@ struct Integrator::Lobes {
         return std::clamp(f0 * a + b * std::fmin(1.f, f0 / 0.04f), 0.f, 1.f);
     }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
+    // Cycles' bsdf_blur (Filter Glossy): the roughness (alpha) raised to at least `a`; a
+    // mirror-smooth lobe so blurred is sampled like any rough one.
+    void blur(float a) {
+        if (a > alpha) alpha = a, delta = false;
+    }
+};
+
+// How the path goes on from a point: one sampled continuation among the lobes that are not
+// traced exactly, picked in proportion to these weights (each lobe's albedo luminance, 0 for
+// a lobe out of bounces or not sampled); all 0 where the path ends.
+struct Integrator::LobePicks {
+    float diffuse = 0.f, glossy = 0.f, transmission = 0.f, sum = 0.f;
 };
 
 // The cloud a ray travels inside once it has crossed the surface at `sp` (refracted, or
@@ -129,16 +167,40 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       filter_(settings.filter_type, settings.filter_width),
       camera_inside_(scene.locate_camera(Vec3(float(camera.position[0]), float(camera.position[1]),
                                               float(camera.position[2])))),
-      lit_scene_(!scene.lights().empty() || scene.any_emission() || luminance(settings.world) > 0.f),
+      lit_scene_(!scene.lights().empty() || scene.any_emission() ||
+                 (luminance(settings.world) > 0.f &&
+                  (settings.world_visibility & (kVisDiffuse | kVisGlossy | kVisTransmission)))),
       mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
                        ? &scene.mesh_lights()
-                       : nullptr) {}
+                       : nullptr),
+      // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
+      clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
+      clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
+      filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f) {
+    if (settings.progressive()) {
+        const size_t pixels = size_t(film.w) * size_t(film.h);
+        half_.assign(pixels, Vec3());
+        taken_.assign(pixels, 0u);
+        converged_.assign(pixels, uint8_t(0));
+        // Combined and the Shadow Catcher pass are formed from these sums in finish().
+        if (scene.any_catcher()) catcher_.assign(pixels, CatcherSums());
+        // The buffers hold sums until finish().
+        auto zero = [&](float *buf, int channels) {
+            if (buf) std::fill(buf, buf + pixels * size_t(channels), 0.f);
+        };
+        zero(film.combined, 4), zero(film.diffcol, 3), zero(film.emit, 3), zero(film.shadow, 3);
+    }
+}
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     Tally tally;
     // Blocks of 4x4 pixels: each sample's camera rays of a block are one packet.
     for_each_block(film_, settings_.tile_size, tile,
                    [&](const int *cols, const int *rows, int n) { shade_block(cols, rows, n, tally, stop); });
+    add_tally(tally);
+}
+
+void Integrator::add_tally(const Tally &tally) const {
     counters_.camera += tally.camera, counters_.shadow += tally.shadow, counters_.reflection += tally.reflection;
     counters_.refraction += tally.refraction, counters_.diffuse += tally.diffuse;
     counters_.transparent += tally.transparent;
@@ -148,20 +210,52 @@ void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
     counters_.interpolations += s.interpolations;
 }
 
-// Every sample of n pixels (cols[k], rows[k]): sample by sample, the n camera rays' first
-// hits in one packet query (settings.packets), then each pixel's path.
+// Every sample of n pixels (cols[k], rows[k]), then their passes.
 void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tally,
                              const std::atomic<bool> *stop) const {
     const int samples = settings_.samples;
-    struct Pixel {
-        Vec3 sum, diffcol, emit, shadow;
-        float alpha = 0;
-        Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
-    } acc[kPacketRays];
-    for (int s = 0; s < samples; ++s) {
+    Pixel acc[kPacketRays];
+    if (!shade_samples(cols, rows, n, 0, samples, acc, tally, stop)) return;
+    const float inv = 1.f / float(samples);
+    const bool catchers = scene_.any_catcher();
+    for (int k = 0; k < n; ++k) {
+        const Pixel &a = acc[k];
+        const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
+        auto put3 = [&](float *buf, Vec3 v) {
+            if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
+        };
+        if (catchers) {
+            write_catcher(a.catcher, inv, a.alpha * inv, p);
+        } else {
+            if (film_.combined) {
+                float *o = film_.combined + 4 * p;
+                o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+            }
+            put3(film_.shadow_catcher, Vec3(1, 1, 1));  // no catcher: nothing to darken
+        }
+        put3(film_.diffcol, a.diffcol * inv);
+        put3(film_.emit, a.emit * inv);
+        put3(film_.shadow, a.shadow * inv);
+        put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
+        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
+        if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
+        if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
+    }
+}
+
+// Samples [s0, s1) of n pixels (cols[k], rows[k]) added to acc: sample by sample, the n
+// camera rays' first hits in one packet query (settings.packets), then each pixel's path.
+// Sample s takes the same random numbers whichever round renders it.
+bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
+                               const std::atomic<bool> *stop) const {
+    const int samples = settings_.samples;
+    const bool half = settings_.adaptive;
+    const bool catchers = scene_.any_catcher();
+    const Vec3 backdrop = world_seen(kVisCamera);
+    for (int s = s0; s < s1; ++s) {
         // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
         // stop (the viewport closing, Python exiting) must not wait for it.
-        if (stop && stop->load(std::memory_order_relaxed)) return;
+        if (stop && stop->load(std::memory_order_relaxed)) return false;
         float ux, uy;
         r2_point(uint32_t(s), &ux, &uy);
         const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
@@ -185,37 +279,196 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
             Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
+            const Sampler replay = rng;  // a catcher-only path takes the same numbers
             Primary prim;
             ++tally.camera;
             const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
             Pixel &a = acc[k];
-            a.sum = a.sum + c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
+            const Vec3 v = c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
+            a.sum = a.sum + v;
+            if (half && sample_is_class_a(uint32_t(s))) a.half = a.half + v * 2.f;
             a.alpha += prim.alpha;
+            if (catchers) {
+                if (prim.catcher) {
+                    // Cycles' shadow catcher split: the same camera ray again, in a scene of
+                    // catchers only, with the same random numbers, so that where nothing else
+                    // changes the catcher's light both paths are the same path (a ratio of
+                    // exactly 1: no noise outside the shadows).
+                    PathState alone;
+                    alone.from.catcher_only = true;
+                    Sampler same = replay;
+                    ++tally.camera;
+                    CatcherSums &cs = a.catcher;
+                    cs.alone = cs.alone + radiance(rays[k], alone, same, nullptr, tally);
+                    cs.full = cs.full + c, cs.samples += 1.f;
+                    cs.background = cs.background + backdrop;
+                } else {
+                    CatcherSums &cs = a.catcher;
+                    cs.matte = cs.matte + v, cs.matte_alpha += prim.alpha;
+                    if (!prim.hit) cs.background = cs.background + backdrop;
+                }
+            }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
             if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.planar_depth(rays[k], prim.t)) : 0.f;
         }
     }
-    const float inv = 1.f / float(samples);
-    for (int k = 0; k < n; ++k) {
-        const Pixel &a = acc[k];
-        const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
-        if (film_.combined) {
+    return true;
+}
+
+// Progressive rendering. A round adds samples [s0, s1) of the tile's pixels still sampling
+// to the film's sums; its pixels never belong to another tile, so rounds run tiles at once.
+void Integrator::render_tile_samples(size_t tile, int s0, int s1, const std::atomic<bool> *stop) {
+    Tally tally;
+    for_each_block(film_, settings_.tile_size, tile, [&](const int *block_cols, const int *block_rows, int count) {
+        // The block's pixels still sampling: one packet, converged pixels left out.
+        int cols[kPacketRays], rows[kPacketRays], n = 0;
+        for (int k = 0; k < count; ++k)
+            if (!converged_[size_t(block_rows[k]) * size_t(film_.w) + size_t(block_cols[k])])
+                cols[n] = block_cols[k], rows[n] = block_rows[k], ++n;
+        if (n == 0) return;
+        Pixel acc[kPacketRays];
+        if (!shade_samples(cols, rows, n, s0, s1, acc, tally, stop)) return;
+        for (int k = 0; k < n; ++k) {
+            const Pixel &a = acc[k];
+            const size_t p = size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]);
             float *o = film_.combined + 4 * p;
-            o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
+            o[0] += a.sum.x, o[1] += a.sum.y, o[2] += a.sum.z, o[3] += a.alpha;
+            auto add3 = [&](float *buf, Vec3 v) {
+                if (buf) buf[3 * p] += v.x, buf[3 * p + 1] += v.y, buf[3 * p + 2] += v.z;
+            };
+            add3(film_.diffcol, a.diffcol), add3(film_.emit, a.emit), add3(film_.shadow, a.shadow);
+            half_[p] = half_[p] + a.half;
+            if (!catcher_.empty()) catcher_[p].add(a.catcher);
+            taken_[p] += uint32_t(s1 - s0);
+            if (s0 == 0) {  // the centre sample's passes
+                if (film_.normal) {
+                    const Vec3 nrm = a.centre.hit ? a.centre.normal : Vec3();
+                    film_.normal[3 * p] = nrm.x, film_.normal[3 * p + 1] = nrm.y, film_.normal[3 * p + 2] = nrm.z;
+                }
+                if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
+                if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
+                if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
+            }
         }
-        auto put3 = [&](float *buf, Vec3 v) {
-            if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
-        };
-        put3(film_.diffcol, a.diffcol * inv);
-        put3(film_.emit, a.emit * inv);
-        put3(film_.shadow, a.shadow * inv);
-        put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
-        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
-        if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
-        if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
+    });
+    add_tally(tally);
+}
+
+int Integrator::align_samples(int start, int wanted) const {
+    if (!settings_.adaptive) return wanted;
+    // The 0-based sample after which the first check is due, then every kAdaptiveStep.
+    const int first = (settings_.adaptive_min_samples + 1) | (kAdaptiveStep - 1);
+    if (start + wanted <= first) return wanted;
+    const int next = std::max(first, start | (kAdaptiveStep - 1));
+    return std::min(next - start + 1, wanted);
+}
+
+bool Integrator::need_check(int sample) const {
+    return settings_.adaptive && sample > settings_.adaptive_min_samples &&
+           (sample & (kAdaptiveStep - 1)) == (kAdaptiveStep - 1);
+}
+
+size_t Integrator::check_convergence() {
+    const int w = film_.w, h = film_.h;
+    // Cycles' film_adaptive_sampling_convergence_check: the difference between the estimate
+    // of all samples (I) and of the class-A half (A), relative to the square root of the
+    // intensity (to the intensity itself above R + G + B = 1, where more noise cannot show).
+    for (size_t p = 0; p < size_t(w) * size_t(h); ++p) {
+        if (converged_[p]) continue;  // a converged pixel stays so, unless a neighbour undoes it
+        const float *I = film_.combined + 4 * p;
+        const Vec3 A = half_[p];
+        const float scale = 1.f / float(taken_[p]);
+        const float difference =
+            (std::fabs(I[0] - A.x) + std::fabs(I[1] - A.y) + std::fabs(I[2] - A.z)) * scale;
+        const float intensity = (I[0] + I[1] + I[2]) * scale;
+        const float normalise = intensity < 1.f ? std::sqrt(intensity) : intensity;
+        // Cycles' epsilon against a division by zero.
+        converged_[p] = difference / (0.0001f + normalise) < settings_.adaptive_threshold;
     }
+    // Cycles' film_adaptive_sampling_filter_x then _y: a pixel next to one still sampling
+    // samples again (a 3x3 box, in two passes).
+    auto spread = [&](size_t start, size_t step, int count) {
+        bool previous = false;  // the pixel before was still sampling
+        for (int i = 0; i < count; ++i) {
+            uint8_t &c = converged_[start + size_t(i) * step];
+            if (!c) {
+                if (i > 0 && !previous) converged_[start + size_t(i - 1) * step] = 0;
+                previous = true;
+            } else {
+                if (previous) c = 0;
+                previous = false;
+            }
+        }
+    };
+    for (int y = 0; y < h; ++y) spread(size_t(y) * size_t(w), 1, w);
+    for (int x = 0; x < w; ++x) spread(size_t(x), size_t(w), h);
+    size_t active = 0;
+    for (uint8_t c : converged_) active += !c;
+    return active;
+}
+
+uint64_t Integrator::finish() {
+    uint64_t total = 0;
+    for (size_t p = 0; p < taken_.size(); ++p) {
+        total += taken_[p];
+        if (!taken_[p]) continue;  // never sampled: a stopped render, discarded by the caller
+        const float inv = 1.f / float(taken_[p]);
+        // Until here Combined held every sample's full path, the catcher's included: the
+        // adaptive check's estimate, as in Cycles, which measures the noise of Combined "as if
+        // there were no catchers in the scene" (kernel/film/light_passes.h).
+        if (!catcher_.empty()) {
+            write_catcher(catcher_[p], inv, film_.combined[4 * p + 3] * inv, p);
+        } else {
+            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
+            if (film_.shadow_catcher)
+                for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
+        }
+        for (float *buf : {film_.diffcol, film_.emit, film_.shadow})
+            if (buf)
+                for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
+    }
+    return total;
+}
+
+// Combined and the Shadow Catcher pass of a pixel of a scene with shadow catchers, formed as
+// Cycles' film does (kernel/film/read.h: film_calculate_shadow_catcher and
+// film_calculate_shadow_catcher_matte_with_shadow). The catcher's shadow is the ratio of its
+// light with everything to its light with catchers only (1 where it has no sample, per
+// channel 1 where the catcher alone is black), alpha-overed on white by the pixel's
+// coverage. Combined is the matte -- everything but the catcher -- and, without the Shadow
+// Catcher pass (Cycles' approximate shadow catcher), the shadow's strength as alpha:
+// 1 - average(shadow) where the matte does not cover; on an opaque film, the world behind
+// it shows through that alpha instead (alpha 1). `sums` over the pixel's samples, `inv` one
+// over their count, `alpha` the pixel's (mean) alpha.
+void Integrator::write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const {
+    const Vec3 matte = sums.matte * inv, background = sums.background * inv;
+    const float matte_alpha = sums.matte_alpha * inv;
+    Vec3 shadow(1, 1, 1);
+    if (sums.samples > 0.f) {
+        // A ratio of sums: the count cancels.
+        auto ratio = [](float a, float b) { return b != 0.f ? a / b : 1.f; };
+        const Vec3 full = sums.full, alone = sums.alone;
+        shadow = Vec3(ratio(full.x, alone.x), ratio(full.y, alone.y), ratio(full.z, alone.z));
+        const float covered = std::clamp(alpha, 0.f, 1.f);
+        shadow = Vec3(1, 1, 1) * (1.f - covered) + shadow * covered;
+    }
+    if (film_.shadow_catcher) {
+        float *o = film_.shadow_catcher + 3 * p;
+        o[0] = shadow.x, o[1] = shadow.y, o[2] = shadow.z;
+    }
+    if (!film_.combined) return;
+    float *o = film_.combined + 4 * p;
+    const float ma = std::clamp(matte_alpha, 0.f, 1.f);
+    Vec3 rgb = matte;
+    float out_alpha = matte_alpha;
+    if (!film_.shadow_catcher) {
+        const float strength = 1.f - std::clamp((shadow.x + shadow.y + shadow.z) / 3.f, 0.f, 1.f);
+        out_alpha = (1.f - ma) * strength + ma;
+        if (!settings_.film_transparent) rgb = rgb + background * (1.f - out_alpha), out_alpha = 1.f;
+    }
+    o[0] = rgb.x, o[1] = rgb.y, o[2] = rgb.z, o[3] = out_alpha;
 }
 
 Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
@@ -240,7 +493,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
-            return cfg.world + lamps;
+            // Cycles clamps light that a ray finds with the ray's bounce - 1: light reaching
+            // the first surface is direct, whether sampled there or found by its bounce ray.
+            return clamped(world_seen(st.kind), st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -253,12 +508,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
-                         inside_after_crossing(passed, st.from.inside)};
+                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
-        if (!(ray.tmax > 0.f)) return cfg.world;
+        if (!(ray.tmax > 0.f)) return clamped(world_seen(st.kind), st.weight, st.bounces > 1);
     }
 
     const Vec3 wo = ray.d * -1.f;
@@ -270,16 +525,18 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     Vec3 n = sp.ns, ng = sp.ng;
     if (dot(ng, wo) < 0.f) ng = ng * -1.f;
     if (dot(n, wo) < 0.f) n = n * -1.f;  // two-sided shading
-    const Lobes lobes(mat, base, entering);
+    Lobes blurred(mat, base, entering);
+    // Cycles' Filter Glossy: after a bounce into a direction of small pdf (a diffuse or rough
+    // one), glossy lobes get at least the roughness sqrt(1 - pdf / Filter Glossy) / 2, so that
+    // the caustic paths that make fireflies are found by light sampling instead.
+    if (filter_glossy_ > 0.f && st.min_pdf < kInfinity) {
+        const float blur_pdf = filter_glossy_ * st.min_pdf;
+        if (blur_pdf < 1.f) blurred.blur(std::sqrt(1.f - blur_pdf) * 0.5f);
+    }
+    const Lobes &lobes = blurred;
     const float cos_o = std::fmax(dot(n, wo), 1e-6f);
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
-    if (primary && st.camera) {
-        // Cycles writes a back face's normal turned towards the viewer (it flips N with Ng).
-        primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
-        primary->diffcol = diffuse_albedo, primary->emit = mat.emission;
-        primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
-    }
     Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
     if (st.mis_pdf > 0.f) {
         // Shadow rays could have found this point too: the power heuristic shares it between
@@ -295,7 +552,16 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                                      : power_heuristic(st.mis_pdf, light_pdf));
         }
     }
-    Vec3 L = emitted + lamps;
+    // Clamped after the MIS weight, as Cycles' film_clamp_light sees the weighted emission.
+    const Vec3 emission = clamped(emitted, st.weight, st.bounces > 1);
+    if (primary && st.camera) {
+        // Cycles writes a back face's normal turned towards the viewer (it flips N with Ng).
+        primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
+        primary->diffcol = diffuse_albedo, primary->emit = emission;
+        primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
+        primary->catcher = scene_.instance(sp.instance).shadow_catcher;
+    }
+    Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
     // Where rays leave this point from: the splats that formed it are excluded (the paper's
@@ -304,7 +570,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside};
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only};
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
@@ -330,18 +596,17 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
 
     // How the path goes on below: one sampled continuation among the lobes that are not traced
     // exactly, picked by these weights. Known before the light sampling, whose MIS needs them.
-    const bool continues = lit_scene_ && st.bounces < cfg.max_bounces && st.bounces < kMaxDepth;
-    float w_diffuse = 0.f, w_glossy = 0.f, w_trans = 0.f, pick[2] = {0.f, 0.f};
-    if (continues) {
-        w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
-        w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
-        w_trans = !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o))
-                                                                              : 0.f;
+    LobePicks picks;
+    if (lit_scene_ && st.bounces < cfg.max_bounces && st.bounces < kMaxDepth) {
+        picks.diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
+        picks.glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
+        picks.transmission =
+            !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
+        picks.sum = picks.diffuse + picks.glossy + picks.transmission;
     }
-    const float w_sum = w_diffuse + w_glossy + w_trans;
-    if (w_sum > 0.f) pick[0] = w_diffuse / w_sum, pick[1] = w_glossy / w_sum;
 
-    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, pick, rng, st.camera ? primary : nullptr, tally);
+    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, picks, rng, st.camera ? primary : nullptr, tally,
+                         st.weight, st.bounces > 0);
 
     // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
     // can bring any back, so none is traced.
@@ -349,9 +614,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (st.bounces >= cfg.max_bounces || st.bounces >= kMaxDepth) return L;
 
     // Continues the path with `weight`, by Russian roulette when its throughput is small.
-    // mis_pdf: the density of a sampled reflection, when mesh lights were sampled here too.
+    // `pdf`: the sampled direction's (Filter Glossy's min_ray_pdf); infinite for a mirror or
+    // clear glass (Cycles gives those 1e6, which no Filter Glossy up to its maximum of 10 uses).
+    // `mis_pdf`: the same density when mesh lights were sampled here too, else 0.
     auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
-                      uint64_t Tally::*count, bool specular, float mis_pdf = 0.f) {
+                      uint64_t Tally::*count, bool specular, float pdf, float mis_pdf = 0.f) {
         PathState next = st;
         next.camera = false;
         next.kind = kind;
@@ -373,6 +640,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             weight = weight * (1.f / survive);
             next.throughput = kRouletteThroughput;
         }
+        next.weight = st.weight * weight;
+        next.min_pdf = std::fmin(st.min_pdf, pdf);
         ++(tally.*count);
         L = L + weight * radiance(spawn(dir), next, rng, nullptr, tally);
     };
@@ -382,43 +651,67 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     if (lobes.delta) {
         const Vec3 spec = lobes.specular(cos_o);
         if (luminance(spec) > 0.f && st.glossy < cfg.glossy_bounces)
-            follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside, &Tally::reflection, true);
+            follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside, &Tally::reflection, true,
+                   kInfinity);
         Vec3 wt;
         const Vec3 trans = lobes.transmission(cos_o);
         if (luminance(trans) > 0.f && st.transmission < cfg.transmission_bounces && refract(wo, n, lobes.eta, &wt))
-            follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true);
+            follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true,
+                   kInfinity);
     }
 
     // Sky light by ambient occlusion replaces the diffuse bounce.
-    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(cfg.world) > 0.f)
-        L = L + diffuse_albedo * cfg.world * sky_occlusion(sp, here, n, ng, rng, tally);
+    const Vec3 sky = world_seen(kVisDiffuse);
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f)
+        L = L + clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
 
     // One sampled continuation among the lobes that are not traced exactly.
-    auto mis_pdf = [&](Vec3 wi) { return mesh_lights_ ? reflection_pdf(lobes, n, wo, cos_o, wi, pick) : 0.f; };
+    const float w_diffuse = picks.diffuse, w_glossy = picks.glossy, w_trans = picks.transmission,
+                w_sum = picks.sum;
     if (w_sum > 0.f) {
         float u = rng.next() * w_sum;
         const float u1 = rng.next(), u2 = rng.next();
+        // The sampled reflection's density, computed only where it is needed: Cycles'
+        // min_ray_pdf for Filter Glossy (infinite without it), and the MIS weight of mesh
+        // lights (0 without them: emission the ray meets counts in full).
+        float pdf = kInfinity, mis_pdf = 0.f;
+        auto densities = [&](Vec3 wi) {
+            if (!(filter_glossy_ > 0.f) && !mesh_lights_) return;
+            const float p = reflection_pdf(lobes, n, wo, cos_o, wi, picks);
+            if (filter_glossy_ > 0.f) pdf = p;
+            if (mesh_lights_) mis_pdf = p;
+        };
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
-            if (dot(wi, ng) > 0.f)
+            if (dot(wi, ng) > 0.f) {
+                densities(wi);
                 follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
-                       &Tally::diffuse, false, mis_pdf(wi));
+                       &Tally::diffuse, false, pdf, mis_pdf);
+            }
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             const Vec3 wi = reflect(wo, m);
             if (dot(wi, n) > 0.f && dot(wi, ng) > 0.f) {
                 // VNDF sampling: the estimator is F(wo.m) G1(wi).
                 const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
+                densities(wi);
                 follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
-                       &Tally::reflection, false, mis_pdf(wi));
+                       &Tally::reflection, false, pdf, mis_pdf);
             }
         } else {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             Vec3 wt;
             if (refract(wo, m, lobes.eta, &wt) && dot(wt, n) < 0.f) {
                 const Vec3 w = lobes.transmission(std::fmax(dot(wo, m), 0.f)) * ggx_g1(-dot(wt, n), lobes.alpha);
+                if (filter_glossy_ > 0.f) {
+                    // The VNDF's pdf of m times the refraction's Jacobian (Walter et al. 2007).
+                    const float om = dot(wo, m), tm = dot(wt, m), den = om + lobes.eta * tm;
+                    pdf = (w_trans / w_sum) * ggx_g1(cos_o, lobes.alpha) * std::fmax(om, 0.f) *
+                          ggx_d(std::fmax(dot(n, m), 0.f), lobes.alpha) / cos_o * lobes.eta * lobes.eta *
+                          std::fabs(tm) / std::fmax(den * den, 1e-12f);
+                }
                 follow(wt, w * (w_sum / w_trans), kVisTransmission, &PathState::transmission, inside_after,
-                       &Tally::refraction, false);
+                       &Tally::refraction, false, pdf);
             }
         }
     }
@@ -436,21 +729,18 @@ Ray Integrator::shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float dista
     return r;
 }
 
-float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const float pick[2]) {
-    const float cos_i = dot(n, wi);
-    if (!(cos_i > 0.f)) return 0.f;
-    float pdf = pick[0] * cos_i * (1.f / kPi);  // cosine-weighted diffuse
-    if (pick[1] > 0.f) {
-        // VNDF sampling reflected about m: D_wo(m) / (4 wo.m) = G1(wo) D(m) / (4 cos_o).
-        const Vec3 h = normalize(wo + wi);
-        pdf += pick[1] * ggx_g1(cos_o, lobes.alpha) * ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) / (4.f * cos_o);
-    }
-    return pdf;
+// The pdf of the BSDF as Cycles' is for a direction (every sampled lobe, by its pick),
+// computed as the Filter Glossy min_ray_pdf has always been.
+float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks) {
+    if (!(picks.sum > 0.f)) return 0.f;  // the path ends here: no reflection is sampled
+    const float diffuse_pdf = std::fmax(dot(n, wi), 0.f) / kPi;  // cosine-weighted
+    const float glossy_pdf = picks.glossy > 0.f ? ggx_reflection_pdf(n, wo, wi, cos_o, lobes.alpha) : 0.f;
+    return (picks.diffuse * diffuse_pdf + picks.glossy * glossy_pdf) / picks.sum;
 }
 
 Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                              const Lobes &lobes, const float pick[2], Sampler &rng, Primary *primary,
-                              Tally &tally) const {
+                              const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary,
+                              Tally &tally, Vec3 weight, bool indirect) const {
     const std::vector<Light> &lights = scene_.lights();
     if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
@@ -465,8 +755,12 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
         const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
         return lobes.specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
     };
+    // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
+    // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
+    const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
     Vec3 L;
     for (const Light &light : lights) {
+        Vec3 lamp;
         for (int s = 0; s < k; ++s) {
             const float u1 = rng.next(), u2 = rng.next();
             const LightSample ls = sample_light(light, sp.p, u1, u2);
@@ -482,9 +776,11 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                 ++tally.shadow;
                 visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
             }
-            L = L + c * visible;
+            if (clamp) lamp = lamp + c * visible;
+            else L = L + c * visible;
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }
+        if (clamp) L = L + clamped(lamp, weight, indirect);
     }
     // Emissive triangles: a point of one picked by power, weighed against the chance that
     // the path's own sampled reflection finds it (the weight its emission gets in radiance()).
@@ -494,22 +790,29 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             const float u0 = rng.next(), u1 = rng.next(), u2 = rng.next();
             const MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
             if (!ls.valid) continue;
+            const Instance &emitter = scene_.instance(ls.instance);
+            // A catcher-only path shades the catchers as if nothing else were there: another
+            // object's emission is not in it (its rays cannot meet one either), as Cycles
+            // flags the emissive triangles of a non-catcher SHADER_EXCLUDE_SHADOW_CATCHER.
+            if (from.catcher_only && !emitter.shadow_catcher) continue;
             const float cos_i = dot(n, ls.wi);
             if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
             // As Cycles excludes them: an emitter hidden from diffuse (glossy) rays lights no
             // diffuse (glossy) lobe -- the rays of that lobe could never meet it either.
-            const uint32_t seen_by = scene_.instance(ls.instance).visibility;
-            Vec3 f = seen_by & kVisDiffuse ? diffuse : Vec3();
-            if (glossy && (seen_by & kVisGlossy)) f = f + glossy_brdf(ls.wi, cos_i);
+            Vec3 f = emitter.visibility & kVisDiffuse ? diffuse : Vec3();
+            if (glossy && (emitter.visibility & kVisGlossy)) f = f + glossy_brdf(ls.wi, cos_i);
             const float light_pdf = ls.pdf * float(k);
-            const float weight =
-                light_only ? 1.f : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, ls.wi, pick));
-            const Vec3 c = f * ls.emission * (cos_i * weight / light_pdf);
+            const float w =
+                light_only ? 1.f : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, ls.wi, picks));
+            const Vec3 c = f * ls.emission * (cos_i * w / light_pdf);
             if (!(luminance(c) > 0.f)) continue;
             ++tally.shadow;
             // Not in the Shadow pass, which is the lamps' (a closed emitter's far side, shadowed
             // by its near side, would darken it everywhere).
-            L = L + c * shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            // Clamped, each sample is one of Cycles' shadow rays (one emitter picked, its light
+            // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
+            L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
         }
     }
     return L;
@@ -549,7 +852,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
         t = t * (1.f - a);
         previous = sp;
         from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
-                      inside_after_crossing(previous, from.inside)};
+                      inside_after_crossing(previous, from.inside), false, from.catcher_only};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -23,6 +24,10 @@ struct IntegratorSettings : FrameSettings {
         transparent_bounces = 8;
     uint32_t seed = 0;
     Vec3 world;  // background radiance
+    // Ray kinds that see the world (World > Settings > Ray Visibility; kVis* bits). A kind
+    // left out meets black where it leaves the scene -- camera rays keep alpha 1 on an opaque
+    // film, as in Cycles.
+    uint32_t world_visibility = kVisCamera | kVisDiffuse | kVisGlossy | kVisTransmission;
     bool film_transparent = false;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
@@ -31,6 +36,17 @@ struct IntegratorSettings : FrameSettings {
     // occlusion rays bring the world's radiance where they escape; no diffuse bounce rays.
     bool sky_ao = false;
     int ao_samples = 1;
+    // Noise control, Cycles' settings with Cycles' meaning (render/shading.py RenderSettings).
+    // Clamp Direct / Indirect: the largest R + G + B a contribution may bring (0: no clamp).
+    float clamp_direct = 0.f, clamp_indirect = 0.f;
+    float filter_glossy = 0.f;  // Filter Glossy (0: off)
+    // Adaptive sampling, the effective values (Cycles' automatic ones already resolved).
+    bool adaptive = false;
+    float adaptive_threshold = 0.f;
+    int adaptive_min_samples = 0;
+    double time_limit = 0.0;  // seconds of sampling; 0: none
+    // Sampling in rounds over the whole image (adaptive sampling or a time limit).
+    bool progressive() const { return adaptive || time_limit > 0.0; }
     // How emissive triangles light other surfaces: both shadow rays aimed at them and the
     // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
     // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
@@ -56,28 +72,76 @@ class Integrator {
     // left unfinished (the caller discards a stopped render).
     void render_tile(size_t tile, const std::atomic<bool> *stop = nullptr) const;
 
+    // Progressive rendering (settings.progressive()): rounds of samples over every tile, the
+    // film's buffers holding sums until finish(). Samples [s0, s1) of the tile's pixels
+    // still sampling.
+    void render_tile_samples(size_t tile, int s0, int s1, const std::atomic<bool> *stop = nullptr);
+    // Cycles' AdaptiveSampling::align_samples: how many of `wanted` samples from `start` to
+    // render so that a round ends where a convergence check is due.
+    int align_samples(int start, int wanted) const;
+    // Cycles' need_filter: a convergence check is due after 0-based sample `sample`.
+    bool need_check(int sample) const;
+    // Cycles' convergence check and its 3x3 spread of unconverged pixels, after every pixel
+    // still sampling has its samples; returns the pixels that go on.
+    size_t check_convergence();
+    // Each pixel's sums divided by its own sample count. Returns the samples taken.
+    uint64_t finish();
+    // Cycles' adaptive step: a convergence check every this many samples.
+    static constexpr int kAdaptiveStep = 16;
+
   private:
     struct Tally;       // per-tile ray counts
     struct PathState;   // bounce counters, where the ray starts, its throughput
     struct Primary;     // what the passes want from the camera ray's first hit
     struct Lobes;       // a material's lobes at one point
+    struct LobePicks;   // how the path goes on from a point: the sampled lobes' weights
+    struct Pixel;       // one pixel's sums over its samples
+    // With shadow catchers (Cycles' film passes of the same names): the samples whose first
+    // surface is not a catcher (the matte: colour, alpha); the catcher's samples shaded with
+    // everything and as if only catchers were there; their count; the world seen by the
+    // camera behind the catcher or past everything. Sums over samples, like every pass.
+    // (Complete here: the progressive film keeps one per pixel.)
+    struct CatcherSums {
+        Vec3 matte, full, alone, background;
+        float matte_alpha = 0, samples = 0;
+        void add(const CatcherSums &o) {
+            matte = matte + o.matte, full = full + o.full, alone = alone + o.alone;
+            background = background + o.background;
+            matte_alpha += o.matte_alpha, samples += o.samples;
+        }
+    };
 
     // `first`: the ray's first hit, already found (the camera packet's), else null.
     Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
                   const SurfacePoint *first = nullptr) const;
-    // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`.
-    // `pick`: the probabilities that the path goes on by a sampled diffuse and glossy
-    // reflection (0 when it ends here), which the mesh lights' MIS weights need.
+    // Light from lamps and sampled emissive triangles at a surface point, shadow rays
+    // included; `n` and `ng` face `wo`. `picks`: how the path goes on from here (all 0 when it
+    // ends), which the mesh lights' MIS weights need. `weight` and `indirect`: the path's, for
+    // the clamp.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                      const Lobes &lobes, const float pick[2], Sampler &rng, Primary *primary, Tally &tally) const;
+                      const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary, Tally &tally,
+                      Vec3 weight, bool indirect) const;
     // The density with which the path's sampled reflection at a point goes in direction wi
-    // (solid angle): the lobe picks times their densities.
-    static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const float pick[2]);
+    // (solid angle): the lobe picks times their densities; 0 when the path ends there.
+    static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks);
     // A shadow ray from the surface point towards wi, ending just short of `distance`.
     static Ray shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance);
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
+    void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
+    // Samples [s0, s1) of n pixels added to acc; false when stopped.
+    bool shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
+                       const std::atomic<bool> *stop) const;
+    void add_tally(const Tally &tally) const;
+    // Cycles' film_clamp_light: light `c` reaching the pixel with path weight `weight` is
+    // scaled so that the contribution's |R| + |G| + |B| stays within the limit.
+    Vec3 clamped(Vec3 c, Vec3 weight, bool indirect) const {
+        const float limit = indirect ? clamp_indirect_ : clamp_direct_;
+        if (!(limit < kInfinity)) return c;
+        const float sum = std::fabs(weight.x * c.x) + std::fabs(weight.y * c.y) + std::fabs(weight.z * c.z);
+        return sum > limit ? c * (limit / sum) : c;
+    }
     // The id of the pixel in window column `col`, row `row`: its random numbers' key.
     uint32_t pixel_id_of(int col, int row) const {
         return uint32_t(film_.y0 + row) * uint32_t(film_.width) + uint32_t(film_.x0 + col);
@@ -86,6 +150,10 @@ class Integrator {
     // hash decorrelates it from the path's stream of the same pixel and sample).
     static constexpr uint32_t kLensStream = 0x6c656e73u;  // "lens"
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
+    // The world's radiance for a ray of `kind` that leaves the scene (0 if hidden from it).
+    Vec3 world_seen(uint32_t kind) const {
+        return (settings_.world_visibility & kind) ? settings_.world : Vec3();
+    }
 
     const RenderScene &scene_;
     const Camera &camera_;
@@ -96,6 +164,16 @@ class Integrator {
     const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
     const MeshLights *mesh_lights_;  // sampled emissive triangles, or null (none, or not sampled)
+    // Cycles' kernel values: the clamps times 3 (they bound a sum of three channels) or
+    // infinity; filter glossy as 1 / Filter Glossy, or 0 when off.
+    float clamp_direct_, clamp_indirect_, filter_glossy_;
+    // Progressive rendering only: per pixel of the window, the class-A half of the combined
+    // sum (times 2, Cycles' adaptive aux buffer), the samples taken, and whether it converged.
+    std::vector<Vec3> half_;
+    std::vector<uint32_t> taken_;
+    std::vector<uint8_t> converged_;
+    // Progressive rendering of a scene with shadow catchers: each pixel's catcher sums.
+    std::vector<CatcherSums> catcher_;
 };
 
 }  // namespace splat

@@ -205,4 +205,4 @@ def read_e57(path: str, progress=None) -> PointCloud:
     if all(c is not None for c in intensity_parts):
         attributes["intensity"] = np.concatenate(intensity_parts).astype(np.float32)
     return make_cloud(path, pos, None, colours, None, attributes, np.concatenate(scanners), drop_non_finite=True,
-                      format="E57", orientation="SCANNER", notes=notes)
+                      format="E57", notes=notes)

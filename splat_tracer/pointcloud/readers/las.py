@@ -344,4 +344,4 @@ def read_las(path: str, progress=None) -> PointCloud:
             notes.append("its colour fields are all zero: imported without colours")
     attributes = {name: column[name] for name in ("intensity", "classification", "return_number") if name in column}
     return make_cloud(path, pos, None, colours, None, attributes, drop_non_finite=True,
-                      format="LAZ" if compressed else "LAS", orientation="UP", notes=notes)
+                      format="LAZ" if compressed else "LAS", notes=notes)

@@ -431,7 +431,6 @@ def read_pcd(path: str) -> PointCloud:
                      + " (a normal needs all three)")
     viewpoint = tuple(float(x) for x in meta.viewpoint)
     scanner = np.asarray(viewpoint[:3], np.float64)
-    orientation = "PROPAGATE"
     if not (np.isfinite(scanner).all() and np.abs(scanner).max() < 1e300):
         scanner = None
         notes.append(f"the file's VIEWPOINT {viewpoint} is not a position: not used")
@@ -444,12 +443,11 @@ def read_pcd(path: str) -> PointCloud:
         notes.append("the file's VIEWPOINT is PCL's default (0, 0, 0, no rotation) and the cloud is not organised: "
                      "not taken as the sensor's position")
     else:
-        orientation = "SCANNER"
         notes.append(viewpoint_note(viewpoint))
     if meta.height > 1:
         notes.append(f"an organised cloud of {meta.width:,} x {meta.height:,} points (rows: v x {meta.width:,} + u)")
     cloud = make_cloud(path, pos, normals, colours, None, attributes, drop_non_finite=True, format="PCD",
-                       orientation=orientation, notes=notes)
+                       notes=notes)
     if scanner is not None:  # one row for every point, set after make_cloud's in-place subset
         cloud.scanners = np.broadcast_to(scanner, (len(cloud), 3))
     return cloud
