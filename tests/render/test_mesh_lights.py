@@ -235,3 +235,23 @@ def test_scenes_without_sampled_emitters_render_as_before():
                for s in ("MIS", "BSDF")]
         np.testing.assert_array_equal(out[0].passes["Combined"], out[1].passes["Combined"])
         assert out[0].counters == out[1].counters
+
+
+def test_adaptive_sampling_and_the_time_limit_converge_with_mesh_lights():
+    """Mesh lights under progressive rendering (rounds of samples, per-pixel sums): a floor
+    under the panel, adaptive sampling (noise threshold 0.02) and a time limit, against a
+    fixed 256-sample render. Measured: mean 0.11238 adaptive, 0.11229 time-limited, 0.11229
+    fixed; adaptive took about 65 samples a pixel of 256. MEAN_RTOL = 1 %: a round whose sums
+    were lost or divided by the wrong count would be off by a factor."""
+    panel = Instance(panel_mesh(), materials=(EMITTER,), visibility=HIDDEN_FROM_CAMERA)
+    cam = ortho_down(4.0 * 4 / 3, 4.0)
+    scene = RenderScene([Instance(floor_mesh(), materials=(LAMBERT,)), panel], (), World(colour=(0.02,) * 3))
+    w, h, samples = 32, 24, 256
+    base = dict(samples=samples, diffuse_bounces=1)
+    fixed = scene.render(cam, w, h, RenderSettings(**base)).passes["Combined"][..., :3].mean()
+    adaptive = scene.render(cam, w, h, RenderSettings(**base, adaptive=True, adaptive_threshold=0.02))
+    timed = scene.render(cam, w, h, RenderSettings(**base, time_limit=0.5))
+    for res in (adaptive, timed):
+        assert abs(res.passes["Combined"][..., :3].mean() / fixed - 1) < 0.01
+        assert (res.passes["Combined"][..., 3] == 1).all()
+    assert adaptive.counters["samples_taken"] < samples * w * h / 2  # it did stop early
