@@ -213,7 +213,7 @@ def fuzz_render_scene(fdp, splats):
                  np.array([[fdp.ConsumeIntInRange(-1, n_mat), fdp.ConsumeIntInRange(0, 2)] for _ in range(n)],
                           np.int32).reshape(n, 2),
                  np.full(n, fdp.ConsumeIntInRange(-1, 64), np.int32), np.zeros(n, np.uint8), np.zeros(n, np.float32),
-                 rows(n_mat, 14), rows(n_light, 21), fdp.ConsumeIntInRange(0, 2))
+                 rows(n_mat, 15), rows(n_light, 21), fdp.ConsumeIntInRange(0, 2))
     if scene is None:
         return
     w, h = fdp.ConsumeIntInRange(1, 12), fdp.ConsumeIntInRange(1, 12)

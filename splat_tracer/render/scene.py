@@ -155,6 +155,13 @@ class RenderScene:
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r[7]) for r in rows)  # instances that are shadow catchers
 
+    def mesh_lights(self) -> list:
+        """The emissive mesh triangles sampled as lights, as (instance index, triangle index,
+        probability of being picked) -- power-weighted: area (in the scene) x luminance of the
+        emission x alpha. A material whose emission_sampling samples no side, an instance
+        hidden from both diffuse and glossy rays, and clouds are not among them."""
+        return self._scene.mesh_lights()
+
     def render(self, camera: Camera, width: int, height: int, settings: RenderSettings = RenderSettings(),
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,

@@ -23,7 +23,17 @@ import numpy as np
 MATERIAL_FIELDS = (
     "base_r", "base_g", "base_b", "metallic", "roughness", "ior", "transmission", "alpha",
     "emission_r", "emission_g", "emission_b", "specular_level", "use_point_colour", "use_point_alpha",
+    "emission_sides",
 )
+
+# Cycles' Emission Sampling (Material > Settings), with its identifiers: which sides of a
+# mesh's emissive triangles are sampled as lights (the others are found by rays only).
+EMISSION_SAMPLING = ("NONE", "AUTO", "FRONT", "BACK", "FRONT_BACK")
+_EMISSION_SIDES = {"NONE": 0, "FRONT": 1, "BACK": 2, "FRONT_BACK": 3}
+# Cycles' Auto samples a material when its emission estimate (colour x strength, at most
+# this in any channel) exceeds 0.5, so that faint glows do not take samples from the lights
+# that matter (Shader::estimate_emission in Cycles' scene/shader.cpp).
+AUTO_EMISSION_THRESHOLD = 0.5
 
 
 @dataclass(frozen=True)
@@ -36,6 +46,10 @@ class Material:
     specular_level: the Principled BSDF's 'Specular IOR Level' (0.5: the IOR's own Fresnel;
         0: no specular reflection on dielectrics; 1: twice it).
     emission: emitted radiance, colour x strength.
+    emission_sampling: Cycles' Emission Sampling (EMISSION_SAMPLING): which sides of a mesh's
+        emissive triangles are sampled as lights; AUTO as Cycles (both sides when the
+        emission exceeds AUTO_EMISSION_THRESHOLD in a channel, else none). Clouds' emission
+        is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     """
 
@@ -49,8 +63,12 @@ class Material:
     specular_level: float = 0.5
     use_point_colour: bool = False
     use_point_alpha: bool = False
+    emission_sampling: str = "AUTO"
 
     def __post_init__(self):
+        if self.emission_sampling not in EMISSION_SAMPLING:
+            raise ValueError(f"material emission_sampling must be one of {EMISSION_SAMPLING}, "
+                             f"got {self.emission_sampling!r}")
         for name in ("metallic", "roughness", "transmission", "alpha"):
             v = getattr(self, name)
             if not (math.isfinite(v) and 0.0 <= v <= 1.0):
@@ -67,7 +85,14 @@ class Material:
     def pack(self) -> np.ndarray:
         return np.array([*self.base_colour, self.metallic, self.roughness, self.ior, self.transmission, self.alpha,
                          *self.emission, self.specular_level, float(self.use_point_colour),
-                         float(self.use_point_alpha)], np.float32)
+                         float(self.use_point_alpha), float(self.emission_sides)], np.float32)
+
+    @property
+    def emission_sides(self) -> int:
+        """The sides sampled as a light: 1 front, 2 back, 3 both, 0 none (AUTO resolved)."""
+        if self.emission_sampling == "AUTO":
+            return 3 if max(self.emission) > AUTO_EMISSION_THRESHOLD else 0
+        return _EMISSION_SIDES[self.emission_sampling]
 
 
 # --------------------------------------------------------------------------------------
@@ -187,6 +212,7 @@ class World:
 
 
 PIXEL_FILTERS = ("BOX", "GAUSSIAN", "BLACKMAN_HARRIS")
+MESH_LIGHT_STRATEGIES = ("MIS", "LIGHT", "BSDF")  # the core's IntegratorSettings::MeshLightStrategy order
 
 
 @dataclass(frozen=True)
@@ -204,6 +230,10 @@ class RenderSettings:
     sky_ao: light from the world by ambient occlusion instead of diffuse bounces: at each
         diffuse point `ao_samples` occlusion rays, the world's radiance where they escape
         (cheaper; ignores light bounced off other surfaces).
+    mesh_light_strategy: how emissive mesh triangles light other surfaces (MESH_LIGHT_STRATEGIES):
+        "MIS" (shadow rays aimed at them and the rays that meet them, weighed by multiple
+        importance sampling, as Cycles), "LIGHT" (shadow rays only) or "BSDF" (the rays that
+        meet them only). The last two are for verifying the first; all three converge alike.
 
     Noise control, Cycles' settings with Cycles' meaning (0 turns each off):
     clamp_direct / clamp_indirect: Cycles' Clamp Direct / Indirect. A sample's contribution
@@ -242,8 +272,12 @@ class RenderSettings:
     adaptive_threshold: float = 0.0
     adaptive_min_samples: int = 0
     time_limit: float = 0.0
+    mesh_light_strategy: str = "MIS"
 
     def __post_init__(self):
+        if self.mesh_light_strategy not in MESH_LIGHT_STRATEGIES:
+            raise ValueError(f"mesh_light_strategy must be one of {MESH_LIGHT_STRATEGIES}, "
+                             f"got {self.mesh_light_strategy!r}")
         if self.pixel_filter not in PIXEL_FILTERS:
             raise ValueError(f"pixel_filter must be one of {PIXEL_FILTERS}, got {self.pixel_filter!r}")
         if not 1 <= self.samples <= 1 << 16:
@@ -286,7 +320,7 @@ class RenderSettings:
                 self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight), bool(self.sky_ao),
                 self.ao_samples, float(self.clamp_direct), float(self.clamp_indirect), float(self.filter_glossy),
                 bool(self.adaptive), *(self.adaptive_parameters() if self.adaptive else (0.0, 0)),
-                float(self.time_limit))
+                float(self.time_limit), MESH_LIGHT_STRATEGIES.index(self.mesh_light_strategy))
 
 
 # Passes the core can write, by the name Blender shows, with their channel count.
@@ -296,7 +330,7 @@ PASSES = {
     "Normal": 3,       # world-space shading normal, pixel-centre sample
     "DiffCol": 3,      # albedo of the diffuse lobe, averaged over the samples
     "Emit": 3,         # emitted radiance seen by camera rays, averaged
-    "Shadow": 3,       # direct light received / direct light unshadowed (1: fully lit or no lamp)
+    "Shadow": 3,       # lamps' direct light received / unshadowed (1: fully lit or no lamp; not mesh lights)
     "IndexOB": 1,      # the object's pass index, pixel-centre sample
     "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
     "Shadow Catcher": 3,  # Cycles': what the background is multiplied by (1: no shadow); see RenderScene.render

@@ -842,10 +842,10 @@ def test_valid_native_arguments_build_a_scene():
 
 
 @pytest.mark.parametrize("change", [
-    {"materials": np.zeros((1, 13), np.float32)},                 # a material row too short
-    {"materials": np.zeros((1, 15), np.float32)},                 # or too long
-    {"materials": np.full((1, 14), np.nan, np.float32)},          # not finite
-    {"materials": np.zeros(14, np.float32)},                      # not a table
+    {"materials": np.zeros((1, 14), np.float32)},                 # a material row too short
+    {"materials": np.zeros((1, 16), np.float32)},                 # or too long
+    {"materials": np.full((1, 15), np.nan, np.float32)},          # not finite
+    {"materials": np.zeros(15, np.float32)},                      # not a table
     {"material_range": np.array([[0, 2]], np.int32)},             # slots beyond the table
     {"material_range": np.array([[-1, 1]], np.int32)},
     {"geometry_index": np.array([1], np.int32)},                  # out of range

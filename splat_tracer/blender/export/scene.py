@@ -350,6 +350,10 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
+        if kind == "cloud" and materials[0].emission_sides:
+            report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
+                        "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "
+                        "an emissive mesh is")
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],

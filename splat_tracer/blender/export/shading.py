@@ -27,6 +27,7 @@ Any other link into a socket the engine reads falls back to that socket's defaul
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import zlib
@@ -172,8 +173,10 @@ class _Sockets:
 # --------------------------------------------------------------------------------------
 # Materials. Each shader reader returns a dict of shading.Material fields (unset: the
 # contract's defaults), so that Mix and Add can blend them before the Material is made.
+# Emission Sampling is the material's setting, not a shader's: material_of sets it.
 
-_DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()}
+_DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
+             if f.name != "emission_sampling"}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -317,9 +320,21 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
     black, as in Cycles; Volume and Displacement are ignored. Every approximation is said
-    once in `report`."""
+    once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
+    return dataclasses.replace(_surface_material(bl_material, report),
+                               emission_sampling=_emission_sampling(bl_material))
+
+
+def _emission_sampling(bl_material) -> str:
+    """Cycles' Emission Sampling of the material (AUTO where there is none to read)."""
+    value = getattr(getattr(bl_material, "cycles", None), "emission_sampling", "AUTO")
+    return value if value in shading.EMISSION_SAMPLING else "AUTO"
+
+
+def _surface_material(bl_material, report: shading.Report) -> shading.Material:
+    """material_of's reading of the node tree (or the viewport settings)."""
     sockets = _Sockets("material", bl_material.name, report)
     tree = _node_tree(bl_material)
     if tree is None:

@@ -226,12 +226,12 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     IntegratorSettings cfg;
     unsigned int seed = 0;
     int headlight = 0, sky_ao = 0, adaptive = 0;
-    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppifffpfid;settings must be RenderSettings.pack()", &cfg.samples,
+    if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppifffpfidi;settings must be RenderSettings.pack()", &cfg.samples,
                           &cfg.filter_type, &cfg.filter_width, &cfg.shadow_samples, &cfg.max_bounces,
                           &cfg.diffuse_bounces, &cfg.glossy_bounces, &cfg.transmission_bounces,
                           &cfg.transparent_bounces, &seed, &headlight, &sky_ao, &cfg.ao_samples, &cfg.clamp_direct,
                           &cfg.clamp_indirect, &cfg.filter_glossy, &adaptive, &cfg.adaptive_threshold,
-                          &cfg.adaptive_min_samples, &cfg.time_limit))
+                          &cfg.adaptive_min_samples, &cfg.time_limit, &cfg.mesh_light_strategy))
         return nullptr;
     cfg.adaptive = adaptive != 0;
     for (float v : {cfg.clamp_direct, cfg.clamp_indirect, cfg.filter_glossy, cfg.adaptive_threshold})
@@ -239,6 +239,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
             return PyErr_Format(PyExc_ValueError, "clamps, filter glossy and the noise threshold must be finite, >= 0");
     if (!(std::isfinite(cfg.time_limit) && cfg.time_limit >= 0.0) || cfg.adaptive_min_samples < 0)
         return PyErr_Format(PyExc_ValueError, "the time limit and minimum samples must be >= 0");
+    if (cfg.mesh_light_strategy < 0 || cfg.mesh_light_strategy > 2)
+        return PyErr_Format(PyExc_ValueError, "mesh_light_strategy must be 0..2 (see shading.RenderSettings)");
     if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
     cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
@@ -358,7 +360,25 @@ PyObject *RenderScene_instances(PyObject *self, void *) {
     return PyLong_FromSize_t(reinterpret_cast<RenderSceneObject *>(self)->scene->instance_count());
 }
 
+PyObject *RenderScene_mesh_lights(PyObject *self, PyObject *) {
+    const MeshLights &lights = reinterpret_cast<RenderSceneObject *>(self)->scene->mesh_lights();
+    std::vector<MeshLights::Pick> picks;
+    std::string message;
+    if (PyObject *type = run_native([&] { picks = lights.picks(); }, message))
+        return PyErr_SetString(type, message.c_str()), nullptr;
+    PyObject *list = PyList_New(Py_ssize_t(picks.size()));
+    if (!list) return nullptr;
+    for (size_t k = 0; k < picks.size(); ++k) {
+        PyObject *item = Py_BuildValue("(iid)", picks[k].instance, int(picks[k].tri), picks[k].probability);
+        if (!item) return Py_DECREF(list), nullptr;
+        PyList_SetItem(list, Py_ssize_t(k), item);
+    }
+    return list;
+}
+
 PyMethodDef RenderScene_methods[] = {
+    {"mesh_lights", RenderScene_mesh_lights, METH_NOARGS,
+     "mesh_lights()\n--\n\nThe emissive triangles sampled as lights: [(instance, triangle, pick probability)]."},
     {"render", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(RenderScene_render)),
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "

@@ -39,6 +39,7 @@ class TriangleMesh {
     bool occluded(const Ray &ray, int32_t skip, TraversalStats *stats) const;
 
     Vec3 point(const MeshHit &h) const;
+    void vertices(int32_t tri, Vec3 *v0, Vec3 *v1, Vec3 *v2) const { *v0 = v0_[tri], *v1 = v1_[tri], *v2 = v2_[tri]; }
     Vec3 geometric_normal(int32_t tri) const;  // unit, along e1 x e2
     Vec3 shading_normal(const MeshHit &h) const;
     int32_t material(int32_t tri) const { return material_.empty() ? 0 : material_[tri]; }

@@ -13,6 +13,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     if (materials_.empty()) materials_.push_back(Material());
     for (const Material &m : materials_)
         any_transparent_ |= m.alpha < 1.f || m.use_point_alpha, any_emission_ |= m.emits();
+    if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_);
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
         Instance &inst = instances_[i];
@@ -135,8 +136,7 @@ void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &
     for (int r = 0; r < 3; ++r)
         err = std::fmax(err, abs_row(r, obj_err) + kGamma3 * (abs_row(r, abs_po) + std::fabs(M.m[4 * r + 3])));
     best.offset = 2.f * (err + max_component(vabs(best.p)) * 1.2e-7f);
-    const int slot = inst.mesh->material(h.tri);
-    best.material = inst.material_offset + (slot < inst.material_count ? slot : 0);
+    best.material = inst.material_of(inst.mesh->material(h.tri));
 }
 
 // A splat surface `h` of instance `index` met by `ray` (scene frame) becomes `best` when nearer.

@@ -12,6 +12,7 @@
 
 #include "bvh/bvh.h"
 #include "scene/mesh.h"
+#include "scene/mesh_lights.h"
 #include "shade/shading.h"
 #include "splats/splat_scene.h"
 #include "splats/visibility.h"
@@ -62,6 +63,9 @@ struct Instance {
     bool shadow_catcher = false;
     float pass_index = 0;        // Object Index pass
     AABB bounds;                 // in the scene frame
+
+    // The material table index of a mesh triangle's slot (a slot past the object's: its first).
+    int material_of(int32_t slot) const { return material_offset + (slot < material_count ? slot : 0); }
 };
 
 // Where a secondary ray starts, so that it does not meet that surface again.
@@ -108,6 +112,7 @@ class RenderScene {
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
     const std::vector<Light> &lights() const { return lights_; }
+    const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }
     bool any_emission() const { return any_emission_; }  // a material emits light
     bool any_catcher() const { return any_catcher_; }    // an instance is a shadow catcher
@@ -146,6 +151,7 @@ class RenderScene {
     std::vector<Instance> instances_;
     std::vector<Material> materials_;
     std::vector<Light> lights_;
+    MeshLights mesh_lights_;
     BVH top_;
     bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false;
 };

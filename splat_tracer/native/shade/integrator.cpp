@@ -28,6 +28,10 @@ struct Integrator::PathState {
     Origin from;
     float throughput = 1.f;
     bool specular = true;  // camera, mirror or clear-glass ray: it may see the lamps themselves
+    // A sampled reflection from `mis_from`, with density `mis_pdf`, where mesh lights were
+    // sampled too: emission it meets on them is weighed by MIS. 0: emission counts in full.
+    float mis_pdf = 0.f;
+    Vec3 mis_from;
     Vec3 weight{1.f, 1.f, 1.f};  // the product of the bounces' weights: what the pixel gets of light found here
     // Cycles' min_ray_pdf: the smallest pdf of the directions sampled so far (Filter Glossy).
     float min_pdf = kInfinity;
@@ -141,6 +145,13 @@ struct Integrator::Lobes {
     }
 };
 
+// How the path goes on from a point: one sampled continuation among the lobes that are not
+// traced exactly, picked in proportion to these weights (each lobe's albedo luminance, 0 for
+// a lobe out of bounces or not sampled); all 0 where the path ends.
+struct Integrator::LobePicks {
+    float diffuse = 0.f, glossy = 0.f, transmission = 0.f, sum = 0.f;
+};
+
 // The cloud a ray travels inside once it has crossed the surface at `sp` (refracted, or
 // passed through a see-through point): entering a splat cloud it is inside it, and its next
 // layer there is the exit (the swapped-facing rule); leaving, it is outside again. Meshes
@@ -159,6 +170,9 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       lit_scene_(!scene.lights().empty() || scene.any_emission() ||
                  (luminance(settings.world) > 0.f &&
                   (settings.world_visibility & (kVisDiffuse | kVisGlossy | kVisTransmission)))),
+      mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
+                       ? &scene.mesh_lights()
+                       : nullptr),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
@@ -523,7 +537,23 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     const float cos_o = std::fmax(dot(n, wo), 1e-6f);
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
-    const Vec3 emission = clamped(mat.emission, st.weight, st.bounces > 1);
+    Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
+    if (st.mis_pdf > 0.f) {
+        // Shadow rays could have found this point too: the power heuristic shares it between
+        // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
+        // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
+        const float area_pdf = mesh_lights_->area_pdf(sp.instance, mat, sp.front);
+        const float cos_l = std::fabs(dot(sp.ng, ray.d));
+        if (area_pdf > 0.f && cos_l > kEdgeOnCosine) {
+            const Vec3 to = sp.p - st.mis_from;
+            const float light_pdf = area_pdf * dot(to, to) / cos_l * float(cfg.shadow_samples);
+            emitted = emitted * (cfg.mesh_light_strategy == IntegratorSettings::kLightOnly
+                                     ? 0.f
+                                     : power_heuristic(st.mis_pdf, light_pdf));
+        }
+    }
+    // Clamped after the MIS weight, as Cycles' film_clamp_light sees the weighted emission.
+    const Vec3 emission = clamped(emitted, st.weight, st.bounces > 1);
     if (primary && st.camera) {
         // Cycles writes a back face's normal turned towards the viewer (it flips N with Ng).
         primary->hit = true, primary->t = sp.t, primary->normal = open_back ? sp.ns * -1.f : sp.ns;
@@ -531,7 +561,6 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
     }
-    // Emission is two-sided, like Cycles' Emission shader.
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
@@ -565,8 +594,19 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         return r;
     };
 
-    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, rng, st.camera ? primary : nullptr, tally, st.weight,
-                         st.bounces > 0);
+    // How the path goes on below: one sampled continuation among the lobes that are not traced
+    // exactly, picked by these weights. Known before the light sampling, whose MIS needs them.
+    LobePicks picks;
+    if (lit_scene_ && st.bounces < cfg.max_bounces && st.bounces < kMaxDepth) {
+        picks.diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
+        picks.glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
+        picks.transmission =
+            !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
+        picks.sum = picks.diffuse + picks.glossy + picks.transmission;
+    }
+
+    L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, picks, rng, st.camera ? primary : nullptr, tally,
+                         st.weight, st.bounces > 0);
 
     // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
     // can bring any back, so none is traced.
@@ -576,8 +616,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // Continues the path with `weight`, by Russian roulette when its throughput is small.
     // `pdf`: the sampled direction's (Filter Glossy's min_ray_pdf); infinite for a mirror or
     // clear glass (Cycles gives those 1e6, which no Filter Glossy up to its maximum of 10 uses).
+    // `mis_pdf`: the same density when mesh lights were sampled here too, else 0.
     auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
-                      uint64_t Tally::*count, bool specular, float pdf) {
+                      uint64_t Tally::*count, bool specular, float pdf, float mis_pdf = 0.f) {
         PathState next = st;
         next.camera = false;
         next.kind = kind;
@@ -592,6 +633,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         // sampling cannot find and which would only add fireflies (not traced, like the
         // glass's shadow).
         next.specular = st.specular && specular;
+        next.mis_pdf = mis_pdf, next.mis_from = sp.p;
         if (next.throughput < kRouletteThroughput) {
             const float survive = next.throughput / kRouletteThroughput;
             if (!(rng.next() < survive)) return;
@@ -624,42 +666,43 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         L = L + clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
 
     // One sampled continuation among the lobes that are not traced exactly.
-    const float w_diffuse = !cfg.sky_ao && st.diffuse < cfg.diffuse_bounces ? luminance(diffuse_albedo) : 0.f;
-    const float w_glossy = !lobes.delta && st.glossy < cfg.glossy_bounces ? luminance(lobes.specular(cos_o)) : 0.f;
-    const float w_trans =
-        !lobes.delta && st.transmission < cfg.transmission_bounces ? luminance(lobes.transmission(cos_o)) : 0.f;
-    const float w_sum = w_diffuse + w_glossy + w_trans;
+    const float w_diffuse = picks.diffuse, w_glossy = picks.glossy, w_trans = picks.transmission,
+                w_sum = picks.sum;
     if (w_sum > 0.f) {
         float u = rng.next() * w_sum;
         const float u1 = rng.next(), u2 = rng.next();
-        // Cycles' min_ray_pdf takes the pdf of the whole BSDF (every lobe) in the sampled
-        // direction; computed only for Filter Glossy.
-        auto reflection_pdf = [&](Vec3 wi) {
-            if (!(filter_glossy_ > 0.f)) return kInfinity;
-            const float diffuse_pdf = std::fmax(dot(n, wi), 0.f) / kPi;
-            const float glossy_pdf = w_glossy > 0.f ? ggx_reflection_pdf(n, wo, wi, cos_o, lobes.alpha) : 0.f;
-            return (w_diffuse * diffuse_pdf + w_glossy * glossy_pdf) / w_sum;
+        // The sampled reflection's density, computed only where it is needed: Cycles'
+        // min_ray_pdf for Filter Glossy (infinite without it), and the MIS weight of mesh
+        // lights (0 without them: emission the ray meets counts in full).
+        float pdf = kInfinity, mis_pdf = 0.f;
+        auto densities = [&](Vec3 wi) {
+            if (!(filter_glossy_ > 0.f) && !mesh_lights_) return;
+            const float p = reflection_pdf(lobes, n, wo, cos_o, wi, picks);
+            if (filter_glossy_ > 0.f) pdf = p;
+            if (mesh_lights_) mis_pdf = p;
         };
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
-            if (dot(wi, ng) > 0.f)
+            if (dot(wi, ng) > 0.f) {
+                densities(wi);
                 follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
-                       &Tally::diffuse, false, reflection_pdf(wi));
+                       &Tally::diffuse, false, pdf, mis_pdf);
+            }
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             const Vec3 wi = reflect(wo, m);
             if (dot(wi, n) > 0.f && dot(wi, ng) > 0.f) {
                 // VNDF sampling: the estimator is F(wo.m) G1(wi).
                 const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
+                densities(wi);
                 follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
-                       &Tally::reflection, false, reflection_pdf(wi));
+                       &Tally::reflection, false, pdf, mis_pdf);
             }
         } else {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
             Vec3 wt;
             if (refract(wo, m, lobes.eta, &wt) && dot(wt, n) < 0.f) {
                 const Vec3 w = lobes.transmission(std::fmax(dot(wo, m), 0.f)) * ggx_g1(-dot(wt, n), lobes.alpha);
-                float pdf = kInfinity;
                 if (filter_glossy_ > 0.f) {
                     // The VNDF's pdf of m times the refraction's Jacobian (Walter et al. 2007).
                     const float om = dot(wo, m), tm = dot(wt, m), den = om + lobes.eta * tm;
@@ -675,16 +718,43 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     return L;
 }
 
+Ray Integrator::shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance) {
+    Ray r;
+    r.o = sp.p + ng * sp.offset;
+    r.d = wi;
+    r.tmin = 0.f;
+    // Stop just short of the light's surface: a lamp is not geometry here, and an emissive
+    // triangle must not shadow itself.
+    r.tmax = std::isinf(distance) ? kInfinity : distance * (1.f - 1e-4f);
+    return r;
+}
+
+// The pdf of the BSDF as Cycles' is for a direction (every sampled lobe, by its pick),
+// computed as the Filter Glossy min_ray_pdf has always been.
+float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks) {
+    if (!(picks.sum > 0.f)) return 0.f;  // the path ends here: no reflection is sampled
+    const float diffuse_pdf = std::fmax(dot(n, wi), 0.f) / kPi;  // cosine-weighted
+    const float glossy_pdf = picks.glossy > 0.f ? ggx_reflection_pdf(n, wo, wi, cos_o, lobes.alpha) : 0.f;
+    return (picks.diffuse * diffuse_pdf + picks.glossy * glossy_pdf) / picks.sum;
+}
+
 Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                              const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally, Vec3 weight,
-                              bool indirect) const {
+                              const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary,
+                              Tally &tally, Vec3 weight, bool indirect) const {
     const std::vector<Light> &lights = scene_.lights();
-    if (lights.empty()) return Vec3();  // no lamp: no shadow ray, no work
+    if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
     const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
     const int k = settings_.shadow_samples;
     const float share = 1.f / float(k);
+    // The reflection towards wi (cos_i = n . wi > 0): the diffuse and the glossy lobe.
+    auto glossy_brdf = [&](Vec3 wi, float cos_i) {
+        const Vec3 h = normalize(wo + wi);
+        const float ch = std::fmax(dot(n, h), 0.f);
+        const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+        return lobes.specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
+    };
     // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
@@ -698,31 +768,52 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             const float cos_i = dot(n, ls.wi);
             if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
             Vec3 f = diffuse;
-            if (glossy) {
-                const Vec3 h = normalize(wo + ls.wi);
-                const float ch = std::fmax(dot(n, h), 0.f);
-                const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-                f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
-                            (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
-            }
+            if (glossy) f = f + glossy_brdf(ls.wi, cos_i);
             const Vec3 c = f * ls.irradiance * (cos_i * share);
             if (!(luminance(c) > 0.f)) continue;
             Vec3 visible(1, 1, 1);
             if (light.cast_shadow) {
-                Ray r;
-                r.o = sp.p + ng * sp.offset;
-                r.d = ls.wi;
-                r.tmin = 0.f;
-                // Stop just short of the lamp's surface: a lamp is not geometry here.
-                r.tmax = std::isinf(ls.distance) ? kInfinity : ls.distance * (1.f - 1e-4f);
                 ++tally.shadow;
-                visible = shadow_transmittance(r, from, tally);
+                visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
             }
             if (clamp) lamp = lamp + c * visible;
             else L = L + c * visible;
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }
         if (clamp) L = L + clamped(lamp, weight, indirect);
+    }
+    // Emissive triangles: a point of one picked by power, weighed against the chance that
+    // the path's own sampled reflection finds it (the weight its emission gets in radiance()).
+    if (mesh_lights_) {
+        const bool light_only = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly;
+        for (int s = 0; s < k; ++s) {
+            const float u0 = rng.next(), u1 = rng.next(), u2 = rng.next();
+            const MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
+            if (!ls.valid) continue;
+            const Instance &emitter = scene_.instance(ls.instance);
+            // A catcher-only path shades the catchers as if nothing else were there: another
+            // object's emission is not in it (its rays cannot meet one either), as Cycles
+            // flags the emissive triangles of a non-catcher SHADER_EXCLUDE_SHADOW_CATCHER.
+            if (from.catcher_only && !emitter.shadow_catcher) continue;
+            const float cos_i = dot(n, ls.wi);
+            if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
+            // As Cycles excludes them: an emitter hidden from diffuse (glossy) rays lights no
+            // diffuse (glossy) lobe -- the rays of that lobe could never meet it either.
+            Vec3 f = emitter.visibility & kVisDiffuse ? diffuse : Vec3();
+            if (glossy && (emitter.visibility & kVisGlossy)) f = f + glossy_brdf(ls.wi, cos_i);
+            const float light_pdf = ls.pdf * float(k);
+            const float w =
+                light_only ? 1.f : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, ls.wi, picks));
+            const Vec3 c = f * ls.emission * (cos_i * w / light_pdf);
+            if (!(luminance(c) > 0.f)) continue;
+            ++tally.shadow;
+            // Not in the Shadow pass, which is the lamps' (a closed emitter's far side, shadowed
+            // by its near side, would darken it everywhere).
+            const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            // Clamped, each sample is one of Cycles' shadow rays (one emitter picked, its light
+            // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
+            L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
+        }
     }
     return L;
 }

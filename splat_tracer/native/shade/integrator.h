@@ -47,6 +47,12 @@ struct IntegratorSettings : FrameSettings {
     double time_limit = 0.0;  // seconds of sampling; 0: none
     // Sampling in rounds over the whole image (adaptive sampling or a time limit).
     bool progressive() const { return adaptive || time_limit > 0.0; }
+    // How emissive triangles light other surfaces: both shadow rays aimed at them and the
+    // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
+    // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
+    // material whose Emission Sampling is None). The last two exist to verify the first.
+    enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
+    int mesh_light_strategy = kMis;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -88,6 +94,7 @@ class Integrator {
     struct PathState;   // bounce counters, where the ray starts, its throughput
     struct Primary;     // what the passes want from the camera ray's first hit
     struct Lobes;       // a material's lobes at one point
+    struct LobePicks;   // how the path goes on from a point: the sampled lobes' weights
     struct Pixel;       // one pixel's sums over its samples
     // With shadow catchers (Cycles' film passes of the same names): the samples whose first
     // surface is not a catcher (the matte: colour, alpha); the catcher's samples shaded with
@@ -107,11 +114,18 @@ class Integrator {
     // `first`: the ray's first hit, already found (the camera packet's), else null.
     Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
                   const SurfacePoint *first = nullptr) const;
-    // Lamps' light at a surface point, shadow rays included; `n` and `ng` face `wo`. `weight`
-    // and `indirect`: the path's, for the clamp.
+    // Light from lamps and sampled emissive triangles at a surface point, shadow rays
+    // included; `n` and `ng` face `wo`. `picks`: how the path goes on from here (all 0 when it
+    // ends), which the mesh lights' MIS weights need. `weight` and `indirect`: the path's, for
+    // the clamp.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                      const Lobes &lobes, Sampler &rng, Primary *primary, Tally &tally, Vec3 weight,
-                      bool indirect) const;
+                      const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary, Tally &tally,
+                      Vec3 weight, bool indirect) const;
+    // The density with which the path's sampled reflection at a point goes in direction wi
+    // (solid angle): the lobe picks times their densities; 0 when the path ends there.
+    static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks);
+    // A shadow ray from the surface point towards wi, ending just short of `distance`.
+    static Ray shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance);
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
     void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
@@ -149,6 +163,7 @@ class Integrator {
     PixelFilter filter_;
     const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
+    const MeshLights *mesh_lights_;  // sampled emissive triangles, or null (none, or not sampled)
     // Cycles' kernel values: the clamps times 3 (they bound a sum of three channels) or
     // infinity; filter glossy as 1 / Filter Glossy, or 0 when off.
     float clamp_direct_, clamp_indirect_, filter_glossy_;

@@ -93,6 +93,13 @@ inline void sample_polygon(int corners, float rotation, float u1, float u2, floa
     *x = cr * px - sr * py, *y = sr * px + cr * py;
 }
 
+// The power heuristic (Veach, beta = 2), as Cycles weighs light and BSDF samples: the weight
+// of a sample drawn with density a from a technique that could also be drawn with density b.
+inline float power_heuristic(float a, float b) {
+    const float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.f ? a2 / (a2 + b2) : 0.f;
+}
+
 // Uniform direction in the cone of half-angle acos(cos_max) about unit axis.
 inline Vec3 sample_cone(Vec3 axis, float cos_max, float u1, float u2) {
     const float c = 1.f - u1 * (1.f - cos_max), s = std::sqrt(std::fmax(0.f, 1.f - c * c)), phi = 2.f * kPi * u2;

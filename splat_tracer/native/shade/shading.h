@@ -12,7 +12,7 @@
 
 namespace splat {
 
-constexpr int kMaterialFields = 14;
+constexpr int kMaterialFields = 15;
 constexpr int kLightFields = 22;
 
 // Below this roughness a lobe is a perfect mirror or clear glass: traced by recursive
@@ -26,6 +26,9 @@ struct Material {
     Vec3 emission;
     float specular_level = 0.5f;
     bool use_point_colour = false, use_point_alpha = false;
+    // The sides of a mesh's triangles whose emission is sampled as a light (1 front, 2 back:
+    // Cycles' Emission Sampling, Auto resolved by render/shading.py); 0: found by rays only.
+    int emission_sides = 0;
 
     static Material from_row(const float *r) {
         Material m;
@@ -33,6 +36,7 @@ struct Material {
         m.metallic = r[3], m.roughness = r[4], m.ior = r[5], m.transmission = r[6], m.alpha = r[7];
         m.emission = Vec3(r[8], r[9], r[10]);
         m.specular_level = r[11], m.use_point_colour = r[12] != 0.f, m.use_point_alpha = r[13] != 0.f;
+        m.emission_sides = int(r[14]) & 3;
         return m;
     }
     bool emits() const { return emission.x > 0.f || emission.y > 0.f || emission.z > 0.f; }
