@@ -83,6 +83,9 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
                 sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
                 if not prefix:
                     col.prop(cycles, "time_limit")
+                    # Cycles' Denoise is on by default and the engine does not denoise: the
+                    # render report says so, and this is where it is switched off.
+                    col.prop(cycles, "use_denoising", text="Cycles' Denoise (not applied)")
         col = layout.column()
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")

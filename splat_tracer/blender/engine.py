@@ -51,11 +51,16 @@ def wanted_passes(view_layer) -> tuple:
     return tuple(names)
 
 
-def _set_pass(layer, name: str, pixels: np.ndarray) -> None:
+def _set_pass(layer, views: list, name: str, pixels: np.ndarray) -> None:
     """Writes (h, w[, c]) top-row-first pixels into the pass the core calls `name` (whose
-    rows run bottom to top)."""
-    layer.passes[_BLENDER_NAME.get(name, name)].rect.foreach_set(
-        np.ascontiguousarray(pixels[::-1], dtype=np.float32).ravel())
+    rows run bottom to top), in each of the result's views. A stereo or multi-view render
+    has one pass per view; the engine renders the scene camera's image once and every view
+    gets it (said in the render report, export/settings.py) -- before, only the first view
+    was written and the others stayed black."""
+    flat = np.ascontiguousarray(pixels[::-1], dtype=np.float32).ravel()
+    blender_name = _BLENDER_NAME.get(name, name)
+    for view in views:
+        layer.passes.find_by_name(blender_name, view).rect.foreach_set(flat)
 
 
 class SplatTracerEngine(bpy.types.RenderEngine):
@@ -100,8 +105,9 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         # Each view layer's render goes into its own layer of the result.
         result = self.begin_result(0, 0, w, h, layer=view_layer.name)
         layer = result.layers[0]
+        views = [view.name for view in result.views]
         for name, pixels in frame.passes.items():
-            _set_pass(layer, name, pixels)
+            _set_pass(layer, views, name, pixels)
         if frame.completed:
             self.end_result(result)
         else:

@@ -18,6 +18,7 @@ import numpy as np
 from ..render import shading
 from ..render.method import Method
 from . import export
+from .export import settings as export_settings
 from .export import shading as export_shading
 
 
@@ -169,6 +170,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     try:
         origin = export.camera_origin(depsgraph)
         camera = export.export_camera(depsgraph, width, height, origin)
+        export_settings.report_unhonoured(scene, depsgraph.view_layer, report)
         exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report)
     except BaseException:
         CACHE.end_frame(keep=False)

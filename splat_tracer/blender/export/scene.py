@@ -403,7 +403,9 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
         raise RuntimeError(f"the active camera '{cam.name}' is not a camera object")
     data = cam.data
     if data.type == "PANO":
-        raise RuntimeError("panoramic cameras are not supported; use perspective or orthographic")
+        kind = str(getattr(data, "panorama_type", "")).replace("_", " ").lower()
+        raise RuntimeError(f"camera '{cam.name}' is panoramic ({kind}): panoramic cameras are not supported yet; "
+                           "use a perspective or orthographic camera")
     if not data.clip_start < data.clip_end:
         raise RuntimeError(f"camera '{cam.name}': Clip Start ({data.clip_start:g}) must be less than Clip End "
                            f"({data.clip_end:g})")

@@ -380,8 +380,6 @@ def _report_lamp_extras(obj, light, say) -> None:
     linking = getattr(obj, "light_linking", None)
     if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
         say("light linking is ignored")
-    if getattr(obj, "lightgroup", ""):
-        say(f"light group '{obj.lightgroup}' is ignored")
     if light.type != "SUN" and not getattr(light, "normalize", True):
         say("'Normalize' off is ignored (rendered as if on)")
 
