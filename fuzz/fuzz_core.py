@@ -25,6 +25,7 @@ atheris's guidance comes from the Python side and the decoding; the sanitizers t
 silent memory errors and undefined behaviour into findings.
 Seed corpus: fuzz/corpus/core/.
 """
+import dataclasses
 import sys
 from pathlib import Path
 from types import SimpleNamespace
@@ -34,6 +35,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from splat_tracer import _core  # noqa: E402
+from splat_tracer.render import shading  # noqa: E402
+from splat_tracer.render.camera import Camera, Lens  # noqa: E402
+from splat_tracer.render.scene import RAY_VISIBILITY, InstanceRow, native_scene, render_arguments  # noqa: E402
+from splat_tracer.render.shading import (PASSES, SETTINGS_FIELDS, Light, Material, RenderSettings,  # noqa: E402
+                                         World)
 
 ALLOWED = (ValueError, TypeError, MemoryError)
 SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-45, 1.1754942e-38, 1e18, -1e18, 1.0000001e18, 1e19, -1e19,
@@ -52,8 +58,13 @@ def value(fdp) -> float:
 
 
 @atheris.instrument_func
-def array(fdp, shape, dtype=np.float32):
+def array(fdp, shape, dtype=np.float32, sane: bool = False):
+    """Fuzzed values (value()) of shape, now and then of a wrong dtype or layout; sane: plain
+    geometry in -3..3 of the right layout (so that, most times, the core accepts the object
+    and the calls on it run past their checks)."""
     n = int(np.prod(shape))
+    if sane:
+        return np.array([fdp.ConsumeFloatInRange(-3.0, 3.0) for _ in range(n)], dtype).reshape(shape)
     a = np.array([value(fdp) for _ in range(n)], np.float64)
     with np.errstate(over="ignore", invalid="ignore"):
         out = a.astype(dtype).reshape(shape)
@@ -69,12 +80,14 @@ def method(fdp):
     if fdp.ConsumeIntInRange(0, 20) == 0:
         return [None, "FULL", (True, True, True, 1, 0, 1.0), SimpleNamespace(far_phase=True),
                 SimpleNamespace(**{**FULL, "epsilon": "1"})][fdp.ConsumeIntInRange(0, 4)]
-    positions = ("FIRST", "NEAR_PHASE", "NEAREST_CENTRE", "MIDDLE", 1)
+    positions = ("FIRST", "NEAR_PHASE", "NEAREST_CENTRE", "MIDDLE", 1)  # the last two: refused
     kernels = ("LINEAR", "SMOOTH", "", None)
+    wild = fdp.ConsumeIntInRange(0, 3) == 0  # else one the core accepts, so that what follows runs
     return SimpleNamespace(wrong_hit_elimination=fdp.ConsumeBool(), normal_interpolation=fdp.ConsumeBool(),
-                           far_phase=fdp.ConsumeBool(), position=positions[fdp.ConsumeIntInRange(0, 4)],
-                           kernel=kernels[fdp.ConsumeIntInRange(0, 3)], epsilon=value(fdp),
-                           crease_angle=[180.0, 45.0, value(fdp)][fdp.ConsumeIntInRange(0, 2)])
+                           far_phase=fdp.ConsumeBool(), position=positions[fdp.ConsumeIntInRange(0, 4 if wild else 2)],
+                           kernel=kernels[fdp.ConsumeIntInRange(0, 3 if wild else 1)],
+                           epsilon=value(fdp) if wild else fdp.ConsumeFloatInRange(0.0, 3.0),
+                           crease_angle=[180.0, 45.0, value(fdp)][fdp.ConsumeIntInRange(0, 2 if wild else 1)])
 
 
 FULL = dict(wrong_hit_elimination=True, normal_interpolation=True, far_phase=True, position="NEAR_PHASE",
@@ -111,9 +124,12 @@ def camera(fdp):
 @atheris.instrument_func
 def fuzz_scene(fdp):
     n = fdp.ConsumeIntInRange(0, 40)
-    c, nrm = array(fdp, (n, 3)), array(fdp, (n, 3))
-    r = array(fdp, (n,))
-    col = array(fdp, (n, 3)) if fdp.ConsumeBool() else None
+    sane = fdp.ConsumeBool()  # a cloud the core accepts, or (mostly) one it refuses
+    c, nrm = array(fdp, (n, 3), sane=sane), array(fdp, (n, 3), sane=sane)
+    r = array(fdp, (n,), sane=sane)
+    if sane:
+        r = np.abs(r) + np.float32(0.01)
+    col = array(fdp, (n, 3), sane=sane) if fdp.ConsumeBool() else None
     closed = np.frombuffer(fdp.ConsumeBytes(n).ljust(n, b"\1"), np.uint8).copy() if fdp.ConsumeBool() else None
     scene = call(_core.SplatCloud, c, nrm, r, col, closed, fdp.ConsumeIntInRange(0, 3))
     if scene is None:
@@ -145,8 +161,8 @@ def fuzz_scene(fdp):
     win = (0, 0, width, height) if fdp.ConsumeBool() else tuple(small_int(fdp) for _ in range(4))
     h, w = max(win[3], 0), max(win[2], 0)
     if h * w <= 4096:
-        m, pos, fwd = camera(fdp)
-        call(scene.render, m, pos, fwd, width, height, win, (value(fdp), 0.0, 0.0, 1.0),
+        cam = scene_camera(fdp)  # its lens is ignored: the cloud's render is a pinhole's
+        call(scene.render, *cam.native(), width, height, win, (value(fdp), 0.0, 0.0, 1.0),
              np.empty((h, w, 4), np.float32), np.empty((h, w), np.float32), np.empty((h, w, 3), np.float32),
              fdp.ConsumeIntInRange(0, 3), None, small_int(fdp), method(fdp))
     fuzz_packets(fdp, scene, n)
@@ -189,11 +205,181 @@ def fuzz_packets(fdp, scene, n):
             assert np.array_equal(x, y, equal_nan=True), "packets changed a surface"
 
 
+# Which packed fields a fuzzed object picks from an enumeration (other strings keep their default).
+ENUMS = {"type": shading.LIGHT_TYPES, "shape": shading.AREA_SHAPES, "emission_sampling": shading.EMISSION_SAMPLING,
+         "pixel_filter": shading.PIXEL_FILTERS, "mesh_light_strategy": shading.MESH_LIGHT_STRATEGIES}
+# Counts now and then: in range, at the core's limits, just past them and extreme (int32
+# only: a wider int is refused by Python's argument parsing as OverflowError, not by the core).
+COUNTS = [0, 1, 2, 3, 7, 33, 1024, 1025, 65536, 65537, -1, 2**31 - 1, -2**31]
+# Work one render may do before the harness gives it a time limit (a fuzz input must stay
+# fast): camera samples x shadow samples x AO samples. One round of the time-limited render
+# is one sample, so shadow x AO samples are capped at MAX_RAYS_PER_SAMPLE on their own.
+WORK_BUDGET = 64
+MAX_RAYS_PER_SAMPLE = 64
+TINY_TIME_LIMIT = 0.002  # seconds: the render stops after its first one-sample round
+
+
+@atheris.instrument_func
+def plausible(fdp, default):
+    """A value of default's kind (bool, int, float, a sequence of them, a set of names, an
+    enumeration name), mostly one the add-on's checks accept (so scenes do render)."""
+    if isinstance(default, (bool, np.bool_)):
+        return fdp.ConsumeBool()
+    if isinstance(default, (int, np.integer)):
+        return fdp.ConsumeIntInRange(min(int(default), 1), max(4, 2 * int(default)))  # counts of 1+ stay 1+
+    if isinstance(default, (float, np.floating)):
+        return fdp.ConsumeFloatInRange(min(0.0, 2 * float(default)), max(1.0, 2 * float(default)))
+    if isinstance(default, frozenset):
+        return frozenset(k for k in sorted(default) if fdp.ConsumeBool())
+    if isinstance(default, (tuple, list, np.ndarray)):
+        return type(default)(plausible(fdp, v) for v in default) if not isinstance(default, np.ndarray) else \
+            np.array([plausible(fdp, v) for v in default.ravel()], default.dtype).reshape(default.shape)
+    return default
+
+
+@atheris.instrument_func
+def hostile(fdp, default):
+    """A value of default's kind that the add-on would refuse or never produce: NaN, inf,
+    negative, huge (value()), counts out of range (COUNTS)."""
+    if isinstance(default, (bool, np.bool_)):
+        return fdp.ConsumeBool()
+    if isinstance(default, (int, np.integer)):
+        return COUNTS[fdp.ConsumeIntInRange(0, len(COUNTS) - 1)]
+    if isinstance(default, (float, np.floating)):
+        return value(fdp)
+    if isinstance(default, (tuple, list)):
+        return type(default)(hostile(fdp, v) if fdp.ConsumeBool() else v for v in default)
+    if isinstance(default, np.ndarray):
+        out = default.copy()
+        flat = out.reshape(-1)
+        for i in range(flat.size):
+            if fdp.ConsumeBool():
+                with np.errstate(over="ignore", invalid="ignore"):
+                    flat[i] = hostile(fdp, flat[i].item())
+        return out
+    return default
+
+
+def corrupt(fdp, entries, odds: int = 6):
+    """entries (a packed row, a settings tuple, a NamedTuple row), one time in `odds` with
+    entries made hostile (each one time in four), keeping their kinds. Rare, as one hostile
+    entry makes the core refuse the whole scene."""
+    if fdp.ConsumeIntInRange(0, odds - 1):
+        return entries
+    out = [hostile(fdp, v) if fdp.ConsumeIntInRange(0, 3) == 0 else v for v in entries]
+    if isinstance(entries, np.ndarray):
+        with np.errstate(over="ignore", invalid="ignore"):
+            return np.array(out, np.float64).astype(entries.dtype)
+    return type(entries)(*out) if hasattr(entries, "_fields") else type(entries)(out)
+
+
+@atheris.instrument_func
+def unchecked(fdp, cls):
+    """An instance of the add-on's dataclass cls (Light, Material, RenderSettings, World,
+    Lens) with every field fuzzed by its default's kind and never validated (its checks
+    are bypassed): plausible mostly, all hostile one time in eight. Its pack() or native()
+    gives the row the add-on would give the core, whatever fields the class has now."""
+    wild = fdp.ConsumeIntInRange(0, 7) == 0
+    obj = object.__new__(cls)
+    for f in dataclasses.fields(cls):
+        default = f.default if f.default is not dataclasses.MISSING else 1.0  # Lens's radius, focus_distance
+        if f.name in ENUMS:
+            v = ENUMS[f.name][fdp.ConsumeIntInRange(0, len(ENUMS[f.name]) - 1)]
+        else:
+            v = hostile(fdp, default) if wild else plausible(fdp, default)
+        object.__setattr__(obj, f.name, v)
+    return obj
+
+
+def packed(make, fallback):
+    """make() (a pack() of an unchecked object), or fallback when the add-on's own packing
+    fails on the unchecked values (a zero-sample threshold divides by 0): the core never sees those."""
+    try:
+        with np.errstate(all="ignore"):
+            return make()
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return fallback
+
+
+@atheris.instrument_func
+def fuzz_settings(fdp):
+    """RenderSettings.pack() of fuzzed settings, entries made hostile, bounded in work: every
+    field the add-on packs (clamps, filter glossy, adaptive sampling, the time limit, the
+    mesh-light strategy...) is fuzzed, by its name in SETTINGS_FIELDS."""
+    s = dict(zip(SETTINGS_FIELDS, corrupt(fdp, packed(unchecked(fdp, RenderSettings).pack,
+                                                      RenderSettings(samples=1).pack()))))
+    counts = [s[k] for k in ("samples", "shadow_samples", "ao_samples")]
+    if all(isinstance(c, int) for c in counts):
+        if max(counts[1], 1) * max(counts[2], 1) > MAX_RAYS_PER_SAMPLE:
+            s["ao_samples"] = 1 if counts[1] <= 1024 else s["ao_samples"]
+            s["shadow_samples"] = min(s["shadow_samples"], MAX_RAYS_PER_SAMPLE) if s["shadow_samples"] <= 1024 \
+                else s["shadow_samples"]
+        if max(counts[0], 1) * max(s["shadow_samples"], 1) * max(s["ao_samples"], 1) > WORK_BUDGET and \
+                not (isinstance(s["time_limit"], float) and 0 < s["time_limit"] <= TINY_TIME_LIMIT):
+            s["time_limit"] = TINY_TIME_LIMIT
+    assert len(s) == len(SETTINGS_FIELDS)
+    return tuple(s[k] for k in SETTINGS_FIELDS)
+
+
+@atheris.instrument_func
+def scene_camera(fdp):
+    """A Camera (unchecked): mostly Camera.look_at from a fuzzed eye, or any matrix,
+    frustum and clip; a thin lens (depth of field) now and then."""
+    cam = None
+    if fdp.ConsumeIntInRange(0, 3):
+        eye = [fdp.ConsumeFloatInRange(-6, 6) for _ in range(3)]
+        try:
+            cam = Camera.look_at(eye, (0.0, 0.0, 0.0), fov_y=fdp.ConsumeFloatInRange(1, 170),
+                                 ortho_height=fdp.ConsumeFloatInRange(0.1, 5) if fdp.ConsumeBool() else None)
+        except ValueError:  # an eye at the target
+            cam = None
+    if cam is None:
+        m, _, _ = camera(fdp)
+        cam = object.__new__(Camera)
+        for name, v in (("local_from_camera", m), ("frustum", tuple(value(fdp) for _ in range(4))),
+                        ("clip", tuple(value(fdp) for _ in range(2))), ("orthographic", fdp.ConsumeBool()),
+                        ("lens", None)):
+            object.__setattr__(cam, name, v)
+    if fdp.ConsumeIntInRange(0, 2) == 0:
+        lens = unchecked(fdp, Lens)
+        object.__setattr__(lens, "blades", fdp.ConsumeIntInRange(-1, 9))
+        copy = object.__new__(Camera)  # a copy with the lens, without Camera's checks
+        copy.__dict__.update(cam.__dict__, lens=lens)
+        cam = copy
+    return cam
+
+
+@atheris.instrument_func
+def instance_row(fdp, n_geo, n_mat):
+    """A scene.InstanceRow: mostly a placed, invertible transform and a material range inside
+    the materials; then its columns made hostile now and then."""
+    m = np.eye(4)
+    if fdp.ConsumeBool():
+        m[:3, :3] *= fdp.ConsumeFloatInRange(0.2, 3)
+        m[:3, 3] = [fdp.ConsumeFloatInRange(-2, 2) for _ in range(3)]
+    with np.errstate(all="ignore"):
+        inv = np.linalg.inv(m)
+    first = fdp.ConsumeIntInRange(0, max(n_mat - 1, 0))
+    row = InstanceRow(geometry_index=fdp.ConsumeIntInRange(0, max(n_geo - 1, 0)), to_world=m[:3].ravel(),
+                      to_object=inv[:3].ravel(), material_range=(first, fdp.ConsumeIntInRange(1, max(n_mat - first, 1))),
+                      visibility=sum(v for v in RAY_VISIBILITY.values() if fdp.ConsumeIntInRange(0, 5)),
+                      holdout=fdp.ConsumeIntInRange(0, 7) == 0, pass_index=fdp.ConsumeIntInRange(0, 9),
+                      shadow_catcher=fdp.ConsumeIntInRange(0, 5) == 0)
+    return corrupt(fdp, row)
+
+
 @atheris.instrument_func
 def fuzz_render_scene(fdp, splats):
+    """A _core.RenderScene over the fuzzed cloud and a fuzzed mesh, built and rendered with the
+    add-on's own layouts (scene.native_scene, scene.render_arguments, Material/Light/
+    RenderSettings.pack()) from unchecked objects whose values are made hostile. Returns
+    the render's counters (and the scene's lights and instances) when the core accepted the
+    scene and rendered, else None."""
     v = fdp.ConsumeIntInRange(0, 12)
-    verts = array(fdp, (v, 3))
-    tris = np.array([fdp.ConsumeIntInRange(-1, v) for _ in range(3 * fdp.ConsumeIntInRange(0, 6))],
+    sane = fdp.ConsumeIntInRange(0, 3) > 0  # mostly a mesh the core accepts: the scene is the point here
+    verts = array(fdp, (v, 3), sane=sane)
+    lo, hi = (0, v - 1) if sane else (-1, v)
+    tris = np.array([fdp.ConsumeIntInRange(lo, hi) for _ in range(3 * fdp.ConsumeIntInRange(0, 6) * (hi >= lo))],
                     np.int32).reshape(-1, 3)
     t = len(tris)
     normals = array(fdp, (t, 3, 3)) if fdp.ConsumeBool() else None
@@ -201,32 +387,35 @@ def fuzz_render_scene(fdp, splats):
     mesh = call(_core.Mesh, verts, tris, normals, mat_index, 1)
     geos = [g for g in (splats, mesh) if g is not None]
     if not geos:
-        return
-    n = fdp.ConsumeIntInRange(0, 4)
-    n_mat, n_light = fdp.ConsumeIntInRange(0, 3), fdp.ConsumeIntInRange(0, 3)
-    rows = lambda count, fields: array(fdp, (count, fields))
-    to_world = np.tile(np.eye(4)[:3].ravel(), (n, 1)).astype(np.float32)
-    if fdp.ConsumeBool():
-        to_world = rows(n, 12)
-    scene = call(_core.RenderScene, geos, np.array([fdp.ConsumeIntInRange(-1, len(geos)) for _ in range(n)], np.int32),
-                 to_world, rows(n, 12) if fdp.ConsumeBool() else to_world,
-                 np.array([[fdp.ConsumeIntInRange(-1, n_mat), fdp.ConsumeIntInRange(0, 2)] for _ in range(n)],
-                          np.int32).reshape(n, 2),
-                 np.full(n, fdp.ConsumeIntInRange(-1, 64), np.int32), np.zeros(n, np.uint8), np.zeros(n, np.float32),
-                 rows(n_mat, 15), rows(n_light, 21), fdp.ConsumeIntInRange(0, 2))
+        return None
+    n_mat = fdp.ConsumeIntInRange(1, 3) if fdp.ConsumeIntInRange(0, 7) else 0  # 0: every instance refused
+    n_light = fdp.ConsumeIntInRange(0, 3)
+    materials = [corrupt(fdp, packed(unchecked(fdp, Material).pack, Material().pack())) for _ in range(n_mat)]
+    lights = [corrupt(fdp, packed(unchecked(fdp, Light).pack, Light().pack())) for _ in range(n_light)]
+    rows = [instance_row(fdp, len(geos), n_mat) for _ in range(fdp.ConsumeIntInRange(0, 4))]
+    try:
+        with np.errstate(over="ignore", invalid="ignore"):  # hostile doubles cast to float32
+            scene = call(native_scene, geos, rows, materials, lights, fdp.ConsumeIntInRange(0, 2))
+    except OverflowError:  # numpy refusing a hostile count as int32/uint8, before the core
+        return None
     if scene is None:
-        return
+        return None
+    call(scene.mesh_lights)
     w, h = fdp.ConsumeIntInRange(1, 12), fdp.ConsumeIntInRange(1, 12)
-    settings = (fdp.ConsumeIntInRange(0, 3), fdp.ConsumeIntInRange(-1, 3), value(fdp), fdp.ConsumeIntInRange(0, 2),
-                *[fdp.ConsumeIntInRange(-1, 4) for _ in range(5)], fdp.ConsumeIntInRange(0, 2**31 - 1),
-                fdp.ConsumeBool())
-    m, pos, fwd = camera(fdp)
-    buffers = {name: np.zeros((h, w, c) if c > 1 else (h, w), np.float32)
-               for name, c in (("depth", 1), ("normal", 3), ("diffcol", 3), ("emit", 3), ("shadow", 3), ("index", 1),
-                               ("splat_count", 1))}
-    call(scene.render, m, pos, fwd, w, h, (0, 0, w, h), settings, method(fdp),
-         tuple(abs(value(fdp)) for _ in range(3)), fdp.ConsumeBool(), np.zeros((h, w, 4), np.float32),
-         threads=fdp.ConsumeIntInRange(0, 2), tile_size=fdp.ConsumeIntInRange(1, 8), **buffers)
+    passes = [name for name in PASSES if fdp.ConsumeBool()]
+    kwargs, _ = render_arguments(scene_camera(fdp), w, h, RenderSettings(), method(fdp), unchecked(fdp, World),
+                                 passes)
+    kwargs["settings"] = fuzz_settings(fdp)
+    for name in ("world", "film_transparent", "world_visibility", "lens", "frustum"):
+        if kwargs[name] is not None and fdp.ConsumeIntInRange(0, 7) == 0:
+            kwargs[name] = hostile(fdp, kwargs[name])
+    got = call(scene.render, **kwargs, threads=fdp.ConsumeIntInRange(0, 2), tile_size=fdp.ConsumeIntInRange(1, 8),
+               packets=fdp.ConsumeBool())
+    if got is None:
+        return None
+    done, counters = got
+    assert done and counters["samples_reached"] >= 1, counters
+    return dict(counters, lights=len(lights), instances=len(rows))
 
 
 @atheris.instrument_func

@@ -38,6 +38,39 @@ def transform_problem(matrix) -> Optional[str]:
     return None
 
 
+class InstanceRow(NamedTuple):
+    """One instance as the core's RenderScene takes it: a column each (no defaults, so that
+    a new column is filled wherever rows are built, fuzz/fuzz_core.py included)."""
+
+    geometry_index: int    # into the geometries
+    to_world: np.ndarray   # 12: the first three rows of the 4x4 object-to-local matrix
+    to_object: np.ndarray  # 12: the same of its inverse
+    material_range: tuple  # (first, count) of its slots in the materials
+    visibility: int        # RAY_VISIBILITY bits
+    holdout: bool
+    pass_index: float
+    shadow_catcher: bool
+
+
+def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: Sequence, lights: Sequence,
+                 threads: int = 0) -> "_core.RenderScene":
+    """The core's RenderScene over native geometries (SplatCloud._scene, Mesh._mesh), one
+    row per instance, materials and lights as their pack() rows. Nothing is checked here:
+    RenderScene checks first, and the fuzz harness passes unchecked rows on purpose."""
+    n = len(rows)
+    col = lambda name, dtype, width=(): np.ascontiguousarray(
+        np.array([getattr(r, name) for r in rows], dtype).reshape((n, *width)))
+    return _core.RenderScene(
+        list(geometries), col("geometry_index", np.int32), col("to_world", np.float32, (12,)),
+        col("to_object", np.float32, (12,)), col("material_range", np.int32, (2,)), col("visibility", np.int32),
+        col("holdout", np.uint8), col("pass_index", np.float32),
+        np.ascontiguousarray(np.array(materials, np.float32).reshape(-1, len(MATERIAL_FIELDS))),
+        np.ascontiguousarray(np.array(lights, np.float32).reshape(-1, len(LIGHT_FIELDS))),
+        threads,
+        # Only a scene with a catcher passes the column: one without is the core's as before.
+        shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None)
+
+
 class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
@@ -130,30 +163,18 @@ class RenderScene:
             for mat in mats:
                 if not isinstance(mat, Material):
                     raise TypeError(f"instance materials must be shading.Material objects, got {type(mat).__name__}")
-            rows.append((index_of[id(native)], m[:3].ravel(), inv[:3].ravel(), (len(materials), len(mats)),
-                         sum(RAY_VISIBILITY[k] for k in inst.visibility), inst.holdout, inst.pass_index,
-                         inst.shadow_catcher))
+            rows.append(InstanceRow(geometry_index=index_of[id(native)], to_world=m[:3].ravel(),
+                                    to_object=inv[:3].ravel(), material_range=(len(materials), len(mats)),
+                                    visibility=sum(RAY_VISIBILITY[k] for k in inst.visibility),
+                                    holdout=inst.holdout, pass_index=inst.pass_index,
+                                    shadow_catcher=inst.shadow_catcher))
             materials.extend(mats)
-        n = len(rows)
-        col = lambda k, dtype: np.array([r[k] for r in rows], dtype).reshape((n,) + np.shape(rows[0][k]) if n else (0,))
         self.world = world
         self.lights = tuple(lights)
-        self._scene = _core.RenderScene(
-            geometries,
-            np.ascontiguousarray(col(0, np.int32)),
-            np.ascontiguousarray(col(1, np.float32).reshape(n, 12)),
-            np.ascontiguousarray(col(2, np.float32).reshape(n, 12)),
-            np.ascontiguousarray(col(3, np.int32).reshape(n, 2)),
-            np.ascontiguousarray(col(4, np.int32)),
-            np.ascontiguousarray(col(5, np.uint8)),
-            np.ascontiguousarray(col(6, np.float32)),
-            np.ascontiguousarray(np.array([m.pack() for m in materials], np.float32).reshape(-1, len(MATERIAL_FIELDS))),
-            np.ascontiguousarray(np.array([l.pack() for l in lights], np.float32).reshape(-1, len(LIGHT_FIELDS))),
-            threads,
-            # Only a scene with a catcher passes the column: one without is the core's as before.
-            shadow_catcher=np.ascontiguousarray(col(7, np.uint8)) if any(r[7] for r in rows) else None)
+        self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
+                                   threads)
         self.geometry_count = len(geometries)
-        self.shadow_catchers = sum(bool(r[7]) for r in rows)  # instances that are shadow catchers
+        self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
 
     def mesh_lights(self) -> list:
         """The emissive mesh triangles sampled as lights, as (instance index, triangle index,
@@ -187,18 +208,35 @@ class RenderScene:
         unknown = set(passes) - set(PASSES)
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
-        x0, y0, w, h = window_rect(window, width, height)
-        buffers = {}
-        for name in ("Combined", *passes):
-            c = PASSES[name]
-            buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
-        key = {"Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit", "Shadow": "shadow",
-               "IndexOB": "index", "Splat Count": "splat_count", "Shadow Catcher": "shadow_catcher"}
-        optional = {key[name]: buf for name, buf in buffers.items() if name != "Combined"}
-        done, counters = self._scene.render(
-            *camera.native(), int(width), int(height),
-            (int(x0), int(y0), int(w), int(h)), settings.pack(), method, self.world.radiance(),
-            bool(self.world.transparent), buffers["Combined"], threads=threads, progress=progress,
-            tile_size=tile_size, packets=packets, lens=camera.lens.native() if camera.lens else None,
-            world_visibility=sum(RAY_VISIBILITY[k] for k in self.world.visibility), **optional)
+        kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window)
+        done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
+                                            packets=packets)
         return FrameResult(buffers, bool(done), counters)
+
+
+# The core's keyword for each pass's buffer (Combined: "combined").
+PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
+                 "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
+                 "Shadow Catcher": "shadow_catcher"}
+
+
+def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
+                     passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None) -> tuple[dict, dict]:
+    """The keyword arguments of the core's RenderScene.render for a frame (all but threads,
+    progress, tile_size and packets), and the zeroed buffers they write, by pass name. It
+    checks only the window (before allocating): RenderScene.render checks its arguments
+    first, and fuzz/fuzz_core.py passes unchecked ones on purpose, so that the fuzzed
+    layout is the add-on's."""
+    x0, y0, w, h = window_rect(window, width, height)
+    buffers = {}
+    for name in ("Combined", *passes):
+        c = PASSES[name]
+        buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
+    local_from_camera, frustum, orthographic = camera.native()
+    kwargs = dict(local_from_camera=local_from_camera, frustum=frustum, orthographic=orthographic, width=int(width),
+                  height=int(height), window=(int(x0), int(y0), int(w), int(h)), settings=settings.pack(),
+                  method=method, world=world.radiance(), film_transparent=bool(world.transparent),
+                  lens=camera.lens.native() if camera.lens else None,
+                  world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
+    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items()})
+    return kwargs, buffers

@@ -315,12 +315,32 @@ class RenderSettings:
         return float(np.float32(threshold) * np.float32(5.0)), min_samples
 
     def pack(self) -> tuple:
-        return (self.samples, PIXEL_FILTERS.index(self.pixel_filter), float(self.filter_width), self.shadow_samples,
-                self.max_bounces, self.diffuse_bounces, self.glossy_bounces, self.transmission_bounces,
-                self.transparent_bounces, self.seed & 0x7FFFFFFF, bool(self.headlight), bool(self.sky_ao),
-                self.ao_samples, float(self.clamp_direct), float(self.clamp_indirect), float(self.filter_glossy),
-                bool(self.adaptive), *(self.adaptive_parameters() if self.adaptive else (0.0, 0)),
-                float(self.time_limit), MESH_LIGHT_STRATEGIES.index(self.mesh_light_strategy))
+        """The settings tuple the core's render parses, in SETTINGS_FIELDS order."""
+        threshold, min_samples = self.adaptive_parameters() if self.adaptive else (0.0, 0)
+        packed = dict(samples=self.samples, pixel_filter=PIXEL_FILTERS.index(self.pixel_filter),
+                      filter_width=float(self.filter_width), shadow_samples=self.shadow_samples,
+                      max_bounces=self.max_bounces, diffuse_bounces=self.diffuse_bounces,
+                      glossy_bounces=self.glossy_bounces, transmission_bounces=self.transmission_bounces,
+                      transparent_bounces=self.transparent_bounces, seed=self.seed & 0x7FFFFFFF,
+                      headlight=bool(self.headlight), sky_ao=bool(self.sky_ao), ao_samples=self.ao_samples,
+                      clamp_direct=float(self.clamp_direct), clamp_indirect=float(self.clamp_indirect),
+                      filter_glossy=float(self.filter_glossy), adaptive=bool(self.adaptive),
+                      adaptive_threshold=threshold, adaptive_min_samples=min_samples,
+                      time_limit=float(self.time_limit),
+                      mesh_light_strategy=MESH_LIGHT_STRATEGIES.index(self.mesh_light_strategy))
+        return tuple(packed[name] for name in SETTINGS_FIELDS)
+
+
+# The entries of RenderSettings.pack(), in order: the tuple the core's render parses (its
+# format string in native/python/py_render.cpp; keep both in step). Enumerations are packed
+# as their index; adaptive_threshold and adaptive_min_samples are the values used
+# (RenderSettings.adaptive_parameters, 0 without adaptive sampling).
+SETTINGS_FIELDS = (
+    "samples", "pixel_filter", "filter_width", "shadow_samples", "max_bounces", "diffuse_bounces", "glossy_bounces",
+    "transmission_bounces", "transparent_bounces", "seed", "headlight", "sky_ao", "ao_samples", "clamp_direct",
+    "clamp_indirect", "filter_glossy", "adaptive", "adaptive_threshold", "adaptive_min_samples", "time_limit",
+    "mesh_light_strategy",
+)
 
 
 # Passes the core can write, by the name Blender shows, with their channel count.
