@@ -478,12 +478,18 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         lo, hi = np.percentile(p[sample], (1.0, 99.0), axis=0)
         level = hi[2] - lo[2] <= TERRAIN_RELIEF * max(hi[0] - lo[0], hi[1] - lo[1])
         share = counts[terrain].sum() / n if level else 0.0
-        if share >= TERRAIN_SHARE:  # a terrain's bulk: every point with a clear up takes it (as UP)
+        if share >= TERRAIN_SHARE:
+            # A terrain's bulk: every point with a clear up takes it (as UP), on the components
+            # visibility left undecided (an object standing on the ground keeps its outside).
             mode = "UP"
-            evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or down "
-                        "on the whole, which visibility cannot orient")
-            anchor_sign[m[:, 2] >= AMBIGUOUS_RULE] = 1
-            anchor_sign[m[:, 2] <= -AMBIGUOUS_RULE] = -1
+            terrain_evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or "
+                                "down on the whole, which visibility cannot orient")
+            evidence = terrain_evidence + (f"; {evidence}" if (decided != 0).any() else "")
+            undecided = decided[labels] == 0
+            anchor_sign[undecided & (m[:, 2] >= AMBIGUOUS_RULE)] = 1
+            anchor_sign[undecided & (m[:, 2] <= -AMBIGUOUS_RULE)] = -1
+            # The decided components have no anchor: the walk seeds them as the first walk did
+            # (the same seed, the same tree), and their visibility sign is applied below.
             negative, ambiguous, seeds, flat = walk(anchor_sign, None)
             sums = walk.sums(negative)
             if len(seeds):
@@ -491,13 +497,13 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
                 open_sheet = (np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded]))
                               >= OPEN_SHEET * counts[seeded])
         else:
-            negative ^= (decided < 0)[labels]
-            keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE
-            seeds, open_sheet = seeds[keep], open_sheet[keep]
-            flat = flat[decided[labels[flat]] == 0]
             mode = "VISIBILITY" if (decided != 0).any() else "PROPAGATE"
-            if mode == "VISIBILITY":
-                sums = walk.sums(negative)
+        negative ^= (decided < 0)[labels]
+        keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE (or UP)
+        seeds, open_sheet = seeds[keep], open_sheet[keep]
+        flat = flat[decided[labels[flat]] == 0]
+        if (decided != 0).any():
+            sums = walk.sums(negative)
     by_rule = int((anchor_sign != 0).sum())  # the rules' anchors (walk() took its seeds out again)
 
     # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X). So

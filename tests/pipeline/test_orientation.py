@@ -185,3 +185,24 @@ def test_visibility_abstains_on_an_open_sheet():
     result = normals.orient(p, axes, "AUTO")
     assert result.mode == "UP" and "terrain" in result.evidence
     assert _right(result.normals.astype(float), up) == 1.0
+
+
+def _sphere_and_ground(ground_low):
+    """A closed sphere (20k points, radius 2 about (0, 0, 4)) and a flat ground of 60k points,
+    20 x 20 from `ground_low` (x, y) at z = 0: a terrain's share of the points."""
+    s, out = fibonacci_sphere(20000, 2.0, (0.0, 0.0, 4.0))
+    rng = np.random.default_rng(0)
+    lo = np.asarray(ground_low, float)
+    g = np.column_stack([rng.uniform(lo, lo + 20.0, (60000, 2)), np.zeros(60000)])
+    p = np.concatenate([s, g])
+    result = normals.orient(p, normals.estimate(p), "AUTO")
+    nrm = result.normals.astype(np.float64)
+    return result, _right(nrm[:20000], out), float((nrm[20000:, 2] > 0).mean())
+
+
+def test_a_terrain_leaves_the_components_visibility_decided():
+    """The terrain's upward rule on every point overrode the sphere beside the ground, which
+    visibility had decided: its lower half faced inward (49.7 % right)."""
+    result, sphere, ground = _sphere_and_ground((5.0, -10.0))
+    assert result.mode == "UP" and "terrain" in result.evidence and "visibility: 1 of 2" in result.evidence
+    assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
