@@ -689,9 +689,11 @@ def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np
     signed = np.where(negative[sample], -1.0, 1.0)[:, None] * m[sample]
     splats = _core.SplatCloud(np.ascontiguousarray(p[sample], np.float32), np.ascontiguousarray(signed, np.float32),
                               np.ascontiguousarray(radii), None, np.zeros(len(sample), np.uint8), threads, None)
-    # Probes: up to VISIBILITY_PROBES of each component's sample points (the sample is random).
+    # Probes: up to VISIBILITY_PROBES of each component's sample points, drawn at random: the
+    # sample is in the renumbered (spatial) order, and its first points of a component lie
+    # together, all on one side of it (a sphere's underside, facing the ground beneath it).
     lab = labels[sample]
-    order = np.argsort(lab, kind="stable")
+    order = np.lexsort((np.random.default_rng(SAMPLE_SEED).random(len(lab)), lab))
     starts = np.r_[0, np.flatnonzero(lab[order][1:] != lab[order][:-1]) + 1]
     rank = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
     probes = order[rank < VISIBILITY_PROBES]

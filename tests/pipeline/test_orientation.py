@@ -206,3 +206,12 @@ def test_a_terrain_leaves_the_components_visibility_decided():
     result, sphere, ground = _sphere_and_ground((5.0, -10.0))
     assert result.mode == "UP" and "terrain" in result.evidence and "visibility: 1 of 2" in result.evidence
     assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
+
+
+def test_visibility_probes_spread_over_their_component():
+    """The probes were a component's first sample points in the spatial renumbering, all on
+    the sphere's underside, whose outward rays meet the ground beneath: visibility abstained,
+    and the terrain rule turned the sphere's lower half inward (49.7 % right)."""
+    result, sphere, ground = _sphere_and_ground((-10.0, -10.0))
+    assert "visibility: 1 of 2" in result.evidence, result.evidence
+    assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
