@@ -256,6 +256,16 @@ def test_an_ascii_pcd_without_the_comment_is_sniffed_as_pcd(tmp_path):
     assert len(readers.read_cloud(str(path))) == 3
 
 
+@pytest.mark.parametrize("first", ["Version 2.1 exported by FooScan", "fields x y z", "VERSION 3\nFIELDS x y z"])
+def test_a_text_file_starting_with_a_pcd_key_is_text(tmp_path, first):
+    """A first line starting VERSION or FIELDS (any case) made the file a PCD, refused as
+    one with no DATA line: without PCL's comment, FIELDS, SIZE and TYPE lines are needed."""
+    path = tmp_path / "scan.xyz"
+    path.write_text(first + "\n0 0 0\n1 0 0\n0 1 0\n")
+    assert readers.sniff(str(path)) == "TEXT"
+    assert len(readers.read_cloud(str(path))) == 3
+
+
 def test_pypcd4_missing_is_refused_naming_the_package(tmp_path, monkeypatch):
     import builtins
 

@@ -39,8 +39,9 @@ from ..cloud import CloudFileError, PointCloud, check_file, linear_colours, make
 from .numbers import parse_numbers
 
 MAGIC = b"# .PCD"  # the comment PCL writes first; a header may also start with VERSION or FIELDS
-# Keys that can start a PCD header (after optional comments): what the sniffing accepts.
-HEADER_KEYS = (b"VERSION", b"FIELDS")
+# Without the comment, the header's lines that say what the data are: a text file may start
+# with a line "Version 2.1 ..." or "fields x y z", never with all three of these.
+SNIFF_KEYS = {"FIELDS", "SIZE", "TYPE"}
 # PCL's header has ten lines (VERSION FIELDS SIZE TYPE COUNT WIDTH HEIGHT VIEWPOINT POINTS
 # DATA) and comments: a few hundred bytes. Beyond this many without a DATA line it is not a header.
 MAX_HEADER_BYTES = 1 << 20
@@ -81,16 +82,22 @@ class Header:
 
 def is_pcd(head: bytes) -> bool:
     """Whether the file's first bytes are a PCD header: PCL's '# .PCD' comment, or (after
-    comments and blank lines) a VERSION or FIELDS line."""
+    comments and blank lines) header lines, up to DATA, among which FIELDS, SIZE and TYPE."""
     if head.startswith(MAGIC):
         return True
+    keys = set()
     for line in head.split(b"\n")[:-1]:  # whole lines only
         line = line.strip()
         if not line or line.startswith(b"#"):
             continue
-        key = line.split(None, 1)[0].upper()
-        return key in HEADER_KEYS and len(line.split()) > 1
-    return False
+        words = line.split()
+        key = words[0].decode("ascii", "replace").upper()
+        if key not in _KEYS or len(words) < 2:
+            break
+        keys.add(key)
+        if key == "DATA":
+            break
+    return SNIFF_KEYS <= keys
 
 
 def _import_pypcd4(path: str):
