@@ -266,6 +266,15 @@ def test_a_text_file_starting_with_a_pcd_key_is_text(tmp_path, first):
     assert len(readers.read_cloud(str(path))) == 3
 
 
+@pytest.mark.parametrize("end", [b"\r", b"\r\n"])
+def test_ascii_data_with_cr_line_ends(tmp_path, end):
+    """Lone CRs ended no line for the parse: 'declares 3 points but 3 rows of data follow'."""
+    path = tmp_path / "cr.pcd"
+    path.write_bytes(_head(3, "ascii") + end.join([b"0 0 0", b"1 0 0", b"0 1 2"]) + end)
+    cloud = readers.read_cloud(str(path))
+    assert np.array_equal(cloud.positions, [[0, 0, 0], [1, 0, 0], [0, 1, 2]])
+
+
 def test_pypcd4_missing_is_refused_naming_the_package(tmp_path, monkeypatch):
     import builtins
 

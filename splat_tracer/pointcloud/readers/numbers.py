@@ -44,3 +44,14 @@ def parse_numbers(data, threads: int = 0, chunk_bytes: int = 1 << 20) -> NumberT
     values, per_line, bad = _core.parse_numbers(data, threads, chunk_bytes)
     return NumberTable(np.frombuffer(values, np.float64), np.frombuffer(per_line, np.int64),
                        np.frombuffer(bad, np.int64))
+
+
+def lf_line_ends(data):
+    """`data` (bytes or str) with its lines ended by LF, as parse_numbers counts them, when
+    some end with a lone CR (classic Mac OS, some exporters), which parse_numbers takes for
+    whitespace: every row would be one line. CR LF alone is left as it is: its CR is
+    whitespace to the parse, and the line count is the same."""
+    cr, crlf, lf = ("\r", "\r\n", "\n") if isinstance(data, str) else (b"\r", b"\r\n", b"\n")
+    if cr not in data or data.count(cr) == data.count(crlf):
+        return data
+    return data.replace(crlf, lf).replace(cr, lf)

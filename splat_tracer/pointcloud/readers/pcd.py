@@ -36,7 +36,7 @@ import numpy as np
 
 from ...util.columns import in_blocks
 from ..cloud import CloudFileError, PointCloud, check_file, linear_colours, make_cloud
-from .numbers import parse_numbers
+from .numbers import lf_line_ends, parse_numbers
 
 MAGIC = b"# .PCD"  # the comment PCL writes first; a header may also start with VERSION or FIELDS
 # Without the comment, the header's lines that say what the data are: a text file may start
@@ -267,6 +267,7 @@ def _read_ascii(path: str, header: Header) -> dict:
         e = data.decode("ascii", errors="replace").index("\ufffd")  # the first byte that is not ASCII
         raise CloudFileError(f"{path}: the ascii data are not ASCII text (byte 0x{data[e]:02x} at offset "
                              f"{header.offset + e:,})")
+    data = lf_line_ends(data)
     parsed = parse_numbers(data)
     n, count = meta.points, header.values
     per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank

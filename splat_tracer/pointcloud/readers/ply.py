@@ -19,7 +19,7 @@ from ...util.columns import finite_rows, in_blocks
 from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, check_file, linear_colours, make_cloud,
                      srgb_to_linear, unit_colours)
 from . import gaussians
-from .numbers import parse_numbers
+from .numbers import lf_line_ends, parse_numbers
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -181,9 +181,7 @@ def _text_vertices(path: str, header, header_len: int) -> Optional[np.ndarray]:
     with open(path, "rb") as f:
         f.seek(header_len)
         data = f.read()
-    if b"\r" in data:  # plyfile reads lines ended by CR LF, LF or CR (the file opened with newline='')
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    table = parse_numbers(data)
+    table = parse_numbers(lf_line_ends(data))  # plyfile reads lines ended by CR LF, LF or CR too
     del data  # the values are what is needed from here on
     per_line, offsets = table.per_line, table.offsets()
     total = sum(e.count for e in elements)

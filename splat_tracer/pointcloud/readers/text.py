@@ -7,7 +7,7 @@ import numpy as np
 
 from ...util.columns import finite_rows
 from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
-from .numbers import parse_numbers
+from .numbers import lf_line_ends, parse_numbers
 
 # Column names a header line may use (lower case), to the roles below.
 _NAMES = {
@@ -128,10 +128,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
         line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
                              "other point-cloud format; save it as UTF-8 or ASCII") from None
-    if "\r" in text and text.count("\r") != text.count("\r\n"):
-        # Lines ended by a lone CR (classic Mac OS, some exporters): every row would be one
-        # line. CR LF is left alone: its CR is whitespace to the parse below.
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    text = lf_line_ends(text)
     decimal_comma = _decimal_comma(path, text)
     if any(c in text for c in ",;\t"):  # (a scan for each is far quicker than a translation that changes nothing)
         text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
