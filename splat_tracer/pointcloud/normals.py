@@ -684,8 +684,10 @@ def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np
     # with n / len(sample) times fewer: sqrt of that times larger, and VISIBILITY_COVER
     # times again so that random gaps between them close.
     radii = (VISIBILITY_COVER * gap * np.sqrt(n / (GRAPH_K * len(sample)))).astype(np.float32)
-    ok = radii > 0
+    ok = radii > 0  # a point with no distance to its neighbours (duplicates) has no disc
     sample, radii = sample[ok], radii[ok]
+    if len(sample) < VISIBILITY_MIN_VOTES:  # no surface to see: no evidence either way
+        return decided, ""
     signed = np.where(negative[sample], -1.0, 1.0)[:, None] * m[sample]
     splats = _core.SplatCloud(np.ascontiguousarray(p[sample], np.float32), np.ascontiguousarray(signed, np.float32),
                               np.ascontiguousarray(radii), None, np.zeros(len(sample), np.uint8), threads, None)

@@ -215,3 +215,17 @@ def test_visibility_probes_spread_over_their_component():
     result, sphere, ground = _sphere_and_ground((-10.0, -10.0))
     assert "visibility: 1 of 2" in result.evidence, result.evidence
     assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
+
+
+@pytest.mark.filterwarnings("error")
+def test_visibility_abstains_without_a_word_on_duplicate_points():
+    """Points each repeated more often than the graph has neighbours (mesh vertices not merged)
+    have no discs: visibility had no probes, and its note read '0 probes ... nan% / nan%'
+    with RuntimeWarnings. The graph's propagation decides alone (each group of duplicates
+    is a component of its own: it faces up)."""
+    p, out = fibonacci_sphere(500, 1.0)
+    p, out = np.repeat(p, normals.GRAPH_K + 2, axis=0), np.repeat(out, normals.GRAPH_K + 2, axis=0)
+    result = normals.orient(p, out, "AUTO")
+    assert result.mode == "PROPAGATE" and result.evidence == "", (result.mode, result.evidence)
+    groups = result.normals.reshape(500, normals.GRAPH_K + 2, 3)
+    assert (groups == groups[:, :1]).all() and (groups[:, 0, 2] >= 0).all()
