@@ -308,7 +308,7 @@ def adaptive_normals(points: np.ndarray, normals: np.ndarray, tree, axis: int, l
     """Refits, in place, the (N,3) `normals` (PCA over the k nearest, by `tree`) of the points
     whose neighbourhood spans fewer than QUANT_SPAN depth steps along `axis` over wider
     neighbourhoods of subsamples (see QUANT_SPAN); returns {reach: count} (reach: the points
-    of the full cloud a fit's neighbourhood spans, k for the points kept)."""
+    of the full cloud a fit's neighbourhood spans, k for the points kept), over every point."""
     pts = np.asarray(points)
     n = len(pts)
     depth = np.ascontiguousarray(pts[:, axis])
@@ -339,6 +339,7 @@ def adaptive_normals(points: np.ndarray, normals: np.ndarray, tree, axis: int, l
         counts[k * fraction] = int(take.sum())
         rest = rest[~take]
         fraction *= 2
+    counts[k] += len(rest)  # a subsample too small to search: they keep their fit over k
     return {reach: c for reach, c in counts.items() if c}
 
 
