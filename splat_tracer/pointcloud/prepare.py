@@ -116,9 +116,13 @@ class PreparedCloud:
         if self.normals_oriented:
             how = f"oriented {_ORIENTED[self.normals_oriented]}"
             if self.orientation_evidence:
-                how += f" (decided by {self.orientation_evidence})"
+                # PROPAGATE with evidence: AUTO's rules were tried, and the graph decided alone.
+                how += (f", after {self.orientation_evidence}" if self.normals_oriented == "PROPAGATE"
+                        else f" (decided by {self.orientation_evidence})")
             if self.normals_oriented in ("SCANNER", "ORIGIN", "UP"):
-                how += f"; {self.oriented_by_rule:.1%} of the points by that rule, the rest from their neighbours"
+                how += f"; {self.oriented_by_rule:.1%} of the points by that rule"
+                if self.oriented_by_rule < 1.0:
+                    how += ", the rest from their neighbours"
             if self.normals_estimated:
                 notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
             else:

@@ -229,3 +229,19 @@ def test_visibility_abstains_without_a_word_on_duplicate_points():
     assert result.mode == "PROPAGATE" and result.evidence == "", (result.mode, result.evidence)
     groups = result.normals.reshape(500, normals.GRAPH_K + 2, 3)
     assert (groups == groups[:, :1]).all() and (groups[:, 0, 2] >= 0).all()
+
+
+def test_the_notes_say_what_decided_and_what_was_tried(tmp_path):
+    """An abstention was presented as the decider ('decided by visibility abstained'), and
+    'the rest from their neighbours' was said when no point was left."""
+    rng = np.random.default_rng(0)
+    wall = np.column_stack([np.zeros(5000), rng.uniform(-2, 2, (5000, 2))])  # seen edge-on from its origin
+    prepared = importer.load(_write_xyz(tmp_path / "wall.xyz", wall))
+    note = next(s for s in prepared.notes(16) if "oriented" in s)
+    assert prepared.normals_oriented == "PROPAGATE"
+    assert "neighbour graph (outward where the surface encloses a volume), after visibility abstained: " in note, note
+    assert "decided by" not in note, note
+    ground = np.column_stack([rng.uniform(-2, 2, (5000, 2)), np.zeros(5000)])
+    prepared = importer.load(_write_xyz(tmp_path / "ground.xyz", ground), importer.ImportOptions(orientation="UP"))
+    note = next(s for s in prepared.notes(16) if "oriented" in s)
+    assert note.endswith("oriented upward (+Z); 100.0% of the points by that rule"), note
