@@ -190,10 +190,12 @@ def pinhole_share(covered: np.ndarray, max_pixels: int = PINHOLE_PIXELS) -> floa
 # --------------------------------------------------------------------------------------
 # Scans: reading, the camera.
 
-def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+def bun045_rotation() -> np.ndarray:
+    """bun045's rotation matrix (BUN045_Q, x y z w, as bun.conf writes it)."""
+    from splat_tracer.util.matrices import quaternion_matrices
+
+    x, y, z, w = BUN045_Q
+    return quaternion_matrices(np.array([[w, x, y, z]]))[0]
 
 
 def _write_xyz_ply(path: Path, points: np.ndarray) -> None:
@@ -215,7 +217,7 @@ def import_path(scan: Scan, cache: Path, tmp: Path) -> Path:
     from splat_tracer.pointcloud.readers import read_cloud
 
     a = read_cloud(str(cache / "bun000.ply")).positions
-    b = read_cloud(str(cache / "bun045.ply")).positions @ quaternion_matrix(*BUN045_Q) + BUN045_T
+    b = read_cloud(str(cache / "bun045.ply")).positions @ bun045_rotation() + BUN045_T
     path = tmp / "bun000+bun045.ply"
     _write_xyz_ply(path, np.vstack([a, b]))
     return path
@@ -232,7 +234,7 @@ def view_for(scan: Scan, prepared, width: int, height: int) -> dict:
         # The scanner looked at the bunny's front (+z); the pair from between its two views.
         direction = np.array([0.0, 0.0, -1.0])
         if scan.name == "bun000+bun045":
-            direction = direction + direction @ quaternion_matrix(*BUN045_Q)
+            direction = direction + direction @ bun045_rotation()
         return meshes.camera_view(world, width, height, direction=direction, fov_y=30.0)
     if scan.kind == "frame":
         # Organised depth/stereo frames are in the sensor's frame (VIEWPOINT at the origin):

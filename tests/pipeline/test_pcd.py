@@ -8,11 +8,12 @@ import pytest
 from pypcd4 import Encoding, MetaData, PointCloud as Pcd
 
 from frames import slanted_wall_frame
-from geometry import fibonacci_sphere, quaternion_matrix
+from geometry import fibonacci_sphere
 from splat_tracer.pointcloud import importer, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, linear_colours
 from splat_tracer.pointcloud.readers import pcd
 from splat_tracer.util import resources
+from splat_tracer.util.matrices import quaternion_matrices
 
 RNG = np.random.default_rng(27)
 ENCODINGS = (Encoding.ASCII, Encoding.BINARY, Encoding.BINARY_COMPRESSED)
@@ -129,7 +130,8 @@ def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     q = (0.8, 0.3, -0.4, 0.33)  # qw qx qy qz: a rotation about a skew axis
     t = np.array([12.0, -4.0, 2.5])
     camera, _ = slanted_wall_frame()
-    world = camera @ quaternion_matrix(q).T + t  # the sensor's frame into the cloud's: its pose, VIEWPOINT
+    # the sensor's frame into the cloud's: its pose, VIEWPOINT
+    world = camera @ quaternion_matrices(np.array([q]) / np.linalg.norm(q))[0].T + t
     f32 = world.astype(np.float32)
     viewpoint = (*t, *(np.asarray(q) / np.linalg.norm(q)))
     path = _write(tmp_path / "frame.pcd", {"x": f32[:, 0], "y": f32[:, 1], "z": f32[:, 2]},
