@@ -36,7 +36,7 @@ import numpy as np
 
 from ...util.columns import in_blocks
 from ..cloud import CloudFileError, PointCloud, check_file, linear_colours, make_cloud
-from .numbers import lf_line_ends, parse_numbers
+from .numbers import first_bad_row, lf_line_ends, parse_numbers
 
 MAGIC = b"# .PCD"  # the comment PCL writes first; a header may also start with VERSION or FIELDS
 # Without the comment, the header's lines that say what the data are: a text file may start
@@ -273,15 +273,13 @@ def _read_ascii(path: str, header: Header) -> dict:
     per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank
     if not parsed.ok or len(per_line) != n or (per_line != count).any():
         # The error path only: name the first row that is wrong, as a person reads the text.
-        lines = [line.split() for line in data.decode("ascii").splitlines()]
-        lines = [(k, t) for k, t in enumerate(lines) if t]
-        for k, t in lines:
-            bad = [v for v in t if not _is_number(v)]
-            if bad or len(t) != count:
-                what = (f"has {len(t)} values where the header declares {count}" if not bad
-                        else f"has '{bad[0][:20]}', which is not a number")
-                raise CloudFileError(f"{path}: data line {k + 1} {what}")
-        raise CloudFileError(f"{path}: the header declares {n:,} points but {len(lines):,} rows of data follow")
+        found = first_bad_row(data.decode("ascii").splitlines(), count)
+        if found:
+            k, t, bad = found
+            what = (f"has {len(t)} values where the header declares {count}" if bad is None
+                    else f"has '{bad[:20]}', which is not a number")
+            raise CloudFileError(f"{path}: data line {k + 1} {what}")
+        raise CloudFileError(f"{path}: the header declares {n:,} points but {len(per_line):,} rows of data follow")
     values = parsed.values
     table = values.reshape(n, count)
     out, at = {}, 0
@@ -289,14 +287,6 @@ def _read_ascii(path: str, header: Header) -> dict:
         out[name] = table[:, at] if c == 1 else table[:, at:at + c]
         at += c
     return out
-
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
 
 
 def _read_binary(path: str, header: Header, pypcd4) -> dict:
