@@ -318,11 +318,14 @@ _USED_PROPERTIES = _KNOWN_PROPERTIES | set(gaussians.GAUSSIAN_FIELDS) | {"scale_
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,
               byte_order: str = "<") -> None:
     """Writes a point cloud as PLY (tests, the demo and benchmarks use it). Colours are
-    written as 8-bit sRGB from scene-linear floats."""
+    written as 8-bit sRGB from scene-linear floats. normals None: positions without normals
+    (the importer estimates them)."""
     from plyfile import PlyData, PlyElement
 
     pos = np.asarray(positions, dtype=np.float64)
-    fields = [("x", "f8"), ("y", "f8"), ("z", "f8"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
+    fields = [("x", "f8"), ("y", "f8"), ("z", "f8")]
+    if normals is not None:
+        fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
     if colours is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
     if radii is not None:
@@ -330,7 +333,8 @@ def write_ply(path: str, positions, normals, colours=None, radii=None, binary: b
     rows = np.empty(len(pos), dtype=fields)
     for k, c in enumerate("xyz"):
         rows[c] = pos[:, k]
-        rows["n" + c] = np.asarray(normals)[:, k]
+        if normals is not None:
+            rows["n" + c] = np.asarray(normals)[:, k]
     if colours is not None:
         lin = np.clip(np.asarray(colours, dtype=np.float64)[:, :3], 0, 1)
         srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055)
