@@ -180,6 +180,12 @@ class Orientation:
     adaptive: dict = None    # neighbourhood reach (points) -> how many normals were fitted over it
 
 
+def _sample(n: int, size: int) -> np.ndarray:
+    """Sorted distinct indices of min(n, size) seeded random draws from `n` points (with
+    replacement: the duplicates drawn are dropped): the same cloud, the same sample."""
+    return np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, size)))
+
+
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
              graph=None, spacing=None, cover=None) -> np.ndarray:
     """(N,3) float64 unit normals (unoriented) by PCA over the k nearest neighbours.
@@ -229,7 +235,6 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     estimating = axes is None
     share = 2.0 / 3.0 if estimating else 0.0
     graph = spacing = cover = None
-    slivers = 0
     if estimating and k >= GRAPH_K and n > k + 1:
         graph = np.empty((n, GRAPH_K + 1), np.int32)
         if 1 <= radius_k <= k:
@@ -264,7 +269,7 @@ def quantised_depth(points: np.ndarray, graph: np.ndarray) -> tuple[int, np.ndar
     found = (-1, np.zeros(0), "")
     if n < QUANT_MIN_LEVELS or graph.shape[1] < 2:
         return found
-    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, QUANT_SAMPLE)))
+    idx = _sample(n, QUANT_SAMPLE)
     nbr = graph[idx, 1:]
     gap = np.linalg.norm(pts[idx] - pts[nbr[:, 0]], axis=1)
     quantised = []
@@ -421,8 +426,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     elif mode == "UP":
         c = nrm[:, 2]
     if mode in ("SCANNER", "ORIGIN", "UP"):
-        anchor_sign[c >= AMBIGUOUS_RULE] = 1
-        anchor_sign[c <= -AMBIGUOUS_RULE] = -1
+        _rule_anchors(anchor_sign, c)
         if (anchor_sign != 0).all():
             return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1, n,
                                evidence)
@@ -449,8 +453,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     p, m, anchor_sign = take_rows(pts, perm, threads), take_rows(nrm, perm, threads), anchor_sign[perm]
     sample = None
     if mode == "AUTO":  # visibility's sample, with each one's distance to its k-th neighbour
-        rng = np.random.default_rng(SAMPLE_SEED)
-        sample = np.unique(rng.integers(0, n, min(n, VISIBILITY_SAMPLE)))
+        sample = _sample(n, VISIBILITY_SAMPLE)
         sample_gap = np.linalg.norm(p[sample] - p[nbr[sample, k - 1]], axis=1)
     w = graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
                       _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
@@ -465,8 +468,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     sums = walk.sums(negative)
     seeded, open_sheet = np.zeros(0, np.int64), np.zeros(0, bool)
     if len(seeds):
-        seeded = labels[seeds]
-        open_sheet = np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * counts[seeded]
+        seeded, open_sheet = labels[seeds], walk.open_sheets(seeds, sums)
     if mode == "AUTO":
         # Visibility first: the components it decides are no terrain (an object's fragments
         # are open sheets too); then the terrain test on the rest.
@@ -486,17 +488,13 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
             terrain_evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or "
                                 "down on the whole, which visibility cannot orient")
             evidence = terrain_evidence + (f"; {evidence}" if (decided != 0).any() else "")
-            undecided = decided[labels] == 0
-            anchor_sign[undecided & (m[:, 2] >= AMBIGUOUS_RULE)] = 1
-            anchor_sign[undecided & (m[:, 2] <= -AMBIGUOUS_RULE)] = -1
+            undecided = np.flatnonzero(decided[labels] == 0)
+            anchor_sign[undecided] = _rule_anchors(anchor_sign[undecided], m[undecided, 2])
             # The decided components have no anchor: the walk seeds them as the first walk did
             # (the same seed, the same tree), and their visibility sign is applied below.
             negative, ambiguous, seeds, flat = walk(anchor_sign, None)
             sums = walk.sums(negative)
-            if len(seeds):
-                seeded = labels[seeds]
-                open_sheet = (np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded]))
-                              >= OPEN_SHEET * counts[seeded])
+            open_sheet = walk.open_sheets(seeds, sums)
         else:
             mode = "VISIBILITY" if (decided != 0).any() else "PROPAGATE"
         negative ^= (decided < 0)[labels]
@@ -529,6 +527,14 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
                        int(n_comp), by_rule, evidence)
 
 
+def _rule_anchors(anchor_sign: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Sets `anchor_sign` (int8, in place; returned) to +1 or -1 where the rule's cosine `c`
+    (the normal against the scanner's direction or +Z) is clear: beyond AMBIGUOUS_RULE."""
+    anchor_sign[c >= AMBIGUOUS_RULE] = 1
+    anchor_sign[c <= -AMBIGUOUS_RULE] = -1
+    return anchor_sign
+
+
 def _neighbour_table(pts, k, tree, graph, workers) -> np.ndarray:
     """(n, k+1) int32: each point itself, then its k nearest (estimate()'s graph when given)."""
     if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
@@ -556,6 +562,12 @@ class _Walk:
         """(components, 3): each component's oriented normals summed."""
         signed = np.where(negative, -1.0, 1.0)
         return np.stack([np.bincount(self.labels, self.m[:, a] * signed, self.n_comp) for a in range(3)], 1)
+
+    def open_sheets(self, seeds, sums) -> np.ndarray:
+        """(len(seeds),) bool: the seeds' components that are open sheets (OPEN_SHEET), by
+        their oriented normals' `sums` (self.sums)."""
+        seeded = self.labels[seeds]
+        return np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * self.counts[seeded]
 
     def __call__(self, anchor_sign, progress):
         """(negative, ambiguous, seeds, flat) from the rules' anchors (anchor_sign, changed:
@@ -593,11 +605,11 @@ class _Walk:
         return negative, ambiguous, seeds, flat
 
 
-def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """(keys, solid angle) of unit directions `u` binned on a cube map whose cells are `cell`
+def _cube_cells(u: np.ndarray, cell: float) -> np.ndarray:
+    """The cells (keys) of unit directions `u` binned on a cube map whose cells are `cell`
     wide on each face (a face at distance 1: cell radians at its centre, half that at its
-    edges), and each cell's solid angle (at its centre). A cube map has no poles: a
-    depth camera looking along an axis is binned as evenly as any other view."""
+    edges). A cube map has no poles: a depth camera looking along an axis is binned as
+    evenly as any other view."""
     a = np.abs(u)
     face = np.argmax(a, axis=1)
     rows = np.arange(len(u))
@@ -608,8 +620,7 @@ def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     ix = np.clip(np.floor((x + 1) / cell), 0, cells - 1).astype(np.int64)
     iy = np.clip(np.floor((y + 1) / cell), 0, cells - 1).astype(np.int64)
     side = face * 2 + (u[rows, face] < 0)
-    cx, cy = (ix + 0.5) * cell - 1, (iy + 0.5) * cell - 1
-    return (side * cells + ix) * cells + iy, cell * cell / (1 + cx * cx + cy * cy) ** 1.5
+    return (side * cells + ix) * cells + iy
 
 
 def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
@@ -622,7 +633,7 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     Decided on a sample of the points (VIEW_SAMPLE) with the spacing of the sample."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, VIEW_SAMPLE)))
+    idx = _sample(n, VIEW_SAMPLE)
     d = pts[idx] - viewpoint
     r = np.linalg.norm(d, axis=1)
     keep = r > 0
@@ -650,7 +661,9 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     cell = VIEW_CELL * float(np.median(gap / r))
     if not (cell > 0):
         return False, ""
-    key = _cube_cells(u, min(cell, 0.5))[0]
+    # At most half a face's width (a face spans 2): a sparse sample's cells still bin the
+    # directions into several per face, not one for a whole face.
+    key = _cube_cells(u, min(cell, 0.5))
     order = np.argsort(key, kind="stable")
     ks = key[order]
     starts = np.r_[0, np.flatnonzero(ks[1:] != ks[:-1]) + 1]
