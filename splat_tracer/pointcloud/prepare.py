@@ -182,12 +182,10 @@ _ORIENTED = {"PROPAGATE": "consistently along the neighbour graph (outward where
 
 
 def resolve_orientation(orientation: str, scanners: bool, viewpoint: bool = True) -> str:
-    """The orientation mode asked of normals.orient: AUTO is SCANNER when the scanners are
-    known (E57 poses, a PCD's viewpoint), else AUTO (normals.orient decides from the
-    geometry, whatever the format: a LAS file may hold an object). SCANNER without
-    scanners, or ORIGIN without the file's origin, is PROPAGATE."""
-    if orientation == "AUTO" and scanners:
-        orientation = "SCANNER"
+    """The orientation mode asked of normals.orient: SCANNER without scanners, or ORIGIN
+    without the file's origin, is PROPAGATE. AUTO stays AUTO: normals.orient takes the
+    scanners when they are known (E57 poses, a PCD's viewpoint), else decides from the
+    geometry, whatever the format (a LAS file may hold an object)."""
     if (orientation == "SCANNER" and not scanners) or (orientation == "ORIGIN" and not viewpoint):
         orientation = "PROPAGATE"
     return orientation
