@@ -462,24 +462,31 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     del nbr, w
     report(0.8, "orienting normals: propagation")
     walk = _Walk(p, m, forest, perm)
+    del forest
     negative, ambiguous, seeds, flat = walk(anchor_sign, _fraction(report, 0.85, 0.95,
                                                                    "orienting normals: propagation"))
     labels, n_comp, counts = walk.labels, walk.n_comp, walk.counts
-    sums = walk.sums(negative)
-    seeded, open_sheet = np.zeros(0, np.int64), np.zeros(0, bool)
-    if len(seeds):
-        seeded, open_sheet = labels[seeds], walk.open_sheets(seeds, sums)
-    if mode == "AUTO":
+    # The sums serve the seeded components only (open sheets, flat ones): none, no sums.
+    sums = walk.sums(negative) if len(seeds) else None
+    open_sheet = walk.open_sheets(seeds, sums) if len(seeds) else np.zeros(0, bool)
+    if mode != "AUTO":
+        walk.edges = None  # no second walk: the forest's memory back (80 MB at 10M points)
+    else:
         # Visibility first: the components it decides are no terrain (an object's fragments
-        # are open sheets too); then the terrain test on the rest.
-        report(0.95, "orienting normals: visibility")
-        decided, evidence = visibility(p, m, negative, labels, n_comp, sample, sample_gap, threads)
+        # are open sheets too); then the terrain test on the rest. Its candidates (open sheets
+        # facing up or down, in a level cloud) are known before: when they cannot make a
+        # terrain, the forest is let go before visibility runs.
         terrain = np.zeros(n_comp, bool)
-        terrain[seeded[open_sheet]] = True
+        terrain[labels[seeds[open_sheet]]] = True
         length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
-        terrain &= (np.abs(sums[:, 2]) >= TERRAIN_COSINE * length) & (decided == 0)
+        terrain &= np.abs(sums[:, 2]) >= TERRAIN_COSINE * length
         lo, hi = np.percentile(p[sample], (1.0, 99.0), axis=0)
         level = hi[2] - lo[2] <= TERRAIN_RELIEF * max(hi[0] - lo[0], hi[1] - lo[1])
+        if not (level and counts[terrain].sum() / n >= TERRAIN_SHARE):
+            walk.edges = None
+        report(0.95, "orienting normals: visibility")
+        decided, evidence = visibility(p, m, negative, labels, n_comp, sample, sample_gap, threads)
+        terrain &= decided == 0
         share = counts[terrain].sum() / n if level else 0.0
         if share >= TERRAIN_SHARE:
             # A terrain's bulk: every point with a clear up takes it (as UP), on the components
@@ -501,7 +508,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
         keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE (or UP)
         seeds, open_sheet = seeds[keep], open_sheet[keep]
         flat = flat[decided[labels[flat]] == 0]
-        if (decided != 0).any():
+        if (decided != 0).any() and len(seeds):
             sums = walk.sums(negative)
     by_rule = int((anchor_sign != 0).sum())  # the rules' anchors (walk() took its seeds out again)
 
@@ -549,10 +556,11 @@ def _neighbour_table(pts, k, tree, graph, workers) -> np.ndarray:
 
 class _Walk:
     """The propagation over one spanning forest, for any set of anchors (AUTO walks twice
-    when it finds a terrain). Arrays in the renumbered order (orient's `perm`)."""
+    when it finds a terrain). Arrays in the renumbered order (orient's `perm`). It keeps the
+    forest's edges only, and orient sets them to None once no walk can follow."""
 
     def __init__(self, p, m, forest, perm):
-        self.p, self.m, self.forest, self.perm = p, m, forest, perm
+        self.p, self.m, self.edges, self.perm = p, m, forest.edges, perm
         self.n_comp, self.labels = forest.components, forest.labels
         n_comp, labels = self.n_comp, self.labels
         self.counts = np.bincount(labels, minlength=n_comp)
@@ -595,7 +603,7 @@ class _Walk:
         # One breadth-first walk from every anchor at once (as if from a virtual root joined to
         # each), each point's sign its parent's unless their normals point apart.
         is_anchor = anchor_sign != 0
-        pred, order = forest_traversal(self.forest.edges, is_anchor, progress)
+        pred, order = forest_traversal(self.edges, is_anchor, progress)
         parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
         cos_parent = np.einsum("ij,ij->i", m, m[parent])
         flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
