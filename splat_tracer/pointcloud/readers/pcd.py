@@ -71,6 +71,9 @@ _PADDING = "_"
 _RESERVED_ATTRIBUTES = ("position", "splat_normal", "splat_radius", "splat_color", "scanner_position")
 _MAX_ATTRIBUTE_NAME = 63  # Blender's longest attribute name (MAX_CUSTOMDATA_LAYER_NAME less its NUL)
 _DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+# A VIEWPOINT coordinate beyond this is no position: its offset from the cloud, squared (a
+# distance), overflows float64 to inf.
+_MAX_VIEWPOINT = 1e300
 
 
 @dataclass
@@ -424,7 +427,7 @@ def read_pcd(path: str) -> PointCloud:
                      + " (a normal needs all three)")
     viewpoint = tuple(float(x) for x in meta.viewpoint)
     scanner = np.asarray(viewpoint[:3], np.float64)
-    if not (np.isfinite(scanner).all() and np.abs(scanner).max() < 1e300):
+    if not (np.isfinite(scanner).all() and np.abs(scanner).max() < _MAX_VIEWPOINT):
         scanner = None
         notes.append(f"the file's VIEWPOINT {viewpoint} is not a position: not used")
     elif viewpoint == _DEFAULT_VIEWPOINT and meta.height <= 1:
