@@ -190,21 +190,12 @@ def pinhole_share(covered: np.ndarray, max_pixels: int = PINHOLE_PIXELS) -> floa
 # --------------------------------------------------------------------------------------
 # Scans: reading, the camera.
 
-def quaternion_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+def bun045_rotation() -> np.ndarray:
+    """bun045's rotation matrix (BUN045_Q, x y z w, as bun.conf writes it)."""
+    from splat_tracer.util.matrices import quaternion_matrices
 
-
-def _write_xyz_ply(path: Path, points: np.ndarray) -> None:
-    """A binary PLY of positions only (so that the importer estimates the normals, as for the
-    original files)."""
-    pts = np.ascontiguousarray(points, "<f4")
-    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(pts)}\n"
-              "property float x\nproperty float y\nproperty float z\nend_header\n").encode()
-    with open(path, "wb") as f:
-        f.write(header)
-        f.write(pts.tobytes())
+    x, y, z, w = BUN045_Q
+    return quaternion_matrices(np.array([[w, x, y, z]]))[0]
 
 
 def import_path(scan: Scan, cache: Path, tmp: Path) -> Path:
@@ -212,27 +203,27 @@ def import_path(scan: Scan, cache: Path, tmp: Path) -> Path:
     a PLY of both scans' points in bun000's frame."""
     if scan.name != "bun000+bun045":
         return cache / scan.files[0]
-    from splat_tracer.pointcloud.readers import read_cloud
+    from splat_tracer.pointcloud.readers import ply, read_cloud
 
     a = read_cloud(str(cache / "bun000.ply")).positions
-    b = read_cloud(str(cache / "bun045.ply")).positions @ quaternion_matrix(*BUN045_Q) + BUN045_T
+    b = read_cloud(str(cache / "bun045.ply")).positions @ bun045_rotation() + BUN045_T
     path = tmp / "bun000+bun045.ply"
-    _write_xyz_ply(path, np.vstack([a, b]))
+    ply.write_ply(str(path), np.vstack([a, b]), None)  # positions only: the importer estimates the normals
     return path
 
 
-def view_for(scan: Scan, prepared, width: int, height: int) -> dict:
-    """Camera.look_at arguments, in the file's (world) coordinates."""
+def view_for(scan: Scan, prepared, world: np.ndarray, width: int, height: int) -> dict:
+    """Camera.look_at arguments, in the file's (world) coordinates (`world`: the imported
+    points there)."""
     from benchmarks import meshes
 
-    world = prepared.local.astype(np.float64) + prepared.origin
     lo, hi = np.percentile(world, 1, axis=0), np.percentile(world, 99, axis=0)
     aspect = width / height
     if scan.kind == "reference":
         # The scanner looked at the bunny's front (+z); the pair from between its two views.
         direction = np.array([0.0, 0.0, -1.0])
         if scan.name == "bun000+bun045":
-            direction = direction + direction @ quaternion_matrix(*BUN045_Q)
+            direction = direction + direction @ bun045_rotation()
         return meshes.camera_view(world, width, height, direction=direction, fov_y=30.0)
     if scan.kind == "frame":
         # Organised depth/stereo frames are in the sensor's frame (VIEWPOINT at the origin):
@@ -369,15 +360,15 @@ def reference_mesh():
     return meshes.read_obj(path) if path.is_file() else None
 
 
-def importer_normal_error(prepared, vertices, triangles) -> dict:
-    """Each imported normal against the mesh's normal at the nearest surface point: mean
-    angle (signs included: a flipped normal counts 180 degrees) and the share flipped."""
+def importer_normal_error(prepared, world, vertices, triangles) -> dict:
+    """Each imported normal (at `world`: the imported points in the file's coordinates) against
+    the mesh's normal at the nearest surface point: mean angle (signs included: a flipped
+    normal counts 180 degrees) and the share flipped."""
     from scipy.spatial import cKDTree
 
     from benchmarks import meshes
 
     samples, sample_normals = meshes.area_samples(vertices, triangles, REFERENCE_SAMPLES)
-    world = prepared.local.astype(np.float64) + prepared.origin
     _, nearest = cKDTree(samples).query(world, workers=-1)
     n = prepared.cloud.normals.astype(np.float64)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -387,7 +378,7 @@ def importer_normal_error(prepared, vertices, triangles) -> dict:
 
 
 def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict, images: dict) -> dict:
-    from splat_tracer.pointcloud import importer, readers
+    from splat_tracer.pointcloud import importer
     from splat_tracer.pointcloud.cloud import CloudFileError
     from splat_tracer.render.camera import Camera
 
@@ -400,9 +391,7 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
             prepared = importer.load(str(path))
             seconds.append(time.perf_counter() - t0)
     except CloudFileError as e:
-        pcd = path.read_bytes()[:64].lstrip().startswith((b"# .PCD", b"VERSION"))
-        row["error"] = ("PCD not supported by this build" if pcd and "PCD" not in readers.FORMATS
-                        else str(e).replace(str(path), path.name))
+        row["error"] = str(e).replace(str(path), path.name)
         print(f"{scan.name:32s} not imported: {row['error']}", flush=True)
         return row
     row.update(points=len(prepared.local), import_s=statistics.median(seconds), import_min_s=min(seconds),
@@ -413,7 +402,8 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
     print(f"{scan.name:32s} {len(prepared.local):8,d} points, import {row['import_s']:.2f} s "
           f"(median of {len(seconds)}), normals {normals}", flush=True)
     width, height = args.size
-    view = view_for(scan, prepared, width, height)
+    world_points = prepared.local.astype(np.float64) + prepared.origin
+    view = view_for(scan, prepared, world_points, width, height)
     cam = Camera.look_at(**view)
     o, d = cam.rays(width, height)
     d64 = d.astype(np.float64)
@@ -422,7 +412,7 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
     # The import's orientation, before any shading turns a back hit towards the ray: the share
     # of all imported normals on the camera's side (the camera is at the sensor for the
     # depth frames and the E57, above the LAS).
-    towards = np.asarray(cam.position, np.float64) - (prepared.local.astype(np.float64) + prepared.origin)
+    towards = np.asarray(cam.position, np.float64) - world_points
     row["facing_camera_pct"] = float(100 * (np.einsum("ij,ij->i", prepared.cloud.normals, towards) > 0).mean())
     truth = None
     if scan.kind == "reference" and mesh is not None:
@@ -431,11 +421,10 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
         vertices, triangles = mesh
         truth = truth_mod.cast(vertices, triangles, meshes.corner_normals(vertices, triangles), o.astype(np.float64),
                                d64, cam.position, cam.forward)
-        row.update(importer_normal_error(prepared, vertices, triangles))
+        row.update(importer_normal_error(prepared, world_points, vertices, triangles))
         row["raw_normals"] = "from the file" if not prepared.normals_estimated else "none in the file"
     frames, offset = {}, {}
     renderers = [("full", "FULL"), ("general", "GENERAL")]
-    world_points = prepared.local.astype(np.float64) + prepared.origin
     lamp = offset_lamp(view, np.median(world_points, axis=0))
     for label, method in renderers:
         frames[label] = core_frame(prepared, view, width, height, method)
@@ -443,10 +432,9 @@ def run_scan(scan: Scan, args, cache: Path, tmp: Path, mesh, calibrations: dict,
     if args.cycles:
         if "cycles" not in calibrations:
             calibrations["cycles"] = cycles_calibration(tmp)
-        world = prepared.local.astype(np.float64) + prepared.origin
-        frames["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
+        frames["cycles"] = blender_frame(tmp, scan.name, world_points, prepared.cloud.normals, prepared.radii, view, width,
                                          height, bool(prepared.hood.closed_guess))
-        offset["cycles"] = blender_frame(tmp, scan.name, world, prepared.cloud.normals, prepared.radii, view, width,
+        offset["cycles"] = blender_frame(tmp, scan.name, world_points, prepared.cloud.normals, prepared.radii, view, width,
                                          height, bool(prepared.hood.closed_guess), lamp=lamp)
     row["renderers"] = {}
     for label, frame in frames.items():

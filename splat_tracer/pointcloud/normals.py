@@ -132,8 +132,9 @@ SLIVER_ANGLE = 30.0     # degrees: the issue's measure of a sliver standing out 
 # at a 90-degree crease the neighbours split between two faces (0.5) and a point between them
 # is not a sliver. Measured (office1, slivers 5.90 % before): 0.75 (cos^2 30 degrees) fixes
 # 4.52 %, 0.6 3.82 %, 0.5 3.71 %; the clean fandisk's normal error rises by 0.11, 0.12, 0.12
-# degrees. SLIVER_PASSES = 2 (a fixed sliver makes its neighbour's consensus coherent): 3.37 %
-# (3 passes: 3.25 %), fandisk +0.13 degrees.
+# degrees. SLIVER_PASSES = 2 (a fixed sliver makes its neighbour's consensus coherent), fandisk
+# +0.13 degrees: 4.45 % as fix_slivers runs (only the points off their nearest neighbour are
+# tested); 3.37 % when every point is (3 passes: 3.25 %), for 0.25 s a million points more.
 SLIVER_COHERENCE = 0.6
 SLIVER_PASSES = 2
 # Depth quantisation (quantised_depth, adaptive_normals). The detector looks at QUANT_SAMPLE
@@ -178,6 +179,12 @@ class Orientation:
     slivers: int = 0         # normals replaced by their neighbours' consensus (fix_slivers)
     quantised: str = ""      # the depth quantisation found (quantised_depth), in words; "": none
     adaptive: dict = None    # neighbourhood reach (points) -> how many normals were fitted over it
+
+
+def _sample(n: int, size: int) -> np.ndarray:
+    """Sorted distinct indices of min(n, size) seeded random draws from `n` points (with
+    replacement: the duplicates drawn are dropped): the same cloud, the same sample."""
+    return np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, size)))
 
 
 def estimate(points: np.ndarray, k: int = DEFAULT_K, workers: int = -1, tree=None, progress=None,
@@ -229,7 +236,6 @@ def estimate_and_orient(points: np.ndarray, k: int = DEFAULT_K, mode: str = "PRO
     estimating = axes is None
     share = 2.0 / 3.0 if estimating else 0.0
     graph = spacing = cover = None
-    slivers = 0
     if estimating and k >= GRAPH_K and n > k + 1:
         graph = np.empty((n, GRAPH_K + 1), np.int32)
         if 1 <= radius_k <= k:
@@ -264,7 +270,7 @@ def quantised_depth(points: np.ndarray, graph: np.ndarray) -> tuple[int, np.ndar
     found = (-1, np.zeros(0), "")
     if n < QUANT_MIN_LEVELS or graph.shape[1] < 2:
         return found
-    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, QUANT_SAMPLE)))
+    idx = _sample(n, QUANT_SAMPLE)
     nbr = graph[idx, 1:]
     gap = np.linalg.norm(pts[idx] - pts[nbr[:, 0]], axis=1)
     quantised = []
@@ -308,7 +314,7 @@ def adaptive_normals(points: np.ndarray, normals: np.ndarray, tree, axis: int, l
     """Refits, in place, the (N,3) `normals` (PCA over the k nearest, by `tree`) of the points
     whose neighbourhood spans fewer than QUANT_SPAN depth steps along `axis` over wider
     neighbourhoods of subsamples (see QUANT_SPAN); returns {reach: count} (reach: the points
-    of the full cloud a fit's neighbourhood spans, k for the points kept)."""
+    of the full cloud a fit's neighbourhood spans, k for the points kept), over every point."""
     pts = np.asarray(points)
     n = len(pts)
     depth = np.ascontiguousarray(pts[:, axis])
@@ -339,6 +345,7 @@ def adaptive_normals(points: np.ndarray, normals: np.ndarray, tree, axis: int, l
         counts[k * fraction] = int(take.sum())
         rest = rest[~take]
         fraction *= 2
+    counts[k] += len(rest)  # a subsample too small to search: they keep their fit over k
     return {reach: c for reach, c in counts.items() if c}
 
 
@@ -420,8 +427,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     elif mode == "UP":
         c = nrm[:, 2]
     if mode in ("SCANNER", "ORIGIN", "UP"):
-        anchor_sign[c >= AMBIGUOUS_RULE] = 1
-        anchor_sign[c <= -AMBIGUOUS_RULE] = -1
+        _rule_anchors(anchor_sign, c)
         if (anchor_sign != 0).all():
             return Orientation((nrm * anchor_sign[:, None]).astype(np.float32), np.zeros(n, bool), mode, 1, n,
                                evidence)
@@ -448,8 +454,7 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     p, m, anchor_sign = take_rows(pts, perm, threads), take_rows(nrm, perm, threads), anchor_sign[perm]
     sample = None
     if mode == "AUTO":  # visibility's sample, with each one's distance to its k-th neighbour
-        rng = np.random.default_rng(SAMPLE_SEED)
-        sample = np.unique(rng.integers(0, n, min(n, VISIBILITY_SAMPLE)))
+        sample = _sample(n, VISIBILITY_SAMPLE)
         sample_gap = np.linalg.norm(p[sample] - p[nbr[sample, k - 1]], axis=1)
     w = graph_weights(p, m, nbr, ACROSS_WEIGHT, threads,
                       _fraction(report, 0.15, 0.3, "orienting normals: neighbour graph"))
@@ -458,46 +463,54 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
     del nbr, w
     report(0.8, "orienting normals: propagation")
     walk = _Walk(p, m, forest, perm)
+    del forest
     negative, ambiguous, seeds, flat = walk(anchor_sign, _fraction(report, 0.85, 0.95,
                                                                    "orienting normals: propagation"))
     labels, n_comp, counts = walk.labels, walk.n_comp, walk.counts
-    sums = walk.sums(negative)
-    seeded, open_sheet = np.zeros(0, np.int64), np.zeros(0, bool)
-    if len(seeds):
-        seeded = labels[seeds]
-        open_sheet = np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * counts[seeded]
-    if mode == "AUTO":
+    # The sums serve the seeded components only (open sheets, flat ones): none, no sums.
+    sums = walk.sums(negative) if len(seeds) else None
+    open_sheet = walk.open_sheets(seeds, sums) if len(seeds) else np.zeros(0, bool)
+    if mode != "AUTO":
+        walk.edges = None  # no second walk: the forest's memory back (80 MB at 10M points)
+    else:
         # Visibility first: the components it decides are no terrain (an object's fragments
-        # are open sheets too); then the terrain test on the rest.
-        report(0.95, "orienting normals: visibility")
-        decided, evidence = visibility(p, m, negative, labels, n_comp, sample, sample_gap, threads)
+        # are open sheets too); then the terrain test on the rest. Its candidates (open sheets
+        # facing up or down, in a level cloud) are known before: when they cannot make a
+        # terrain, the forest is let go before visibility runs.
         terrain = np.zeros(n_comp, bool)
-        terrain[seeded[open_sheet]] = True
+        terrain[labels[seeds[open_sheet]]] = True
         length = np.sqrt(np.einsum("ij,ij->i", sums, sums))
-        terrain &= (np.abs(sums[:, 2]) >= TERRAIN_COSINE * length) & (decided == 0)
+        terrain &= np.abs(sums[:, 2]) >= TERRAIN_COSINE * length
         lo, hi = np.percentile(p[sample], (1.0, 99.0), axis=0)
         level = hi[2] - lo[2] <= TERRAIN_RELIEF * max(hi[0] - lo[0], hi[1] - lo[1])
+        if not (level and counts[terrain].sum() / n >= TERRAIN_SHARE):
+            walk.edges = None
+        report(0.95, "orienting normals: visibility")
+        decided, evidence = visibility(p, m, negative, labels, n_comp, sample, sample_gap, threads)
+        terrain &= decided == 0
         share = counts[terrain].sum() / n if level else 0.0
-        if share >= TERRAIN_SHARE:  # a terrain's bulk: every point with a clear up takes it (as UP)
+        if share >= TERRAIN_SHARE:
+            # A terrain's bulk: every point with a clear up takes it (as UP), on the components
+            # visibility left undecided (an object standing on the ground keeps its outside).
             mode = "UP"
-            evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or down "
-                        "on the whole, which visibility cannot orient")
-            anchor_sign[m[:, 2] >= AMBIGUOUS_RULE] = 1
-            anchor_sign[m[:, 2] <= -AMBIGUOUS_RULE] = -1
+            terrain_evidence = (f"terrain: {share:.0%} of the points lie on open sheets whose normals face up or "
+                                "down on the whole, which visibility cannot orient")
+            evidence = terrain_evidence + (f"; {evidence}" if (decided != 0).any() else "")
+            undecided = np.flatnonzero(decided[labels] == 0)
+            anchor_sign[undecided] = _rule_anchors(anchor_sign[undecided], m[undecided, 2])
+            # The decided components have no anchor: the walk seeds them as the first walk did
+            # (the same seed, the same tree), and their visibility sign is applied below.
             negative, ambiguous, seeds, flat = walk(anchor_sign, None)
             sums = walk.sums(negative)
-            if len(seeds):
-                seeded = labels[seeds]
-                open_sheet = (np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded]))
-                              >= OPEN_SHEET * counts[seeded])
+            open_sheet = walk.open_sheets(seeds, sums)
         else:
-            negative ^= (decided < 0)[labels]
-            keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE
-            seeds, open_sheet = seeds[keep], open_sheet[keep]
-            flat = flat[decided[labels[flat]] == 0]
             mode = "VISIBILITY" if (decided != 0).any() else "PROPAGATE"
-            if mode == "VISIBILITY":
-                sums = walk.sums(negative)
+        negative ^= (decided < 0)[labels]
+        keep = decided[labels[seeds]] == 0  # the rest as PROPAGATE (or UP)
+        seeds, open_sheet = seeds[keep], open_sheet[keep]
+        flat = flat[decided[labels[flat]] == 0]
+        if (decided != 0).any() and len(seeds):
+            sums = walk.sums(negative)
     by_rule = int((anchor_sign != 0).sum())  # the rules' anchors (walk() took its seeds out again)
 
     # Flat components (no outward side): their normals' sum points up (+Z, else +Y, +X). So
@@ -522,6 +535,14 @@ def orient(points: np.ndarray, normals: np.ndarray, mode: str = "PROPAGATE", sca
                        int(n_comp), by_rule, evidence)
 
 
+def _rule_anchors(anchor_sign: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Sets `anchor_sign` (int8, in place; returned) to +1 or -1 where the rule's cosine `c`
+    (the normal against the scanner's direction or +Z) is clear: beyond AMBIGUOUS_RULE."""
+    anchor_sign[c >= AMBIGUOUS_RULE] = 1
+    anchor_sign[c <= -AMBIGUOUS_RULE] = -1
+    return anchor_sign
+
+
 def _neighbour_table(pts, k, tree, graph, workers) -> np.ndarray:
     """(n, k+1) int32: each point itself, then its k nearest (estimate()'s graph when given)."""
     if graph is not None and graph.shape[1] >= k + 1:  # estimate()'s own neighbours
@@ -536,10 +557,11 @@ def _neighbour_table(pts, k, tree, graph, workers) -> np.ndarray:
 
 class _Walk:
     """The propagation over one spanning forest, for any set of anchors (AUTO walks twice
-    when it finds a terrain). Arrays in the renumbered order (orient's `perm`)."""
+    when it finds a terrain). Arrays in the renumbered order (orient's `perm`). It keeps the
+    forest's edges only, and orient sets them to None once no walk can follow."""
 
     def __init__(self, p, m, forest, perm):
-        self.p, self.m, self.forest, self.perm = p, m, forest, perm
+        self.p, self.m, self.edges, self.perm = p, m, forest.edges, perm
         self.n_comp, self.labels = forest.components, forest.labels
         n_comp, labels = self.n_comp, self.labels
         self.counts = np.bincount(labels, minlength=n_comp)
@@ -549,6 +571,12 @@ class _Walk:
         """(components, 3): each component's oriented normals summed."""
         signed = np.where(negative, -1.0, 1.0)
         return np.stack([np.bincount(self.labels, self.m[:, a] * signed, self.n_comp) for a in range(3)], 1)
+
+    def open_sheets(self, seeds, sums) -> np.ndarray:
+        """(len(seeds),) bool: the seeds' components that are open sheets (OPEN_SHEET), by
+        their oriented normals' `sums` (self.sums)."""
+        seeded = self.labels[seeds]
+        return np.sqrt(np.einsum("ij,ij->i", sums[seeded], sums[seeded])) >= OPEN_SHEET * self.counts[seeded]
 
     def __call__(self, anchor_sign, progress):
         """(negative, ambiguous, seeds, flat) from the rules' anchors (anchor_sign, changed:
@@ -576,7 +604,7 @@ class _Walk:
         # One breadth-first walk from every anchor at once (as if from a virtual root joined to
         # each), each point's sign its parent's unless their normals point apart.
         is_anchor = anchor_sign != 0
-        pred, order = forest_traversal(self.forest.edges, is_anchor, progress)
+        pred, order = forest_traversal(self.edges, is_anchor, progress)
         parent = np.where(is_anchor | (pred < 0), np.arange(n), pred)
         cos_parent = np.einsum("ij,ij->i", m, m[parent])
         flip = np.where(is_anchor, anchor_sign < 0, cos_parent < 0)
@@ -586,11 +614,11 @@ class _Walk:
         return negative, ambiguous, seeds, flat
 
 
-def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
-    """(keys, solid angle) of unit directions `u` binned on a cube map whose cells are `cell`
+def _cube_cells(u: np.ndarray, cell: float) -> np.ndarray:
+    """The cells (keys) of unit directions `u` binned on a cube map whose cells are `cell`
     wide on each face (a face at distance 1: cell radians at its centre, half that at its
-    edges), and each cell's solid angle (at its centre). A cube map has no poles: a
-    depth camera looking along an axis is binned as evenly as any other view."""
+    edges). A cube map has no poles: a depth camera looking along an axis is binned as
+    evenly as any other view."""
     a = np.abs(u)
     face = np.argmax(a, axis=1)
     rows = np.arange(len(u))
@@ -601,8 +629,7 @@ def _cube_cells(u: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
     ix = np.clip(np.floor((x + 1) / cell), 0, cells - 1).astype(np.int64)
     iy = np.clip(np.floor((y + 1) / cell), 0, cells - 1).astype(np.int64)
     side = face * 2 + (u[rows, face] < 0)
-    cx, cy = (ix + 0.5) * cell - 1, (iy + 0.5) * cell - 1
-    return (side * cells + ix) * cells + iy, cell * cell / (1 + cx * cx + cy * cy) ** 1.5
+    return (side * cells + ix) * cells + iy
 
 
 def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
@@ -615,7 +642,7 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     Decided on a sample of the points (VIEW_SAMPLE) with the spacing of the sample."""
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    idx = np.unique(np.random.default_rng(SAMPLE_SEED).integers(0, n, min(n, VIEW_SAMPLE)))
+    idx = _sample(n, VIEW_SAMPLE)
     d = pts[idx] - viewpoint
     r = np.linalg.norm(d, axis=1)
     keep = r > 0
@@ -643,7 +670,9 @@ def range_image(points, normals, viewpoint, table) -> tuple[bool, str]:
     cell = VIEW_CELL * float(np.median(gap / r))
     if not (cell > 0):
         return False, ""
-    key = _cube_cells(u, min(cell, 0.5))[0]
+    # At most half a face's width (a face spans 2): a sparse sample's cells still bin the
+    # directions into several per face, not one for a whole face.
+    key = _cube_cells(u, min(cell, 0.5))
     order = np.argsort(key, kind="stable")
     ks = key[order]
     starts = np.r_[0, np.flatnonzero(ks[1:] != ks[:-1]) + 1]
@@ -678,14 +707,18 @@ def visibility(p, m, negative, labels, n_comp, sample, gap, threads) -> tuple[np
     # with n / len(sample) times fewer: sqrt of that times larger, and VISIBILITY_COVER
     # times again so that random gaps between them close.
     radii = (VISIBILITY_COVER * gap * np.sqrt(n / (GRAPH_K * len(sample)))).astype(np.float32)
-    ok = radii > 0
+    ok = radii > 0  # a point with no distance to its neighbours (duplicates) has no disc
     sample, radii = sample[ok], radii[ok]
+    if len(sample) < VISIBILITY_MIN_VOTES:  # no surface to see: no evidence either way
+        return decided, ""
     signed = np.where(negative[sample], -1.0, 1.0)[:, None] * m[sample]
     splats = _core.SplatCloud(np.ascontiguousarray(p[sample], np.float32), np.ascontiguousarray(signed, np.float32),
                               np.ascontiguousarray(radii), None, np.zeros(len(sample), np.uint8), threads, None)
-    # Probes: up to VISIBILITY_PROBES of each component's sample points (the sample is random).
+    # Probes: up to VISIBILITY_PROBES of each component's sample points, drawn at random: the
+    # sample is in the renumbered (spatial) order, and its first points of a component lie
+    # together, all on one side of it (a sphere's underside, facing the ground beneath it).
     lab = labels[sample]
-    order = np.argsort(lab, kind="stable")
+    order = np.lexsort((np.random.default_rng(SAMPLE_SEED).random(len(lab)), lab))
     starts = np.r_[0, np.flatnonzero(lab[order][1:] != lab[order][:-1]) + 1]
     rank = np.arange(len(order)) - np.repeat(starts, np.diff(np.r_[starts, len(order)]))
     probes = order[rank < VISIBILITY_PROBES]

@@ -116,9 +116,13 @@ class PreparedCloud:
         if self.normals_oriented:
             how = f"oriented {_ORIENTED[self.normals_oriented]}"
             if self.orientation_evidence:
-                how += f" (decided by {self.orientation_evidence})"
+                # PROPAGATE with evidence: AUTO's rules were tried, and the graph decided alone.
+                how += (f", after {self.orientation_evidence}" if self.normals_oriented == "PROPAGATE"
+                        else f" (decided by {self.orientation_evidence})")
             if self.normals_oriented in ("SCANNER", "ORIGIN", "UP"):
-                how += f"; {self.oriented_by_rule:.1%} of the points by that rule, the rest from their neighbours"
+                how += f"; {self.oriented_by_rule:.1%} of the points by that rule"
+                if self.oriented_by_rule < 1.0:
+                    how += ", the rest from their neighbours"
             if self.normals_estimated:
                 notes.append(f"the file has no normals: estimated from the {self.normal_k} nearest neighbours, {how}")
             else:
@@ -178,12 +182,10 @@ _ORIENTED = {"PROPAGATE": "consistently along the neighbour graph (outward where
 
 
 def resolve_orientation(orientation: str, scanners: bool, viewpoint: bool = True) -> str:
-    """The orientation mode asked of normals.orient: AUTO is SCANNER when the scanners are
-    known (E57 poses, a PCD's viewpoint), else AUTO (normals.orient decides from the
-    geometry, whatever the format: a LAS file may hold an object). SCANNER without
-    scanners, or ORIGIN without the file's origin, is PROPAGATE."""
-    if orientation == "AUTO" and scanners:
-        orientation = "SCANNER"
+    """The orientation mode asked of normals.orient: SCANNER without scanners, or ORIGIN
+    without the file's origin, is PROPAGATE. AUTO stays AUTO: normals.orient takes the
+    scanners when they are known (E57 poses, a PCD's viewpoint), else decides from the
+    geometry, whatever the format (a LAS file may hold an object)."""
     if (orientation == "SCANNER" and not scanners) or (orientation == "ORIGIN" and not viewpoint):
         orientation = "PROPAGATE"
     return orientation

@@ -55,3 +55,13 @@ def transform_rows(points: np.ndarray, m) -> np.ndarray:
             acc += np.multiply(p[:, k], mat[i, k], dtype=np.float64)
         out[:, i] = acc
     return out
+
+
+def quaternion_matrices(q: np.ndarray) -> np.ndarray:
+    """(N,3,3) rotation matrices of unit quaternions (w, x, y, z); columns are the axes."""
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], axis=1)

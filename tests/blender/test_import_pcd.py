@@ -7,7 +7,7 @@ import numpy as np
 from pypcd4 import Encoding, PointCloud as Pcd
 
 from frames import slanted_wall_frame
-from geometry import quaternion_matrix
+from splat_tracer.util.matrices import quaternion_matrices
 
 
 def test_a_pcd_depth_frame_imports_with_its_viewpoint(blender, empty_scene, tmp_path):
@@ -15,7 +15,7 @@ def test_a_pcd_depth_frame_imports_with_its_viewpoint(blender, empty_scene, tmp_
     assert ".pcd" in bpy.types.SPLAT_TRACER_FH_point_cloud.bl_file_extensions.split(";")
     q, t = np.array([0.9, -0.2, 0.3, 0.1]), np.array([-3.0, 5.0, 1.5])
     camera, _ = slanted_wall_frame()
-    world = (camera @ quaternion_matrix(q).T + t).astype(np.float32)
+    world = (camera @ quaternion_matrices(q[None] / np.linalg.norm(q))[0].T + t).astype(np.float32)
     n = len(world)
     rgb = np.full(n, (200 << 16) | (100 << 8) | 50, np.uint32)
     intensity = np.linspace(0, 1, n, dtype=np.float32)

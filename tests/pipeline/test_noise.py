@@ -1,5 +1,6 @@
 """Noise and sparse regions (issue 27): slivers mended and counted, sparse radii bounded."""
 import numpy as np
+import pytest
 
 import frames
 from splat_tracer.pointcloud import normals, prepare
@@ -139,3 +140,16 @@ def normals_graph(p):
     graph = np.empty((len(p), normals.GRAPH_K + 1), np.int32)
     normals.estimate(p, graph=graph)
     return graph
+
+
+@pytest.mark.parametrize("n, slope", [(150, 0.1), (3000, 0.3)])
+def test_adaptive_counts_cover_every_point(n, slope):
+    """The points left when the subsamples grew too small to search were counted under no
+    reach: a 150-point plane three depth steps deep gave {}."""
+    from splat_tracer.pointcloud.spacing import neighbour_tree
+
+    rng = np.random.default_rng(0)
+    xy = rng.uniform(0, 1, (n, 2))
+    p = np.column_stack([xy, np.round(slope * xy[:, 0] / 0.05) * 0.05])
+    counts = normals.adaptive_normals(p, normals.estimate(p), neighbour_tree(p), 2, np.unique(p[:, 2]), 16)
+    assert sum(counts.values()) == n, counts

@@ -185,3 +185,63 @@ def test_visibility_abstains_on_an_open_sheet():
     result = normals.orient(p, axes, "AUTO")
     assert result.mode == "UP" and "terrain" in result.evidence
     assert _right(result.normals.astype(float), up) == 1.0
+
+
+def _sphere_and_ground(ground_low):
+    """A closed sphere (20k points, radius 2 about (0, 0, 4)) and a flat ground of 60k points,
+    20 x 20 from `ground_low` (x, y) at z = 0: a terrain's share of the points."""
+    s, out = fibonacci_sphere(20000, 2.0, (0.0, 0.0, 4.0))
+    rng = np.random.default_rng(0)
+    lo = np.asarray(ground_low, float)
+    g = np.column_stack([rng.uniform(lo, lo + 20.0, (60000, 2)), np.zeros(60000)])
+    p = np.concatenate([s, g])
+    result = normals.orient(p, normals.estimate(p), "AUTO")
+    nrm = result.normals.astype(np.float64)
+    return result, _right(nrm[:20000], out), float((nrm[20000:, 2] > 0).mean())
+
+
+def test_a_terrain_leaves_the_components_visibility_decided():
+    """The terrain's upward rule on every point overrode the sphere beside the ground, which
+    visibility had decided: its lower half faced inward (49.7 % right)."""
+    result, sphere, ground = _sphere_and_ground((5.0, -10.0))
+    assert result.mode == "UP" and "terrain" in result.evidence and "visibility: 1 of 2" in result.evidence
+    assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
+
+
+def test_visibility_probes_spread_over_their_component():
+    """The probes were a component's first sample points in the spatial renumbering, all on
+    the sphere's underside, whose outward rays meet the ground beneath: visibility abstained,
+    and the terrain rule turned the sphere's lower half inward (49.7 % right)."""
+    result, sphere, ground = _sphere_and_ground((-10.0, -10.0))
+    assert "visibility: 1 of 2" in result.evidence, result.evidence
+    assert sphere >= 0.99 and ground == 1.0, (sphere, ground)
+
+
+@pytest.mark.filterwarnings("error")
+def test_visibility_abstains_without_a_word_on_duplicate_points():
+    """Points each repeated more often than the graph has neighbours (mesh vertices not merged)
+    have no discs: visibility had no probes, and its note read '0 probes ... nan% / nan%'
+    with RuntimeWarnings. The graph's propagation decides alone (each group of duplicates
+    is a component of its own: it faces up)."""
+    p, out = fibonacci_sphere(500, 1.0)
+    p, out = np.repeat(p, normals.GRAPH_K + 2, axis=0), np.repeat(out, normals.GRAPH_K + 2, axis=0)
+    result = normals.orient(p, out, "AUTO")
+    assert result.mode == "PROPAGATE" and result.evidence == "", (result.mode, result.evidence)
+    groups = result.normals.reshape(500, normals.GRAPH_K + 2, 3)
+    assert (groups == groups[:, :1]).all() and (groups[:, 0, 2] >= 0).all()
+
+
+def test_the_notes_say_what_decided_and_what_was_tried(tmp_path):
+    """An abstention was presented as the decider ('decided by visibility abstained'), and
+    'the rest from their neighbours' was said when no point was left."""
+    rng = np.random.default_rng(0)
+    wall = np.column_stack([np.zeros(5000), rng.uniform(-2, 2, (5000, 2))])  # seen edge-on from its origin
+    prepared = importer.load(_write_xyz(tmp_path / "wall.xyz", wall))
+    note = next(s for s in prepared.notes(16) if "oriented" in s)
+    assert prepared.normals_oriented == "PROPAGATE"
+    assert "neighbour graph (outward where the surface encloses a volume), after visibility abstained: " in note, note
+    assert "decided by" not in note, note
+    ground = np.column_stack([rng.uniform(-2, 2, (5000, 2)), np.zeros(5000)])
+    prepared = importer.load(_write_xyz(tmp_path / "ground.xyz", ground), importer.ImportOptions(orientation="UP"))
+    note = next(s for s in prepared.notes(16) if "oriented" in s)
+    assert note.endswith("oriented upward (+Z); 100.0% of the points by that rule"), note

@@ -8,11 +8,12 @@ import pytest
 from pypcd4 import Encoding, MetaData, PointCloud as Pcd
 
 from frames import slanted_wall_frame
-from geometry import fibonacci_sphere, quaternion_matrix
+from geometry import fibonacci_sphere
 from splat_tracer.pointcloud import importer, prepare, readers
 from splat_tracer.pointcloud.cloud import CloudFileError, linear_colours
 from splat_tracer.pointcloud.readers import pcd
 from splat_tracer.util import resources
+from splat_tracer.util.matrices import quaternion_matrices
 
 RNG = np.random.default_rng(27)
 ENCODINGS = (Encoding.ASCII, Encoding.BINARY, Encoding.BINARY_COMPRESSED)
@@ -129,7 +130,8 @@ def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     q = (0.8, 0.3, -0.4, 0.33)  # qw qx qy qz: a rotation about a skew axis
     t = np.array([12.0, -4.0, 2.5])
     camera, _ = slanted_wall_frame()
-    world = camera @ quaternion_matrix(q).T + t  # the sensor's frame into the cloud's: its pose, VIEWPOINT
+    # the sensor's frame into the cloud's: its pose, VIEWPOINT
+    world = camera @ quaternion_matrices(np.array([q]) / np.linalg.norm(q))[0].T + t
     f32 = world.astype(np.float32)
     viewpoint = (*t, *(np.asarray(q) / np.linalg.norm(q)))
     path = _write(tmp_path / "frame.pcd", {"x": f32[:, 0], "y": f32[:, 1], "z": f32[:, 2]},
@@ -144,7 +146,8 @@ def test_estimated_normals_face_the_sensor_at_the_viewpoint(tmp_path):
     points = prepared.local.astype(np.float64) + prepared.origin
     towards = np.einsum("ij,ij->i", prepared.cloud.normals, t - points)
     assert (towards > 0).mean() >= 0.99, (towards > 0).mean()
-    assert any("towards the scanner positions" in note for note in prepared.notes(8))
+    assert any("towards the scanner positions (decided by the file's scanner positions)" in note
+               for note in prepared.notes(8)), prepared.notes(8)
 
 
 def test_the_default_viewpoint_of_an_unorganised_cloud_is_not_a_sensor(tmp_path):
@@ -254,6 +257,25 @@ def test_an_ascii_pcd_without_the_comment_is_sniffed_as_pcd(tmp_path):
     path.write_bytes(_head(3, "ascii") + b"0 0 0\n1 0 0\n0 1 0\n")
     assert readers.sniff(str(path)) == "PCD"
     assert len(readers.read_cloud(str(path))) == 3
+
+
+@pytest.mark.parametrize("first", ["Version 2.1 exported by FooScan", "fields x y z", "VERSION 3\nFIELDS x y z"])
+def test_a_text_file_starting_with_a_pcd_key_is_text(tmp_path, first):
+    """A first line starting VERSION or FIELDS (any case) made the file a PCD, refused as
+    one with no DATA line: without PCL's comment, FIELDS, SIZE and TYPE lines are needed."""
+    path = tmp_path / "scan.xyz"
+    path.write_text(first + "\n0 0 0\n1 0 0\n0 1 0\n")
+    assert readers.sniff(str(path)) == "TEXT"
+    assert len(readers.read_cloud(str(path))) == 3
+
+
+@pytest.mark.parametrize("end", [b"\r", b"\r\n"])
+def test_ascii_data_with_cr_line_ends(tmp_path, end):
+    """Lone CRs ended no line for the parse: 'declares 3 points but 3 rows of data follow'."""
+    path = tmp_path / "cr.pcd"
+    path.write_bytes(_head(3, "ascii") + end.join([b"0 0 0", b"1 0 0", b"0 1 2"]) + end)
+    cloud = readers.read_cloud(str(path))
+    assert np.array_equal(cloud.positions, [[0, 0, 0], [1, 0, 0], [0, 1, 2]])
 
 
 def test_pypcd4_missing_is_refused_naming_the_package(tmp_path, monkeypatch):

@@ -71,7 +71,7 @@ def test_near_black_share_compares_with_a_facing_surface_at_the_same_distance():
 
 
 def test_the_pose_of_bun045_is_a_rotation_and_the_cache_is_overridable(monkeypatch, tmp_path):
-    r = real_scans.quaternion_matrix(*real_scans.BUN045_Q)
+    r = real_scans.bun045_rotation()
     np.testing.assert_allclose(r @ r.T, np.eye(3), atol=1e-6)
     assert np.linalg.det(r) == pytest.approx(1.0, abs=1e-6)
     monkeypatch.setenv(real_scans.CACHE_ENV, str(tmp_path))

@@ -129,12 +129,3 @@ def ray_box(origins, directions, half: float = 1.0, lo=None, hi=None):
     rows = np.arange(len(origins))
     normal[rows, axis] = -np.sign(directions[rows, axis])
     return t, normal
-
-
-def quaternion_matrix(q):
-    """The rotation matrix of a quaternion (w, x, y, z), normalised first."""
-    w, x, y, z = np.asarray(q, np.float64) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
-

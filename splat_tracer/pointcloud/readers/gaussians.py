@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...util.matrices import quaternion_matrices
 from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear
 
 C0 = 0.28209479177387814
@@ -37,16 +38,6 @@ def is_gaussian(names) -> bool:
     """A vertex element with any of the Gaussian-splatting properties is read as one
     (and then must have all of them)."""
     return any(n.startswith(("f_dc_", "scale_", "rot_")) for n in names) or "opacity" in names
-
-
-def quaternion_matrices(q: np.ndarray) -> np.ndarray:
-    """(N,3,3) rotation matrices of unit quaternions (w, x, y, z); columns are the axes."""
-    w, x, y, z = q.T
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
-    ], axis=1)
 
 
 def read_gaussians(path: str, v, names) -> PointCloud:

@@ -9,11 +9,15 @@ reader finds a row of the wrong length, or a token that is not a number, by its 
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from ... import _core
+
+# A token parse_numbers reads as a number (underscores and exotic spellings are not).
+_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
 
 
 @dataclass(frozen=True)
@@ -44,3 +48,32 @@ def parse_numbers(data, threads: int = 0, chunk_bytes: int = 1 << 20) -> NumberT
     values, per_line, bad = _core.parse_numbers(data, threads, chunk_bytes)
     return NumberTable(np.frombuffer(values, np.float64), np.frombuffer(per_line, np.int64),
                        np.frombuffer(bad, np.int64))
+
+
+def lf_line_ends(data):
+    """`data` (bytes or str) with its lines ended by LF, as parse_numbers counts them, when
+    some end with a lone CR (classic Mac OS, some exporters), which parse_numbers takes for
+    whitespace: every row would be one line. CR LF alone is left as it is: its CR is
+    whitespace to the parse, and the line count is the same."""
+    cr, crlf, lf = ("\r", "\r\n", "\n") if isinstance(data, str) else (b"\r", b"\r\n", b"\n")
+    if cr not in data or data.count(cr) == data.count(crlf):
+        return data
+    return data.replace(crlf, lf).replace(cr, lf)
+
+
+def is_number(token: str) -> bool:
+    """Whether the whitespace-free `token` is a number (as parse_numbers reads one)."""
+    return bool(_NUMBER.match(token))
+
+
+def first_bad_row(lines, count: int):
+    """The first of `lines` (text, each one line) that is not blank and not `count` numbers:
+    (its index, its tokens, its first token that is not a number or None); None when every
+    row is. For the readers' error paths: the row to name, as a person reads the text."""
+    for k, line in enumerate(lines):
+        tokens = line.split()
+        if tokens:
+            bad = next((t for t in tokens if not is_number(t)), None)
+            if bad is not None or len(tokens) != count:
+                return k, tokens, bad
+    return None

@@ -36,11 +36,12 @@ import numpy as np
 
 from ...util.columns import in_blocks
 from ..cloud import CloudFileError, PointCloud, check_file, linear_colours, make_cloud
-from .numbers import parse_numbers
+from .numbers import first_bad_row, lf_line_ends, parse_numbers
 
 MAGIC = b"# .PCD"  # the comment PCL writes first; a header may also start with VERSION or FIELDS
-# Keys that can start a PCD header (after optional comments): what the sniffing accepts.
-HEADER_KEYS = (b"VERSION", b"FIELDS")
+# Without the comment, the header's lines that say what the data are: a text file may start
+# with a line "Version 2.1 ..." or "fields x y z", never with all three of these.
+SNIFF_KEYS = {"FIELDS", "SIZE", "TYPE"}
 # PCL's header has ten lines (VERSION FIELDS SIZE TYPE COUNT WIDTH HEIGHT VIEWPOINT POINTS
 # DATA) and comments: a few hundred bytes. Beyond this many without a DATA line it is not a header.
 MAX_HEADER_BYTES = 1 << 20
@@ -70,6 +71,9 @@ _PADDING = "_"
 _RESERVED_ATTRIBUTES = ("position", "splat_normal", "splat_radius", "splat_color", "scanner_position")
 _MAX_ATTRIBUTE_NAME = 63  # Blender's longest attribute name (MAX_CUSTOMDATA_LAYER_NAME less its NUL)
 _DEFAULT_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+# A VIEWPOINT coordinate beyond this is no position: its offset from the cloud, squared (a
+# distance), overflows float64 to inf.
+_MAX_VIEWPOINT = 1e300
 
 
 @dataclass
@@ -81,16 +85,22 @@ class Header:
 
 def is_pcd(head: bytes) -> bool:
     """Whether the file's first bytes are a PCD header: PCL's '# .PCD' comment, or (after
-    comments and blank lines) a VERSION or FIELDS line."""
+    comments and blank lines) header lines, up to DATA, among which FIELDS, SIZE and TYPE."""
     if head.startswith(MAGIC):
         return True
+    keys = set()
     for line in head.split(b"\n")[:-1]:  # whole lines only
         line = line.strip()
         if not line or line.startswith(b"#"):
             continue
-        key = line.split(None, 1)[0].upper()
-        return key in HEADER_KEYS and len(line.split()) > 1
-    return False
+        words = line.split()
+        key = words[0].decode("ascii", "replace").upper()
+        if key not in _KEYS or len(words) < 2:
+            break
+        keys.add(key)
+        if key == "DATA":
+            break
+    return SNIFF_KEYS <= keys
 
 
 def _import_pypcd4(path: str):
@@ -260,20 +270,19 @@ def _read_ascii(path: str, header: Header) -> dict:
         e = data.decode("ascii", errors="replace").index("\ufffd")  # the first byte that is not ASCII
         raise CloudFileError(f"{path}: the ascii data are not ASCII text (byte 0x{data[e]:02x} at offset "
                              f"{header.offset + e:,})")
+    data = lf_line_ends(data)
     parsed = parse_numbers(data)
     n, count = meta.points, header.values
     per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank
     if not parsed.ok or len(per_line) != n or (per_line != count).any():
         # The error path only: name the first row that is wrong, as a person reads the text.
-        lines = [line.split() for line in data.decode("ascii").splitlines()]
-        lines = [(k, t) for k, t in enumerate(lines) if t]
-        for k, t in lines:
-            bad = [v for v in t if not _is_number(v)]
-            if bad or len(t) != count:
-                what = (f"has {len(t)} values where the header declares {count}" if not bad
-                        else f"has '{bad[0][:20]}', which is not a number")
-                raise CloudFileError(f"{path}: data line {k + 1} {what}")
-        raise CloudFileError(f"{path}: the header declares {n:,} points but {len(lines):,} rows of data follow")
+        found = first_bad_row(data.decode("ascii").splitlines(), count)
+        if found:
+            k, t, bad = found
+            what = (f"has {len(t)} values where the header declares {count}" if bad is None
+                    else f"has '{bad[:20]}', which is not a number")
+            raise CloudFileError(f"{path}: data line {k + 1} {what}")
+        raise CloudFileError(f"{path}: the header declares {n:,} points but {len(per_line):,} rows of data follow")
     values = parsed.values
     table = values.reshape(n, count)
     out, at = {}, 0
@@ -281,14 +290,6 @@ def _read_ascii(path: str, header: Header) -> dict:
         out[name] = table[:, at] if c == 1 else table[:, at:at + c]
         at += c
     return out
-
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
 
 
 def _read_binary(path: str, header: Header, pypcd4) -> dict:
@@ -426,7 +427,7 @@ def read_pcd(path: str) -> PointCloud:
                      + " (a normal needs all three)")
     viewpoint = tuple(float(x) for x in meta.viewpoint)
     scanner = np.asarray(viewpoint[:3], np.float64)
-    if not (np.isfinite(scanner).all() and np.abs(scanner).max() < 1e300):
+    if not (np.isfinite(scanner).all() and np.abs(scanner).max() < _MAX_VIEWPOINT):
         scanner = None
         notes.append(f"the file's VIEWPOINT {viewpoint} is not a position: not used")
     elif viewpoint == _DEFAULT_VIEWPOINT and meta.height <= 1:

@@ -19,7 +19,7 @@ from ...util.columns import finite_rows, in_blocks
 from ..cloud import (INTEGER_COLOUR_SCALES, CloudFileError, PointCloud, check_file, linear_colours, make_cloud,
                      srgb_to_linear, unit_colours)
 from . import gaussians
-from .numbers import parse_numbers
+from .numbers import lf_line_ends, parse_numbers
 
 
 # A header is a few lines per element and property, plus comments: scanners write a few
@@ -181,9 +181,7 @@ def _text_vertices(path: str, header, header_len: int) -> Optional[np.ndarray]:
     with open(path, "rb") as f:
         f.seek(header_len)
         data = f.read()
-    if b"\r" in data:  # plyfile reads lines ended by CR LF, LF or CR (the file opened with newline='')
-        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    table = parse_numbers(data)
+    table = parse_numbers(lf_line_ends(data))  # plyfile reads lines ended by CR LF, LF or CR too
     del data  # the values are what is needed from here on
     per_line, offsets = table.per_line, table.offsets()
     total = sum(e.count for e in elements)
@@ -320,11 +318,14 @@ _USED_PROPERTIES = _KNOWN_PROPERTIES | set(gaussians.GAUSSIAN_FIELDS) | {"scale_
 def write_ply(path: str, positions, normals, colours=None, radii=None, binary: bool = True,
               byte_order: str = "<") -> None:
     """Writes a point cloud as PLY (tests, the demo and benchmarks use it). Colours are
-    written as 8-bit sRGB from scene-linear floats."""
+    written as 8-bit sRGB from scene-linear floats. normals None: positions without normals
+    (the importer estimates them)."""
     from plyfile import PlyData, PlyElement
 
     pos = np.asarray(positions, dtype=np.float64)
-    fields = [("x", "f8"), ("y", "f8"), ("z", "f8"), ("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
+    fields = [("x", "f8"), ("y", "f8"), ("z", "f8")]
+    if normals is not None:
+        fields += [("nx", "f4"), ("ny", "f4"), ("nz", "f4")]
     if colours is not None:
         fields += [("red", "u1"), ("green", "u1"), ("blue", "u1")]
     if radii is not None:
@@ -332,7 +333,8 @@ def write_ply(path: str, positions, normals, colours=None, radii=None, binary: b
     rows = np.empty(len(pos), dtype=fields)
     for k, c in enumerate("xyz"):
         rows[c] = pos[:, k]
-        rows["n" + c] = np.asarray(normals)[:, k]
+        if normals is not None:
+            rows["n" + c] = np.asarray(normals)[:, k]
     if colours is not None:
         lin = np.clip(np.asarray(colours, dtype=np.float64)[:, :3], 0, 1)
         srgb = np.where(lin <= 0.0031308, lin * 12.92, 1.055 * lin ** (1 / 2.4) - 0.055)

@@ -7,7 +7,7 @@ import numpy as np
 
 from ...util.columns import finite_rows
 from ..cloud import CloudFileError, PointCloud, make_cloud, srgb_to_linear, unit_colours
-from .numbers import parse_numbers
+from .numbers import first_bad_row, is_number, lf_line_ends, parse_numbers
 
 # Column names a header line may use (lower case), to the roles below.
 _NAMES = {
@@ -28,11 +28,10 @@ _DECIMAL_SAMPLE = 1 << 20
 _NUMERIC_LINE = re.compile(r"^[\d\s;,.+\-eE]*\d[\d\s;,.+\-eE]*$")  # digits and number punctuation only
 _COMMA_DECIMAL = re.compile(r"^[+-]?\d+,\d+([eE][+-]?\d+)?$")        # one comma between digits: 10,50  -0,5
 _HEADER_LINES = 100  # at most this many lines before the data are taken as a header
-_NUMBER = re.compile(r"^[+-]?(\d+\.?\d*([eE][+-]?\d+)?|\.\d+([eE][+-]?\d+)?|nan|inf|infinity)$", re.IGNORECASE)
 
 
 def _is_numbers(tokens) -> bool:
-    return bool(tokens) and all(_NUMBER.match(t) for t in tokens)
+    return bool(tokens) and all(is_number(t) for t in tokens)
 
 
 def _parse_columns(path: str, spec: str, count: int) -> list[str]:
@@ -128,10 +127,7 @@ def read_text(path: str, columns: str = "") -> PointCloud:
         line = len(re.split(rb"\r\n|\r|\n", data[:e.start]))  # any line ending (the error path only)
         raise CloudFileError(f"{path}: not UTF-8 text (byte {e.start}, 0x{data[e.start]:02x}, on line {line}) and no "
                              "other point-cloud format; save it as UTF-8 or ASCII") from None
-    if "\r" in text and text.count("\r") != text.count("\r\n"):
-        # Lines ended by a lone CR (classic Mac OS, some exporters): every row would be one
-        # line. CR LF is left alone: its CR is whitespace to the parse below.
-        text = text.replace("\r\n", "\n").replace("\r", "\n")
+    text = lf_line_ends(text)
     decimal_comma = _decimal_comma(path, text)
     if any(c in text for c in ",;\t"):  # (a scan for each is far quicker than a translation that changes nothing)
         text = text.translate(_DECIMAL_COMMA if decimal_comma else _SEPARATORS)
@@ -160,12 +156,13 @@ def read_text(path: str, columns: str = "") -> PointCloud:
     per_line = parsed.per_line[parsed.per_line > 0]  # the rows: lines that are not blank
     rows = len(per_line)
     if not parsed.ok or (per_line != count).any():
-        for k, line in enumerate(body.splitlines()):  # the error path only: find the row to name
-            tokens = line.split()
-            if tokens and (len(tokens) != count or not _is_numbers(tokens)):
-                what = (f"has {len(tokens)} values where the first row has {count}" if _is_numbers(tokens)
-                        else f"is not all numbers ('{line.strip()[:60]}')")
-                raise CloudFileError(f"{path}: data line {k + 1} (after {len(header)} header lines) {what}")
+        lines = body.splitlines()  # the error path only: find the row to name
+        found = first_bad_row(lines, count)
+        if found:
+            k, tokens, bad = found
+            what = (f"has {len(tokens)} values where the first row has {count}" if bad is None
+                    else f"is not all numbers ('{lines[k].strip()[:60]}')")
+            raise CloudFileError(f"{path}: data line {k + 1} (after {len(header)} header lines) {what}")
         raise CloudFileError(f"{path}: the rows could not be read as {count} numbers each")
     table = parsed.values.reshape(rows, count)
     # A PTS file's first line is its point count: it must not lie.
