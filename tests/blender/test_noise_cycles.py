@@ -122,9 +122,9 @@ CLAMP_RTOL = 0.05
 
 def test_clamp_indirect_removes_the_fireflies_as_cycles_does(blender, empty_scene, tmp_path):
     """The floor's bounce light comes from a hot patch on the wall: at 16 samples, fireflies.
-    Clamp Indirect 1 removes them in both engines. Measured: unclamped max 2.60 / 1.93
-    (ours / Cycles), 124 / 23 fireflies (ours is noisier at equal samples: Cycles' samples
-    are stratified); clamped max 0.34 / 0.28, none; clamped mean 0.0981 / 0.0989 (0.8 %),
+    Clamp Indirect 1 removes them in both engines. Measured: unclamped max 1.90 / 1.93
+    (ours / Cycles), 20 / 23 fireflies (124 with independent random numbers: both engines'
+    samples are stratified now); clamped max 0.27 / 0.28, none; clamped mean 0.1000 / 0.0989 (1.1 %),
     the sun alone gives 0.076. CLAMP_RTOL = 5 % on the mean: the unclamped mean (0.29) fails
     it, and so does a clamp 3x too strong (0.3: mean 0.0823, -17 %)."""
     bpy, scene = blender, empty_scene
@@ -190,10 +190,10 @@ def _our_mean_samples(bpy, scene, tmp_path, x0, x1):
 def test_adaptive_sampling_reaches_the_same_error_with_fewer_samples_as_cycles(blender, empty_scene, tmp_path):
     """Left half: an emitting plane (flat); right half: the firefly scene's floor (noisy).
     Noise Threshold 0.05 (Min Samples automatic: 40), 128 samples, against each engine's own
-    512-sample reference. Measured RMSE fixed / adaptive: ours 0.0975 / 0.0975, Cycles
-    0.0585 / 0.0585 (ours noisier at equal samples, as above); mean samples ours 89.4 of 128
-    (70 %), Cycles 0.70 of the samples (its Debug Sample Count pass: a fraction); flat half
-    ours 51, Cycles 0.40 x 128 = 51, noisy half 128 in both. The flat half costing no more
+    512-sample reference. Measured RMSE fixed / adaptive: ours 0.0530 / 0.0530, Cycles
+    0.0585 / 0.0585 (ours 0.0975 with independent random numbers); mean samples ours 89.7 of
+    128 (70 %), Cycles 0.70 of the samples (its Debug Sample Count pass: a fraction); flat half
+    ours 50, Cycles 0.40 x 128 = 51, noisy half 128 in both. The flat half costing no more
     than half the samples and the noisy one nearly all is what fails an engine that stops
     pixels on anything but their noise."""
     bpy, scene = blender, empty_scene

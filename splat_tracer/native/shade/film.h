@@ -72,12 +72,14 @@ void for_each_block(const Film &film, int tile_size, size_t tile, Block &&block)
         }
 }
 
-// The camera rays of a block's n pixels (window column and row), each through its pixel's
-// centre moved by (dx, dy) pixels (a sample's offset).
-inline void block_rays(const Camera &camera, const Film &film, const int *cols, const int *rows, int n, double dx,
-                       double dy, Ray *rays) {
-    for (int k = 0; k < n; ++k)
+// The camera rays of a block's n pixels (window column and row), pixel k's through its
+// centre moved by (offsets[2k], offsets[2k + 1]) pixels (its sample's offset; null: centres).
+inline void block_rays(const Camera &camera, const Film &film, const int *cols, const int *rows, int n,
+                       const double *offsets, Ray *rays) {
+    for (int k = 0; k < n; ++k) {
+        const double dx = offsets ? offsets[2 * k] : 0.0, dy = offsets ? offsets[2 * k + 1] : 0.0;
         rays[k] = camera.ray(film.x0 + cols[k] + 0.5 + dx, film.y0 + rows[k] + 0.5 + dy, film.width, film.height);
+    }
 }
 
 // The point of a camera's lens (camera-space x, y) for uniform numbers u1, u2 in [0, 1):
@@ -93,10 +95,11 @@ inline void lens_point(const Camera &camera, float u1, float u2, double *x, doub
 
 // block_rays() through the lens: pixel k's ray leaves the lens at (lens[2k], lens[2k + 1]).
 inline void block_lens_rays(const Camera &camera, const Film &film, const int *cols, const int *rows, int n,
-                            double dx, double dy, const double *lens, Ray *rays) {
+                            const double *offsets, const double *lens, Ray *rays) {
     for (int k = 0; k < n; ++k)
-        rays[k] = camera.ray_through_lens(film.x0 + cols[k] + 0.5 + dx, film.y0 + rows[k] + 0.5 + dy, film.width,
-                                          film.height, lens[2 * k], lens[2 * k + 1]);
+        rays[k] = camera.ray_through_lens(film.x0 + cols[k] + 0.5 + offsets[2 * k],
+                                          film.y0 + rows[k] + 0.5 + offsets[2 * k + 1], film.width, film.height,
+                                          lens[2 * k], lens[2 * k + 1]);
 }
 
 }  // namespace splat

@@ -252,34 +252,41 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
     const bool half = settings_.adaptive;
     const bool catchers = scene_.any_catcher();
     const Vec3 backdrop = world_seen(kVisCamera);
+    // Each pixel's sample 0, by which its pixel points are moved so that it is the centre.
+    uint32_t first[2 * kPacketRays];
+    if (samples > 1)
+        for (int k = 0; k < n; ++k)
+            Sampler(pixel_id_of(cols[k], rows[k]), 0u, settings_.seed).get_bits(Sampler::kCamera, first + 2 * k, 2);
     for (int s = s0; s < s1; ++s) {
         // Checked a sample at a time: one tile of a many-sample render takes seconds, and a
         // stop (the viewport closing, Python exiting) must not wait for it.
         if (stop && stop->load(std::memory_order_relaxed)) return false;
-        float ux, uy;
-        r2_point(uint32_t(s), &ux, &uy);
-        const double fx = samples > 1 ? filter_.offset(ux) : 0.0, fy = samples > 1 ? filter_.offset(uy) : 0.0;
-        Ray rays[kPacketRays];
-        if (camera_.has_lens()) {
-            // Each pixel's sample goes through its own point of the lens, from a stream of its
-            // own: the path's random numbers are the pinhole render's, and more samples
-            // converge the blur.
-            double lens[2 * kPacketRays];
-            for (int k = 0; k < n; ++k) {
-                Sampler lens_rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed ^ kLensStream);
-                const float u1 = lens_rng.next(), u2 = lens_rng.next();
-                lens_point(camera_, u1, u2, &lens[2 * k], &lens[2 * k + 1]);
+        // Each pixel's sample: its point in the pixel (the filter's offset) and on the lens,
+        // one 4D point of the pixel's camera dimensions.
+        const bool lens = camera_.has_lens();
+        double offsets[2 * kPacketRays], lens_xy[2 * kPacketRays];
+        for (int k = 0; k < n; ++k) {
+            const uint32_t pixel = pixel_id_of(cols[k], rows[k]);
+            uint32_t u[4];
+            Sampler(pixel, uint32_t(s), settings_.seed).get_bits(Sampler::kCamera, u, lens ? 4 : 2);
+            double *o = offsets + 2 * k;
+            o[0] = o[1] = 0.0;
+            if (samples > 1) {
+                // The pixel's points moved (toroidally: a shifted stratified set stays one) so
+                // that sample 0 is the pixel centre, whose passes are Depth, Normal and Index.
+                o[0] = filter_.offset(Sampler::to_unit(u[0] - first[2 * k] + 0x80000000u));
+                o[1] = filter_.offset(Sampler::to_unit(u[1] - first[2 * k + 1] + 0x80000000u));
             }
-            block_lens_rays(camera_, film_, cols, rows, n, fx, fy, lens, rays);
-        } else {
-            block_rays(camera_, film_, cols, rows, n, fx, fy, rays);
+            if (lens) lens_point(camera_, Sampler::to_unit(u[2]), Sampler::to_unit(u[3]), &lens_xy[2 * k], &lens_xy[2 * k + 1]);
         }
+        Ray rays[kPacketRays];
+        if (lens) block_lens_rays(camera_, film_, cols, rows, n, offsets, lens_xy, rays);
+        else block_rays(camera_, film_, cols, rows, n, offsets, rays);
         SurfacePoint hits[kPacketRays];
         if (settings_.packets)
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
-            Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
-            const Sampler replay = rng;  // a catcher-only path takes the same numbers
+            const Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
             Primary prim;
             ++tally.camera;
             const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
@@ -296,10 +303,9 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                     // exactly 1: no noise outside the shadows).
                     PathState alone;
                     alone.from.catcher_only = true;
-                    Sampler same = replay;
                     ++tally.camera;
                     CatcherSums &cs = a.catcher;
-                    cs.alone = cs.alone + radiance(rays[k], alone, same, nullptr, tally);
+                    cs.alone = cs.alone + radiance(rays[k], alone, rng, nullptr, tally);
                     cs.full = cs.full + c, cs.samples += 1.f;
                     cs.background = cs.background + backdrop;
                 } else {
@@ -471,7 +477,7 @@ void Integrator::write_catcher(const CatcherSums &sums, float inv, float alpha, 
     o[0] = rgb.x, o[1] = rgb.y, o[2] = rgb.z, o[3] = out_alpha;
 }
 
-Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *primary, Tally &tally,
                           const SurfacePoint *first) const {
     const IntegratorSettings &cfg = settings_;
     SurfacePoint sp, passed;  // `passed`: the last surface passed through, which st.from points into
@@ -504,7 +510,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         mat = scene_.material(sp.material);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
-        if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces || rng.next() < opacity) break;
+        if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces ||
+            rng.get1(Sampler::kTransparent + Sampler::kDimStride * uint32_t(st.transparent)) < opacity)
+            break;
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
@@ -617,8 +625,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     // `pdf`: the sampled direction's (Filter Glossy's min_ray_pdf); infinite for a mirror or
     // clear glass (Cycles gives those 1e6, which no Filter Glossy up to its maximum of 10 uses).
     // `mis_pdf`: the same density when mesh lights were sampled here too, else 0.
+    // `branch`: which of the rays from here it is (kSampled, or a mirror or glass ray), for
+    // the next vertex's random numbers.
     auto follow = [&](Vec3 dir, Vec3 weight, uint32_t kind, int PathState::*counter, int inside,
-                      uint64_t Tally::*count, bool specular, float pdf, float mis_pdf = 0.f) {
+                      uint64_t Tally::*count, bool specular, float pdf, float mis_pdf, uint32_t branch) {
+        const Sampler next_rng = rng.bounce(branch);
         PathState next = st;
         next.camera = false;
         next.kind = kind;
@@ -636,14 +647,14 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         next.mis_pdf = mis_pdf, next.mis_from = sp.p;
         if (next.throughput < kRouletteThroughput) {
             const float survive = next.throughput / kRouletteThroughput;
-            if (!(rng.next() < survive)) return;
+            if (!(next_rng.get1(Sampler::kRoulette) < survive)) return;
             weight = weight * (1.f / survive);
             next.throughput = kRouletteThroughput;
         }
         next.weight = st.weight * weight;
         next.min_pdf = std::fmin(st.min_pdf, pdf);
         ++(tally.*count);
-        L = L + weight * radiance(spawn(dir), next, rng, nullptr, tally);
+        L = L + weight * radiance(spawn(dir), next, next_rng, nullptr, tally);
     };
     const int inside_after = inside_after_crossing(sp, st.from.inside);
 
@@ -652,12 +663,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
         const Vec3 spec = lobes.specular(cos_o);
         if (luminance(spec) > 0.f && st.glossy < cfg.glossy_bounces)
             follow(reflect(wo, n), spec, kVisGlossy, &PathState::glossy, st.from.inside, &Tally::reflection, true,
-                   kInfinity);
+                   kInfinity, 0.f, kMirror);
         Vec3 wt;
         const Vec3 trans = lobes.transmission(cos_o);
         if (luminance(trans) > 0.f && st.transmission < cfg.transmission_bounces && refract(wo, n, lobes.eta, &wt))
             follow(wt, trans, kVisTransmission, &PathState::transmission, inside_after, &Tally::refraction, true,
-                   kInfinity);
+                   kInfinity, 0.f, kGlass);
     }
 
     // Sky light by ambient occlusion replaces the diffuse bounce.
@@ -669,8 +680,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
     const float w_diffuse = picks.diffuse, w_glossy = picks.glossy, w_trans = picks.transmission,
                 w_sum = picks.sum;
     if (w_sum > 0.f) {
-        float u = rng.next() * w_sum;
-        const float u1 = rng.next(), u2 = rng.next();
+        float bsdf_u[3];
+        rng.get(Sampler::kBsdf, bsdf_u, 3);
+        // The direction from the pair whose strata are finest (Sobol's dimensions 0 and 1).
+        const float u1 = bsdf_u[0], u2 = bsdf_u[1];
+        float u = bsdf_u[2] * w_sum;
         // The sampled reflection's density, computed only where it is needed: Cycles'
         // min_ray_pdf for Filter Glossy (infinite without it), and the MIS weight of mesh
         // lights (0 without them: emission the ray meets counts in full).
@@ -686,7 +700,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
             if (dot(wi, ng) > 0.f) {
                 densities(wi);
                 follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
-                       &Tally::diffuse, false, pdf, mis_pdf);
+                       &Tally::diffuse, false, pdf, mis_pdf, kSampled);
             }
         } else if ((u -= w_diffuse) < w_glossy) {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
@@ -696,7 +710,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                 const Vec3 w = lobes.specular(std::fmax(dot(wo, m), 0.f)) * ggx_g1(dot(wi, n), lobes.alpha);
                 densities(wi);
                 follow(wi, w * (w_sum / w_glossy), kVisGlossy, &PathState::glossy, st.from.inside,
-                       &Tally::reflection, false, pdf, mis_pdf);
+                       &Tally::reflection, false, pdf, mis_pdf, kSampled);
             }
         } else {
             const Vec3 m = sample_ggx_vndf(n, wo, lobes.alpha, u1, u2);
@@ -711,7 +725,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, Sampler &rng, Primary *primary,
                           std::fabs(tm) / std::fmax(den * den, 1e-12f);
                 }
                 follow(wt, w * (w_sum / w_trans), kVisTransmission, &PathState::transmission, inside_after,
-                       &Tally::refraction, false, pdf);
+                       &Tally::refraction, false, pdf, 0.f, kSampled);
             }
         }
     }
@@ -739,8 +753,8 @@ float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_
 }
 
 Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                              const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary,
-                              Tally &tally, Vec3 weight, bool indirect) const {
+                              const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
+                              Primary *primary, Tally &tally, Vec3 weight, bool indirect) const {
     const std::vector<Light> &lights = scene_.lights();
     if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
@@ -759,10 +773,13 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
     Vec3 L;
-    for (const Light &light : lights) {
+    for (size_t i = 0; i < lights.size(); ++i) {
+        const Light &light = lights[i];
         Vec3 lamp;
         for (int s = 0; s < k; ++s) {
-            const float u1 = rng.next(), u2 = rng.next();
+            float u[2];
+            rng.get(Sampler::kLamp + Sampler::kDimStride * uint32_t(i), u, 2, uint32_t(s), uint32_t(k));
+            const float u1 = u[0], u2 = u[1];
             const LightSample ls = sample_light(light, sp.p, u1, u2);
             if (!ls.valid) continue;
             const float cos_i = dot(n, ls.wi);
@@ -787,7 +804,9 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     if (mesh_lights_) {
         const bool light_only = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly;
         for (int s = 0; s < k; ++s) {
-            const float u0 = rng.next(), u1 = rng.next(), u2 = rng.next();
+            float u[3];
+            rng.get(Sampler::kMeshLight, u, 3, uint32_t(s), uint32_t(k));
+            const float u0 = u[2], u1 = u[0], u2 = u[1];  // the point from the finest pair
             const MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
             if (!ls.valid) continue;
             const Instance &emitter = scene_.instance(ls.instance);
@@ -820,13 +839,14 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
 
 // The fraction of the sky the point sees, by cosine-distributed occlusion rays: with the
 // cosine in the pdf, the diffuse integral of a uniform sky is albedo x world x that fraction.
-Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng,
+Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
                                Tally &tally) const {
     Vec3 open;
     const int k = settings_.ao_samples;
     for (int i = 0; i < k; ++i) {
-        const float u1 = rng.next(), u2 = rng.next();
-        const Vec3 wi = sample_cosine(n, u1, u2);
+        float u[2];
+        rng.get(Sampler::kOcclusion, u, 2, uint32_t(i), uint32_t(k));
+        const Vec3 wi = sample_cosine(n, u[0], u[1]);
         if (dot(wi, ng) <= 0.f) continue;
         Ray r;
         r.o = sp.p + ng * sp.offset;

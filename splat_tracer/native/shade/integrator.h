@@ -112,14 +112,14 @@ class Integrator {
     };
 
     // `first`: the ray's first hit, already found (the camera packet's), else null.
-    Vec3 radiance(Ray ray, PathState st, Sampler &rng, Primary *primary, Tally &tally,
+    Vec3 radiance(Ray ray, PathState st, const Sampler &rng, Primary *primary, Tally &tally,
                   const SurfacePoint *first = nullptr) const;
     // Light from lamps and sampled emissive triangles at a surface point, shadow rays
     // included; `n` and `ng` face `wo`. `picks`: how the path goes on from here (all 0 when it
     // ends), which the mesh lights' MIS weights need. `weight` and `indirect`: the path's, for
     // the clamp.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
-                      const Lobes &lobes, const LobePicks &picks, Sampler &rng, Primary *primary, Tally &tally,
+                      const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Primary *primary, Tally &tally,
                       Vec3 weight, bool indirect) const;
     // The density with which the path's sampled reflection at a point goes in direction wi
     // (solid angle): the lobe picks times their densities; 0 when the path ends there.
@@ -127,7 +127,7 @@ class Integrator {
     // A shadow ray from the surface point towards wi, ending just short of `distance`.
     static Ray shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance);
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
-    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Sampler &rng, Tally &tally) const;
+    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng, Tally &tally) const;
     void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // Samples [s0, s1) of n pixels added to acc; false when stopped.
@@ -146,9 +146,9 @@ class Integrator {
     uint32_t pixel_id_of(int col, int row) const {
         return uint32_t(film_.y0 + row) * uint32_t(film_.width) + uint32_t(film_.x0 + col);
     }
-    // Salt of the seed for the lens points' stream (any constant unlike the others: the
-    // hash decorrelates it from the path's stream of the same pixel and sample).
-    static constexpr uint32_t kLensStream = 0x6c656e73u;  // "lens"
+    // The rays leaving a point, as Sampler::bounce's branch: the one sampled continuation,
+    // and a mirror-smooth surface's reflection and refraction.
+    static constexpr uint32_t kSampled = 0, kMirror = 1, kGlass = 2;
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
     // The world's radiance for a ray of `kind` that leaves the scene (0 if hidden from it).
     Vec3 world_seen(uint32_t kind) const {

@@ -8,7 +8,7 @@ namespace splat {
 void Renderer::render_tile(size_t tile) const {
     for_each_block(film_, settings_.tile_size, tile, [&](const int *cols, const int *rows, int n) {
         Ray rays[kPacketRays];
-        block_rays(camera_, film_, cols, rows, n, 0.0, 0.0, rays);
+        block_rays(camera_, film_, cols, rows, n, nullptr, rays);
         const bool inside[kPacketRays] = {};
         SurfaceHit hits[kPacketRays];
         if (settings_.packets) find_surfaces(scene_, rays, n, settings_.method, inside, nullptr, 0, hits);
