@@ -69,7 +69,7 @@ def _multiview(bpy, scene):
 
 def _denoising(bpy, scene):
     scene.cycles.use_denoising = True
-    return ("Cycles' Denoise (OpenImageDenoise) is not applied", "The compositor's Denoise node", "Normal and Diffuse Color passes")
+    return ("Cycles' Denoise is not applied", "The compositor's Denoise node", "Normal and Diffuse Color passes")
 
 
 def _aov(bpy, scene):
@@ -146,7 +146,7 @@ def test_a_default_scene_says_none_of_it(blender, empty_scene):
     empty_scene.cycles.samples = 1
     lines = render(bpy)
     unhonoured = [line for line in lines if any(k in line for k in ("not rendered", "not applied", "not written"))]
-    assert len(unhonoured) == 1 and unhonoured[0].startswith("Cycles' Denoise (OpenImageDenoise) is not applied"), lines
+    assert len(unhonoured) == 1 and unhonoured[0].startswith("Cycles' Denoise is not applied"), lines
     empty_scene.view_layers[0].cycles.use_denoising = False  # the view layer's own Denoise switch
     assert not lines_with(render(bpy), "Denoise")
 

@@ -55,10 +55,6 @@ def _on(owner, prop: str) -> bool:
     return bool(getattr(owner, prop, False)) if owner is not None else False
 
 
-# Cycles' denoisers as its interface names them (its enum is dynamic: RNA lists no items).
-_DENOISERS = {"OPENIMAGEDENOISE": "OpenImageDenoise", "OPTIX": "OptiX"}
-
-
 def stereo_views(render) -> list:
     """The views a multi-view render makes, as Blender picks them: Stereo 3D renders the
     'left' and 'right' views (those switched on), Multi-View every view switched on."""
@@ -81,9 +77,9 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
                     "camera itself (no eye separation, no per-view camera)")
     cycles = getattr(scene, "cycles", None)
     if _on(cycles, "use_denoising") and getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
-        denoiser = str(getattr(cycles, "denoiser", ""))
-        denoiser = _DENOISERS.get(denoiser, denoiser)
-        report.once(f"Cycles' Denoise ({denoiser}) is not applied: the image keeps its noise. The compositor's "
+        # The denoiser is not named: reading Cycles' `denoiser` enum (its items are computed)
+        # initialises Cycles' GPU libraries, which logs a CUDA warning in every render.
+        report.once("Cycles' Denoise is not applied: the image keeps its noise. The compositor's "
                     "Denoise node, "
                     "fed the Normal and Diffuse Color passes the engine writes, denoises it (turn Denoise off "
                     "in Splat Tracer > Sampling to silence this line)")
