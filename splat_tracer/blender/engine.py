@@ -14,8 +14,9 @@ import numpy as np
 from ..render import ab
 from . import session, viewport
 
-# Blender 5.0 renamed three passes (Cycles and EEVEE write "Diffuse Color", "Emission" and
-# "Object Index" there, "DiffCol", "Emit" and "IndexOB" before). A pass must carry the name
+# Blender 5.0 renamed five passes (Cycles and EEVEE write "Diffuse Color", "Emission",
+# "Object Index", "Material Index" and "Environment" there, "DiffCol", "Emit", "IndexOB",
+# "IndexMA" and "Env" before). A pass must carry the name
 # Blender's own engines give it, or the compositor's Render Layers node shows it as a
 # different socket and links made for Cycles (an ID Mask on Object Index) are lost.
 _NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
@@ -28,6 +29,10 @@ _PASSES = (
     ("use_pass_emit", "Emit", "Emission" if _NEW_PASS_NAMES else "Emit", 3, "RGB", "COLOR"),
     ("use_pass_shadow", "Shadow", "Shadow", 3, "RGB", "COLOR"),
     ("use_pass_object_index", "IndexOB", "Object Index" if _NEW_PASS_NAMES else "IndexOB", 1, "X", "VALUE"),
+    ("use_pass_material_index", "IndexMA", "Material Index" if _NEW_PASS_NAMES else "IndexMA", 1, "X", "VALUE"),
+    ("use_pass_position", "Position", "Position", 3, "XYZ", "VECTOR"),
+    ("use_pass_mist", "Mist", "Mist", 1, "Z", "VALUE"),
+    ("use_pass_environment", "Env", "Environment" if _NEW_PASS_NAMES else "Env", 3, "RGB", "COLOR"),
     # Cycles' own switch (view_layer.cycles, the Cycles add-on's), name and channels.
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )

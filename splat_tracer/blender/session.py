@@ -185,6 +185,13 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
                                           threads=threads, progress=progress)
     t_render = time.perf_counter() - t1
+    position = result.passes.get("Position")
+    if position is not None:
+        # The core's positions are in the local frame; the pass is in world space, as
+        # Cycles'. A miss stays 0 (Cycles' value there); a hit is never at the local origin,
+        # which is the camera's own position.
+        hit = np.any(position != 0.0, axis=-1)
+        position[hit] = (position[hit] + exported.origin).astype(np.float32)
     frame_stats = dict(instances=exported.instances, geometries=len(CACHE.used), built=CACHE.built,
                        reused=CACHE.reused, build_seconds=CACHE.build_seconds, export_seconds=t_export,
                        clouds=exported.clouds, closed_clouds=exported.closed_clouds,

@@ -217,7 +217,8 @@ class RenderScene:
 # The core's keyword for each pass's buffer (Combined: "combined").
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
-                 "Shadow Catcher": "shadow_catcher"}
+                 "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
+                 "Mist": "mist", "Env": "environment"}
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
@@ -238,5 +239,7 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   method=method, world=world.radiance(), film_transparent=bool(world.transparent),
                   lens=camera.lens.native() if camera.lens else None,
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
+    if "Mist" in passes:  # read by the Mist pass alone
+        kwargs["mist_settings"] = world.mist()
     kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items()})
     return kwargs, buffers

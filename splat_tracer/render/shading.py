@@ -23,7 +23,7 @@ import numpy as np
 MATERIAL_FIELDS = (
     "base_r", "base_g", "base_b", "metallic", "roughness", "ior", "transmission", "alpha",
     "emission_r", "emission_g", "emission_b", "specular_level", "use_point_colour", "use_point_alpha",
-    "emission_sides",
+    "emission_sides", "pass_index",
 )
 
 # Cycles' Emission Sampling (Material > Settings), with its identifiers: which sides of a
@@ -51,6 +51,7 @@ class Material:
         emission exceeds AUTO_EMISSION_THRESHOLD in a channel, else none). Clouds' emission
         is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
+    pass_index: Blender's material pass index, the Material Index pass's value.
     """
 
     base_colour: Sequence[float] = (0.8, 0.8, 0.8)
@@ -64,6 +65,7 @@ class Material:
     use_point_colour: bool = False
     use_point_alpha: bool = False
     emission_sampling: str = "AUTO"
+    pass_index: int = 0
 
     def __post_init__(self):
         if self.emission_sampling not in EMISSION_SAMPLING:
@@ -85,7 +87,7 @@ class Material:
     def pack(self) -> np.ndarray:
         return np.array([*self.base_colour, self.metallic, self.roughness, self.ior, self.transmission, self.alpha,
                          *self.emission, self.specular_level, float(self.use_point_colour),
-                         float(self.use_point_alpha), float(self.emission_sides)], np.float32)
+                         float(self.use_point_alpha), float(self.emission_sides), float(self.pass_index)], np.float32)
 
     @property
     def emission_sides(self) -> int:
@@ -187,6 +189,9 @@ class Light:
 # World and render settings.
 
 WORLD_RAYS = ("camera", "diffuse", "glossy", "transmission")  # ray kinds the world may be hidden from
+# The World's Mist Pass falloffs (Blender's identifiers) and the exponent Cycles raises the
+# mist to for each (its Blender sync: Quadratic 2, Linear 1, Inverse Quadratic 0.5).
+MIST_FALLOFFS = {"QUADRATIC": 2.0, "LINEAR": 1.0, "INVERSE_QUADRATIC": 0.5}
 
 
 @dataclass(frozen=True)
@@ -195,20 +200,35 @@ class World:
     scene, which also lights it (through diffuse bounces). `transparent`: camera rays that
     miss get alpha 0 (Film > Transparent). `visibility`: the ray kinds that see it (World >
     Ray Visibility: 'camera', 'diffuse', 'glossy', 'transmission'); a kind left out meets
-    black instead -- camera rays on an opaque film keep alpha 1, as in Cycles."""
+    black instead -- camera rays on an opaque film keep alpha 1, as in Cycles.
+    mist_start, mist_depth, mist_falloff: the World's Mist Pass settings (MIST_FALLOFFS), which
+    only the Mist pass reads; the defaults are Cycles' for a scene without a world."""
 
     colour: Sequence[float] = (0.05, 0.05, 0.05)
     strength: float = 1.0
     transparent: bool = False
     visibility: frozenset = frozenset(WORLD_RAYS)
+    mist_start: float = 0.0
+    mist_depth: float = 100.0
+    mist_falloff: str = "LINEAR"
 
     def __post_init__(self):
+        if self.mist_falloff not in MIST_FALLOFFS:
+            raise ValueError(f"mist_falloff must be one of {sorted(MIST_FALLOFFS)}, got {self.mist_falloff!r}")
+        if not (math.isfinite(self.mist_start) and math.isfinite(self.mist_depth) and self.mist_depth >= 0):
+            raise ValueError(f"mist start must be finite and depth >= 0, got {self.mist_start!r}, {self.mist_depth!r}")
         unknown = set(self.visibility) - set(WORLD_RAYS)
         if unknown:
             raise ValueError(f"unknown world ray visibility {sorted(unknown)}; use {list(WORLD_RAYS)}")
 
     def radiance(self) -> tuple:
         return tuple(float(c) * float(self.strength) for c in self.colour)
+
+    def mist(self) -> tuple:
+        """(start, 1 / depth, falloff exponent), as the core takes them: Cycles' Film values
+        (a depth of 0 gives 1 / depth 0, as Cycles' mist_inv_depth)."""
+        inv_depth = 1.0 / self.mist_depth if self.mist_depth > 0 else 0.0
+        return float(self.mist_start), inv_depth, MIST_FALLOFFS[self.mist_falloff]
 
 
 PIXEL_FILTERS = ("BOX", "GAUSSIAN", "BLACKMAN_HARRIS")
@@ -354,6 +374,10 @@ PASSES = {
     "IndexOB": 1,      # the object's pass index, pixel-centre sample
     "Splat Count": 1,  # debug: splats that formed the surface point, pixel-centre sample
     "Shadow Catcher": 3,  # Cycles': what the background is multiplied by (1: no shadow); see RenderScene.render
+    "Position": 3,     # position of the first hit (the scene's local frame), pixel-centre sample; 0 on a miss
+    "IndexMA": 1,      # the material's pass index, pixel-centre sample
+    "Mist": 1,         # Cycles' mist (World.mist_*): 0 at the start, 1 at start + depth and on a miss; averaged
+    "Env": 3,          # the world seen by camera rays that leave the scene (black on surfaces), averaged
 }
 
 

@@ -20,7 +20,7 @@ from splat_tracer import _core
 from splat_tracer.render.camera import Camera
 from splat_tracer.render.method import Method
 from splat_tracer.render.scene import RAY_VISIBILITY, FrameResult, Instance, Mesh, RenderScene
-from splat_tracer.render.shading import Light, Material, RenderSettings, World
+from splat_tracer.render.shading import MATERIAL_FIELDS, Light, Material, RenderSettings, World
 from splat_tracer.render.splats import SplatCloud
 
 from geometry import ray_sphere, sphere_cloud
@@ -842,10 +842,10 @@ def test_valid_native_arguments_build_a_scene():
 
 
 @pytest.mark.parametrize("change", [
-    {"materials": np.zeros((1, 14), np.float32)},                 # a material row too short
-    {"materials": np.zeros((1, 16), np.float32)},                 # or too long
-    {"materials": np.full((1, 15), np.nan, np.float32)},          # not finite
-    {"materials": np.zeros(15, np.float32)},                      # not a table
+    {"materials": np.zeros((1, len(MATERIAL_FIELDS) - 1), np.float32)},      # a material row too short
+    {"materials": np.zeros((1, len(MATERIAL_FIELDS) + 1), np.float32)},      # or too long
+    {"materials": np.full((1, len(MATERIAL_FIELDS)), np.nan, np.float32)},   # not finite
+    {"materials": np.zeros(len(MATERIAL_FIELDS), np.float32)},               # not a table
     {"material_range": np.array([[0, 2]], np.int32)},             # slots beyond the table
     {"material_range": np.array([[-1, 1]], np.int32)},
     {"geometry_index": np.array([1], np.int32)},                  # out of range

@@ -19,12 +19,8 @@ from ...render import shading
 # of Blender's RNA, so a pass a new Blender adds fails that test instead of going unsaid.
 UNWRITTEN_PASSES = (
     ("", "use_pass_vector", "Vector"),
-    ("", "use_pass_position", "Position"),
-    ("", "use_pass_uv", "UV"),
-    ("", "use_pass_mist", "Mist"),
-    ("", "use_pass_material_index", "Material Index"),
+    ("", "use_pass_uv", "UV"),  # meshes' UV maps are not exported
     ("", "use_pass_ambient_occlusion", "Ambient Occlusion"),
-    ("", "use_pass_environment", "Environment"),
     ("", "use_pass_diffuse_direct", "Diffuse Direct"),
     ("", "use_pass_diffuse_indirect", "Diffuse Indirect"),
     ("", "use_pass_glossy_direct", "Glossy Direct"),

@@ -324,7 +324,7 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     if bl_material is None:
         return shading.Material()
     return dataclasses.replace(_surface_material(bl_material, report),
-                               emission_sampling=_emission_sampling(bl_material))
+                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index)
 
 
 def _emission_sampling(bl_material) -> str:
@@ -509,7 +509,9 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
-    film = dict(transparent=transparent, visibility=world_visibility(world, report))
+    mist = world.mist_settings  # read by the Mist pass only
+    film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
+                mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff)
     viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, **film)
     tree = _node_tree(world)
     if tree is None:

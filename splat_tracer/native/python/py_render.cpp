@@ -206,24 +206,32 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
-                                   "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", nullptr};
+                                   "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
+                                   "material_index", "mist", "environment", "mist_settings", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
-             *progress = Py_None, *olens = Py_None, *ocatcher = Py_None;
+             *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOi", const_cast<char **>(kwlist),
+    IntegratorSettings cfg;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)",
+                                     const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
-                                     &packets, &olens, &ocatcher, &world_visibility))
+                                     &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
         if (!(std::isfinite(v) && v >= 0.f)) return PyErr_Format(PyExc_ValueError, "world radiance must be finite, >= 0");
 
-    IntegratorSettings cfg;
+    for (float v : {cfg.mist_start, cfg.mist_inv_depth, cfg.mist_falloff})
+        if (!std::isfinite(v)) return PyErr_Format(PyExc_ValueError, "mist settings must be finite");
+    if (cfg.mist_inv_depth < 0.f || cfg.mist_falloff <= 0.f)
+        return PyErr_Format(PyExc_ValueError, "mist settings: 1 / depth must be >= 0 and the falloff > 0");
     unsigned int seed = 0;
     int headlight = 0, sky_ao = 0, adaptive = 0;
     if (!PyArg_ParseTuple(osettings, "iifiiiiiiIppifffpfidi;settings must be RenderSettings.pack()", &cfg.samples,
@@ -275,7 +283,11 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
                 {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
                 {oindex, "index", 1, &film.index, {}},        {ocount, "splat_count", 1, &film.splat_count, {}},
-                {ocatcher, "shadow_catcher", 3, &film.shadow_catcher, {}}};
+                {ocatcher, "shadow_catcher", 3, &film.shadow_catcher, {}},
+                {oposition, "position", 3, &film.position, {}},
+                {omatindex, "material_index", 1, &film.material_index, {}},
+                {omist, "mist", 1, &film.mist, {}},
+                {oenv, "environment", 3, &film.environment, {}}};
     for (Out &out : outs) {
         if (out.obj == Py_None) continue;
         Py_ssize_t shape[3] = {h, w, out.channels};
@@ -383,7 +395,8 @@ PyMethodDef RenderScene_methods[] = {
      METH_VARARGS | METH_KEYWORDS,
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
-     "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15)\n--\n\n"
+     "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1))\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},

@@ -36,6 +36,16 @@ struct Film {
     // Asked for, it also makes Combined leave the catcher's shadow out, as Cycles does when
     // the pass is on (integrator.cpp, write_catcher).
     float *shadow_catcher = nullptr;
+    // Cycles' data passes of the camera ray's first opaque hit, from the pixel-centre sample
+    // (Cycles' sample 0; 0 where nothing is hit): its position, 3 floats in the scene's local
+    // frame (the caller moves it to world space), and its material's pass index, 1 float.
+    float *position = nullptr, *material_index = nullptr;
+    // 1 float: Cycles' Mist -- 0 at the mist's start, 1 at start + depth along the distance
+    // from the camera (IntegratorSettings::mist_*), 1 where nothing is hit; averaged over samples.
+    float *mist = nullptr;
+    // 3 floats: Cycles' Environment -- the world as camera rays that leave the scene see it
+    // (black where they meet a surface, as Cycles' background pass), averaged over samples.
+    float *environment = nullptr;
 };
 
 // What both renderers take the same way.

@@ -46,10 +46,15 @@ struct Integrator::Primary {
     float alpha = 1.f;
     float lit = 0, unshadowed = 0;  // direct light with and without shadows (luminance)
     bool catcher = false;  // the first opaque surface is a shadow catcher's
+    Vec3 position;  // of the first opaque surface (local frame)
+    float material_index = 0;
+    float mist = 0;    // 1 - Cycles' mist there (0 where nothing is hit); only with the Mist pass
+    Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
 };
 
 struct Integrator::Pixel {
-    Vec3 sum, diffcol, emit, shadow;
+    Vec3 sum, diffcol, emit, shadow, environment;
+    float mist = 0;  // sum of Primary::mist
     Vec3 half;  // progressive rendering: the class-A samples' sum, times 2
     float alpha = 0;
     Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
@@ -189,6 +194,7 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
             if (buf) std::fill(buf, buf + pixels * size_t(channels), 0.f);
         };
         zero(film.combined, 4), zero(film.diffcol, 3), zero(film.emit, 3), zero(film.shadow, 3);
+        zero(film.environment, 3), zero(film.mist, 1);
     }
 }
 
@@ -236,10 +242,9 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.diffcol, a.diffcol * inv);
         put3(film_.emit, a.emit * inv);
         put3(film_.shadow, a.shadow * inv);
-        put3(film_.normal, a.centre.hit ? a.centre.normal : Vec3());
-        if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
-        if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
-        if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
+        put3(film_.environment, a.environment * inv);
+        if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
+        write_centre(a.centre, p);
     }
 }
 
@@ -315,6 +320,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                 }
             }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
+            a.environment = a.environment + prim.environment, a.mist += prim.mist;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
             if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.planar_depth(rays[k], prim.t)) : 0.f;
@@ -345,18 +351,12 @@ void Integrator::render_tile_samples(size_t tile, int s0, int s1, const std::ato
                 if (buf) buf[3 * p] += v.x, buf[3 * p + 1] += v.y, buf[3 * p + 2] += v.z;
             };
             add3(film_.diffcol, a.diffcol), add3(film_.emit, a.emit), add3(film_.shadow, a.shadow);
+            add3(film_.environment, a.environment);
+            if (film_.mist) film_.mist[p] += a.mist;
             half_[p] = half_[p] + a.half;
             if (!catcher_.empty()) catcher_[p].add(a.catcher);
             taken_[p] += uint32_t(s1 - s0);
-            if (s0 == 0) {  // the centre sample's passes
-                if (film_.normal) {
-                    const Vec3 nrm = a.centre.hit ? a.centre.normal : Vec3();
-                    film_.normal[3 * p] = nrm.x, film_.normal[3 * p + 1] = nrm.y, film_.normal[3 * p + 2] = nrm.z;
-                }
-                if (film_.depth) film_.depth[p] = a.centre.hit ? a.centre.t : kBackgroundDepth;
-                if (film_.index) film_.index[p] = a.centre.hit ? a.centre.index : 0.f;
-                if (film_.splat_count) film_.splat_count[p] = float(a.centre.splats);
-            }
+            if (s0 == 0) write_centre(a.centre, p);  // the centre sample's passes
         }
     });
     add_tally(tally);
@@ -431,11 +431,43 @@ uint64_t Integrator::finish() {
             if (film_.shadow_catcher)
                 for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
         }
-        for (float *buf : {film_.diffcol, film_.emit, film_.shadow})
+        for (float *buf : {film_.diffcol, film_.emit, film_.shadow, film_.environment})
             if (buf)
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
+        if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
     }
     return total;
+}
+
+// The passes of the pixel-centre sample (Cycles' data passes, written at its sample 0).
+void Integrator::write_centre(const Primary &c, size_t p) const {
+    auto put3 = [&](float *buf, Vec3 v) {
+        if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
+    };
+    put3(film_.normal, c.hit ? c.normal : Vec3());
+    put3(film_.position, c.hit ? c.position : Vec3());
+    if (film_.depth) film_.depth[p] = c.hit ? c.t : kBackgroundDepth;
+    if (film_.index) film_.index[p] = c.hit ? c.index : 0.f;
+    if (film_.material_index) film_.material_index[p] = c.hit ? c.material_index : 0.f;
+    if (film_.splat_count) film_.splat_count[p] = float(c.splats);
+}
+
+// Cycles' mist (kernel/film/data_passes.h): the distance from the camera (along its view
+// axis for an orthographic one: camera_distance), mapped to 0..1 from the mist's start over
+// its depth, raised to the falloff. Cycles accumulates 1 - mist and writes 1 - the mean.
+float Integrator::mist_term(Vec3 p) const {
+    const double d[3] = {double(p.x) - camera_.position[0], double(p.y) - camera_.position[1],
+                         double(p.z) - camera_.position[2]};
+    const double distance =
+        camera_.orthographic
+            ? std::fabs(d[0] * camera_.forward[0] + d[1] * camera_.forward[1] + d[2] * camera_.forward[2])
+            : std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    float mist = std::clamp((float(distance) - settings_.mist_start) * settings_.mist_inv_depth, 0.f, 1.f);
+    const float falloff = settings_.mist_falloff;
+    if (falloff == 2.f) mist = mist * mist;
+    else if (falloff == 0.5f) mist = std::sqrt(mist);
+    else if (falloff != 1.f) mist = std::pow(mist, falloff);
+    return 1.f - mist;
 }
 
 // Combined and the Shadow Catcher pass of a pixel of a scene with shadow catchers, formed as
@@ -495,6 +527,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             for (const Light &light : scene_.lights())
                 if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
         if (!sp.valid()) {
+            // Cycles' Environment pass: the world a camera ray leaves into, on a transparent
+            // film too (its background pass is evaluated there for that pass alone).
+            if (primary && st.camera && film_.environment)
+                primary->environment = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
             if (st.camera && cfg.film_transparent) {
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
@@ -521,7 +557,11 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
-        if (!(ray.tmax > 0.f)) return clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+        if (!(ray.tmax > 0.f)) {
+            const Vec3 world = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+            if (primary && st.camera && film_.environment) primary->environment = world;
+            return world;
+        }
     }
 
     const Vec3 wo = ray.d * -1.f;
@@ -568,6 +608,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         primary->diffcol = diffuse_albedo, primary->emit = emission;
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
+        primary->position = sp.p, primary->material_index = mat.pass_index;
+        if (film_.mist) primary->mist = mist_term(sp.p);
     }
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));

@@ -53,6 +53,9 @@ struct IntegratorSettings : FrameSettings {
     // material whose Emission Sampling is None). The last two exist to verify the first.
     enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
     int mesh_light_strategy = kMis;
+    // Cycles' Film mist settings (the World's Mist Pass panel): start, 1 / depth (0: a depth
+    // of 0) and the falloff's exponent (Quadratic 2, Linear 1, Inverse Quadratic 0.5).
+    float mist_start = 0.f, mist_inv_depth = 0.01f, mist_falloff = 1.f;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -129,6 +132,9 @@ class Integrator {
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng, Tally &tally) const;
     void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
+    // 1 - Cycles' mist at local point p (what Cycles accumulates: the pass is 1 - the mean).
+    float mist_term(Vec3 p) const;
+    void write_centre(const Primary &centre, size_t p) const;
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // Samples [s0, s1) of n pixels added to acc; false when stopped.
     bool shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,

@@ -12,7 +12,7 @@
 
 namespace splat {
 
-constexpr int kMaterialFields = 15;
+constexpr int kMaterialFields = 16;
 constexpr int kLightFields = 22;
 
 // Below this roughness a lobe is a perfect mirror or clear glass: traced by recursive
@@ -29,6 +29,7 @@ struct Material {
     // The sides of a mesh's triangles whose emission is sampled as a light (1 front, 2 back:
     // Cycles' Emission Sampling, Auto resolved by render/shading.py); 0: found by rays only.
     int emission_sides = 0;
+    float pass_index = 0;  // Blender's material pass index: the Material Index pass
 
     static Material from_row(const float *r) {
         Material m;
@@ -37,6 +38,7 @@ struct Material {
         m.emission = Vec3(r[8], r[9], r[10]);
         m.specular_level = r[11], m.use_point_colour = r[12] != 0.f, m.use_point_alpha = r[13] != 0.f;
         m.emission_sides = int(r[14]) & 3;
+        m.pass_index = r[15];
         return m;
     }
     bool emits() const { return emission.x > 0.f || emission.y > 0.f || emission.z > 0.f; }
