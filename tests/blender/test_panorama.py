@@ -99,3 +99,16 @@ def test_unsupported_panorama_types_are_refused_by_name(blender, empty_scene, tm
         name = kind.replace("_", " ").title()
         with pytest.raises(RuntimeError, match=f"camera 'Camera': the panorama type '{name}' is not rendered"):
             render(bpy, scene, tmp_path / "refused.exr", (16, 8))
+
+
+def test_the_panorama_settings_show_for_the_engine(blender, empty_scene):
+    """Blender's Lens panel draws the panorama settings for Cycles only: the engine's own
+    sub-panel shows them for a panoramic camera."""
+    from types import SimpleNamespace
+    panel = blender.types.SPLAT_TRACER_PT_camera_panorama
+    cam = blender.data.cameras.new("C")
+    cam.type = "PANO"
+    assert panel.poll(SimpleNamespace(camera=cam, engine="SPLAT_TRACER"))
+    assert not panel.poll(SimpleNamespace(camera=cam, engine="CYCLES"))
+    cam.type = "PERSP"
+    assert not panel.poll(SimpleNamespace(camera=cam, engine="SPLAT_TRACER"))
