@@ -112,3 +112,25 @@ def test_the_panorama_settings_show_for_the_engine(blender, empty_scene):
     assert not panel.poll(SimpleNamespace(camera=cam, engine="CYCLES"))
     cam.type = "PERSP"
     assert not panel.poll(SimpleNamespace(camera=cam, engine="SPLAT_TRACER"))
+
+
+def test_depth_of_field_applies_to_a_panorama_as_in_cycles(blender, empty_scene, tmp_path):
+    """Cycles applies the lens to panoramas (a disc across each ray, a sphere in focus):
+    at f/0.02 focused at 4 m, our blurred equirectangular image correlates with Cycles'
+    blurred one better than our sharp one does (measured 0.979 against 0.949, 64 samples;
+    ours blurred against Cycles' sharp 0.952)."""
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene, "EQUIRECTANGULAR")
+    scene.cycles.samples = 64
+    size = (192, 96)
+    dof = scene.camera.data.dof
+    dof.focus_distance, dof.aperture_fstop = 4.0, 0.02
+    images = {}
+    for use_dof, engine in ((True, "CYCLES"), (True, "SPLAT_TRACER"), (False, "SPLAT_TRACER")):
+        dof.use_dof, scene.render.engine = use_dof, engine
+        out = render(bpy, scene, tmp_path / f"{engine}_{use_dof}.exr", size)["ViewLayer"]
+        images[engine, use_dof] = luminance(out["Combined"][..., :3])
+    blurred = _correlation(images["SPLAT_TRACER", True], images["CYCLES", True])
+    sharp = _correlation(images["SPLAT_TRACER", False], images["CYCLES", True])
+    print(f"blurred {blurred:.4f}, sharp {sharp:.4f}")
+    assert blurred >= 0.96 and blurred >= sharp + 0.015, (blurred, sharp)
