@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from splat_tracer import _core  # noqa: E402
 from splat_tracer.render import shading  # noqa: E402
-from splat_tracer.render.camera import Camera, Lens  # noqa: E402
+from splat_tracer.render.camera import PROJECTIONS, Camera, Lens, Panorama  # noqa: E402
 from splat_tracer.render.scene import RAY_VISIBILITY, InstanceRow, native_scene, render_arguments  # noqa: E402
 from splat_tracer.render.shading import (PASSES, SETTINGS_FIELDS, Light, Material, RenderSettings,  # noqa: E402
                                          World)
@@ -324,7 +324,8 @@ def fuzz_settings(fdp):
 @atheris.instrument_func
 def scene_camera(fdp):
     """A Camera (unchecked): mostly Camera.look_at from a fuzzed eye, or any matrix,
-    frustum and clip; a thin lens (depth of field) now and then."""
+    frustum and clip; a thin lens (depth of field) and a panorama (unchecked parameters) now
+    and then."""
     cam = None
     if fdp.ConsumeIntInRange(0, 3):
         eye = [fdp.ConsumeFloatInRange(-6, 6) for _ in range(3)]
@@ -338,13 +339,20 @@ def scene_camera(fdp):
         cam = object.__new__(Camera)
         for name, v in (("local_from_camera", m), ("frustum", tuple(value(fdp) for _ in range(4))),
                         ("clip", tuple(value(fdp) for _ in range(2))), ("orthographic", fdp.ConsumeBool()),
-                        ("lens", None)):
+                        ("lens", None), ("panorama", None)):
             object.__setattr__(cam, name, v)
     if fdp.ConsumeIntInRange(0, 2) == 0:
         lens = unchecked(fdp, Lens)
         object.__setattr__(lens, "blades", fdp.ConsumeIntInRange(-1, 9))
         copy = object.__new__(Camera)  # a copy with the lens, without Camera's checks
         copy.__dict__.update(cam.__dict__, lens=lens)
+        cam = copy
+    if fdp.ConsumeIntInRange(0, 2) == 0:
+        panorama = object.__new__(Panorama)  # any of the kinds, its parameters unchecked
+        object.__setattr__(panorama, "kind", PROJECTIONS[fdp.ConsumeIntInRange(1, len(PROJECTIONS) - 1)])
+        object.__setattr__(panorama, "parameters", tuple(value(fdp) for _ in range(fdp.ConsumeIntInRange(0, 5))))
+        copy = object.__new__(Camera)
+        copy.__dict__.update(cam.__dict__, panorama=panorama)
         cam = copy
     return cam
 

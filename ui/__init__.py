@@ -270,6 +270,40 @@ def _draw_slot(layout, settings, name: str) -> None:
     col.prop(settings, "radius_factor")
 
 
+class SPLAT_TRACER_PT_camera_panorama(SplatTracerPanel, bpy.types.Panel):
+    """A panoramic camera's settings (Blender's Lens panel draws them for Cycles only), the
+    ones the engine reads (blender/export/scene.py camera_panorama)."""
+    bl_label = "Panorama"
+    bl_context = "data"
+    bl_parent_id = "DATA_PT_lens"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.camera is not None and context.camera.type == "PANO"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        cam = context.camera
+        col = layout.column()
+        col.prop(cam, "panorama_type")
+        kind = cam.panorama_type
+        if kind == "FISHEYE_EQUIDISTANT":
+            col.prop(cam, "fisheye_fov")
+        elif kind == "FISHEYE_EQUISOLID":
+            col.prop(cam, "fisheye_lens", text="Lens")
+            col.prop(cam, "fisheye_fov")
+        elif kind == "EQUIRECTANGULAR":
+            sub = col.column(align=True)
+            sub.prop(cam, "latitude_min", text="Latitude Min")
+            sub.prop(cam, "latitude_max", text="Max")
+            sub = col.column(align=True)
+            sub.prop(cam, "longitude_min", text="Longitude Min")
+            sub.prop(cam, "longitude_max", text="Max")
+        elif kind != "MIRRORBALL":
+            col.label(text="Not rendered by Splat Tracer", icon="ERROR")
+
+
 class SPLAT_TRACER_PT_viewport_ab(bpy.types.Panel):
     """The viewport's live A/B comparison, in the 3D View's sidebar (N)."""
     bl_label = "A/B Comparison"
@@ -369,7 +403,7 @@ class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
            SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
 
 # Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they

@@ -41,7 +41,8 @@ def _matrix(m) -> np.ndarray:
     return a
 
 
-def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=None, lens=None) -> Camera:
+def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=None, lens=None,
+                     panorama=None) -> Camera:
     """The core camera of a 3D view: `window_matrix` is its projection (view space to clip
     space, RegionView3D.window_matrix) and `view_matrix` maps world to view space
     (RegionView3D.view_matrix). Perspective, orthographic and the camera view all come this
@@ -50,7 +51,12 @@ def camera_from_view(window_matrix, view_matrix, origin=(0.0, 0.0, 0.0), clip=No
     the view's clipping range (start, end) in double, which a float32 perspective matrix
     loses for ranges of about 1e8 and more (None: read from window_matrix). `origin`: the
     scene's local-frame origin (float64 world position). `lens`: the scene camera's depth
-    of field in the camera view (render.camera.Lens), None elsewhere."""
+    of field in the camera view (render.camera.Lens), None elsewhere. `panorama`: in the
+    camera view of a panoramic camera, (the region's (u, v) window, render.camera.Panorama)
+    (view_panorama); window_matrix then plays no part."""
+    if panorama is not None:
+        return Camera.from_frustum(matrices.inverse(_matrix(view_matrix)), panorama[0], clip, False, origin, lens,
+                                   panorama[1])
     camera = Camera.from_view_projection(_matrix(window_matrix), matrices.inverse(_matrix(view_matrix)), origin, clip)
     return camera.with_lens(lens) if lens is not None else camera
 
@@ -109,14 +115,40 @@ class View:
     window: Optional[tuple] = None
     clip: Optional[tuple] = None
     lens: Optional[Lens] = None
+    panorama: Optional[tuple] = None  # view_panorama's, in the camera view of a panoramic camera
 
     @classmethod
-    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None, lens=None) -> "View":
+    def of(cls, window_matrix, view_matrix, width: int, height: int, window="ALL", clip=None, lens=None,
+           panorama=None) -> "View":
         as_tuple = lambda m: tuple(tuple(float(v) for v in row) for row in _matrix(m))
         if window == "ALL":
             window = border_window(int(width), int(height))
         clip = None if clip is None else (float(clip[0]), float(clip[1]))
-        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip, lens)
+        return cls(as_tuple(window_matrix), as_tuple(view_matrix), int(width), int(height), window, clip, lens,
+                   panorama)
+
+
+def view_panorama(cam, render, frame_rect, width: int, height: int) -> Optional[tuple]:
+    """The camera view of a panoramic camera as Cycles' viewport shows it: the panorama
+    fills the camera frame (frame_rect: xmin, ymin, xmax, ymax in region pixels), and the
+    region around it continues it. (The region's (u, v) window, render.camera.Panorama),
+    or None for a perspective or orthographic camera and for the panorama types the engine
+    does not render (the camera view then shows the camera's perspective view, as before;
+    F12 names the type)."""
+    from . import export
+    if cam.data.type != "PANO":
+        return None
+    try:
+        (u0, u1, v0, v1), panorama = export.camera_panorama(cam, render.resolution_x, render.resolution_y,
+                                                           render.pixel_aspect_x, render.pixel_aspect_y)
+    except RuntimeError:
+        return None
+    x0, y0, x1, y1 = frame_rect
+    if not (x1 > x0 and y1 > y0):
+        return None
+    # The region's edges in the frame's (u, v), the frame spanning the (shifted) unit square.
+    fu, fv = (u1 - u0) / (x1 - x0), (v1 - v0) / (y1 - y0)
+    return (u0 - x0 * fu, u0 + (width - x0) * fu, v0 - y0 * fv, v0 + (height - y0) * fv), panorama
 
 
 def view_clip(scene, depsgraph, rv3d, space) -> Optional[tuple]:
@@ -137,14 +169,17 @@ def view_of(scene, depsgraph, region, rv3d, space) -> View:
     border, or in the camera view the scene's render border within the camera frame."""
     width, height = int(region.width), int(region.height)
     window_matrix, view_matrix = rv3d.window_matrix, rv3d.view_matrix
+    panorama = None
     if rv3d.view_perspective == "CAMERA" and scene.camera is not None:
         fractions = None
+        cam = scene.camera.evaluated_get(depsgraph)
+        frame = [cam.matrix_world @ v for v in cam.data.view_frame(scene=scene)] if cam.type == "CAMERA" else []
+        rect = region_rect(rv3d.perspective_matrix, [tuple(v) for v in frame], width, height) if frame else None
+        if rect is not None:
+            panorama = view_panorama(cam, scene.render, rect, width, height)
         if scene.render.use_border:
             r = scene.render
             fractions = (r.border_min_x, r.border_min_y, r.border_max_x, r.border_max_y)
-            cam = scene.camera.evaluated_get(depsgraph)
-            frame = [cam.matrix_world @ v for v in cam.data.view_frame(scene=scene)]
-            rect = region_rect(rv3d.perspective_matrix, [tuple(v) for v in frame], width, height)
         else:
             rect = None
     else:
@@ -152,7 +187,7 @@ def view_of(scene, depsgraph, region, rv3d, space) -> View:
         fractions = ((space.render_border_min_x, space.render_border_min_y, space.render_border_max_x,
                       space.render_border_max_y) if space.use_render_border else None)
     return View.of(window_matrix, view_matrix, width, height, border_window(width, height, rect, fractions),
-                   view_clip(scene, depsgraph, rv3d, space), view_lens(scene, depsgraph, rv3d))
+                   view_clip(scene, depsgraph, rv3d, space), view_lens(scene, depsgraph, rv3d), panorama)
 
 
 def view_lens(scene, depsgraph, rv3d) -> Optional[Lens]:
@@ -491,7 +526,7 @@ class ViewportSession:
         self.error = None
         if self._camera is None and self._view.window is not None:  # no window: no rays (render_pass)
             self._camera = camera_from_view(self._view.window_matrix, self._view.view_matrix, self.origin,
-                                            self._view.clip, self._view.lens)
+                                            self._view.clip, self._view.lens, self._view.panorama)
         with self._cond:
             for name in names if names is not None else list(self._states):
                 variant, settings, threads, _ = self._states[name]

@@ -8,7 +8,6 @@ from typing import Optional
 import numpy as np
 
 from .. import _core
-from ..util import matrices
 
 PACKET_RAYS = _core.PACKET_RAYS  # rays SplatCloud.trace / trace_surface take through the tree at once
 
@@ -103,6 +102,56 @@ class Lens:
         return (self.radius, self.focus_distance, self.blades, self.rotation, self.ratio)
 
 
+# The core's projections (scene/camera.h Camera::Projection), in its order: "PLANAR" is a
+# pinhole or an orthographic camera; the others are Cycles' panorama types of those names.
+PROJECTIONS = ("PLANAR", "EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID", "MIRRORBALL")
+_PANORAMA_PARAMETERS = {"EQUIRECTANGULAR": 4, "FISHEYE_EQUIDISTANT": 1, "FISHEYE_EQUISOLID": 4, "MIRRORBALL": 0}
+
+
+@dataclass(frozen=True)
+class Panorama:
+    """A panoramic projection as Cycles has it (kernel/camera/projection.h): which of
+    PROJECTIONS[1:] and its parameters, angles in radians, lengths in mm:
+    EQUIRECTANGULAR (longitude min, max, latitude min, max): the image's columns run the
+    longitude from min to max (positive to the camera's right), its rows the latitude
+    (positive up, max at the top); FISHEYE_EQUIDISTANT (field of view): the image's
+    unit square holds the circle, the angle off the view axis is r fov / 2;
+    FISHEYE_EQUISOLID (lens, field of view, sensor width, sensor height): r on the sensor
+    is 2 lens sin(angle / 2), cut at the field of view (the sensor as Cycles fits it to
+    the image: Panorama.equisolid_sensor); MIRRORBALL (): a mirror ball filling the image
+    square, its centre looking down the view axis. Pixels outside a fisheye's circle or
+    the ball see nothing (black, alpha 0, as in Cycles)."""
+
+    kind: str
+    parameters: tuple = ()
+
+    def __post_init__(self):
+        if self.kind not in _PANORAMA_PARAMETERS:
+            raise ValueError(f"panorama kind must be one of {', '.join(_PANORAMA_PARAMETERS)}, got {self.kind!r}")
+        count = _PANORAMA_PARAMETERS[self.kind]
+        values = _numbers(self.parameters, f"{self.kind} parameters", count) if count else ()
+        if self.kind == "FISHEYE_EQUIDISTANT" and not values[0] > 0:
+            raise ValueError(f"a fisheye's field of view must be > 0, got {values[0]!r}")
+        if self.kind == "FISHEYE_EQUISOLID" and not all(v > 0 for v in values):
+            raise ValueError(f"an equisolid fisheye's lens, field of view and sensor must be > 0, got {values!r}")
+        object.__setattr__(self, "parameters", values)
+
+    @staticmethod
+    def equisolid_sensor(sensor_width: float, sensor_height: float, sensor_fit: str, width: float,
+                         height: float) -> tuple:
+        """The sensor (width, height) an equisolid fisheye maps the image to, as Cycles'
+        blender/camera.cpp fits it: the fitted side's sensor size (AUTO: the width, along
+        the image's longer side), the other side in the image's proportion. width and
+        height: the image's size times the pixel aspect."""
+        horizontal = width > height if sensor_fit == "AUTO" else sensor_fit == "HORIZONTAL"
+        size = sensor_height if sensor_fit == "VERTICAL" else sensor_width
+        return (size, size * height / width) if horizontal else (size * width / height, size)
+
+    def native(self) -> tuple:
+        """The projection's index in PROJECTIONS and 5 parameters (unused ones 0)."""
+        return (float(PROJECTIONS.index(self.kind)), *self.parameters, *(0.0,) * (5 - len(self.parameters)))
+
+
 @dataclass(frozen=True)
 class Camera:
     """A pinhole or orthographic camera, as the core consumes it: its parameters in double
@@ -116,7 +165,11 @@ class Camera:
     one (scene units). clip: (start, end) distances along the view axis between which rays
     run (start may be negative for an orthographic camera). lens: a thin lens (depth of
     field; its units are camera space's), or None for a pinhole. position / forward: camera
-    centre and unit view axis, for planar depth.
+    centre and unit view axis, for planar depth. panorama: a panoramic projection, or None;
+    its frustum is the image's rectangle in Cycles' panorama (u, v) coordinates ((0, 1, 0,
+    1), moved by the lens shift), its rays leave the camera's centre (or its lens) and are
+    clipped at clip start and end along themselves, and its Depth pass is the distance from
+    the camera (Cycles' camera_z_depth).
     """
 
     local_from_camera: np.ndarray
@@ -124,6 +177,7 @@ class Camera:
     clip: tuple
     orthographic: bool = False
     lens: Optional[Lens] = None
+    panorama: Optional[Panorama] = None
 
     def __post_init__(self):
         m = np.array(self.local_from_camera, dtype=np.float64)
@@ -146,6 +200,10 @@ class Camera:
             raise TypeError(f"lens must be a Lens or None, got {type(self.lens).__name__}")
         if self.lens is not None and self.lens.radius == 0:
             object.__setattr__(self, "lens", None)  # a closed aperture is a pinhole
+        if self.panorama is not None and not isinstance(self.panorama, Panorama):
+            raise TypeError(f"panorama must be a Panorama or None, got {type(self.panorama).__name__}")
+        if self.panorama is not None and self.orthographic:
+            raise ValueError("a camera is either orthographic or panoramic")
 
     @property
     def position(self) -> np.ndarray:
@@ -159,20 +217,23 @@ class Camera:
     def native(self) -> tuple:
         """The arguments the core's render calls take for the camera (its lens apart:
         `lens.native()`)."""
-        return self.local_from_camera, np.array([*self.frustum, *self.clip], np.float64), self.orthographic
+        projection = self.panorama.native() if self.panorama is not None else (0.0,) * 6
+        return (self.local_from_camera, np.array([*self.frustum, *self.clip, *projection], np.float64),
+                self.orthographic)
 
     def with_lens(self, lens: Optional[Lens]) -> "Camera":
         """This camera with another lens (None: a pinhole)."""
-        return Camera(self.local_from_camera, self.frustum, self.clip, self.orthographic, lens)
+        return Camera(self.local_from_camera, self.frustum, self.clip, self.orthographic, lens, self.panorama)
 
     @classmethod
     def from_frustum(cls, world_from_camera, frustum, clip, orthographic: bool = False,
-                     origin=(0.0, 0.0, 0.0), lens: Optional[Lens] = None) -> "Camera":
+                     origin=(0.0, 0.0, 0.0), lens: Optional[Lens] = None,
+                     panorama: Optional[Panorama] = None) -> "Camera":
         """From the camera's world matrix (looking down its local -Z; scale is not removed)
         and its parameters (see the class); `origin` is the scene's local-frame origin."""
         m = np.array(world_from_camera, dtype=np.float64).reshape(4, 4)
         m[:3, 3] -= np.asarray(origin, dtype=np.float64)
-        return cls(m, frustum, clip, orthographic, lens)
+        return cls(m, frustum, clip, orthographic, lens, panorama)
 
     @classmethod
     def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0), clip=None) -> "Camera":
@@ -242,22 +303,13 @@ class Camera:
         return cls.from_frustum(w_c, (-half_w, half_w, -half_h, half_h), (near, far), ortho_height is not None)
 
     def rays(self, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
-        """Pixel-centre rays (origins on the near plane, unit directions), row-major from
-        the top row: the same rays `SplatCloud.render` traces (the core's Camera::ray), for
-        use with `SplatCloud.trace`. The pinhole's rays: the lens is not sampled here."""
-        j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-        left, right, bottom, top = self.frustum
-        u = (left + (right - left) * (j / width)).ravel()
-        v = (bottom + (top - bottom) * (1.0 - i / height)).ravel()
-        start, _ = self.clip
-        one = np.ones_like(u)
-        if self.orthographic:
-            points = np.column_stack([u, v, -start * one, one])
-            dirs = np.column_stack([0 * one, 0 * one, -one, 0 * one])
-        else:
-            points = np.column_stack([u * start, v * start, -start * one, one])
-            dirs = np.column_stack([u, v, -one, 0 * one])
-        a = matrices.transform_rows(points, self.local_from_camera)[:, :3]
-        d = matrices.transform_rows(dirs, self.local_from_camera)[:, :3]
-        d /= np.linalg.norm(d, axis=1, keepdims=True)
-        return a.astype(np.float32), d.astype(np.float32)
+        """Pixel-centre rays (origins on the near plane, unit directions; float32, row-major
+        from the top row): the core's own (Camera::ray), the rays `SplatCloud.render`
+        traces, for use with `SplatCloud.trace`. The pinhole's rays: the lens is not
+        sampled here. A pixel a panorama does not see has a zero direction."""
+        if not (width > 0 and height > 0):
+            raise ValueError(f"width and height must be positive, got {width}x{height}")
+        origins = np.empty((width * height, 3), np.float32)
+        directions = np.empty((width * height, 3), np.float32)
+        _core.camera_rays(*self.native(), int(width), int(height), origins, directions)
+        return origins, directions

@@ -301,7 +301,9 @@ def test_render_errors_are_reported_not_swallowed(blender, empty_scene, sphere_p
     scene.render.resolution_x, scene.render.resolution_y = 64, 48
     cam = add_camera(bpy, scene, (1.3, -5.5, 1.3), (math.radians(76), 0.0, math.radians(9.5)))
     cam.data.type = "PANO"
-    with pytest.raises(RuntimeError, match=r"camera 'Camera' is panoramic \(.+\): panoramic cameras are not supported"):
+    cam.data.panorama_type = "CENTRAL_CYLINDRICAL"
+    with pytest.raises(RuntimeError, match=r"camera 'Camera': the panorama type 'Central Cylindrical' is "
+                                           r"not rendered"):
         bpy.ops.render.render()
     cam.data.type = "PERSP"
     cam.data.clip_start, cam.data.clip_end = 50.0, 10.0

@@ -640,3 +640,34 @@ def test_a_view_without_pixels_renders_nothing_without_an_error(blender, empty_s
     vs.set_view(full)
     assert vs.refine().pixels[..., 3].max() > 0 and vs.error is None
     vs.close()
+
+
+def test_camera_view_of_a_panorama_fills_the_frame_as_f12_and_cycles_viewport(blender, empty_scene):
+    """The camera view of a panoramic camera renders the panorama (Cycles' viewport does):
+    its (u, v) window puts the F12 image's unit square (moved by the shift) on the camera
+    frame, whatever the view's zoom and offset; at zoom 1 with no offset the frame is the
+    region and the rays are F12's. An unsupported type shows the perspective view."""
+    from splat_tracer.blender import export, viewport
+    scene = empty_scene
+    scene.render.resolution_x, scene.render.resolution_y = RW, RH
+    cam, window, view = _view_camera(blender, scene, "PANO", shift=(0.1, -0.05), panorama_type="EQUIRECTANGULAR",
+                                     clip_start=0.1, clip_end=100.0)
+    depsgraph = blender.context.evaluated_depsgraph_get()
+    f12 = export.export_camera(depsgraph, RW, RH, (0, 0, 0))
+    space = SimpleNamespace(clip_start=0.1, clip_end=100.0, use_render_border=False)
+    for zoom, offset in ((1.0, (0.0, 0.0)), (0.6, (0.1, -0.15))):
+        cv_window = _camera_view_window(window, zoom, offset)
+        region, rv3d = _stand_ins(cv_window, view, True, "CAMERA")
+        v = viewport.view_of(scene, depsgraph, region, rv3d, space)
+        (u0, u1, v0, v1), panorama = v.panorama
+        assert panorama == f12.panorama
+        frame = [tuple(cam.matrix_world @ p) for p in cam.data.view_frame(scene=scene)]
+        x0, y0, x1, y1 = viewport.region_rect(rv3d.perspective_matrix, frame, RW, RH)
+        at = lambda a, b, t, n: a + (b - a) * t / n  # noqa: E731 - the window's coordinate at region pixel t
+        np.testing.assert_allclose([at(u0, u1, x0, RW), at(u0, u1, x1, RW), at(v0, v1, y0, RH), at(v0, v1, y1, RH)],
+                                   [0.1, 1.1, -0.05, 0.95], atol=1e-5)
+        camera = viewport.camera_from_view(v.window_matrix, v.view_matrix, clip=v.clip, panorama=v.panorama)
+        if zoom == 1.0:
+            np.testing.assert_allclose(camera.rays(RW, RH)[1], f12.rays(RW, RH)[1], atol=1e-5)
+    cam.data.panorama_type = "CENTRAL_CYLINDRICAL"
+    assert viewport.view_of(scene, blender.context.evaluated_depsgraph_get(), region, rv3d, space).panorama is None

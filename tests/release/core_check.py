@@ -115,7 +115,7 @@ def api_part(i: dict) -> dict:
     grey = Material(base_colour=(0.8, 0.8, 0.8), roughness=0.5)
     scene = RenderScene([Instance(cloud, materials=(grey,), pass_index=1), Instance(floor, pass_index=2)],
                         [Light(type="SUN", power=3.0, direction=tuple(a["sun_direction"]))], threads=THREADS)
-    camera = Camera(a["local_from_camera"], tuple(a["frustum"][:4]), tuple(a["frustum"][4:]),
+    camera = Camera(a["local_from_camera"], tuple(a["frustum"][:4]), tuple(a["frustum"][4:6]),
                     bool(a["orthographic"][0]))
     w, h = (int(v) for v in a["size"])
     frame = scene.render(camera, w, h, RenderSettings(samples=4), passes=(

@@ -108,7 +108,7 @@ def inputs(tmp_path_factory) -> Path:
     f32 = np.float32
     np.savez(path, centres=centres.astype(f32), normals=normals.astype(f32), radii=radii.astype(f32),
              origins=origins.astype(f32), directions=directions.astype(f32),
-             # the camera as the core takes it: local_from_camera 4x4, frustum and clip range (6)
+             # the camera as the core takes it: local_from_camera 4x4, frustum, clip range and projection (12)
              local_from_camera=np.ascontiguousarray(camera.native()[0], np.float64),
              frustum=np.ascontiguousarray(camera.native()[1], np.float64),
              orthographic=np.array([camera.orthographic], np.int32),

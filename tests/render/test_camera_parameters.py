@@ -108,12 +108,18 @@ def test_the_core_checks_the_camera_it_is_given():
     out = np.empty((4, 4, 4), np.float32)
     good = Camera.look_at(EYE, TARGET)
     m, frustum, ortho = good.native()
-    for bad_m, bad_f, bad_o, error in ((m, np.array([1.0, -1, -1, 1, 0.1, 10]), False, "left < right"),
-                                      (m, np.array([-1.0, 1, -1, 1, 0.0, 10]), False, "clip start"),
-                                      (m, np.array([-1.0, 1, -1, 1, 10, 0.1]), True, "clip start"),
+    plane = lambda *values: np.array([*values, 0, 0, 0, 0, 0, 0], np.float64)  # a planar camera's 12 numbers
+    for bad_m, bad_f, bad_o, error in ((m, plane(1.0, -1, -1, 1, 0.1, 10), False, "left < right"),
+                                      (m, plane(-1.0, 1, -1, 1, 0.0, 10), False, "clip start"),
+                                      (m, plane(-1.0, 1, -1, 1, 10, 0.1), True, "clip start"),
+                                      (m, frustum[:6].copy(), False, "expected 12"),
+                                      (m, np.r_[frustum[:6], 9, 0, 0, 0, 0, 0], False, "projection"),
+                                      (m, np.r_[frustum[:6], 1.5, 0, 0, 0, 0, 0], False, "projection"),
+                                      (m, np.r_[frustum[:6], 2, 0, 0, 0, 0, 0], False, "projection"),
+                                      (m, np.r_[frustum[:6], 1, 0, 0, 0, 0, 0], True, "projection"),
                                       (np.diag([1.0, 1, 0, 1]), frustum, False, "view axis"),
                                       (np.full((4, 4), np.nan), frustum, False, "finite")):
         with pytest.raises(ValueError, match=error):
             cloud._scene.render(bad_m, bad_f, bad_o, 4, 4, (0, 0, 4, 4), (0, 0, 0, 0), out)
     # An orthographic camera may start behind its position (Blender's orthographic views do).
-    cloud._scene.render(m, np.array([-1.0, 1, -1, 1, -5.0, 5.0]), True, 4, 4, (0, 0, 4, 4), (0, 0, 0, 0), out)
+    cloud._scene.render(m, plane(-1.0, 1, -1, 1, -5.0, 5.0), True, 4, 4, (0, 0, 4, 4), (0, 0, 0, 0), out)

@@ -22,7 +22,7 @@ import bpy
 import numpy as np
 
 from ...render import shading
-from ...render.camera import Camera, Lens
+from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
 from ...util import resources
@@ -402,10 +402,10 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
     if cam.type != "CAMERA":
         raise RuntimeError(f"the active camera '{cam.name}' is not a camera object")
     data = cam.data
+    r = scene.render
+    panorama = None
     if data.type == "PANO":
-        kind = str(getattr(data, "panorama_type", "")).replace("_", " ").lower()
-        raise RuntimeError(f"camera '{cam.name}' is panoramic ({kind}): panoramic cameras are not supported yet; "
-                           "use a perspective or orthographic camera")
+        frustum, panorama = camera_panorama(cam, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
     if not data.clip_start < data.clip_end:
         raise RuntimeError(f"camera '{cam.name}': Clip Start ({data.clip_start:g}) must be less than Clip End "
                            f"({data.clip_end:g})")
@@ -417,10 +417,35 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
         scale = tuple(round(v, 6) for v in cam.matrix_world.to_scale())
         raise RuntimeError(f"camera '{cam.name}' is scaled to zero (world scale {scale}): it has no view "
                            "direction or image there; give it a non-zero scale on every axis")
-    r = scene.render
-    frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
+    if panorama is None:
+        frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
     return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
-                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph))
+                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama)
+
+
+def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0) -> tuple:
+    """A panoramic camera's (u, v) window and render.camera.Panorama, read as Cycles'
+    blender/camera.cpp reads them: the window is the unit square moved by the lens shift,
+    the equisolid fisheye's sensor is fitted to the image (Panorama.equisolid_sensor). The
+    panorama types Splat Tracer does not build are refused, naming the camera and type."""
+    data = cam.data
+    kind = data.panorama_type
+    if kind == "EQUIRECTANGULAR":
+        panorama = Panorama(kind, (data.longitude_min, data.longitude_max, data.latitude_min, data.latitude_max))
+    elif kind == "FISHEYE_EQUIDISTANT":
+        panorama = Panorama(kind, (data.fisheye_fov,))
+    elif kind == "FISHEYE_EQUISOLID":
+        sensor = Panorama.equisolid_sensor(data.sensor_width, data.sensor_height, data.sensor_fit,
+                                           width * aspect_x, height * aspect_y)
+        panorama = Panorama(kind, (data.fisheye_lens, data.fisheye_fov, *sensor))
+    elif kind == "MIRRORBALL":
+        panorama = Panorama(kind)
+    else:
+        name = kind.replace("_", " ").title()
+        raise RuntimeError(f"camera '{cam.name}': the panorama type '{name}' is not rendered by Splat Tracer; use an "
+                           "equirectangular, fisheye (equidistant or equisolid) or mirror ball panorama, or a "
+                           "perspective or orthographic camera")
+    return (data.shift_x, 1.0 + data.shift_x, data.shift_y, 1.0 + data.shift_y), panorama
 
 
 def camera_lens(cam, depsgraph: bpy.types.Depsgraph) -> Optional[Lens]:

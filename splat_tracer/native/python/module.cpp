@@ -434,7 +434,46 @@ PyObject *set_exit_wait(PyObject *, PyObject *arg) {
     return PyFloat_FromDouble(previous);
 }
 
+// The camera's pixel-centre rays (Camera::ray), row-major from the top row, into out_origins
+// and out_directions (float32, width*height x 3): render.camera.Camera.rays. A pixel a
+// panorama does not see gets a zero direction.
+PyObject *camera_rays(PyObject *, PyObject *args, PyObject *kwargs) {
+    static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "out_origins",
+                                   "out_directions", nullptr};
+    PyObject *om, *ofrustum, *oo, *od;
+    int orthographic, width, height;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpiiOO", const_cast<char **>(kwlist), &om, &ofrustum,
+                                     &orthographic, &width, &height, &oo, &od))
+        return nullptr;
+    if (width < 1 || height < 1 || int64_t(width) * height > (int64_t(1) << 31))
+        return PyErr_Format(PyExc_ValueError, "width and height must be positive (at most 2^31 pixels)");
+    Camera cam;
+    CameraViews cam_views;
+    if (!parse_camera(om, ofrustum, orthographic, cam, cam_views)) return nullptr;
+    View origins, directions;
+    Py_ssize_t shape[2] = {Py_ssize_t(width) * height, 3};
+    if (!get_array(oo, "out_origins", 'f', 2, shape, true, origins) ||
+        !get_array(od, "out_directions", 'f', 2, shape, true, directions) ||
+        !check_separate({{origins, "out_origins"}, {directions, "out_directions"}},
+                        {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
+    float *o = origins.data<float>(), *d = directions.data<float>();
+    for (int i = 0; i < height; ++i)
+        for (int j = 0; j < width; ++j) {
+            const Ray ray = cam.ray(j + 0.5, i + 0.5, width, height);
+            const size_t p = 3 * (size_t(i) * size_t(width) + size_t(j));
+            const bool none = Camera::is_none(ray);
+            o[p] = ray.o.x, o[p + 1] = ray.o.y, o[p + 2] = ray.o.z;
+            d[p] = none ? 0.f : ray.d.x, d[p + 1] = none ? 0.f : ray.d.y, d[p + 2] = none ? 0.f : ray.d.z;
+        }
+    Py_RETURN_NONE;
+}
+
 PyMethodDef module_methods[] = {
+    {"camera_rays", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(camera_rays)),
+     METH_VARARGS | METH_KEYWORDS,
+     "camera_rays(local_from_camera, frustum, orthographic, width, height, out_origins, out_directions): the "
+     "camera's pixel-centre rays (render.camera.Camera.rays)."},
     {"hardware_threads", hardware_threads, METH_NOARGS, "Number of threads used when threads=0."},
     {"simd_path", simd_path, METH_NOARGS,
      "The instruction sets the BVH's box and disc tests use: 'SSE2', 'SSE2, packet kernels in AVX2' (chosen at "

@@ -473,21 +473,22 @@ struct CameraViews {
 };
 
 // A camera from its parameters (render.camera.Camera): local_from_camera 4x4 (an affine
-// matrix), frustum 6 (left, right, bottom, top, clip start, clip end), all float64 and
-// finite, and whether it is orthographic. Sets an exception and returns false otherwise.
+// matrix), frustum 12 (left, right, bottom, top, clip start, clip end, the projection and
+// its 5 parameters: render.camera.Camera.native()), all float64 and finite, and whether it
+// is orthographic. Sets an exception and returns false otherwise.
 // `views` holds the two arrays while the call runs (for check_separate).
 inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Camera &cam, CameraViews &views) {
     View &m = views.m, &fr = views.frustum;
-    Py_ssize_t s44[2] = {4, 4}, s6[1] = {6};
+    Py_ssize_t s44[2] = {4, 4}, s12[1] = {12};
     if (!get_array(om, "local_from_camera", 'd', 2, s44, false, m) ||
-        !get_array(ofrustum, "frustum", 'd', 1, s6, false, fr))
+        !get_array(ofrustum, "frustum", 'd', 1, s12, false, fr))
         return false;
     const double *a = m.data<double>(), *f = fr.data<double>();
     for (int k = 0; k < 16; ++k)
         if (!std::isfinite(a[k])) return PyErr_Format(PyExc_ValueError, "local_from_camera must be finite"), false;
     if (a[12] != 0.0 || a[13] != 0.0 || a[14] != 0.0 || a[15] != 1.0)
         return PyErr_Format(PyExc_ValueError, "local_from_camera must be affine (last row 0 0 0 1)"), false;
-    for (int k = 0; k < 6; ++k)
+    for (int k = 0; k < 12; ++k)
         if (!std::isfinite(f[k])) return PyErr_Format(PyExc_ValueError, "frustum must be finite"), false;
     if (!(f[0] < f[1] && f[2] < f[3]))
         return PyErr_Format(PyExc_ValueError, "frustum must have left < right and bottom < top"), false;
@@ -498,6 +499,17 @@ inline bool parse_camera(PyObject *om, PyObject *ofrustum, int orthographic, Cam
     std::memcpy(cam.frustum, f, sizeof cam.frustum);
     cam.clip_start = f[4], cam.clip_end = f[5];
     cam.orthographic = orthographic != 0;
+    // The projection and its parameters (render.camera.Panorama.native()).
+    const double *pano = f + 7;
+    const int kind = int(f[6]);
+    bool ok = double(kind) == f[6] && kind >= Camera::kPlanar && kind < Camera::kProjections;
+    if (ok && kind == Camera::kFisheyeEquidistant) ok = pano[0] > 0.0;
+    if (ok && kind == Camera::kFisheyeEquisolid) ok = pano[0] > 0.0 && pano[1] > 0.0 && pano[2] > 0.0 && pano[3] > 0.0;
+    if (!ok || (kind != Camera::kPlanar && orthographic))
+        return PyErr_Format(PyExc_ValueError, "frustum[6:] is not a projection (render.camera.Panorama.native())"),
+               false;
+    cam.projection = kind;
+    std::memcpy(cam.pano, pano, sizeof cam.pano);
     if (!cam.derive_axes()) return PyErr_Format(PyExc_ValueError, "local_from_camera has no view axis (-Z)"), false;
     return true;
 }

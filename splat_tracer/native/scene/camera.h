@@ -6,8 +6,11 @@
 // No projection matrix is inverted: with a clipping range of 1e8 or more, a float32
 // projection (Blender's) unprojects its far plane to w = 0, and even a double one loses
 // the far plane at the ranges Blender allows (1e-6 to 3.4e38).
+// A panoramic camera (render.camera.Panorama) maps the image to directions as Cycles'
+// kernel/camera/projection.h does; its rays all leave the camera's centre (or its lens).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 
 #include "base/ray.h"
@@ -30,8 +33,79 @@ struct Camera {
     int blades = 0;               // 0: a disc; >= 3: a regular polygon
     double blade_rotation = 0.0;  // radians
     double aperture_ratio = 1.0;  // anamorphic: the aperture's x extent is divided by it
+    // The projection: render.camera.PROJECTIONS' index (kPlanar: pinhole or orthographic,
+    // as `orthographic` says) and its parameters (render.camera.Panorama.native()). For a
+    // panorama, frustum is the image's (u, v) rectangle in Cycles' panorama coordinates
+    // ((0, 1, 0, 1) shifted by the lens shift), which the projection maps to directions.
+    enum Projection { kPlanar = 0, kEquirectangular, kFisheyeEquidistant, kFisheyeEquisolid, kMirrorball, kProjections };
+    int projection = kPlanar;
+    double pano[5] = {0, 0, 0, 0, 0};
 
     bool has_lens() const { return lens_radius > 0.0; }
+    bool panoramic() const { return projection != kPlanar; }
+
+    // A pixel a panorama does not see (outside a fisheye's circle, or beyond a mirror
+    // ball): Cycles traces nothing there and writes black with alpha 0. none() is that
+    // ray: it has no length, and is_none() tells it.
+    static Ray none() {
+        Ray ray;
+        ray.o = Vec3(0.f, 0.f, 0.f), ray.d = Vec3(0.f, 0.f, -1.f), ray.tmin = 0.f, ray.tmax = 0.f;
+        return ray;
+    }
+    static bool is_none(const Ray &ray) { return !(ray.tmax > 0.f); }
+
+    // The unit camera-space direction (looking down -Z, +Y up) of panorama coordinates
+    // (u, v) in [0, 1] (v upwards), or false where the projection sees nothing. Cycles'
+    // panorama space looks down +X with +Z up (+Y to the left); its blender/camera.cpp
+    // turns it into Blender's camera space, so x_cycles = -z, y_cycles = -x, z_cycles = y
+    // (a mirror ball: x_cycles = x, y_cycles = z, z_cycles = y), which is folded in here.
+    bool panorama_direction(double u, double v, double d[3]) const {
+        switch (projection) {
+            case kEquirectangular: {
+                // pano = (longitude min, max, latitude min, max), radians: u runs the
+                // longitude from min to max (positive towards the camera's +X), v the
+                // latitude from min to max (positive upwards).
+                const double lon = pano[0] + (pano[1] - pano[0]) * u, lat = pano[2] + (pano[3] - pano[2]) * v;
+                d[0] = std::cos(lat) * std::sin(lon), d[1] = std::sin(lat), d[2] = -std::cos(lat) * std::cos(lon);
+                return true;
+            }
+            case kFisheyeEquidistant:
+            case kFisheyeEquisolid: {
+                // Equidistant: pano = (field of view); the image's unit square is the
+                // circle's [-1, 1] square, the angle from the view axis is r fov / 2.
+                // Equisolid: pano = (lens, field of view, sensor width, sensor height) (lens
+                // and sensor in mm): r on the sensor is 2 lens sin(angle / 2), cut at fov / 2.
+                double x, y, theta;
+                if (projection == kFisheyeEquidistant) {
+                    x = (u - 0.5) * 2.0, y = (v - 0.5) * 2.0;
+                    const double r = std::sqrt(x * x + y * y);
+                    if (r > 1.0) return false;
+                    theta = r * pano[0] * 0.5;
+                } else {
+                    x = (u - 0.5) * pano[2], y = (v - 0.5) * pano[3];
+                    const double r = std::sqrt(x * x + y * y);
+                    if (r > 2.0 * pano[0] * std::sin(pano[1] * 0.25)) return false;
+                    theta = 2.0 * std::asin(std::min(r / (2.0 * pano[0]), 1.0));
+                }
+                const double r = std::sqrt(x * x + y * y), s = std::sin(theta);
+                d[0] = r > 0.0 ? s * x / r : 0.0, d[1] = r > 0.0 ? s * y / r : 0.0, d[2] = -std::cos(theta);
+                return true;
+            }
+            case kMirrorball: {
+                // Cycles' mirror ball: (u, v) in [0, 1]^2 is a unit ball's disc, (x, y, z)
+                // the ball's normal there; the direction is the normal's reflection of
+                // Cycles' incoming ray, so that the disc's centre looks down the view axis
+                // and its rim straight back.
+                const double x = 2.0 * u - 1.0, y = 2.0 * v - 1.0, rr = x * x + y * y;
+                if (rr > 1.0) return false;
+                const double z = std::sqrt(std::max(1.0 - rr, 0.0));
+                d[0] = 2.0 * z * x, d[1] = 2.0 * z * y, d[2] = 1.0 - 2.0 * z * z;
+                return true;
+            }
+            default:
+                return false;
+        }
+    }
 
     // position and forward from local_from_camera; false when its view axis has no length.
     bool derive_axes() {
@@ -45,10 +119,18 @@ struct Camera {
     // (the centre of the pixel in column j, row i from the top is (j + 0.5, i + 0.5)). It
     // starts on the near clipping plane and ends on the far one. Double precision here,
     // float from here on: the local frame keeps the coordinates small.
+    // A panorama's ray leaves the camera's centre along its pixel's direction, from
+    // clip_start to clip_end along it; none() where the projection sees nothing.
     Ray ray(double px, double py, int width, int height) const {
         const double fx = px / width, fy = 1.0 - py / height;
         const double u = frustum[0] + (frustum[1] - frustum[0]) * fx;
         const double v = frustum[2] + (frustum[3] - frustum[2]) * fy;
+        if (panoramic()) {
+            double dir[3];
+            if (!panorama_direction(u, v, dir)) return none();
+            const double start[3] = {dir[0] * clip_start, dir[1] * clip_start, dir[2] * clip_start};
+            return local_ray(start, dir);
+        }
         // Camera space: a pinhole's ray leaves its centre along (u, v, -1) and is clipped
         // at clip_start and clip_end times that vector; an orthographic ray leaves (u, v)
         // along -Z.
@@ -68,7 +150,31 @@ struct Camera {
         const double v = frustum[2] + (frustum[3] - frustum[2]) * fy;
         const double f = focus_distance;
         double dir[3], start[3];  // camera space
-        if (orthographic) {
+        if (panoramic()) {
+            // Cycles' camera_sample_panorama: the lens is the disc across the pixel's
+            // direction D (axes U, V: Cycles' panorama axis x_cycles made perpendicular to
+            // D, and D x U); the ray leaves the lens point towards f D (a sphere in focus).
+            double d[3];
+            if (!panorama_direction(u, v, d)) return none();
+            double a[3] = {0.0, 0.0, -1.0};  // x_cycles in camera space (see panorama_direction)
+            if (projection == kMirrorball) a[0] = 1.0, a[2] = 0.0;
+            const double ad = a[0] * d[0] + a[1] * d[1] + a[2] * d[2];
+            double U[3] = {a[0] - ad * d[0], a[1] - ad * d[1], a[2] - ad * d[2]};
+            double ul = std::sqrt(U[0] * U[0] + U[1] * U[1] + U[2] * U[2]);
+            // D along x_cycles (where Cycles' normalize(0) is undefined): take camera +X,
+            // which is perpendicular to it.
+            if (!(ul > 1e-12)) U[0] = 1.0, U[1] = U[2] = 0.0, ul = 1.0;
+            for (double &c : U) c /= ul;
+            // V = D x U; the mirror ball's axes are a reflection of Cycles' (x, z, y), so
+            // its cross product changes sign.
+            const double sign = projection == kMirrorball ? -1.0 : 1.0;
+            const double V[3] = {sign * (d[1] * U[2] - d[2] * U[1]), sign * (d[2] * U[0] - d[0] * U[2]),
+                                 sign * (d[0] * U[1] - d[1] * U[0])};
+            double p[3], len = 0.0;
+            for (int k = 0; k < 3; ++k) p[k] = U[k] * lx + V[k] * ly, dir[k] = d[k] * f - p[k], len += dir[k] * dir[k];
+            len = std::sqrt(len);
+            for (int k = 0; k < 3; ++k) dir[k] /= len, start[k] = p[k] + dir[k] * clip_start;
+        } else if (orthographic) {
             // A unit direction from (u + lx, v + ly, 0) to (u, v, -f), started on the near plane.
             const double len = std::sqrt(lx * lx + ly * ly + f * f);
             dir[0] = -lx / len, dir[1] = -ly / len, dir[2] = -f / len;
@@ -104,9 +210,14 @@ struct Camera {
         return ray;
     }
 
-    double planar_depth(const Ray &r, float t) const {
+    // The Depth pass: the distance along the view axis, or for a panorama the distance
+    // from the camera's centre (Cycles' camera_z_depth).
+    double depth(const Ray &r, float t) const {
         double p[3] = {double(r.o.x) + double(r.d.x) * t, double(r.o.y) + double(r.d.y) * t,
                        double(r.o.z) + double(r.d.z) * t};
+        if (panoramic())
+            return std::sqrt((p[0] - position[0]) * (p[0] - position[0]) + (p[1] - position[1]) * (p[1] - position[1]) +
+                             (p[2] - position[2]) * (p[2] - position[2]));
         return (p[0] - position[0]) * forward[0] + (p[1] - position[1]) * forward[1] +
                (p[2] - position[2]) * forward[2];
     }

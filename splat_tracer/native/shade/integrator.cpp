@@ -291,6 +291,9 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
         if (settings_.packets)
             scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
         for (int k = 0; k < n; ++k) {
+            // A pixel the panorama does not see: nothing is traced or added (Cycles': black,
+            // alpha 0, no pass written).
+            if (Camera::is_none(rays[k])) continue;
             const Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
             Primary prim;
             ++tally.camera;
@@ -323,7 +326,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             a.environment = a.environment + prim.environment, a.mist += prim.mist;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
-            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.planar_depth(rays[k], prim.t)) : 0.f;
+            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.depth(rays[k], prim.t)) : 0.f;
         }
     }
     return true;

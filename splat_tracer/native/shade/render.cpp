@@ -25,7 +25,9 @@ void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &h
     const size_t p = size_t(row) * film_.w + col;
     float *rgba = film_.combined + 4 * p;
     if (!hit.valid()) {
-        std::copy(settings_.background, settings_.background + 4, rgba);
+        // Past everything: the background; a pixel the panorama does not see: black, alpha 0.
+        if (Camera::is_none(ray)) std::fill(rgba, rgba + 4, 0.f);
+        else std::copy(settings_.background, settings_.background + 4, rgba);
         if (film_.depth) film_.depth[p] = kBackgroundDepth;
         if (film_.normal) std::fill(film_.normal + 3 * p, film_.normal + 3 * p + 3, 0.f);
         return;
@@ -33,7 +35,7 @@ void Renderer::shade_pixel(int col, int row, const Ray &ray, const SurfaceHit &h
     const Vec3 n = scene_.open_back(hit.id, hit.front) ? hit.normal * -1.f : hit.normal;
     const Vec3 c = hit.colour * std::fabs(dot(n, ray.d));
     rgba[0] = c.x, rgba[1] = c.y, rgba[2] = c.z, rgba[3] = 1.f;
-    if (film_.depth) film_.depth[p] = float(camera_.planar_depth(ray, hit.t));
+    if (film_.depth) film_.depth[p] = float(camera_.depth(ray, hit.t));
     if (film_.normal) {
         float *out = film_.normal + 3 * p;
         out[0] = n.x, out[1] = n.y, out[2] = n.z;
