@@ -112,6 +112,8 @@ CASES = {
                                 {"graph": np.empty((N, K + 1), np.int32), "spacing_k": K,
                                  "spacing": np.empty(N, np.float32), "cover_k": K, "hole": 1.0, "max_gap": 2.0,
                                  "cover": np.empty(N, np.float32)}), [2, "graph", "spacing", "cover"]),
+    "camera_rays": (lambda: (_core.camera_rays, [*_camera_args(), 8, 8, np.empty((64, 3), np.float32),
+                                                np.empty((64, 3), np.float32)], {}), [5, 6]),
     "spatial_order": (lambda: (_core.spatial_order, [_points().astype(np.float64), np.empty(N, np.int32)], {}), [1]),
     "first_of_duplicates": (lambda: (_core.first_of_duplicates, [_points(), np.empty(N, np.bool_)], {}), [1]),
     "permute_table": (lambda: (_core.permute_table, [_neighbours(), ROWS[::-1].copy(), 0,
