@@ -10,6 +10,9 @@ the engine's behaviour as the default, so without the add-on there is nothing to
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Optional
+
 from ...render import shading
 
 # View-layer passes an artist can enable that the engine does not write: (the switch's owner on
@@ -36,7 +39,6 @@ UNWRITTEN_PASSES = (
     ("", "use_pass_cryptomatte_material", "Cryptomatte Material"),
     ("", "use_pass_cryptomatte_asset", "Cryptomatte Asset"),
     ("", "use_pass_grease_pencil", "Grease Pencil"),
-    ("cycles", "denoising_store_passes", "Denoising Data"),
     ("cycles", "use_pass_volume_direct", "Volume Direct"),
     ("cycles", "use_pass_volume_indirect", "Volume Indirect"),
     ("cycles", "use_pass_volume_scatter", "Volume Scatter"),
@@ -60,6 +62,60 @@ def stereo_views(render) -> list:
     return [v.name for v in views]
 
 
+# Cycles' `denoiser` enum by its stored number (properties.py's items: OptiX 2,
+# OpenImageDenoise 4, the default). Read raw, by number: the enum's items are computed, and
+# computing them asks Cycles for its GPU devices, which logs a CUDA warning in every render.
+_DENOISER_OPTIX = 2
+NOISY_IMAGE = "Noisy Image"
+DENOISING_DATA = ("Denoising Normal", "Denoising Albedo", "Denoising Depth")
+
+
+@dataclass(frozen=True)
+class Denoising:
+    """Cycles' Denoise settings (Render > Sampling > Render > Denoise) as the engine applies
+    them with OpenImageDenoise (blender/denoise.py)."""
+    input_passes: str  # RGB, RGB_ALBEDO or RGB_ALBEDO_NORMAL
+    prefilter: str     # NONE, FAST or ACCURATE
+    quality: str       # HIGH, BALANCED or FAST
+
+    @property
+    def albedo(self) -> bool:
+        return self.input_passes in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL")
+
+    @property
+    def normal(self) -> bool:
+        return self.input_passes == "RGB_ALBEDO_NORMAL"
+
+    def describe(self) -> str:
+        inputs = {"RGB": "the image alone", "RGB_ALBEDO": "the image and Denoising Albedo",
+                  "RGB_ALBEDO_NORMAL": "the image, Denoising Albedo and Denoising Normal"}[self.input_passes]
+        return (f"denoised by OpenImageDenoise (CPU) from {inputs}, prefilter {self.prefilter.title()}, "
+                f"quality {self.quality.title()}")
+
+
+def denoising_of(scene, view_layer, report: Optional[shading.Report] = None) -> Optional[Denoising]:
+    """The final render's denoising (None: off), read where Cycles keeps it: the scene's
+    Denoise switch and the view layer's own (View Layer > Denoising). Without the Cycles
+    add-on there is no switch, and nothing is denoised."""
+    cycles = getattr(scene, "cycles", None)
+    if not _on(cycles, "use_denoising") or not getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
+        return None
+    if report is not None and cycles.get("denoiser", 4) == _DENOISER_OPTIX:
+        report.once("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead")
+    return Denoising(cycles.denoising_input_passes, cycles.denoising_prefilter, cycles.denoising_quality)
+
+
+def denoising_passes(scene, view_layer) -> tuple:
+    """The denoising passes Cycles writes, by its names: Noisy Image whenever the render is
+    denoised, Denoising Normal/Albedo/Depth with the view layer's Denoising Data switch."""
+    names = ()
+    if denoising_of(scene, view_layer) is not None:
+        names += (NOISY_IMAGE,)
+    if _on(getattr(view_layer, "cycles", None), "denoising_store_passes"):
+        names += DENOISING_DATA
+    return names
+
+
 def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     """Says, once each, the scene's and the view layer's render settings the engine does not
     honour and what it does instead. Called once a frame by the session."""
@@ -68,17 +124,15 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
         report.once(f"Motion Blur is not rendered: the frame is rendered sharp at frame {scene.frame_current}'s "
                     f"time (the shutter of {render.motion_blur_shutter:g} frames is ignored)")
     if render.use_multiview:
-        views = ", ".join(f"'{v}'" for v in stereo_views(render))
-        report.once(f"Stereoscopy is not rendered: every view ({views}) gets the same image, from the scene "
-                    "camera itself (no eye separation, no per-view camera)")
-    cycles = getattr(scene, "cycles", None)
-    if _on(cycles, "use_denoising") and getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
-        # The denoiser is not named: reading Cycles' `denoiser` enum (its items are computed)
-        # initialises Cycles' GPU libraries, which logs a CUDA warning in every render.
-        report.once("Cycles' Denoise is not applied: the image keeps its noise. The compositor's "
-                    "Denoise node, "
-                    "fed the Normal and Diffuse Color passes the engine writes, denoises it (turn Denoise off "
-                    "in Splat Tracer > Sampling to silence this line)")
+        camera = scene.camera
+        if camera is not None and camera.type == "CAMERA" and camera.data.type == "PANO" \
+                and render.views_format == "STEREO_3D":
+            # Cycles' spherical stereo moves each ray's origin by the eye offset turned with
+            # the ray's direction (omni-directional stereo); the engine renders each eye as
+            # a whole camera moved sideways, which is right only near the view's centre.
+            report.once(f"camera '{camera.name}': stereo panorama rendered with each eye's camera moved by half "
+                        "the interocular distance, not Cycles' spherical stereo (each ray's own eye offset): "
+                        "the disparity is right ahead of the camera only")
     owners = {"": view_layer, "cycles": getattr(view_layer, "cycles", None)}
     layer = f"view layer '{view_layer.name}'"
     for owner, prop, label in UNWRITTEN_PASSES:
