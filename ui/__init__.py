@@ -83,9 +83,16 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
                 sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
                 if not prefix:
                     col.prop(cycles, "time_limit")
-                    # Cycles' Denoise is on by default and the engine does not denoise: the
-                    # render report says so, and this is where it is switched off.
-                    col.prop(cycles, "use_denoising", text="Cycles' Denoise (not applied)")
+                # Cycles' Denoise, applied with OpenImageDenoise (blender/denoise.py; the
+                # viewport's to its last pass). Not `denoiser`/`preview_denoiser`: drawing
+                # those enums computes their items, which enumerates GPU devices (a CUDA
+                # warning in every session).
+                col.prop(cycles, f"use_{prefix}denoising", text="Denoise")
+                sub = col.column()
+                sub.active = getattr(cycles, f"use_{prefix}denoising")
+                sub.prop(cycles, f"{prefix}denoising_input_passes", text="Passes")
+                sub.prop(cycles, f"{prefix}denoising_prefilter", text="Prefilter")
+                sub.prop(cycles, f"{prefix}denoising_quality", text="Quality")
         col = layout.column()
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")

@@ -121,3 +121,37 @@ def test_denoise_off_without_passes_is_the_plain_render(blender, empty_scene):
     bpy.ops.render.render()
     stats = extension_module("blender.session").HISTORY[-1]
     assert stats["denoise_seconds"] == 0.0 and "denoised" not in stats["sampling"], stats
+
+
+def test_viewport_denoises_its_last_pass(blender, empty_scene):
+    """Cycles' viewport Denoise (use_preview_denoising): the viewport's last pass is denoised
+    (the F12 image with the viewport's samples, then OIDN); the passes before it are not.
+    Off, the last pass is the undenoised one."""
+    from test_viewport import _f12_view
+
+    viewport = extension_module("blender.viewport")
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    scene.cycles.samples = scene.cycles.preview_samples = NOISY_SAMPLES
+    scene.render.engine = "SPLAT_TRACER"
+    images = {}
+    for on in (False, True):
+        scene.cycles.use_preview_denoising = on
+        bpy.context.view_layer.update()
+        vs = viewport.ViewportSession()
+        vs.set_view(_f12_view(bpy, scene, W, H))
+        vs.update(bpy.context.evaluated_depsgraph_get())
+        passes = []
+        while vs.step():
+            passes.append(vs.latest())
+        passes.append(vs.latest())
+        vs.close()
+        images[on] = passes
+    plain, denoised = images[False][-1], images[True][-1]
+    assert denoised.denoised and not plain.denoised and not any(p.denoised for p in images[True][:-1])
+    assert "denoised" in viewport.status({"SCENE": denoised}, True)
+    # Denoising smooths: the mean absolute difference between neighbouring pixels drops.
+    rough = lambda im: float(np.abs(np.diff(im.pixels[..., :3], axis=1)).mean())
+    print(f"viewport neighbour difference {rough(plain):.4f} -> {rough(denoised):.4f}")
+    assert rough(denoised) < 0.8 * rough(plain)
+    np.testing.assert_array_equal(images[True][-2].pixels, images[False][-2].pixels)

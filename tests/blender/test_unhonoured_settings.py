@@ -134,6 +134,7 @@ def test_a_default_scene_says_none_of_it(blender, empty_scene):
     add_camera(bpy, empty_scene, (0, -5, 0), (math.radians(90), 0, 0))
     empty_scene.render.resolution_x, empty_scene.render.resolution_y = W, H
     empty_scene.cycles.samples = 1
+    empty_scene.cycles.use_denoising = True  # Cycles' default (the fixture turns it off)
     lines = render(bpy)
     assert not [line for line in lines if any(k in line for k in ("not rendered", "not applied", "not written"))], lines
     assert "denoised by OpenImageDenoise" in extension_module("blender.session").HISTORY[-1]["sampling"]

@@ -93,16 +93,22 @@ class Denoising:
                 f"quality {self.quality.title()}")
 
 
-def denoising_of(scene, view_layer, report: Optional[shading.Report] = None) -> Optional[Denoising]:
+def denoising_of(scene, view_layer, report: Optional[shading.Report] = None,
+                 viewport: bool = False) -> Optional[Denoising]:
     """The final render's denoising (None: off), read where Cycles keeps it: the scene's
-    Denoise switch and the view layer's own (View Layer > Denoising). Without the Cycles
-    add-on there is no switch, and nothing is denoised."""
+    Denoise switch and the view layer's own (View Layer > Denoising); viewport: the
+    viewport's (Sampling > Viewport > Denoise, its own passes, prefilter and quality).
+    Without the Cycles add-on there is no switch, and nothing is denoised."""
     cycles = getattr(scene, "cycles", None)
-    if not _on(cycles, "use_denoising") or not getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
+    prefix = "preview_" if viewport else ""
+    if not _on(cycles, f"use_{prefix}denoising"):
         return None
-    if report is not None and cycles.get("denoiser", 4) == _DENOISER_OPTIX:
+    if not viewport and not getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
+        return None
+    if report is not None and not viewport and cycles.get("denoiser", 4) == _DENOISER_OPTIX:
         report.once("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead")
-    return Denoising(cycles.denoising_input_passes, cycles.denoising_prefilter, cycles.denoising_quality)
+    return Denoising(getattr(cycles, f"{prefix}denoising_input_passes"), getattr(cycles, f"{prefix}denoising_prefilter"),
+                     getattr(cycles, f"{prefix}denoising_quality"))
 
 
 def denoising_passes(scene, view_layer) -> tuple:
