@@ -250,9 +250,11 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
             hit = np.any(position != 0.0, axis=-1)
             position[hit] = (position[hit] + exported.origin).astype(np.float32)
         frame_passes = result.passes
-        if result.completed and (denoising is not None or set(core_passes) != set(wanted)):
+        if denoising is not None or set(core_passes) != set(wanted):
+            # A stopped render is not denoised, but loses the passes only the denoiser wanted.
             t2 = time.perf_counter()
-            frame_passes = denoise_passes(frame_passes, wanted, denoising, camera.local_from_camera, threads, report)
+            frame_passes = denoise_passes(frame_passes, wanted, denoising if result.completed else None,
+                                          camera.local_from_camera, threads, report)
             t_denoise += time.perf_counter() - t2
         view_passes[name] = frame_passes
         completed = completed and result.completed
