@@ -183,8 +183,14 @@ def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: 
     if not denoise.available():
         report.once("Denoise: Blender's OpenImageDenoise library was not found, the image is not denoised")
         return out
-    clean = denoise.denoise(combined[..., :3], guides["Denoising Albedo"] if denoising.albedo else None,
-                            normal if denoising.normal else None, denoising.prefilter, denoising.quality, threads)
+    try:
+        clean = denoise.denoise(combined[..., :3], guides["Denoising Albedo"] if denoising.albedo else None,
+                                normal if denoising.normal else None, denoising.prefilter, denoising.quality, threads)
+    except RuntimeError as e:
+        # Skip, don't refuse: the frame is kept, noisy (e.g. an older Blender's OIDN refusing
+        # a setting it does not know).
+        report.once(f"Denoise failed ({e}): the image is not denoised")
+        return out
     result = combined.copy()
     result[..., :3] = clean
     out["Combined"] = result
@@ -238,7 +244,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     core_passes = tuple(dict.fromkeys([name for name in wanted if name not in _GUIDES
                                        and name != export_settings.NOISY_IMAGE] + guides))
     t1 = time.perf_counter()
-    view_passes, completed, counters, t_denoise = {}, True, {}, 0.0
+    view_passes, completed, counters, t_denoise, denoised_views = {}, True, {}, 0.0, 0
     for name, camera in cameras.items():
         result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
                                               window=(x0, y0, w, h), threads=threads, progress=progress)
@@ -256,6 +262,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
             frame_passes = denoise_passes(frame_passes, wanted, denoising if result.completed else None,
                                           camera.local_from_camera, threads, report)
             t_denoise += time.perf_counter() - t2
+            denoised_views += frame_passes.get("Combined") is not result.passes.get("Combined")
         view_passes[name] = frame_passes
         completed = completed and result.completed
         counters = counters or result.counters
@@ -263,7 +270,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
             break
     t_render = time.perf_counter() - t1
     sampling = sampling_summary(settings, counters, w * h)
-    if denoising is not None and completed and denoise.available():
+    if denoised_views:
         sampling = "; ".join(filter(None, [sampling, f"{denoising.describe()} in {t_denoise:.2f} s"]))
     frame_stats = dict(instances=exported.instances, geometries=len(CACHE.used), built=CACHE.built,
                        reused=CACHE.reused, build_seconds=CACHE.build_seconds, export_seconds=t_export,

@@ -155,3 +155,22 @@ def test_viewport_denoises_its_last_pass(blender, empty_scene):
     print(f"viewport neighbour difference {rough(plain):.4f} -> {rough(denoised):.4f}")
     assert rough(denoised) < 0.8 * rough(plain)
     np.testing.assert_array_equal(images[True][-2].pixels, images[False][-2].pixels)
+
+
+def test_a_failing_denoiser_keeps_the_frame_and_says_so(blender, empty_scene, monkeypatch):
+    """Skip, don't refuse: OIDN failing (an older Blender's library refusing a setting) leaves
+    the frame rendered, noisy, with one report line -- and no claim that it was denoised."""
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene)
+    scene.cycles.samples, scene.cycles.use_denoising = 1, True
+    scene.render.engine = "SPLAT_TRACER"
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("OpenImageDenoise: invalid argument")
+
+    monkeypatch.setattr(extension_module("blender.denoise"), "denoise", fail)
+    bpy.ops.render.render()
+    stats = extension_module("blender.session").HISTORY[-1]
+    assert stats["completed"]
+    assert stats["report"].count("Denoise failed (OpenImageDenoise: invalid argument): the image is not denoised") == 1
+    assert "denoised" not in stats["sampling"], stats["sampling"]
