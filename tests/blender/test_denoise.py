@@ -174,3 +174,39 @@ def test_a_failing_denoiser_keeps_the_frame_and_says_so(blender, empty_scene, mo
     assert stats["completed"]
     assert stats["report"].count("Denoise failed (OpenImageDenoise: invalid argument): the image is not denoised") == 1
     assert "denoised" not in stats["sampling"], stats["sampling"]
+
+
+CLEAN_PROCESS_RENDER = """
+from tools import dev_extension
+home = dev_extension.isolate_user_dirs()
+import bpy, math
+dev_extension.enable_from_source(home)
+bpy.ops.wm.read_homefile()  # Blender's default scene: a cube, a lamp, a camera; Denoise on
+scene = bpy.context.scene
+scene.render.engine = "SPLAT_TRACER"
+scene.render.resolution_x, scene.render.resolution_y = 48, 32
+scene.cycles.samples = 4
+scene.view_layers[0].cycles.denoising_store_passes = True
+bpy.ops.render.render()
+from blender_helpers import extension_module
+print("SAMPLING", extension_module("blender.session").HISTORY[-1]["sampling"])
+"""
+
+
+def test_denoising_initialises_no_gpu_library(tmp_path):
+    """In a fresh Blender (the first read of Cycles' `denoiser` enum would enumerate GPU
+    devices and log 'CUEW initialization failed', which the version matrix reads as a
+    failure): a default scene renders denoised, with Denoising Data on, and
+    nothing mentions CUDA or CUEW."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    run = subprocess.run([sys.executable, "-c", CLEAN_PROCESS_RENDER], capture_output=True, text=True, timeout=300,
+                         cwd=root, env={**os.environ, "PYTHONPATH": str(root / "tests" / "support")})
+    assert run.returncode == 0, run.stderr[-2000:]
+    log = run.stdout + run.stderr
+    assert "SAMPLING" in log and "denoised by OpenImageDenoise (CPU)" in log, log[-2000:]
+    assert "CUEW" not in log and "CUDA" not in log, log[-2000:]

@@ -64,8 +64,18 @@ def stereo_views(render) -> list:
 
 # Cycles' `denoiser` enum by its stored number (properties.py's items: OptiX 2,
 # OpenImageDenoise 4, the default). Read raw, by number: the enum's items are computed, and
-# computing them asks Cycles for its GPU devices, which logs a CUDA warning in every render.
-_DENOISER_OPTIX = 2
+# computing them asks Cycles for its GPU devices, which logs a CUDA warning ("CUEW
+# initialization failed") in every render.
+_DENOISER_OPTIX, _DENOISER_DEFAULT = 2, 4
+
+
+def _stored(owner, prop: str, default):
+    """An add-on property's stored value, without RNA's conversion: the system properties
+    (Blender 5.0+ keeps bpy.props values there) or, before 5.0, the group's own ID
+    properties; `default` when never set."""
+    system = getattr(owner, "bl_system_properties_get", None)
+    store = system() if system is not None else owner
+    return default if store is None else store.get(prop, default)
 NOISY_IMAGE = "Noisy Image"
 DENOISING_DATA = ("Denoising Normal", "Denoising Albedo", "Denoising Depth")
 
@@ -105,7 +115,7 @@ def denoising_of(scene, view_layer, report: Optional[shading.Report] = None,
         return None
     if not viewport and not getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
         return None
-    if report is not None and not viewport and cycles.get("denoiser", 4) == _DENOISER_OPTIX:
+    if report is not None and not viewport and _stored(cycles, "denoiser", _DENOISER_DEFAULT) == _DENOISER_OPTIX:
         report.once("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead")
     return Denoising(getattr(cycles, f"{prefix}denoising_input_passes"), getattr(cycles, f"{prefix}denoising_prefilter"),
                      getattr(cycles, f"{prefix}denoising_quality"))
