@@ -108,7 +108,8 @@ def test_denoising_passes_have_cycles_names(blender, empty_scene, tmp_path):
     np.testing.assert_allclose(np.median(ours["Denoising Normal"][floor], axis=0),
                                np.median(cycles["Denoising Normal"][floor], axis=0), atol=0.05)
     # The world-space Normal pass is not it (the floor's (0, 0, 1) there): the test sees the space.
-    assert np.abs(np.median(ours["Normal"][floor], axis=0) - np.median(cycles["Denoising Normal"][floor], axis=0)).max() > 0.3
+    world = np.median(ours["Normal"][floor], axis=0)
+    assert np.abs(world - np.median(cycles["Denoising Normal"][floor], axis=0)).max() > 0.3, world
 
 
 def test_denoise_off_without_passes_is_the_plain_render(blender, empty_scene):

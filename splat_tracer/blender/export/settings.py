@@ -117,8 +117,8 @@ def denoising_of(scene, view_layer, report: Optional[shading.Report] = None,
         return None
     if report is not None and not viewport and _stored(cycles, "denoiser", _DENOISER_DEFAULT) == _DENOISER_OPTIX:
         report.once("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead")
-    return Denoising(getattr(cycles, f"{prefix}denoising_input_passes"), getattr(cycles, f"{prefix}denoising_prefilter"),
-                     getattr(cycles, f"{prefix}denoising_quality"))
+    names = ("input_passes", "prefilter", "quality")
+    return Denoising(*(getattr(cycles, f"{prefix}denoising_{name}") for name in names))
 
 
 def denoising_passes(scene, view_layer) -> tuple:
