@@ -11,7 +11,7 @@ import traceback
 import bpy
 import numpy as np
 
-from ..render import ab
+from ..render import ab, cryptomatte
 from . import session, viewport
 
 # Blender 5.0 renamed five passes (Cycles and EEVEE write "Diffuse Color", "Emission",
@@ -37,6 +37,10 @@ _PASSES = (
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )
 SPLAT_COUNT = "Splat Count"  # debug pass: the splats that formed each surface point
+# Cryptomatte: the view layer's switch of each kind (render/cryptomatte.py KINDS), whose
+# passes are <kind>00, <kind>01, ... (4 channels, two (id, coverage) pairs each), as Cycles names them.
+_CRYPTOMATTE = dict(zip(cryptomatte.KINDS, ("use_pass_cryptomatte_object", "use_pass_cryptomatte_material",
+                                            "use_pass_cryptomatte_asset")))
 _BLENDER_NAME = {core_name: blender_name for _, core_name, blender_name, *_ in _PASSES}
 
 
@@ -51,6 +55,7 @@ def _switch(view_layer, prop: str) -> bool:
 def wanted_passes(view_layer) -> tuple:
     """The core's names of the passes the view layer asks for."""
     names = [name for prop, name, *_ in _PASSES if _switch(view_layer, prop)]
+    names += [kind for kind, prop in _CRYPTOMATTE.items() if _switch(view_layer, prop)]
     if view_layer.splat_tracer.use_pass_splat_count:
         names.append(SPLAT_COUNT)
     return tuple(names)
@@ -81,6 +86,12 @@ class SplatTracerEngine(bpy.types.RenderEngine):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
+        layers = cryptomatte.slots_of(renderlayer.pass_cryptomatte_depth) // 2
+        for kind, prop in _CRYPTOMATTE.items():
+            if _switch(renderlayer, prop):
+                for i in range(layers):
+                    # Lower-case channel ids, as Cycles registers them (the EXR's '.r', '.g', ...).
+                    self.register_pass(scene, renderlayer, f"{kind}{i:02d}", 4, "rgba", "COLOR")
 
     def render(self, depsgraph):
         # Blender does not fail bpy.ops.render.render() for an exception raised here: it
@@ -113,6 +124,13 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         views = [view.name for view in result.views]
         for name, pixels in frame.passes.items():
             _set_pass(layer, views, name, pixels)
+        if frame.metadata:
+            # Cryptomatte's manifests, saved in the EXR's header: on the engine's whole result
+            # (get_result), as Cycles writes them -- a tile's begin_result() result is merged
+            # into it without its metadata.
+            whole = self.get_result()
+            for key, value in frame.metadata.items():
+                whole.stamp_data_add_field(key, value)
         if frame.completed:
             self.end_result(result)
         else:

@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..render import shading
+from ..render import cryptomatte, shading
 from ..render.method import Method
 from . import export
 from .export import settings as export_settings
@@ -86,6 +86,7 @@ class Frame:
     height: int
     stats: dict
     report: shading.Report = field(default_factory=shading.Report)
+    metadata: dict = field(default_factory=dict)  # the render result's (Cryptomatte's manifests): field -> text
 
 
 def image_size(render) -> tuple[int, int]:
@@ -182,9 +183,12 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
     say(summary + " | rendering")
     t1 = time.perf_counter()
+    view_layer = depsgraph.view_layer
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
-                                          threads=threads, progress=progress)
+                                          threads=threads, progress=progress,
+                                          cryptomatte_levels=view_layer.pass_cryptomatte_depth)
     t_render = time.perf_counter() - t1
+    metadata = cryptomatte_layers(result.passes, exported.render_scene, view_layer.name)
     position = result.passes.get("Position")
     if position is not None:
         # The core's positions are in the local frame; the pass is in world space, as
@@ -206,4 +210,20 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     del HISTORY[:-_HISTORY_LIMIT]
     say(f"{summary} | built {CACHE.built}, reused {CACHE.reused} ({CACHE.build_seconds:.2f} s) | "
         f"export {t_export:.2f} s, render {t_render:.2f} s")
-    return Frame(result.passes, result.completed, (x0, y0, w, h), width, height, frame_stats, report)
+    return Frame(result.passes, result.completed, (x0, y0, w, h), width, height, frame_stats, report, metadata)
+
+
+def cryptomatte_layers(passes: dict, render_scene, view_layer_name: str) -> dict:
+    """Replaces each Cryptomatte pass of `passes` by its RGBA layers (CryptoObject00, ...),
+    and returns their metadata for the render result, as Cycles writes it: per kind, the
+    view layer's '<layer>.<kind>' name and the manifest of the names the scene holds (Cycles
+    lists every object and shader of its scene, whether seen or not)."""
+    names = {"CryptoObject": [n for n, _ in render_scene.instance_names],
+             "CryptoMaterial": render_scene.material_names,
+             "CryptoAsset": [a for _, a in render_scene.instance_names]}
+    metadata = {}
+    for kind in cryptomatte.KINDS:
+        if kind in passes:
+            passes.update(cryptomatte.layers(kind, passes.pop(kind)))
+            metadata.update(cryptomatte.metadata(f"{view_layer_name}.{kind}", names[kind]))
+    return metadata

@@ -124,9 +124,11 @@ def test_the_pass_tables_cover_every_pass_switch_of_blender(blender):
     -- so a pass a new Blender adds fails here instead of going unsaid."""
     bpy = blender
     engine = extension_module("blender.engine")
+    # Accurate Mode: a mode of the Cryptomatte passes, no pass of its own -- and one neither
+    # Cycles nor 5.0's panels use (the engine keeps the pixel's first ids, as Cycles).
     not_passes = {"use_pass_combined",             # always written
-                  "use_pass_cryptomatte_accurate"}  # a mode of the Cryptomatte passes, no pass of its own
-    written = {prop for prop, *_ in engine._PASSES}
+                  "use_pass_cryptomatte_accurate"}
+    written = {prop for prop, *_ in engine._PASSES} | set(engine._CRYPTOMATTE.values())
     unwritten = {f"{owner}.{prop}" if owner else prop for owner, prop, _ in _pass_switches()}
     assert not written & unwritten
     layer = bpy.context.scene.view_layers[0]

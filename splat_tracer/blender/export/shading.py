@@ -173,10 +173,10 @@ class _Sockets:
 # --------------------------------------------------------------------------------------
 # Materials. Each shader reader returns a dict of shading.Material fields (unset: the
 # contract's defaults), so that Mix and Add can blend them before the Material is made.
-# Emission Sampling is the material's setting, not a shader's: material_of sets it.
+# Emission Sampling and the name are the material's, not a shader's: material_of sets them.
 
 _DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
-             if f.name != "emission_sampling"}
+             if f.name not in ("emission_sampling", "name")}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -324,7 +324,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     if bl_material is None:
         return shading.Material()
     return dataclasses.replace(_surface_material(bl_material, report),
-                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index)
+                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index,
+                               name=bl_material.name)
 
 
 def _emission_sampling(bl_material) -> str:
