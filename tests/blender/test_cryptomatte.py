@@ -1,9 +1,10 @@
 """Cryptomatte through Blender (issue 26, item 2): the engine's Object, Material and Asset
 passes, read by Blender's own compositor node and laid out as Cycles lays them out.
 
-One scene: a scan (a splat-cloud sphere, material 'Grey'), a ball (mesh, 'Red') and a box
-(mesh, 'Blue', parented to the empty 'Rig': its asset), under a sun, 96x64 pixels, 16
-samples, Levels 6. Rendered with the engine and with Cycles (CPU, no denoising) to
+One scene: a scan (a splat-cloud sphere, material 'Grey'), a ball (mesh, 'Red'), a box
+(mesh, 'Blue', parented to the empty 'Rig': its asset) and two instances of a collection
+holding a pebble (mesh, 'Grey': both instances are 'Pebble', as in Cycles), under a sun,
+96x64 pixels, 16 samples, Levels 6. Rendered with the engine and with Cycles (CPU, no denoising) to
 multilayer EXRs.
 
 Tolerances (measured with bpy 5.0.1; each shown below to reject a wrong render):
@@ -49,6 +50,13 @@ def _scene(bpy):
     scene.collection.objects.link(rig)
     box.parent = rig
     ball.pass_index, box.pass_index, scan.pass_index = BALL, BOX, SCAN
+    pebbles = bpy.data.collections.new("Pebbles")  # not in the scene: only its instances render
+    cube(bpy, "Pebble", 0.3, (0, 0, 0.15), grey, collection=pebbles)
+    for i, x in enumerate((-0.2, 1.5)):
+        instancer = bpy.data.objects.new(f"Pebbles {i}", None)
+        instancer.instance_type, instancer.instance_collection = "COLLECTION", pebbles
+        instancer.location = (x, -1.0, 0.0)
+        scene.collection.objects.link(instancer)
     lamp(bpy, "SUN", rotation=(math.radians(-35), 0, 0), energy=3.0)
     add_camera(bpy, scene, (0, -5, 3), (math.radians(65), 0, 0))
     layer = scene.view_layers[0]
@@ -194,6 +202,25 @@ def test_layout_and_manifest_as_cycles(blender, renders):
     print(f"ball matte, mean |engine - Cycles| = {difference:.4f}")
     assert _matte(cycles, "CryptoObject", ball).sum() > 100
     assert difference < MATTE_TOL
+
+
+def test_instances_share_their_object_name(blender, renders):
+    from scipy.ndimage import label
+
+    from splat_tracer.render import cryptomatte
+
+    ours, meta = renders["engine"]
+    cycles, _ = renders["cycles"]
+    pebble = cryptomatte.name_id("Pebble")
+    for channels in (ours, cycles):
+        matte = _matte(channels, "CryptoObject", pebble)
+        assert label(matte > 0.5)[1] == 2  # both instances, one name
+        np.testing.assert_array_equal(_matte(channels, "CryptoAsset", pebble), matte)
+    difference = np.abs(_matte(ours, "CryptoObject", pebble) - _matte(cycles, "CryptoObject", pebble)).mean()
+    print(f"pebbles matte, mean |engine - Cycles| = {difference:.4f}")
+    assert difference < MATTE_TOL
+    manifests = [json.loads(v) for k, v in meta.items() if k.endswith("/manifest")]
+    assert all("Pebbles 0" not in m for m in manifests)  # the instancer is not a name
 
 
 def test_levels_set_the_layer_count(blender, renders):
