@@ -224,7 +224,8 @@ class RenderScene:
         if set(passes) & set(cryptomatte.KINDS):
             ids = (np.array([[cryptomatte.name_id(n) for n in pair] for pair in self.instance_names],
                             np.float32).reshape(-1, 2),
-                   np.array([cryptomatte.name_id(n) for n in self.material_names], np.float32))
+                   # The core's table has its default material when no instance brings one.
+                   np.array([cryptomatte.name_id(n) for n in self.material_names or [Material().name]], np.float32))
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
                                            cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels)
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,

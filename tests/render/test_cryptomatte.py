@@ -115,6 +115,11 @@ def test_background_has_no_id():
     np.testing.assert_allclose(obj[:, -2:, 1], 1.0)
 
 
+def test_an_empty_scene_has_no_ids():
+    res = _render(RenderScene([]), cryptomatte.KINDS, samples=2)
+    assert all(not res.passes[k].any() for k in cryptomatte.KINDS)
+
+
 def test_progressive_rendering_gives_the_same_coverage():
     # Adaptive sampling renders in rounds over the whole film (finish() divides by each
     # pixel's own count): with a threshold no pixel meets, the same samples, the same matte.
