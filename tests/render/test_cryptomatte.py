@@ -12,7 +12,8 @@ import pytest
 
 from splat_tracer.render import cryptomatte
 from splat_tracer.render.camera import Camera
-from splat_tracer.render.scene import Instance, Mesh, RenderScene
+from splat_tracer.render.method import Method
+from splat_tracer.render.scene import Instance, Mesh, RenderScene, render_arguments
 from splat_tracer.render.shading import Material, RenderSettings, World
 
 # Taller than the image: the filter's samples past its top and bottom still meet it.
@@ -147,16 +148,37 @@ def test_other_passes_unchanged_by_cryptomatte():
         np.testing.assert_array_equal(plain.passes[name], with_crypto.passes[name])
 
 
-def test_core_refuses_bad_ids():
+def _core_arguments(scene, ids, kinds=("CryptoObject",)):
+    kwargs, buffers = render_arguments(_camera(), W, H // 2, RenderSettings(), Method(), scene.world, kinds,
+                                       cryptomatte_ids=ids)
+    return kwargs, buffers
+
+
+def test_core_refuses_bad_ids_and_buffers():
     scene = _scene()
-    from splat_tracer.render.scene import render_arguments
     good = (np.ones((2, 2), np.float32), np.ones(2, np.float32))
     for ids, message in [((np.zeros((2, 2), np.float32), good[1]), "not 0"),
                          ((good[0], np.array([1.0, np.nan], np.float32)), "finite"),
                          ((np.ones((3, 2), np.float32), good[1]), "size"),
                          ((good[0], np.ones(5, np.float32)), "size")]:
-        kwargs, _ = render_arguments(_camera(), W, H // 2, RenderSettings(), scene._scene and
-                                     __import__("splat_tracer.render.method", fromlist=["Method"]).Method(),
-                                     scene.world, ("CryptoObject",), cryptomatte_ids=ids)
+        kwargs, _ = _core_arguments(scene, ids)
         with pytest.raises(ValueError, match=message):
             scene._scene.render(**kwargs)
+    kwargs, buffers = _core_arguments(scene, good, ("CryptoObject", "CryptoAsset"))
+    object_, _, asset, slots, *ids = kwargs["cryptomatte"]
+    bad = [((object_, None, asset, 0, *ids), ValueError, "slots"),
+           ((object_, None, asset, 17, *ids), ValueError, "slots"),
+           ((object_, None, asset), TypeError, "cryptomatte must be"),
+           ((object_.astype(np.float64), None, asset, slots, *ids), TypeError, "dtype"),
+           ((object_[:, :, :4].copy(), None, asset, slots, *ids), ValueError, "size"),
+           ((object_, None, object_, slots, *ids), ValueError, "share memory"),
+           ((kwargs["combined"].reshape(H // 2, W, 4)[..., :4].copy(), None, None, 2, *ids), None, None)]
+    for arg, error, message in bad:
+        if error is None:  # a valid 2-slot buffer: accepted
+            scene._scene.render(**{**kwargs, "cryptomatte": arg})
+            continue
+        with pytest.raises(error, match=message):
+            scene._scene.render(**{**kwargs, "cryptomatte": arg})
+    with pytest.raises(ValueError, match="share memory"):
+        scene._scene.render(**{**kwargs, "cryptomatte": (kwargs["combined"].reshape(H // 2, W, 4), None, None, 2,
+                                                          *ids)})
