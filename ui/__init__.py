@@ -187,6 +187,27 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
 
 
+class SPLAT_TRACER_PT_passes_cryptomatte(SplatTracerPanel, bpy.types.Panel):
+    """Blender's Cryptomatte settings of the view layer, as Cycles' panel shows them (Accurate
+    Mode left out, as there: neither Cycles nor the engine reads it)."""
+    bl_label = "Cryptomatte"
+    bl_context = "view_layer"
+    bl_parent_id = "SPLAT_TRACER_PT_passes"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        view_layer = context.view_layer
+        col = layout.column()
+        col.prop(view_layer, "use_pass_cryptomatte_object", text="Object")
+        col.prop(view_layer, "use_pass_cryptomatte_material", text="Material")
+        col.prop(view_layer, "use_pass_cryptomatte_asset", text="Asset")
+        col = layout.column()
+        col.active = any((view_layer.use_pass_cryptomatte_object, view_layer.use_pass_cryptomatte_material,
+                          view_layer.use_pass_cryptomatte_asset))
+        col.prop(view_layer, "pass_cryptomatte_depth", text="Levels")
+
+
 class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
     """Mask (shadow catcher, holdout) and ray visibility, as Cycles reads them, inside
     Blender's Object > Visibility panel (Cycles' own copy hides for other engines)."""
@@ -403,6 +424,7 @@ class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
+           SPLAT_TRACER_PT_passes_cryptomatte,
            SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
            SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
 

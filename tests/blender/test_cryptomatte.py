@@ -228,3 +228,19 @@ def test_levels_set_the_layer_count(blender, renders):
     two, _ = renders["levels2"]
     for kind in KINDS:
         assert len(_layers(two, kind)) == 1 and len(_layers(six, kind)) == 3
+
+
+def test_the_engines_passes_panel_shows_the_settings(blender, empty_scene):
+    from types import SimpleNamespace
+
+    from test_method_settings import _Layout
+
+    bpy = blender
+    panel = bpy.types.SPLAT_TRACER_PT_passes_cryptomatte
+    assert panel.poll(bpy.context)
+    drawn = []
+    panel.draw(SimpleNamespace(layout=_Layout(drawn)), SimpleNamespace(view_layer=empty_scene.view_layers[0]))
+    assert drawn == ["use_pass_cryptomatte_object", "use_pass_cryptomatte_material", "use_pass_cryptomatte_asset",
+                     "pass_cryptomatte_depth"]
+    empty_scene.render.engine = "CYCLES"
+    assert not panel.poll(bpy.context)
