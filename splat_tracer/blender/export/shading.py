@@ -373,6 +373,10 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+# Cycles' default (and largest useful) per-lamp Max Bounces: below it, the lamp's limit acts.
+_LIGHT_MAX_BOUNCES = 1024
+
+
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
     if _has_custom_nodes(light):
@@ -382,6 +386,14 @@ def _report_lamp_extras(obj, light, say) -> None:
         say("light linking is ignored")
     if light.type != "SUN" and not getattr(light, "normalize", True):
         say("'Normalize' off is ignored (rendered as if on)")
+    factors = [label for prop, label in (("diffuse_factor", "Diffuse"), ("specular_factor", "Glossy"),
+                                         ("transmission_factor", "Transmission"))
+               if getattr(light, prop, 1.0) != 1.0]
+    if factors:
+        say(f"its {'/'.join(factors)} influence is ignored (rendered as 1)")
+    bounces = getattr(getattr(light, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        say(f"its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
 
 
 def _area_fields(light, matrix: np.ndarray, say) -> dict:
