@@ -7,9 +7,12 @@ from __future__ import annotations
 import fnmatch
 from dataclasses import dataclass
 
-# The structs the audit walks (test_settings_audit.Audit.owners), as an artist reaches them.
+# The structs the audit walks (test_settings_audit.Audit.owners), as an artist reaches them;
+# spot_light, area_light and sun_light: the lamp turned into that type, the settings its own RNA
+# class adds to a point lamp's.
 OWNERS = ("render", "cycles", "view_settings", "display_settings", "view_layer", "view_layer.cycles", "object",
-          "object.cycles", "light", "spot_light", "area_light", "sun_light", "light.cycles", "world", "world.cycles", "world.light_settings",
+          "object.cycles", "light", "spot_light", "area_light", "sun_light",
+          "light.cycles", "world", "world.cycles", "world.light_settings",
           "world.mist_settings", "world.cycles_visibility", "material", "material.cycles", "camera", "camera.dof",
           "camera.stereo")
 
@@ -278,12 +281,19 @@ def listed(key: str):
 def markdown() -> str:
     out = ["# Settings Splat Tracer does not render", "",
            "Generated from `tests/blender/settings_not_rendered.py` (the settings audit's lists, "
-           "`tests/blender/test_settings_audit.py`); do not edit by hand.", ""]
+           "`tests/blender/test_settings_audit.py`); do not edit by hand.", "",
+           "The audit walks every setting Blender's RNA gives these structs (the scene's `render`, "
+           "Cycles' scene settings `cycles`, colour management, the view layer and its `cycles` group, "
+           "objects, lamps of each type, the world with its mist and light settings, materials, the "
+           "camera with its depth of field and stereo settings), changes each alone in a tiny render, "
+           "and requires that the image or a pass changes, or that the render report says it "
+           "([user-guide.md](user-guide.md#settings-the-engine-does-not-honour)). The settings below "
+           "are the exceptions, each with its reason; every other one is honoured or said.", ""]
     for kind, title in KINDS.items():
         out += [f"## {title}", "", "| Settings | Why |", "|---|---|"]
         for e in ENTRIES:
             if e.kind == kind:
-                names = ", ".join(f"`{e.owner}.{n}`" for n in e.names)
+                names = ", ".join(f"every `{e.owner}` setting" if n == "*" else f"`{e.owner}.{n}`" for n in e.names)
                 out.append(f"| {names} | {e.reason} |")
         out.append("")
     return "\n".join(out)

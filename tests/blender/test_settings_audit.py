@@ -1,6 +1,8 @@
 """The settings audit (issue 26, item 5): every setting an artist can change for a render,
 enumerated from Blender's RNA (not a hand list), is honoured (the image or a pass changes),
-said in the render report (a new line naming it), or listed in settings_not_rendered.py with
+said in the render report (a line said, or no longer said: the lines themselves name the
+setting, which tests/blender/test_unhonoured_settings.py checks case by case for the scene's
+settings), or listed in settings_not_rendered.py with
 its reason -- which docs/settings.md shows. A setting a new Blender adds is in none of these
 and fails here, so the version matrix shows it instead of leaving it unsaid.
 
