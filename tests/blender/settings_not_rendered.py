@@ -132,8 +132,8 @@ ENTRIES = (
           "Parenting, rotation modes, instancing and shape keys: Blender evaluates them into the objects, "
           "matrices and instances the engine renders (no effect on the audit's unparented objects)"),
     Entry("object", ("color",), U,
-          "Read only through a material's Object Info node, which the engine's node evaluation does not have "
-          "(said where a material uses it)"),
+          "Acts only through a material's Object Info node (what the engine makes of a material's nodes is "
+          "said where it differs from Cycles)"),
     Entry("object", ("visible_volume_scatter",), U, "Volumes are not rendered"),
     Entry("object", ("lightgroup",), U,
           "The object's light group: the view layer's light groups are said (their passes are not written)"),
@@ -179,7 +179,6 @@ ENTRIES = (
     Entry("world.cycles", ("volume_sampling", "volume_interpolation", "volume_step_size"), U,
           "Volumes are not rendered"),
     Entry("world.cycles", ("is_caustics_light",), U, "Shadow caustics are not rendered"),
-    Entry("world.cycles", ("max_bounces",), U, "Not read: the world's light takes the scene's bounce limits"),
     Entry("world.light_settings", ("ao_factor", "distance"), U,
           "Settings of the AO pass and Fast GI, which the engine does not write or use (said); the engine's "
           "own AO sky light has its own settings"),
@@ -187,7 +186,8 @@ ENTRIES = (
           "Not read by Cycles either: its Mist pass takes Start, Depth and Falloff"),
     Entry("world.cycles_visibility", ("name",), V, "The property group's name, not a setting"),
     Entry("world.cycles_visibility", ("scatter",), U, "Volumes are not rendered (said when switched off)"),
-    Entry("world.cycles_visibility", ("shadow",), U, "Not read: shadow rays are always blocked as usual"),
+    Entry("world.cycles_visibility", ("shadow",), U,
+          "Not shown in Cycles' panels (its world Ray Visibility has no Shadow); not read"),
     # -- materials -----------------------------------------------------------------------
     Entry("material", ("name", "use_fake_user", "use_extra_user", "is_runtime_data", "tag", "use_nodes",
                        "diffuse_color", "specular_color", "roughness", "specular_intensity", "metallic",

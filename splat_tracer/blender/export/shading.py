@@ -373,7 +373,7 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
-# Cycles' default (and largest useful) per-lamp Max Bounces: below it, the lamp's limit acts.
+# Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
 _LIGHT_MAX_BOUNCES = 1024
 
 
@@ -521,6 +521,9 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
+    bounces = getattr(getattr(world, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        report.once(f"world '{world.name}': its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
                 mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff)
