@@ -1,13 +1,13 @@
 """The settings audit (issue 26, item 5): every setting an artist can change for a render,
 enumerated from Blender's RNA (not a hand list), is honoured (the image or a pass changes),
-said in the render report (a line said, or no longer said: the lines themselves name the
-setting, which tests/blender/test_unhonoured_settings.py checks case by case for the scene's
-settings), or listed in settings_not_rendered.py with
-its reason -- which docs/settings.md shows. A setting a new Blender adds is in none of these
-and fails here, so the version matrix shows it instead of leaving it unsaid.
+said in the render report (a line said, or no longer said; that the line names the setting
+is checked case by case in test_unhonoured_settings.py), or listed in settings_not_rendered.py
+with its reason -- which docs/settings.md shows. A setting a new Blender adds is in none of
+these and fails here instead of going unsaid.
 
-The scene is tiny (24 x 24 pixels, 1 sample): a splat-cloud sphere on a mesh floor, a point
-lamp, a grey world with mist, a camera. Each setting is changed alone from the scene's value
+The scene is tiny (24 x 24 pixels, 1 sample): a splat-cloud sphere on a mesh floor (one
+material, partly transmissive and transparent), a point lamp, a grey world with mist, a
+camera moving through the frame. Each setting is changed alone from the scene's value
 (settings_not_rendered.VALUES where the generic change would show nothing in this scene, and
 CONTEXT where it acts only in another mode, e.g. a spot lamp's cone), the frame is rendered
 through the session (the engine's own export and render, passes included) and compared with
@@ -165,7 +165,7 @@ def _value(owner, prop):
 
 
 def _apply(audit, settings: dict) -> list:
-    """Sets {'owner.prop': value} on the first struct of each owner; returns the undo."""
+    """Sets {"owner.prop": value} on every struct of each owner; returns the undo."""
     undo = []
     for key, value in settings.items():
         owner_name, _, prop = key.rpartition(".")
