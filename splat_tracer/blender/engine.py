@@ -11,7 +11,7 @@ import traceback
 import bpy
 import numpy as np
 
-from ..render import ab
+from ..render import ab, cryptomatte
 from . import session, viewport
 from .export import settings as export_settings
 from .export.scene import View
@@ -43,6 +43,10 @@ _PASSES = (
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )
 SPLAT_COUNT = "Splat Count"  # debug pass: the splats that formed each surface point
+# Cryptomatte: the view layer's switch of each kind (render/cryptomatte.py KINDS), whose
+# passes are <kind>00, <kind>01, ... (4 channels, two (id, coverage) pairs each), as Cycles names them.
+_CRYPTOMATTE = dict(zip(cryptomatte.KINDS, ("use_pass_cryptomatte_object", "use_pass_cryptomatte_material",
+                                            "use_pass_cryptomatte_asset")))
 _BLENDER_NAME = {core_name: blender_name for _, core_name, blender_name, *_ in _PASSES}
 
 
@@ -58,6 +62,7 @@ def wanted_passes(view_layer, scene=None) -> tuple:
     """The core's names of the passes the view layer asks for (with the scene: and Cycles'
     denoising passes, by Cycles' names)."""
     names = [name for prop, name, *_ in _PASSES if _switch(view_layer, prop)]
+    names += [kind for kind, prop in _CRYPTOMATTE.items() if _switch(view_layer, prop)]
     if view_layer.splat_tracer.use_pass_splat_count:
         names.append(SPLAT_COUNT)
     if scene is not None:
@@ -88,6 +93,12 @@ class SplatTracerEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
         for name in export_settings.denoising_passes(scene, renderlayer):
             self.register_pass(scene, renderlayer, name, *_DENOISING_PASSES[name])
+        layers = cryptomatte.slots_of(renderlayer.pass_cryptomatte_depth) // 2
+        for kind, prop in _CRYPTOMATTE.items():
+            if _switch(renderlayer, prop):
+                for i in range(layers):
+                    # Lower-case channel ids, as Cycles registers them (the EXR's '.r', '.g', ...).
+                    self.register_pass(scene, renderlayer, f"{kind}{i:02d}", 4, "rgba", "COLOR")
 
     def _views(self, scene) -> list:
         """A stereo or multi-view render's views, each with its camera as Blender gives it
@@ -140,6 +151,13 @@ class SplatTracerEngine(bpy.types.RenderEngine):
             # (none known) would get the first view's image rather than stay black.
             for name, pixels in frame.views.get(view.name, frame.passes).items():
                 _set_pass(layer, view.name, name, pixels)
+        if frame.metadata:
+            # Cryptomatte's manifests, saved in the EXR's header: on the engine's whole result
+            # (get_result), as Cycles writes them -- a tile's begin_result() result is merged
+            # into it without its metadata.
+            whole = self.get_result()
+            for key, value in frame.metadata.items():
+                whole.stamp_data_add_field(key, value)
         if frame.completed:
             self.end_result(result)
         else:

@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..render import shading
+from ..render import cryptomatte, shading
 from ..render.method import Method
 from . import denoise, export
 from .export import settings as export_settings
@@ -87,6 +87,7 @@ class Frame:
     stats: dict
     report: shading.Report = field(default_factory=shading.Report)
     views: dict = field(default_factory=dict)  # a multi-view render's passes by view name ('passes': the first's)
+    metadata: dict = field(default_factory=dict)  # the render result's (Cryptomatte's manifests): field -> text
 
 
 def image_size(render) -> tuple[int, int]:
@@ -244,10 +245,13 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     core_passes = tuple(dict.fromkeys([name for name in wanted if name not in _GUIDES
                                        and name != export_settings.NOISY_IMAGE] + guides))
     t1 = time.perf_counter()
+    view_layer = depsgraph.view_layer
     view_passes, completed, counters, t_denoise, denoised_views = {}, True, {}, 0.0, 0
+    metadata = {}
     for name, camera in cameras.items():
         result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
-                                              window=(x0, y0, w, h), threads=threads, progress=progress)
+                                              window=(x0, y0, w, h), threads=threads, progress=progress,
+                                              cryptomatte_levels=view_layer.pass_cryptomatte_depth)
         position = result.passes.get("Position")
         if position is not None:
             # The core's positions are in the local frame; the pass is in world space, as
@@ -263,6 +267,10 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                                           camera.local_from_camera, threads, report)
             t_denoise += time.perf_counter() - t2
             denoised_views += frame_passes.get("Combined") is not result.passes.get("Combined")
+        # Every view gets its Cryptomatte layers (cut after the denoiser, which keeps the
+        # passes `wanted` names); the manifests, the scene's names, are the same for every
+        # view: the result's metadata, written once.
+        metadata = cryptomatte_layers(frame_passes, exported.render_scene, view_layer.name)
         view_passes[name] = frame_passes
         completed = completed and result.completed
         counters = counters or result.counters
@@ -277,7 +285,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                        clouds=exported.clouds, closed_clouds=exported.closed_clouds,
                        render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
-                       view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
+                       view_layer=view_layer.name, samples=settings.samples, report=list(report.lines),
                        completed=completed, sampling=sampling, views=list(cameras) if views else [],
                        denoise_seconds=t_denoise, **counters)
     CACHE.end_frame(keep)
@@ -287,4 +295,20 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
         f"export {t_export:.2f} s, render {t_render:.2f} s")
     first = next(iter(view_passes.values()))
     return Frame(first, completed, (x0, y0, w, h), width, height, frame_stats, report,
-                 view_passes if views else {})
+                 view_passes if views else {}, metadata)
+
+
+def cryptomatte_layers(passes: dict, render_scene, view_layer_name: str) -> dict:
+    """Replaces each Cryptomatte pass of `passes` by its RGBA layers (CryptoObject00, ...),
+    and returns their metadata for the render result, as Cycles writes it: per kind, the
+    view layer's '<layer>.<kind>' name and the manifest of the names the scene holds (Cycles
+    lists every object and shader of its scene, whether seen or not)."""
+    names = {"CryptoObject": [n for n, _ in render_scene.instance_names],
+             "CryptoMaterial": render_scene.material_names,
+             "CryptoAsset": [a for _, a in render_scene.instance_names]}
+    metadata = {}
+    for kind in cryptomatte.KINDS:
+        if kind in passes:
+            passes.update(cryptomatte.layers(kind, passes.pop(kind)))
+            metadata.update(cryptomatte.metadata(f"{view_layer_name}.{kind}", names[kind]))
+    return metadata

@@ -85,8 +85,37 @@ def _optix(bpy, scene):
     return ("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead",)
 
 
+def _film_exposure(bpy, scene):
+    scene.cycles.film_exposure = 2.0
+    return ("Cycles' Film > Exposure (2) is not applied", "rendered at 1")
+
+
+def _caustics(bpy, scene):
+    scene.cycles.caustics_refractive = False
+    return ("Cycles' Caustics > Reflective/Refractive off is not honoured",)
+
+
+def _layer_samples(bpy, scene):
+    scene.view_layers[0].samples = 8
+    return (f"{LAYER}: its Samples override (8) is not used", "the scene's 1 samples")
+
+
+def _layer_filter(bpy, scene):
+    scene.view_layers[0].use_sky = False
+    return (f"{LAYER}: Filter > Environment off is not honoured",)
+
+
+def _lamp_influence(bpy, scene):
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    scene.collection.objects.link(lamp)
+    lamp.data.diffuse_factor = 0.5
+    return ("light 'Lamp': its Diffuse influence is ignored (rendered as 1)",)
+
+
 CASES = {"motion blur": _motion_blur, "stereo panorama": _stereo_panorama, "shader AOV": _aov,
-         "light group": _light_group, "OptiX denoiser": _optix}
+         "light group": _light_group, "OptiX denoiser": _optix, "film exposure": _film_exposure,
+         "caustics": _caustics, "view layer samples": _layer_samples, "view layer filter": _layer_filter,
+         "lamp influence": _lamp_influence}
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
@@ -122,10 +151,13 @@ def test_the_pass_tables_cover_every_pass_switch_of_blender(blender):
     -- so a pass a new Blender adds fails here instead of going unsaid."""
     bpy = blender
     engine = extension_module("blender.engine")
+    # Accurate Mode: a mode of the Cryptomatte passes, no pass of its own -- and one neither
+    # Cycles nor 5.0's panels use (the engine keeps the pixel's first ids, as Cycles).
     not_passes = {"use_pass_combined",             # always written
-                  "use_pass_cryptomatte_accurate"}  # a mode of the Cryptomatte passes, no pass of its own
+                  "use_pass_cryptomatte_accurate"}
     # Denoising Data: the Denoising Normal/Albedo/Depth passes (export/settings.py denoising_passes).
-    written = {prop for prop, *_ in engine._PASSES} | {"cycles.denoising_store_passes"}
+    written = ({prop for prop, *_ in engine._PASSES} | set(engine._CRYPTOMATTE.values())
+               | {"cycles.denoising_store_passes"})
     unwritten = {f"{owner}.{prop}" if owner else prop for owner, prop, _ in _pass_switches()}
     assert not written & unwritten
     layer = bpy.context.scene.view_layers[0]

@@ -357,7 +357,8 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
-            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"]))
+            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], name=obj.name,
+            asset=asset_name(obj)))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
@@ -365,6 +366,15 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report)
+
+
+def asset_name(obj) -> str:
+    """Cryptomatte's asset of an object, as Cycles names it: its top-level parent's name (its
+    own without a parent). An instance is named by the object it instances (Cycles' object
+    name), whose parents are followed, not the instancer's."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.name
 
 
 def geometry_has_colours(obj) -> bool:

@@ -35,9 +35,6 @@ UNWRITTEN_PASSES = (
     ("", "use_pass_subsurface_direct", "Subsurface Direct"),
     ("", "use_pass_subsurface_indirect", "Subsurface Indirect"),
     ("", "use_pass_subsurface_color", "Subsurface Color"),
-    ("", "use_pass_cryptomatte_object", "Cryptomatte Object"),
-    ("", "use_pass_cryptomatte_material", "Cryptomatte Material"),
-    ("", "use_pass_cryptomatte_asset", "Cryptomatte Asset"),
     ("", "use_pass_grease_pencil", "Grease Pencil"),
     ("cycles", "use_pass_volume_direct", "Volume Direct"),
     ("cycles", "use_pass_volume_indirect", "Volume Indirect"),
@@ -47,6 +44,26 @@ UNWRITTEN_PASSES = (
     ("cycles", "pass_debug_sample_count", "Debug Sample Count"),
     ("cycles", "pass_render_time", "Render Time"),
 )
+
+
+# Blender's default Alpha Threshold of the data passes (ViewLayer.pass_alpha_threshold).
+_ALPHA_THRESHOLD = 0.5
+
+
+def _report_cycles_scene(scene, cycles, report: shading.Report) -> None:
+    """Cycles' scene settings the engine does not read (the settings audit found them)."""
+    if cycles.film_exposure != 1.0:  # Cycles' brightness scale, 1 by default
+        report.once(f"Cycles' Film > Exposure ({cycles.film_exposure:g}) is not applied: the image is rendered "
+                    "at 1 (Color Management > Exposure, which Blender applies, brightens both engines' images)")
+    if not cycles.caustics_reflective or not cycles.caustics_refractive:
+        report.once("Cycles' Caustics > Reflective/Refractive off is not honoured: caustic paths are not filtered")
+    if cycles.film_transparent_glass and scene.render.film_transparent:
+        report.once("Cycles' Film > Transparent Glass is not honoured: glass is not made transparent in the "
+                    "film's alpha")
+    if cycles.use_fast_gi:
+        report.once("Cycles' Fast GI Approximation is not used: indirect light is traced to the bounce limits")
+    if cycles.use_sample_subset:
+        report.once(f"Cycles' Sample Subset is not used: all {cycles.samples} samples are taken")
 
 
 def _on(owner, prop: str) -> bool:
@@ -137,8 +154,9 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     honour and what it does instead. Called once a frame by the session."""
     render = scene.render
     if render.use_motion_blur:
+        position = render.motion_blur_position.lower().replace("_", " ")
         report.once(f"Motion Blur is not rendered: the frame is rendered sharp at frame {scene.frame_current}'s "
-                    f"time (the shutter of {render.motion_blur_shutter:g} frames is ignored)")
+                    f"time (the shutter of {render.motion_blur_shutter:g} frames, position {position}, is ignored)")
     if render.use_multiview:
         camera = scene.camera
         if camera is not None and camera.type == "CAMERA" and camera.data.type == "PANO" \
@@ -149,8 +167,19 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
             report.once(f"camera '{camera.name}': stereo panorama rendered with each eye's camera moved by half "
                         "the interocular distance, not Cycles' spherical stereo (each ray's own eye offset): "
                         "the disparity is right ahead of the camera only")
+    cycles = getattr(scene, "cycles", None)
+    if cycles is not None:
+        _report_cycles_scene(scene, cycles, report)
     owners = {"": view_layer, "cycles": getattr(view_layer, "cycles", None)}
     layer = f"view layer '{view_layer.name}'"
+    if cycles is not None and view_layer.samples > 0 and getattr(cycles, "use_layer_samples", "USE") != "IGNORE":
+        report.once(f"{layer}: its Samples override ({view_layer.samples}) is not used: the scene's "
+                    f"{cycles.samples} samples are taken")
+    for prop, label in (("use_solid", "Surfaces"), ("use_sky", "Environment")):
+        if not getattr(view_layer, prop, True):
+            report.once(f"{layer}: Filter > {label} off is not honoured (rendered as on)")
+    if view_layer.pass_alpha_threshold != _ALPHA_THRESHOLD:
+        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is not read")
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")
