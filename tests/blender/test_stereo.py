@@ -10,6 +10,7 @@ uses each view's own (suffixed) camera.
 """
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -67,8 +68,10 @@ def _render(bpy, scene, path) -> dict:
         for name, c in part.channels.items():
             layer, pass_name, letter = name.split(".")
             views.setdefault(part.header["view"], {}).setdefault(pass_name, {})[letter] = c.pixels
-    return {view: {p: (c[next(iter(c))] if len(c) == 1 else np.stack([c[k] for k in sorted(c, key="RGBAXYZ".index)],
-                                                                       axis=-1)) for p, c in passes.items()}
+    # Channel ids in RGBA order, upper-case or Cryptomatte's lower-case ones alike.
+    order = lambda k: "RGBAXYZ".index(k.upper())  # noqa: E731
+    return {view: {p: (c[next(iter(c))] if len(c) == 1 else np.stack([c[k] for k in sorted(c, key=order)], axis=-1))
+                   for p, c in passes.items()}
             for view, passes in views.items()}
 
 
@@ -163,3 +166,39 @@ def test_no_stereo_line_in_report(blender, empty_scene, tmp_path):
     stats = session.HISTORY[-1]
     assert stats["views"] == ["left", "right"], stats["views"]
     assert not any("tereo" in line for line in stats["report"]), stats["report"]
+
+
+def test_every_view_gets_its_cryptomatte_layers(blender, empty_scene, tmp_path):
+    """Cryptomatte in a stereo render: each eye's CryptoObject layers come from that eye's
+    camera -- the cube's matte (its coverage, as a compositor decodes it) sits where the
+    eye's Object Index shows the cube, within DISPARITY_TOLERANCE of its centre and its
+    area within 10 % (anti-aliased edges), and not where the other eye shows it (the
+    cube's disparity, 7 px, is outside the tolerance) -- and the manifest, written once,
+    names the scene's objects."""
+    import OpenEXR
+
+    from splat_tracer.render import cryptomatte
+
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene, "OFFAXIS")
+    scene.view_layers[0].use_pass_cryptomatte_object = True
+    scene.render.engine = "SPLAT_TRACER"
+    path = tmp_path / "crypto.exr"
+    views = _render(bpy, scene, path)
+    cube_id = np.float32(cryptomatte.name_id("Cube"))
+    centres = {}
+    for name, passes in views.items():
+        layers = sorted(p for p in passes if p.startswith("CryptoObject"))
+        assert layers == ["CryptoObject00", "CryptoObject01", "CryptoObject02"], (name, sorted(passes))
+        matte = sum(np.where(passes[layer][..., i] == cube_id, passes[layer][..., i + 1], 0.0)
+                    for layer in layers for i in (0, 2))
+        mask = np.rint(passes[INDEX]) == 1
+        assert abs(matte.sum() - mask.sum()) < 0.1 * mask.sum(), (name, matte.sum(), mask.sum())
+        centres[name] = float((matte.sum(axis=0) * np.arange(W)).sum() / matte.sum())
+        assert abs(centres[name] - _centre_x(passes[INDEX], 1)) < DISPARITY_TOLERANCE, (name, centres)
+    assert abs(centres["left"] - _centre_x(views["right"][INDEX], 1)) > 2 * DISPARITY_TOLERANCE, centres
+    header = OpenEXR.File(str(path)).parts[0].header
+    keys = [k for k in header if k.startswith("cryptomatte/") and k.endswith("/manifest")]
+    assert len(keys) == 1, keys
+    manifest = header[keys[0]]
+    assert set(json.loads(manifest.decode() if isinstance(manifest, bytes) else manifest)) == {"Cube", "Ball"}
