@@ -48,9 +48,6 @@ ENTRIES = (
           "Output, compositing, sequencer, metadata stamps and Freestyle: Blender applies them to the engine's "
           "result, as to Cycles'"),
     Entry("render", ("engine",), B, "Chooses the render engine itself"),
-    Entry("render", ("views_format",), B,
-          "Which views Blender makes (Stereo 3D or Multi-View); the engine writes its one image into each, "
-          "said with Stereoscopy"),
     Entry("render", ("preview_pixel_size", "use_lock_interface"), V, "The viewport's pixel size; the interface lock"),
     Entry("render", ("threads", "threads_mode", "use_persistent_data"), C,
           "Performance only: the engine uses the threads and keeps the geometry between frames (Persistent "
@@ -78,9 +75,9 @@ ENTRIES = (
                      "use_preview_denoising", "preview_denois*", "volume_preview_step_rate", "preview_dicing_rate"), V,
           "The viewport's settings (the engine's viewport reads its samples and adaptive sampling; the audit "
           "renders F12 frames)"),
-    Entry("cycles", ("denoiser", "denoising_prefilter", "denoising_quality", "denoising_input_passes"), U,
-          "Settings of Cycles' Denoise, which the engine does not apply (said in the render report, with the "
-          "compositor's Denoise node as the way)"),
+    Entry("cycles", ("denoiser",), C,
+          "Which denoiser Cycles runs: the engine denoises with OpenImageDenoise on the CPU, and says so when "
+          "OptiX is set (test_unhonoured_settings.py); without an NVIDIA GPU OptiX cannot be chosen"),
     Entry("cycles", ("volume_bounces", "volume_step_rate", "volume_max_steps", "volume_biased"), U,
           "Volumes are not rendered (a material's Volume output is said where it is ignored)"),
     Entry("cycles", ("dicing_rate", "max_subdivisions", "offscreen_dicing_scale"), U,
@@ -224,8 +221,9 @@ ENTRIES = (
     Entry("camera", ("custom_*",), U, "Custom (OSL script) cameras are not rendered: the frame fails with a message"),
     Entry("camera.dof", ("focus_subtarget",), B,
           "A bone of the focus object: Blender's focus distance follows it (no bone in the audit's scene)"),
-    Entry("camera.stereo", ("*",), U,
-          "The stereo eyes' cameras: every view gets the scene camera's image (said with Stereoscopy)"),
+    Entry("camera.stereo", ("use_spherical_stereo", "use_pole_merge", "pole_merge_angle_*"), U,
+          "Cycles' spherical stereo and its pole merge (each ray its own eye offset) are not used: each eye is "
+          "rendered with its whole camera moved (said for a panoramic camera)"),
 )
 
 # A value for settings whose generic change (test_settings_audit.changed_value) shows nothing
@@ -274,6 +272,12 @@ CONTEXT = {
        for p in ("latitude_min", "latitude_max", "longitude_min", "longitude_max")},
     **{f"camera.dof.{p}": _DOF for p in ("focus_distance", "aperture_fstop", "aperture_blades", "aperture_ratio")},
     "camera.dof.aperture_rotation": {**_DOF, "camera.dof.aperture_blades": 5},
+    # Stereoscopy: its settings act with it on (each view compared, test_settings_audit.Audit.frame).
+    "render.views_format": {"render.use_multiview": True},
+    **{f"camera.stereo.{p}": {"render.use_multiview": True}
+       for p in ("convergence_mode", "convergence_distance", "interocular_distance", "pivot")},
+    # Denoising: its settings act with Cycles' Denoise on.
+    **{f"cycles.denoising_{p}": {"cycles.use_denoising": True} for p in ("prefilter", "quality", "input_passes")},
 }
 
 

@@ -108,7 +108,10 @@ class Audit:
         finally:
             self.session.render_frame = render_frame
         assert len(frames) == 1, "one view layer, one frame"
-        return frames[0].passes, list(frames[0].report.lines)
+        frame = frames[0]
+        # A stereo or multi-view frame: every view's passes (a setting may change one eye only).
+        passes = {f"{view}/{name}": pixels for view, views in frame.views.items() for name, pixels in views.items()}
+        return passes or frame.passes, list(frame.report.lines)
 
 
 def _enum_items(owner, prop) -> list:
