@@ -459,9 +459,8 @@ classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_vis
 # object data, physics), as Cycles' add-on keeps its list (cycles/ui.py get_panels). Names, or
 # fnmatch patterns for whole families. Left out on purpose: DATA_PT_light (a second light-type
 # selector; SPLAT_TRACER_PT_light is the one Light panel), DATA_PT_spot (in that panel),
-# DATA_PT_preview and MATERIAL_PT_preview (no preview renders: bl_use_preview),
-# DATA_PT_camera_stereoscopy (the eyes' cameras are not rendered), the volume and light-probe
-# render settings, Freestyle and Grease Pencil render settings (not offered by this engine),
+# DATA_PT_preview and MATERIAL_PT_preview (no preview renders: bl_use_preview), the volume and
+# light-probe render settings, Freestyle and Grease Pencil render settings (not offered by this engine),
 # EEVEE_MATERIAL_PT_viewport_settings (EEVEE's material settings) and OBJECT_PT_shading (an
 # empty parent for engines' shading settings). tests/blender/test_panels.py checks that every
 # panel opened is here and that none shows a setting the settings audit lists as not rendered.
@@ -476,9 +475,11 @@ GENERIC_PANELS = (
     "VIEWLAYER_PT_layer", "VIEWLAYER_PT_context_layer", "OBJECT_PT_visibility", "OBJECT_PT_custom_props",
     "WORLD_PT_context_world", "WORLD_PT_animation", "WORLD_PT_custom_props", "MATERIAL_PT_animation",
     "MATERIAL_PT_custom_props", "MATERIAL_PT_freestyle_line",
-    # Camera: Depth of Field is honoured as Cycles does (Cycles opens its own copy)
+    # Camera: Depth of Field is honoured as Cycles does (Cycles opens its own copy); the stereo
+    # eyes' cameras are rendered (Blender gives each view's to the engine)
     "CAMERA_PT_presets", "CAMERA_PT_safe_areas_presets", "DATA_PT_context_camera", "DATA_PT_camera",
-    "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_camera_display",
+    "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_camera_stereoscopy",
+    "DATA_PT_camera_display",
     "DATA_PT_camera_display_composition_guides", "DATA_PT_camera_safe_areas",
     "DATA_PT_camera_safe_areas_center_cut", "DATA_PT_camera_background_image", "DATA_PT_camera_animation",
     "DATA_PT_custom_props_camera",

@@ -74,7 +74,7 @@ def test_generic_panels_come_from_the_include_list(blender):
     names = [p.__name__ for p in bpy.types.Panel.__subclasses__()]
     assert all(any(fnmatch.fnmatchcase(n, pattern) for n in names) for pattern in ui.GENERIC_PANELS)
     for left_out in ("DATA_PT_light", "DATA_PT_spot", "DATA_PT_preview", "MATERIAL_PT_preview",
-                     "DATA_PT_camera_stereoscopy", "RENDER_PT_freestyle", "OBJECT_PT_shading"):
+                     "RENDER_PT_freestyle", "OBJECT_PT_shading"):
         assert left_out not in opened
     # Blender's engine-agnostic panels that show for its own BLENDER_RENDER were all opened before
     # (297 of them); the include list opens fewer.
@@ -116,6 +116,7 @@ def scene_objects(blender):
     lamp_obj = lamp(bpy, "SPOT", location=(1, -1, 3))
     cam = add_camera(bpy, scene, (0, -5, 3), (math.radians(62), 0, 0))
     cam.data.dof.use_dof = True
+    scene.render.use_multiview = True  # the camera's Stereoscopy panel shows with it
     scene.world = bpy.data.worlds.new("World")
     return scene, [floor, cloud, lamp_obj, cam], material
 
@@ -213,7 +214,7 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
     assert not unsupported, unsupported
     # The walk saw the engine's settings (a draw recorder that records nothing would pass).
     assert {"cycles.samples", "light.temperature", "light.exposure", "camera.dof.aperture_fstop",
-            "object.is_shadow_catcher", "render.resolution_x"} <= shown_keys, sorted(shown_keys)
+            "object.is_shadow_catcher", "render.resolution_x", "camera.stereo.interocular_distance"} <= shown_keys, sorted(shown_keys)
 
 
 def test_one_light_panel_with_one_type_selector(blender, scene_objects):
