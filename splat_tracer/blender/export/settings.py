@@ -93,6 +93,8 @@ def _stored(owner, prop: str, default):
     system = getattr(owner, "bl_system_properties_get", None)
     store = system() if system is not None else owner
     return default if store is None else store.get(prop, default)
+
+
 NOISY_IMAGE = "Noisy Image"
 DENOISING_DATA = ("Denoising Normal", "Denoising Albedo", "Denoising Depth")
 
