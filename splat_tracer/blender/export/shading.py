@@ -37,6 +37,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
+from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"
@@ -523,6 +524,12 @@ def world_of(scene, report: shading.Report) -> shading.World:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, **film)
     if sockets.linked_inputs(output, ["Volume"]):
         sockets.say(": Volume is ignored")
+    if source[0].type in ("MIX_SHADER", "ADD_SHADER") or any(
+            n.type in ("TEX_ENVIRONMENT", "LIGHT_PATH") and not n.mute for n in tree.nodes):
+        # A world that varies with the direction or the ray: baked into an image (world.py).
+        # A plain Background keeps the uniform path below, as before.
+        fields = export_world.bake(tree, output, sockets, _upstream)
+        return shading.World(strength=1.0, **fields, **film)
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
         return viewport

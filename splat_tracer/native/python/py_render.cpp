@@ -202,27 +202,59 @@ void RenderScene_dealloc(PyObject *self) {
     Py_DECREF(type);
 }
 
+// world_map: None, or (light, camera): the environment image lighting the scene and the one
+// camera rays see (None: the same), each a height x width x 3 float32 array of finite values
+// >= 0 (shade/environment.h's layout).
+bool parse_world_map(PyObject *obj, std::unique_ptr<EnvironmentMap> &light, std::unique_ptr<EnvironmentMap> &camera) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj) || PyTuple_Size(obj) != 2)
+        return PyErr_SetString(PyExc_TypeError, "world_map must be None or a (light, camera) tuple"), false;
+    for (int i = 0; i < 2; ++i) {
+        PyObject *item = PyTuple_GetItem(obj, i);
+        if (item == Py_None) {
+            if (i == 0) return PyErr_SetString(PyExc_TypeError, "world_map's light image is required"), false;
+            continue;
+        }
+        const char *name = i == 0 ? "world_map light" : "world_map camera";
+        View view;
+        const Py_ssize_t shape[3] = {-1, -1, 3};
+        if (!get_array(item, name, 'f', 3, shape, false, view)) return false;
+        const Py_ssize_t h = view.buf.shape[0], w = view.buf.shape[1];
+        if (w < 2 || h < 2 || w > 65536 || h > 32768)
+            return PyErr_Format(PyExc_ValueError, "%s must be 2..65536 wide and 2..32768 high", name), false;
+        const float *data = view.data<float>();
+        for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+            if (!(std::isfinite(data[k]) && data[k] >= 0.f))
+                return PyErr_Format(PyExc_ValueError, "%s must be finite, >= 0", name), false;
+        std::string message;
+        std::unique_ptr<EnvironmentMap> &target = i == 0 ? light : camera;
+        if (PyObject *type = run_native([&] { target = std::make_unique<EnvironmentMap>(data, int(w), int(h)); }, message))
+            return PyErr_SetString(type, message.c_str()), false;
+    }
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "world_map", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *oworldmap = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)O",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &oworldmap))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -264,6 +296,12 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (world_visibility < 0 || world_visibility > int(kVisAll))
         return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
     cfg.world_visibility = uint32_t(world_visibility);
+    std::unique_ptr<EnvironmentMap> environment, camera_environment;
+    if (!parse_world_map(oworldmap, environment, camera_environment)) return nullptr;
+    if (environment) {
+        cfg.environment = environment.get(), cfg.camera_environment = camera_environment.get();
+        cfg.world = environment->mean();  // what the uniform world's uses (sky AO, "is the scene lit") see
+    }
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
@@ -396,10 +434,13 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1))\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), world_map=None)"
+     "\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
-     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. world_map: None "
+     "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
     {nullptr, nullptr, 0, nullptr},
 };
 
