@@ -281,6 +281,7 @@ class RenderSettings:
         "MIS" (shadow rays aimed at them and the rays that meet them, weighed by multiple
         importance sampling, as Cycles), "LIGHT" (shadow rays only) or "BSDF" (the rays that
         meet them only). The last two are for verifying the first; all three converge alike.
+        The world's environment image (World.environment) is sampled by the same strategy.
 
     Noise control, Cycles' settings with Cycles' meaning (0 turns each off):
     clamp_direct / clamp_indirect: Cycles' Clamp Direct / Indirect. A sample's contribution

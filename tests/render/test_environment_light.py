@@ -93,3 +93,71 @@ def test_black_image_is_not_sampled():
 def test_bad_images_are_refused(bad):
     with pytest.raises(ValueError):
         _run(bad, np.zeros((0, 2)), np.zeros((0, 3)))
+
+
+# --------------------------------------------------------------------------------------
+# The environment as a light in a render (plain core, no Blender).
+
+def _env_scene():
+    """A floor and a sphere cloud under the sun-spot sky of _image() (no lamp)."""
+    from splat_tracer.render.scene import Instance, Mesh, RenderScene
+    from splat_tracer.render.shading import Material, World
+    from splat_tracer.render.splats import SplatCloud
+    from geometry import sphere_cloud
+
+    p, n, r = sphere_cloud(4000, radius=0.4)
+    floor = Mesh([(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)], np.array([(0, 1, 2), (0, 2, 3)]))
+    lambert = Material(base_colour=(0.8,) * 3, specular_level=0.0, roughness=1.0)
+    world = World(environment=_image())
+    return RenderScene([Instance(floor, materials=(lambert,)), Instance(SplatCloud(p + [0, 0, 0.5], n, r),
+                                                                        materials=(lambert,))], (), world)
+
+
+def _env_render(scene, strategy, samples, seed=0):
+    from splat_tracer.render.camera import Camera
+    from splat_tracer.render.shading import RenderSettings
+
+    cam = Camera.look_at((0.0, -3.0, 1.8), (0.0, 0.2, 0.3), up=(0, 0, 1), fov_y=50, aspect=4 / 3)
+    res = scene.render(cam, 32, 24, RenderSettings(samples=samples, diffuse_bounces=1, seed=seed,
+                                                   mesh_light_strategy=strategy))
+    return res.passes["Combined"][..., :3].astype(np.float64), res
+
+
+def test_light_bsdf_and_mis_agree_and_importance_sampling_cuts_the_noise():
+    """Shadow rays towards the environment only, BSDF rays only and both weighed by MIS are
+    three unbiased estimators: their means agree within 3 % (measured: 16 samples LIGHT 0.4194,
+    BSDF 0.4013, MIS 0.4154; 1024-sample MIS 0.4141). At equal samples (16), the error against
+    the 1024-sample MIS reference is several times smaller with the environment sampled (MIS)
+    than without (BSDF: the sun found by chance). Measured mean absolute error: MIS 0.040,
+    BSDF 0.378 (9.5x), LIGHT alone 0.134 (the wide sky is what BSDF rays find best)."""
+    scene = _env_scene()
+    reference, _ = _env_render(scene, "MIS", 1024)
+    images = {s: _env_render(scene, s, 16, seed=1)[0] for s in ("LIGHT", "BSDF", "MIS")}
+    means = {k: v.mean() for k, v in images.items()}
+    print({k: round(v, 4) for k, v in means.items()}, "reference", round(reference.mean(), 4))
+    long_bsdf = _env_render(scene, "BSDF", 1024)[0]
+    assert abs(long_bsdf.mean() / reference.mean() - 1) < 0.03
+    for k in ("LIGHT", "MIS"):
+        assert abs(means[k] / reference.mean() - 1) < 0.03, (k, means)
+    error = {k: np.abs(v - reference).mean() for k, v in images.items()}
+    print("mean absolute error at 16 samples", {k: round(v, 4) for k, v in error.items()})
+    assert error["MIS"] * 4 < error["BSDF"]
+    assert error["MIS"] <= error["LIGHT"] * 1.2
+
+
+def test_camera_rays_see_the_camera_image_and_the_light_is_the_other():
+    """World.camera_environment: what camera rays see; the floor is lit by `environment`."""
+    from splat_tracer.render.shading import World
+
+    scene = _env_scene()
+    lit, _ = _env_render(scene, "MIS", 16)
+    green = np.zeros((8, 16, 3), np.float32)
+    green[..., 1] = 0.5
+    scene.world = World(environment=_image(), camera_environment=green)
+    both, _ = _env_render(scene, "MIS", 16)
+    sky = np.isclose(both, (0, 0.5, 0)).all(-1)
+    assert sky.sum() > 50  # the top rows see the backdrop
+    # The same light everywhere else: pixels differ only on the sky and its filtered edge.
+    from scipy.ndimage import binary_dilation
+    differ = ~np.isclose(lit, both).all(-1)
+    assert not (differ & ~binary_dilation(sky, iterations=2)).any()  # the filter: 3 px wide

@@ -178,7 +178,8 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
                        ? &scene.mesh_lights()
                        : nullptr),
-      environment_light_(settings.environment && settings.environment->sampled() && !settings.sky_ao
+      environment_light_(settings.environment && settings.environment->sampled() && !settings.sky_ao &&
+                                 settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly
                              ? settings.environment
                              : nullptr),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
@@ -893,6 +894,7 @@ Vec3 Integrator::world_missed(const PathState &st, Vec3 d) const {
     // A sampled diffuse or glossy bounce (mis_pdf > 0) could have been drawn by the
     // environment light too: the power heuristic shares the direction between the two ways.
     if (!environment_light_ || !(st.mis_pdf > 0.f)) return world;
+    if (settings_.mesh_light_strategy == IntegratorSettings::kLightOnly) return Vec3();
     const float light_pdf = environment_light_->pdf(d) * float(settings_.shadow_samples);
     return world * power_heuristic(st.mis_pdf, light_pdf);
 }
@@ -924,7 +926,9 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
                         (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
         }
         const float light_pdf = es.pdf * float(k);
-        const float w = power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, es.wi, picks));
+        const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
+                            ? 1.f
+                            : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, es.wi, picks));
         const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
         if (!(luminance(c) > 0.f)) continue;
         ++tally.shadow;

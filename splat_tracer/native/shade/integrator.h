@@ -57,6 +57,7 @@ struct IntegratorSettings : FrameSettings {
     // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
     // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
     // material whose Emission Sampling is None). The last two exist to verify the first.
+    // The environment image as a light follows the same strategy.
     enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
     int mesh_light_strategy = kMis;
     // Cycles' Film mist settings (the World's Mist Pass panel): start, 1 / depth (0: a depth
