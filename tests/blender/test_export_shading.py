@@ -340,11 +340,19 @@ def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, rep
     assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform sky of radiance (1.7, 2.9, 4.8)" \
         in report.lines[0]
     background.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    # An Environment Texture is baked (tests/blender/test_world_environment.py); without an
+    # image, Cycles renders its missing-image pink (measured: (1.02, 0.0004, 1.04) on 8x8
+    # pixels), a uniform world: the uniform path, x strength, nothing to report.
     links.new(nodes.new("ShaderNodeTexEnvironment").outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    assert w.colour == approx((0.3, 0.3, 0.3))
-    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Environment Texture' node; "
-                               "using its default value (0.3, 0.3, 0.3)")
+    assert w.environment is None and w.radiance() == approx((0.5, 0.0, 0.5))
+    assert len(report.lines) == 1
+    # A node the bake does not evaluate falls back to the socket's default value, said once.
+    links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"], background.inputs["Color"])
+    w = es.world_of(empty_scene, report)
+    assert w.radiance() == approx((0.15, 0.15, 0.15))
+    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Noise Texture' node ('Noise Texture'), "
+                               "which the world bake does not evaluate; using the default value (0.3, 0.3, 0.3)")
 
 
 # --------------------------------------------------------------------------------------

@@ -32,16 +32,17 @@ import numpy as np
 from ...render import shading
 
 BAKE_WIDTH = 1024  # a procedural world's image: 1024 x 512, ~0.35 degree a pixel
-MAX_WIDTH = 8192   # an HDRI larger than this is baked at this width (the core's memory: 8192 x 4096 x 12 bytes)
+MAX_WIDTH = 4096   # an HDRI wider than this is baked at this width (4096 x 2048: 100 MB in the core)
+_BLOCK = 1 << 16   # directions evaluated at once: bounds the bake's temporary arrays to some 10 MB
 _CACHE_SIZE = 2    # bakes kept: the world being edited and the one before it (undo)
 _cache: dict = {}
 
 
-def _unit_directions(width: int, height: int) -> np.ndarray:
-    """The directions of an equirectangular image's pixel centres, (height, width, 3), row 0
+def _unit_directions(width: int, height: int, rows: range = None) -> np.ndarray:
+    """The directions of an equirectangular image's pixel centres, (rows, width, 3), row 0
     at the nadir: shading.World.environment's layout (Cycles' orientation)."""
     u = (np.arange(width) + 0.5) / width
-    v = (np.arange(height) + 0.5) / height
+    v = ((np.arange(height) if rows is None else np.asarray(rows)) + 0.5) / height
     phi = (0.5 - u)[None, :] * 2.0 * np.pi
     elevation = (v - 0.5)[:, None] * np.pi
     c = np.cos(elevation)
@@ -227,10 +228,10 @@ def _image_pixels(image, sockets) -> Optional[np.ndarray]:
         return None
     flat = np.empty(n, np.float32)
     image.pixels.foreach_get(flat)
-    px = flat.reshape(h, w, image.channels).astype(np.float64)
+    px = flat.reshape(h, w, image.channels)
     if image.channels < 4:
         px = np.concatenate([px[..., :1].repeat(3, -1) if image.channels == 1 else px[..., :3],
-                             np.ones((h, w, 1))], axis=-1)
+                             np.ones((h, w, 1), np.float32)], axis=-1)
     space = image.colorspace_settings.name
     # A float image's buffer is scene linear already (Blender converts it on load); a byte
     # image's values are in its colour space.
@@ -318,14 +319,21 @@ def _bake(tree, output, sockets, upstream, env_nodes, images) -> dict:
         width = 8
     width = min(max(width, 8), MAX_WIDTH)
     height = max(width // 2, 4)
-    d = _unit_directions(width, height).reshape(-1, 3)
-    light_bake = _Bake(sockets, upstream, d, False, pixels)
-    light = light_bake.shader(output.inputs["Surface"])
+    light = np.empty((height * width, 3), np.float32)
     camera = None
-    if light_bake.uses_camera:
-        camera = _Bake(sockets, upstream, d, True, pixels).shader(output.inputs["Surface"])
-        if np.array_equal(camera, light):
-            camera = None
+    step = max(1, _BLOCK // width)  # rows at a time
+    for r0 in range(0, height, step):
+        rows = range(r0, min(r0 + step, height))
+        block = _unit_directions(width, height, rows).reshape(-1, 3)
+        at = slice(r0 * width, rows.stop * width)
+        light_bake = _Bake(sockets, upstream, block, False, pixels)
+        light[at] = light_bake.shader(output.inputs["Surface"])
+        if light_bake.uses_camera:
+            if camera is None:
+                camera = np.empty((height * width, 3), np.float32)
+            camera[at] = _Bake(sockets, upstream, block, True, pixels).shader(output.inputs["Surface"])
+    if camera is not None and np.array_equal(camera, light):
+        camera = None
 
     def image_of(a):
         a = np.nan_to_num(np.maximum(a, 0.0), posinf=0.0).astype(np.float32).reshape(height, width, 3)
