@@ -17,7 +17,10 @@ samples it as a light. What the bake reads:
   others; when the two differ the camera gets its own image (the usual trick of a visible
   backdrop other than the light).
 - RGB and Value nodes. Anything else linked falls back to the socket's default value, said
-  once with the node's name. A Sky Texture is the uniform SKY_RADIANCE (said once).
+  once with the node's name.
+- Sky Texture: Nishita's (Single, Multiple Scattering) as a model measured on Cycles -- a
+  uniform dome by sun elevation and the sun disc, its irradiance through the atmosphere by air
+  mass (at the default atmosphere); Preetham and Hosek-Wilkie as that dome. Said once.
 The image is as large as the largest Environment Texture image (at most MAX_WIDTH wide), so
 that an equirectangular HDRI without mapping is baked pixel for pixel; BAKE_WIDTH otherwise.
 """
@@ -36,6 +39,7 @@ MAX_WIDTH = 4096   # an HDRI wider than this is baked at this width (4096 x 2048
 _BLOCK = 1 << 16   # directions evaluated at once: bounds the bake's temporary arrays to some 10 MB
 _CACHE_SIZE = 2    # bakes kept: the world being edited and the one before it (undo)
 _cache: dict = {}
+BAKED_NODES = ("TEX_ENVIRONMENT", "TEX_SKY", "LIGHT_PATH")  # what makes a world vary: baked
 
 
 def _unit_directions(width: int, height: int, rows: range = None) -> np.ndarray:
@@ -66,8 +70,9 @@ def _euler_xyz(rotation) -> np.ndarray:
 class _Bake:
     """One evaluation of a world's tree at `directions` (N, 3), for camera rays or not."""
 
-    def __init__(self, sockets, upstream, directions: np.ndarray, camera: bool, images: dict):
+    def __init__(self, sockets, upstream, directions: np.ndarray, camera: bool, images: dict, grid=None):
         self.sockets, self.upstream = sockets, upstream
+        self.grid = grid  # (width, height) of the equirectangular image being baked, or None
         self.d, self.camera, self.images = directions, camera, images
         self.uses_camera = False  # whether Is Camera Ray was read
 
@@ -110,10 +115,7 @@ class _Bake:
         if node.type == "TEX_ENVIRONMENT":
             return self.environment(node, output.name)
         if node.type == "TEX_SKY":
-            self.sockets.say(f": the Sky Texture is approximated by a uniform sky of radiance "
-                             f"{tuple(shading_sky())} x strength (the default sky's dome, as an upward-facing "
-                             f"surface sees it; no sun disc)")
-            return np.broadcast_to(np.array(shading_sky(), np.float64), (len(self.d), 3))
+            return self.sky(node)
         if node.type == "LIGHT_PATH" and output.name == "Is Camera Ray":
             self.uses_camera = True
             return np.full(len(self.d), 1.0 if self.camera else 0.0)
@@ -190,15 +192,93 @@ class _Bake:
         return rgba[:, :3] if output == "Color" else rgba[:, 3]
 
 
+    def sky(self, node) -> np.ndarray:
+        """The Sky Texture: Nishita's (Single and Multiple Scattering) as a measured model --
+        a uniform dome and the sun disc (see _sky_dome, _sun_irradiance); the older models as
+        the dome alone."""
+        elevation, rotation = float(node.sun_elevation), float(node.sun_rotation)
+        nishita = node.sky_type in ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
+        dome = _sky_dome(elevation)
+        say = self.sockets.say
+        if not nishita:
+            say(f": the {node.sky_type.replace('_', ' ').title()} Sky Texture is approximated by a uniform sky of "
+                f"radiance {_fmt(dome)}, Nishita's dome at its sun's elevation; no sun")
+            return np.broadcast_to(dome, (len(self.d), 3))
+        say(f": the Sky Texture is approximated by a uniform dome of radiance {_fmt(dome)} (Cycles' dome as an "
+            f"upward-facing surface sees it at this sun elevation, measured), a uniform ground below the horizon "
+            f"and its sun disc (Cycles' sun irradiance, measured, through the atmosphere by air mass); the sky's "
+            f"gradient and glow are not drawn")
+        defaults = dict(altitude=100.0, air_density=1.0, aerosol_density=1.0, ozone_density=1.0)  # Blender's
+        changed = [k for k, v in defaults.items() if abs(float(getattr(node, k, v)) - v) > 1e-6]
+        if changed:
+            say(f": the Sky Texture's {', '.join(k.replace('_', ' ') for k in changed)} "
+                f"{'is' if len(changed) == 1 else 'are'} ignored (the model is measured for the default atmosphere)")
+        out = np.array(np.broadcast_to(dome, (len(self.d), 3)))
+        out[self.d[:, 2] < 0] = _sky_dome(elevation, _GROUND, _GROUND_ELEVATIONS)
+        if not node.sun_disc or self.grid is None:
+            return out
+        sun = np.array([math.sin(rotation) * math.cos(elevation), math.cos(rotation) * math.cos(elevation),
+                        math.sin(elevation)])
+        radius = 0.5 * max(float(node.sun_size), 1e-6)
+        pixels, solid_angle = _sun_pixels(self.grid, tuple(sun), radius)
+        # Cycles' sun: a radiance, so that its irradiance grows with the disc's solid angle.
+        irradiance = _sun_irradiance(elevation) * float(node.sun_intensity) * (
+            _cone(radius) / _cone(0.5 * _DEFAULT_SUN_SIZE))
+        inside = np.einsum("ij,j->i", self.d, sun) >= math.cos(pixels)
+        out[inside] = out[inside] + irradiance / solid_angle
+        return out
+
+
+# Cycles 5.0.1's Nishita sky at its default atmosphere (altitude 100 m, densities 1), measured on a
+# diffuse floor (tests/blender/test_world_environment.py): the dome's radiance as an
+# upward-facing surface sees it, at sun elevations of 15, 40 and 70 degrees (between them
+# interpolated, beyond them held), and the sun's irradiance on a surface facing it: a
+# Beer-Lambert fit E0 exp(-tau m) over the Kasten-Young air mass m, within 1 % of all three.
+_DOME_ELEVATIONS = np.radians([15.0, 40.0, 70.0])
+_DOME = np.array([[1.72, 2.85, 4.83], [2.41, 4.14, 7.27], [2.79, 4.86, 8.64]])
+# Below the horizon Nishita's sky is a dark ground: its mean radiance as a camera looking 9 to
+# 20 degrees down sees it, at sun elevations of 15, 40 and 55 degrees.
+_GROUND_ELEVATIONS = np.radians([15.0, 40.0, 55.0])
+_GROUND = np.array([[0.37, 0.38, 0.40], [0.13, 0.19, 0.33], [0.14, 0.22, 0.40]])
+_SUN_E0 = np.array([179.3, 164.4, 150.3])
+_SUN_TAU = np.array([0.091, 0.147, 0.273])
+_DEFAULT_SUN_SIZE = math.radians(0.545)  # Blender's default Sun Size (the measured one)
+
+
+def _sky_dome(elevation: float, table=None, at=None) -> np.ndarray:
+    table, at = (_DOME, _DOME_ELEVATIONS) if table is None else (table, at)
+    return np.array([np.interp(elevation, at, table[:, c]) for c in range(3)])
+
+
+def _sun_irradiance(elevation: float) -> np.ndarray:
+    """The sun's irradiance (RGB) on a surface facing it; 0 once it has set."""
+    if elevation <= 0.0:
+        return np.zeros(3)
+    degrees = math.degrees(elevation)
+    air_mass = 1.0 / (math.sin(elevation) + 0.50572 * (degrees + 6.07995) ** -1.6364)  # Kasten & Young 1989
+    return _SUN_E0 * np.exp(-_SUN_TAU * air_mass)
+
+
+def _cone(half_angle: float) -> float:
+    return 2.0 * math.pi * (1.0 - math.cos(half_angle))
+
+
+def _sun_pixels(grid, sun, radius):
+    """(angular radius, solid angle) of the pixels of the (width, height) equirectangular grid
+    that carry the sun: those whose centres are within the disc, widened to 0.75 pixel so that a
+    disc smaller than a pixel still has one. Its irradiance is spread over their solid angle."""
+    width, height = grid
+    reach = max(radius, 0.75 * math.pi / height)
+    d = _unit_directions(width, height)
+    cell = (2 * math.pi / width) * (math.pi / height) * np.cos(((np.arange(height) + 0.5) / height - 0.5) * np.pi)
+    inside = np.einsum("hwj,j->hw", d, np.array(sun)) >= math.cos(reach)
+    return reach, float((inside * cell[:, None]).sum()) or 1.0
+
+
 def _fmt(value) -> str:
     if isinstance(value, (int, float)):
         return f"{value:.3g}"
     return "(" + ", ".join(f"{v:.3g}" for v in tuple(value)[:3]) + ")"
-
-
-def shading_sky():
-    from .shading import SKY_RADIANCE
-    return SKY_RADIANCE
 
 
 def _sample(pixels: np.ndarray, u: np.ndarray, v: np.ndarray, closest: bool) -> np.ndarray:
@@ -247,13 +327,19 @@ def _image_pixels(image, sockets) -> Optional[np.ndarray]:
     return px
 
 
+# Node properties (not sockets) that change what a bake gives.
+_KEYED_PROPERTIES = ("projection", "interpolation", "vector_type", "blend_type", "data_type", "target",
+                     "is_active_output", "object", "sky_type", "sun_disc", "sun_size", "sun_intensity",
+                     "sun_elevation", "sun_rotation", "altitude", "air_density", "aerosol_density", "ozone_density",
+                     "turbidity", "ground_albedo", "sun_direction")
+
+
 def _tree_key(tree, images) -> str:
     """The content of a node tree and its images: what a bake depends on."""
     h = hashlib.sha1()
     for node in tree.nodes:
         h.update(repr((node.bl_idname, node.name, node.mute)).encode())
-        for attr in ("projection", "interpolation", "vector_type", "sky_type", "blend_type", "data_type", "target",
-                     "is_active_output", "object"):
+        for attr in _KEYED_PROPERTIES:
             h.update(repr(getattr(node, attr, None)).encode())
         for socket in node.inputs:
             value = getattr(socket, "default_value", None)
@@ -268,6 +354,23 @@ def _tree_key(tree, images) -> str:
         h.update(repr((image.name, image.filepath_raw, tuple(image.size), image.source, image.is_dirty,
                        image.colorspace_settings.name, image.packed_file.size if image.packed_file else 0)).encode())
     return h.hexdigest()
+
+
+def varying_nodes(output) -> list:
+    """The unmuted nodes of BAKED_NODES that feed `output` (through any links): what makes the
+    world vary with the direction or the ray."""
+    seen, stack, found = set(), [output], []
+    while stack:
+        node = stack.pop()
+        for socket in node.inputs:
+            for link in socket.links:
+                if link.is_muted or not link.is_valid or link.from_node.name in seen:
+                    continue
+                seen.add(link.from_node.name)
+                stack.append(link.from_node)
+                if link.from_node.type in BAKED_NODES and not link.from_node.mute:
+                    found.append(link.from_node)
+    return found
 
 
 class _Said:
@@ -287,7 +390,7 @@ def bake(tree, output, sockets, upstream) -> dict:
     when it depends neither on the direction nor on the ray (the core's uniform path, as
     before), else also `environment` and `camera_environment` (None: the same). `sockets`: a
     shading._Sockets for the report; `upstream`: its _upstream. Cached by content."""
-    env_nodes = [n for n in tree.nodes if n.type in ("TEX_ENVIRONMENT", "LIGHT_PATH") and not n.mute]
+    env_nodes = varying_nodes(output)
     images = [n.image for n in env_nodes if n.type == "TEX_ENVIRONMENT" and n.image is not None]
     key = _tree_key(tree, images)
     if key in _cache:
@@ -314,9 +417,8 @@ def _bake(tree, output, sockets, upstream, env_nodes, images) -> dict:
             sockets.say(f": image '{image.name}' has no pixels; rendered as Cycles' missing-image pink")
             px = np.tile(np.array([1.0, 0.0, 1.0, 1.0]), (2, 2, 1))
         pixels[image.name] = px
-    width = max([px.shape[1] for px in pixels.values()] or [8])
-    if not pixels:  # only Is Camera Ray: two uniform colours, a tiny image each
-        width = 8
+    sky = any(n.type == "TEX_SKY" for n in env_nodes)
+    width = max([px.shape[1] for px in pixels.values()] + [BAKE_WIDTH if sky else 8])
     width = min(max(width, 8), MAX_WIDTH)
     height = max(width // 2, 4)
     light = np.empty((height * width, 3), np.float32)
@@ -326,12 +428,13 @@ def _bake(tree, output, sockets, upstream, env_nodes, images) -> dict:
         rows = range(r0, min(r0 + step, height))
         block = _unit_directions(width, height, rows).reshape(-1, 3)
         at = slice(r0 * width, rows.stop * width)
-        light_bake = _Bake(sockets, upstream, block, False, pixels)
+        light_bake = _Bake(sockets, upstream, block, False, pixels, (width, height))
         light[at] = light_bake.shader(output.inputs["Surface"])
         if light_bake.uses_camera:
             if camera is None:
                 camera = np.empty((height * width, 3), np.float32)
-            camera[at] = _Bake(sockets, upstream, block, True, pixels).shader(output.inputs["Surface"])
+            camera[at] = _Bake(sockets, upstream, block, True, pixels, (width, height)).shader(
+                output.inputs["Surface"])
     if camera is not None and np.array_equal(camera, light):
         camera = None
 
