@@ -32,7 +32,6 @@ from typing import Optional
 
 import numpy as np
 
-from ...render import shading
 
 BAKE_WIDTH = 1024  # a procedural world's image: 1024 x 512, ~0.35 degree a pixel
 MAX_WIDTH = 4096   # an HDRI wider than this is baked at this width (4096 x 2048: 100 MB in the core)
@@ -419,6 +418,9 @@ def _bake(tree, output, sockets, upstream, env_nodes, images) -> dict:
         pixels[image.name] = px
     sky = any(n.type == "TEX_SKY" for n in env_nodes)
     width = max([px.shape[1] for px in pixels.values()] + [BAKE_WIDTH if sky else 8])
+    if width > MAX_WIDTH:
+        sockets.say(f": an image {width} pixels wide is baked at {MAX_WIDTH} (point-sampled: a sun a pixel wide "
+                    f"may lose some of its light)")
     width = min(max(width, 8), MAX_WIDTH)
     height = max(width // 2, 4)
     light = np.empty((height * width, 3), np.float32)
