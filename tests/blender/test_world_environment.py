@@ -332,3 +332,32 @@ def test_the_baked_world_is_the_world_cycles_renders(blender, tmp_path, case):
         wrong = clip(render(blender, scene, tmp_path / "wrong.exr", (PANO_W, PANO_H))["ViewLayer"]["Combined"])
         print(case, "wrong variant: pixels off", off(wrong), "median", median(wrong))
         assert off(wrong) > 2 * PANO_OFF and median(wrong) > PANO_MEDIAN
+
+
+def test_what_the_bake_approximates_is_said_once(blender, tmp_path):
+    """Cubic interpolation (baked as Linear) and a node the bake does not evaluate (a Math
+    node on the Strength: its socket's value) are each one report line, naming the node;
+    a cached bake says them again in the next frame's report."""
+    from blender_helpers import extension_module
+
+    bpy = blender
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    world = scene.world = bpy.data.worlds.new("Said")
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    env = nodes.new("ShaderNodeTexEnvironment")
+    env.image, env.interpolation = save_hdri(bpy, tmp_path / "said.exr"), "Cubic"
+    links.new(env.outputs["Color"], nodes["Background"].inputs["Color"])
+    math_node = nodes.new("ShaderNodeMath")
+    links.new(math_node.outputs[0], nodes["Background"].inputs["Strength"])
+    es = extension_module("blender.export.shading")
+    Report = extension_module("render.shading").Report
+    for _ in range(2):  # baked, then from the cache
+        report = Report()
+        w = es.world_of(scene, report)
+        assert w.environment is not None
+        assert np.allclose(w.environment, hdri()[..., :3], rtol=1e-5)  # Strength: its value 1
+        assert len(report.lines) == 2, report.lines
+        assert "'Environment Texture' uses Cubic interpolation; baked with Linear" in report.lines[1] + report.lines[0]
+        assert any("'Math' node ('Math'), which the world bake does not evaluate; using the default value 1"
+                   in line for line in report.lines), report.lines
