@@ -32,34 +32,41 @@ Vec3 EnvironmentMap::from_uv(float u, float v) {
 EnvironmentMap::EnvironmentMap(const float *rgb, int width, int height)
     : width_(width), height_(height), rgb_(rgb, rgb + size_t(width) * size_t(height) * 3) {
     const int w = width_, h = height_;
-    std::vector<float> lum(size_t(w) * size_t(h));
+    // Per pixel the largest luminance of its row neighbours (wrapping in u), then of its
+    // column neighbours of that: the 3x3 maximum in two passes.
+    std::vector<float> across(size_t(w) * size_t(h));
     double mean[3] = {0, 0, 0}, solid = 0;
+    std::vector<float> lum(static_cast<size_t>(w));
     for (int y = 0; y < h; ++y) {
         // The row's share of the sphere is proportional to sin(theta) at its centre.
         const double sin_theta = std::sin(kPi * (y + 0.5) / h);
+        double row[3] = {0, 0, 0};
         for (int x = 0; x < w; ++x) {
             const Vec3 c = texel(x, y);
-            lum[size_t(y) * w + x] = std::fmax(luminance(c), 0.f);
-            mean[0] += c.x * sin_theta, mean[1] += c.y * sin_theta, mean[2] += c.z * sin_theta;
-            solid += sin_theta;
+            lum[x] = std::fmax(luminance(c), 0.f);
+            row[0] += c.x, row[1] += c.y, row[2] += c.z;
         }
+        for (int k = 0; k < 3; ++k) mean[k] += row[k] * sin_theta;
+        solid += sin_theta * w;
+        float *a = &across[size_t(y) * w];
+        for (int x = 0; x < w; ++x)
+            a[x] = std::fmax(lum[x], std::fmax(lum[x > 0 ? x - 1 : w - 1], lum[x + 1 < w ? x + 1 : 0]));
     }
     mean_ = Vec3(float(mean[0] / solid), float(mean[1] / solid), float(mean[2] / solid));
     weight_.assign(size_t(w) * size_t(h), 0.f);
     std::vector<double> row_total(size_t(h), 0.0);
     for (int y = 0; y < h; ++y) {
-        const double sin_theta = std::sin(kPi * (y + 0.5) / h);
+        const float sin_theta = float(std::sin(kPi * (y + 0.5) / h));
+        const float *up = &across[size_t(std::min(y + 1, h - 1)) * w], *mid = &across[size_t(y) * w],
+                    *down = &across[size_t(std::max(y - 1, 0)) * w];
+        float *out = &weight_[size_t(y) * w];
+        double sum = 0;
         for (int x = 0; x < w; ++x) {
-            float m = 0.f;
-            for (int dy = -1; dy <= 1; ++dy) {
-                const int yy = std::clamp(y + dy, 0, h - 1);
-                for (int dx = -1; dx <= 1; ++dx) m = std::fmax(m, lum[size_t(yy) * w + size_t((x + dx + w) % w)]);
-            }
-            const double f = double(m) * sin_theta;
-            weight_[size_t(y) * w + x] = float(f);
-            row_total[y] += f;
-            total_ += f;
+            out[x] = std::fmax(mid[x], std::fmax(up[x], down[x])) * sin_theta;
+            sum += out[x];
         }
+        row_total[y] = sum;
+        total_ += sum;
     }
     if (!(total_ > 0.0) || !std::isfinite(total_)) {
         total_ = 0.0;
