@@ -11,6 +11,7 @@ Units are Blender's, so that a scene lit for Cycles renders at the same brightne
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
@@ -239,10 +240,17 @@ class World:
     def radiance(self) -> tuple:
         """The uniform radiance; with an environment image, its mean over the sphere."""
         if self.environment is not None:
-            weights = np.sin(np.pi * (np.arange(self.environment.shape[0]) + 0.5) / self.environment.shape[0])
-            mean = np.einsum("hwc,h->c", self.environment.astype(np.float64), weights)
-            return tuple(float(c) for c in mean / (weights.sum() * self.environment.shape[1]))
+            return self._environment_mean
         return tuple(float(c) * float(self.strength) for c in self.colour)
+
+    @functools.cached_property
+    def _environment_mean(self) -> tuple:
+        """The environment's mean radiance over the sphere (rows weighed by sin(theta)): once
+        per World, which a viewport renders many times."""
+        h = self.environment.shape[0]
+        weights = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+        rows = self.environment.mean(axis=1, dtype=np.float64)
+        return tuple(float(c) for c in weights @ rows / weights.sum())
 
     def world_map(self):
         """The core's world_map argument: None, or (light image, camera image or None)."""

@@ -181,3 +181,21 @@ def test_world_ray_visibility_applies_to_the_environment():
     scene.world = World(environment=_image(), visibility=frozenset({"diffuse", "glossy", "transmission"}))
     no_camera, _ = _env_render(scene, "MIS", 4)
     assert np.all(no_camera[sky] == 0) and np.array_equal(no_camera[surfaces], seen[surfaces])
+
+
+def test_a_changed_image_is_never_served_from_the_cores_cache():
+    """The core keeps the last environment maps by content (a viewport re-renders the same
+    world many times): the same image renders the same, an image changed in place (same array,
+    same shape) renders with its new content."""
+    from splat_tracer.render.shading import World
+
+    scene = _env_scene()
+    image = _image()
+    scene.world = World(environment=image)
+    first, _ = _env_render(scene, "MIS", 4)
+    again, _ = _env_render(scene, "MIS", 4)
+    assert np.array_equal(first, again)
+    image[20, 10] = 0.0  # the sun taken out of the same array
+    scene.world = World(environment=image)
+    dark, _ = _env_render(scene, "MIS", 4)
+    assert dark.mean() < 0.6 * first.mean()  # measured 0.21 against 0.42: the sun is most of the light
