@@ -361,3 +361,27 @@ def test_what_the_bake_approximates_is_said_once(blender, tmp_path):
         assert "'Environment Texture' uses Cubic interpolation; baked with Linear" in report.lines[1] + report.lines[0]
         assert any("'Math' node ('Math'), which the world bake does not evaluate; using the default value 1"
                    in line for line in report.lines), report.lines
+
+
+def test_a_bake_that_fails_renders_the_viewport_colour_and_says_so(blender, tmp_path, monkeypatch):
+    from blender_helpers import extension_module
+
+    bpy = blender
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    world = scene.world = bpy.data.worlds.new("Broken")
+    world.color = (0.2, 0.3, 0.4)
+    nodes = world.node_tree.nodes
+    env = nodes.new("ShaderNodeTexEnvironment")
+    world.node_tree.links.new(env.outputs["Color"], nodes["Background"].inputs["Color"])
+    world_module = extension_module("blender.export.world")
+
+    def broken(*args):
+        raise ValueError("no")
+    monkeypatch.setattr(world_module, "_bake", broken)
+    world_module._cache.clear()
+    report = extension_module("render.shading").Report()
+    w = extension_module("blender.export.shading").world_of(scene, report)
+    assert w.environment is None and w.radiance() == pytest.approx((0.2, 0.3, 0.4))
+    assert report.lines == ["world 'Broken': its node tree could not be baked (ValueError: no); "
+                            "using the world's viewport colour"]

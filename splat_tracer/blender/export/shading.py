@@ -517,7 +517,12 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if source[0].type in ("MIX_SHADER", "ADD_SHADER") or export_world.varying_nodes(output):
         # A world that varies with the direction or the ray: baked into an image (world.py).
         # A plain Background keeps the uniform path below, as before.
-        fields = export_world.bake(tree, output, sockets, _upstream)
+        try:
+            fields = export_world.bake(tree, output, sockets, _upstream)
+        except Exception as error:  # noqa: BLE001 -- skip, don't refuse: the frame renders
+            sockets.say(f": its node tree could not be baked ({type(error).__name__}: {error}); "
+                        f"using the world's viewport colour")
+            return viewport
         return shading.World(strength=1.0, **fields, **film)
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")

@@ -196,7 +196,8 @@ class _Bake:
         a uniform dome and the sun disc (see _sky_dome, _sun_irradiance); the older models as
         the dome alone."""
         elevation, rotation = float(node.sun_elevation), float(node.sun_rotation)
-        if self.upstream(node.inputs["Vector"]) is not None:
+        vector = next((s for s in node.inputs if s.name == "Vector"), None)  # not found by key in bpy 5.0
+        if vector is not None and self.upstream(vector) is not None:
             self.sockets.say(f": the Sky Texture '{node.name}''s Vector input is ignored (the view direction is used)")
         nishita = node.sky_type in ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
         dome = _sky_dome(elevation)
