@@ -264,6 +264,8 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   method=method, world=world.radiance(), film_transparent=bool(world.transparent),
                   lens=camera.lens.native() if camera.lens else None,
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
+    if world.environment is not None:  # a uniform world passes nothing more: the call is as before
+        kwargs["world_map"] = world.world_map()
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
     kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name not in cryptomatte.KINDS})

@@ -37,6 +37,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
+from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"
@@ -49,10 +50,6 @@ _BLACK = dict(base_colour=(0.0, 0.0, 0.0), specular_level=0.0)
 _IS_BSDF = "_bsdf"
 # Smallest IOR passed on: the contract needs a positive one (IOR < 1 is valid: a bubble).
 _MIN_IOR = 1e-3
-# The default Sky Texture (Multiple Scattering, sun 15 degrees up) as one uniform radiance:
-# the one giving the same irradiance on an upward-facing surface, measured by rendering the
-# sky with Cycles 5.0.1 (an equirectangular 256x128 image; without the sun disc).
-SKY_RADIANCE = (1.7, 2.9, 4.8)
 # Principled BSDF lobes the engine does not render, by the socket that turns each on.
 _PRINCIPLED_EXTRAS = {"Subsurface Weight": "subsurface", "Coat Weight": "coat", "Sheen Weight": "sheen",
                       "Anisotropic": "anisotropy", "Thin Film Thickness": "thin film"}
@@ -491,13 +488,7 @@ def _within_limits(kind: str, fields: dict, say) -> bool:
 
 def _background(node, sockets: _Sockets) -> tuple:
     """(colour, strength) of a Background (or Emission) node of the world."""
-    strength = sockets.value(node, "Strength")
-    source = _upstream(node.inputs["Color"])
-    if source is not None and source[0].type == "TEX_SKY":
-        sockets.say(f": the Sky Texture is approximated by a uniform sky of radiance {_fmt(SKY_RADIANCE)} "
-                    f"x strength (the default sky's dome, as an upward-facing surface sees it)")
-        return SKY_RADIANCE, strength
-    return sockets.colour(node, "Color"), strength
+    return sockets.colour(node, "Color"), sockets.value(node, "Strength")
 
 
 def world_visibility(world, report: shading.Report) -> frozenset:
@@ -539,6 +530,16 @@ def world_of(scene, report: shading.Report) -> shading.World:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, **film)
     if sockets.linked_inputs(output, ["Volume"]):
         sockets.say(": Volume is ignored")
+    if source[0].type in ("MIX_SHADER", "ADD_SHADER") or export_world.varying_nodes(output):
+        # A world that varies with the direction or the ray: baked into an image (world.py).
+        # A plain Background keeps the uniform path below, as before.
+        try:
+            fields = export_world.bake(tree, output, sockets, _upstream)
+        except Exception as error:  # noqa: BLE001 -- skip, don't refuse: the frame renders
+            sockets.say(f": its node tree could not be baked ({type(error).__name__}: {error}); "
+                        f"using the world's viewport colour")
+            return viewport
+        return shading.World(strength=1.0, **fields, **film)
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
         return viewport

@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <iterator>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "python/py_util.h"
@@ -248,27 +250,98 @@ bool parse_cryptomatte(PyObject *arg, const RenderScene &scene, int w, int h, Cr
     return true;
 }
 
+// world_map: None, or (light, camera): the environment image lighting the scene and the one
+// camera rays see (None: the same), each a height x width x 3 float32 array of finite values
+// >= 0 (shade/environment.h's layout).
+// The environment maps of the last renders, by content: building one costs ~30 ns a pixel
+// (66 ms for 2048 x 1024), which the viewport would pay on every pass of every redraw; the
+// images' bytes are hashed (~1 ns a byte) and compared in full before one is reused.
+struct CachedMap {
+    uint64_t hash = 0;
+    int width = 0, height = 0;
+    std::vector<float> rgb;
+    std::shared_ptr<const EnvironmentMap> map;
+};
+
+std::shared_ptr<const EnvironmentMap> environment_map_of(const float *data, int w, int h) {
+    static std::mutex mutex;
+    static CachedMap cache[2];  // the world being edited and the one before it
+    static int next = 0;
+    const size_t n = size_t(w) * size_t(h) * 3;
+    uint64_t hash = 1469598103934665603ull;  // FNV-1a over the words: a quick first check
+    for (size_t k = 0; k < n; ++k) {
+        uint32_t bits;
+        std::memcpy(&bits, data + k, 4);
+        hash = (hash ^ bits) * 1099511628211ull;
+    }
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const CachedMap &c : cache)
+            if (c.map && c.hash == hash && c.width == w && c.height == h &&
+                std::memcmp(c.rgb.data(), data, n * sizeof(float)) == 0)
+                return c.map;
+    }
+    auto map = std::make_shared<const EnvironmentMap>(data, w, h);
+    std::lock_guard<std::mutex> lock(mutex);
+    CachedMap &slot = cache[next];
+    next = (next + 1) % 2;
+    slot.hash = hash, slot.width = w, slot.height = h;
+    slot.rgb.assign(data, data + n);
+    slot.map = map;
+    return map;
+}
+
+bool parse_world_map(PyObject *obj, std::shared_ptr<const EnvironmentMap> &light,
+                     std::shared_ptr<const EnvironmentMap> &camera) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj) || PyTuple_Size(obj) != 2)
+        return PyErr_SetString(PyExc_TypeError, "world_map must be None or a (light, camera) tuple"), false;
+    for (int i = 0; i < 2; ++i) {
+        PyObject *item = PyTuple_GetItem(obj, i);
+        if (item == Py_None) {
+            if (i == 0) return PyErr_SetString(PyExc_TypeError, "world_map's light image is required"), false;
+            continue;
+        }
+        const char *name = i == 0 ? "world_map light" : "world_map camera";
+        View view;
+        const Py_ssize_t shape[3] = {-1, -1, 3};
+        if (!get_array(item, name, 'f', 3, shape, false, view)) return false;
+        const Py_ssize_t h = view.buf.shape[0], w = view.buf.shape[1];
+        if (w < 2 || h < 2 || w > 65536 || h > 32768)
+            return PyErr_Format(PyExc_ValueError, "%s must be 2..65536 wide and 2..32768 high", name), false;
+        const float *data = view.data<float>();
+        for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+            if (!(std::isfinite(data[k]) && data[k] >= 0.f))
+                return PyErr_Format(PyExc_ValueError, "%s must be finite, >= 0", name), false;
+        std::string message;
+        std::shared_ptr<const EnvironmentMap> &target = i == 0 ? light : camera;
+        if (PyObject *type = run_native([&] { target = environment_map_of(data, int(w), int(h)); }, message))
+            return PyErr_SetString(type, message.c_str()), false;
+    }
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte", "world_map", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *oworldmap = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)O",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &oworldmap))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -310,6 +383,12 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (world_visibility < 0 || world_visibility > int(kVisAll))
         return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
     cfg.world_visibility = uint32_t(world_visibility);
+    std::shared_ptr<const EnvironmentMap> environment, camera_environment;
+    if (!parse_world_map(oworldmap, environment, camera_environment)) return nullptr;
+    if (environment) {
+        cfg.environment = environment.get(), cfg.camera_environment = camera_environment.get();
+        cfg.world = environment->mean();  // what the uniform world's uses (sky AO, "is the scene lit") see
+    }
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
@@ -455,11 +534,13 @@ PyMethodDef RenderScene_methods[] = {
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
-     "cryptomatte=None)\n--\n\n"
+     "cryptomatte=None, world_map=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
-     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py)."},
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). world_map: None "
+     "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -179,6 +179,10 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
                        ? &scene.mesh_lights()
                        : nullptr),
+      environment_light_(settings.environment && settings.environment->sampled() && !settings.sky_ao &&
+                                 settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly
+                             ? settings.environment
+                             : nullptr),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
@@ -264,7 +268,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
     const int samples = settings_.samples;
     const bool half = settings_.adaptive;
     const bool catchers = scene_.any_catcher();
-    const Vec3 backdrop = world_seen(kVisCamera);
+    auto backdrop = [&](Vec3 d) { return world_seen(kVisCamera, d); };
     const bool crypto = film_.cryptomatte.enabled();
     // Each pixel's sample 0, by which its pixel points are moved so that it is the centre.
     uint32_t first[2 * kPacketRays];
@@ -324,11 +328,11 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                     CatcherSums &cs = a.catcher;
                     cs.alone = cs.alone + radiance(rays[k], alone, rng, nullptr, tally);
                     cs.full = cs.full + c, cs.samples += 1.f;
-                    cs.background = cs.background + backdrop;
+                    cs.background = cs.background + backdrop(rays[k].d);
                 } else {
                     CatcherSums &cs = a.catcher;
                     cs.matte = cs.matte + v, cs.matte_alpha += prim.alpha;
-                    if (!prim.hit) cs.background = cs.background + backdrop;
+                    if (!prim.hit) cs.background = cs.background + backdrop(rays[k].d);
                 }
             }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
@@ -548,14 +552,15 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             // Cycles' Environment pass: the world a camera ray leaves into, on a transparent
             // film too (its background pass is evaluated there for that pass alone).
             if (primary && st.camera && film_.environment)
-                primary->environment = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+                primary->environment = clamped(world_seen(st.kind, ray.d), st.weight, st.bounces > 1);
             if (st.camera && cfg.film_transparent) {
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
             // Cycles clamps light that a ray finds with the ray's bounce - 1: light reaching
             // the first surface is direct, whether sampled there or found by its bounce ray.
-            return clamped(world_seen(st.kind), st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
+            return clamped(world_missed(st, ray.d), st.weight, st.bounces > 1) +
+                   clamped(lamps, st.weight, st.bounces > 1);
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -576,7 +581,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
         if (!(ray.tmax > 0.f)) {
-            const Vec3 world = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+            const Vec3 world = clamped(world_missed(st, ray.d), st.weight, st.bounces > 1);
             if (primary && st.camera && film_.environment) primary->environment = world;
             return world;
         }
@@ -604,7 +609,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
     Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
-    if (st.mis_pdf > 0.f) {
+    if (st.mis_pdf > 0.f && mesh_lights_) {  // (the environment light sets mis_pdf too)
         // Shadow rays could have found this point too: the power heuristic shares it between
         // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
         // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
@@ -751,10 +756,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // lights (0 without them: emission the ray meets counts in full).
         float pdf = kInfinity, mis_pdf = 0.f;
         auto densities = [&](Vec3 wi) {
-            if (!(filter_glossy_ > 0.f) && !mesh_lights_) return;
+            if (!(filter_glossy_ > 0.f) && !mesh_lights_ && !environment_light_) return;
             const float p = reflection_pdf(lobes, n, wo, cos_o, wi, picks);
             if (filter_glossy_ > 0.f) pdf = p;
-            if (mesh_lights_) mis_pdf = p;
+            if (mesh_lights_ || environment_light_) mis_pdf = p;
         };
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
@@ -817,7 +822,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                               const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
                               Primary *primary, Tally &tally, Vec3 weight, bool indirect) const {
     const std::vector<Light> &lights = scene_.lights();
-    if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
+    if (lights.empty() && !mesh_lights_ && !environment_light_) return Vec3();  // nothing to sample: no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
     const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
@@ -894,6 +899,57 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
             L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
         }
+    }
+    if (environment_light_)
+        L = L + environment_light(sp, from, n, ng, wo, cos_o, lobes, picks, rng, tally, weight, indirect);
+    return L;
+}
+
+Vec3 Integrator::world_missed(const PathState &st, Vec3 d) const {
+    const Vec3 world = world_seen(st.kind, d);
+    // A sampled diffuse or glossy bounce (mis_pdf > 0) could have been drawn by the
+    // environment light too: the power heuristic shares the direction between the two ways.
+    if (!environment_light_ || !(st.mis_pdf > 0.f)) return world;
+    if (settings_.mesh_light_strategy == IntegratorSettings::kLightOnly) return Vec3();
+    const float light_pdf = environment_light_->pdf(d) * float(settings_.shadow_samples);
+    return world * power_heuristic(st.mis_pdf, light_pdf);
+}
+
+Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo,
+                                   float cos_o, const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
+                                   Tally &tally, Vec3 weight, bool indirect) const {
+    const uint32_t vis = settings_.world_visibility;
+    // As a world hidden from diffuse (glossy) rays lights no diffuse (glossy) lobe in Cycles.
+    const Vec3 diffuse = vis & kVisDiffuse ? lobes.diffuse(cos_o) * (1.f / kPi) : Vec3();
+    const bool glossy = (vis & kVisGlossy) && !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
+    if (luminance(diffuse) <= 0.f && !glossy) return Vec3();
+    const int k = settings_.shadow_samples;
+    const float share = 1.f / float(k);
+    const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
+    Vec3 L;
+    for (int s = 0; s < k; ++s) {
+        float u[2];
+        rng.get(Sampler::kEnvironment, u, 2, uint32_t(s), uint32_t(k));
+        const EnvironmentSample es = environment_light_->sample(u[0], u[1]);
+        if (!es.valid) continue;
+        const float cos_i = dot(n, es.wi);
+        if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
+        Vec3 f = diffuse;
+        if (glossy) {
+            const Vec3 h = normalize(wo + es.wi);
+            const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+            f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
+                        (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
+        }
+        const float light_pdf = es.pdf * float(k);
+        const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
+                            ? 1.f
+                            : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, es.wi, picks));
+        const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
+        if (!(luminance(c) > 0.f)) continue;
+        ++tally.shadow;
+        const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
+        L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
     }
     return L;
 }
