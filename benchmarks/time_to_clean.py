@@ -83,15 +83,21 @@ def sample_ladder(start_threshold: float, max_samples: int = MAX_SAMPLES, steps:
 
 def _rna_values(struct) -> list:
     """The plain (non-pointer) property values of an RNA struct, by name: a fingerprint part."""
+    import bpy
+
+    # An ID's bookkeeping (session_uid, users, tags) changes from one Blender session to the
+    # next without changing the image: left out, or the cache would never be hit.
+    bookkeeping = {p.identifier for p in bpy.types.ID.bl_rna.properties} - {"name"}
     out = []
     for prop in struct.bl_rna.properties:
-        if prop.type in ("POINTER", "COLLECTION") or prop.identifier in ("rna_type", "name_full"):
+        if prop.type in ("POINTER", "COLLECTION") or prop.identifier in bookkeeping | {"rna_type", "name_full"}:
             continue
         value = getattr(struct, prop.identifier, None)
-        try:
-            value = tuple(value)
-        except TypeError:
-            pass
+        if not isinstance(value, (str, int, float, bool)) and value is not None:
+            try:
+                value = tuple(value)
+            except TypeError:
+                pass
         out.append((prop.identifier, repr(value)))
     return out
 
