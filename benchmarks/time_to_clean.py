@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import os
 import statistics
 import sys
 import time
@@ -308,6 +309,7 @@ def main(argv=None) -> int:
         print(text, flush=True)
         lines.append(text)
 
+    say(f"load average (1, 5, 15 min) at the start: {', '.join(f'{x:.1f}' for x in os.getloadavg())}")
     results = []
     for key in args.scenes.split(","):
         if key == "demo":
@@ -332,6 +334,9 @@ def main(argv=None) -> int:
                         "references": {e: {k: v for k, v in ref.items() if k != "rgb"} for e, ref in refs.items()},
                         "cross_rel_mse": cross, "rows": rows})
 
+    # Timings on a shared machine are only as good as its load: said beside them.
+    say(f"load average (1, 5, 15 min) at the end: {', '.join(f'{x:.1f}' for x in os.getloadavg())} "
+        f"on {os.cpu_count()} CPUs, {scene.render.threads} render threads")
     table = ["", f"Target: relMSE <= {100 * TARGET:g} % against the engine's own {REFERENCE_SAMPLES}-sample reference"
              f" (runs: {runs}; time: wall seconds of the F12 render, export to EXR written).", "",
              "| scene | denoise | engine | setting reached | relMSE | denoised | time (s, median) | spread (s) | runs "
