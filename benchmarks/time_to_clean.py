@@ -200,13 +200,13 @@ def reference(r: Renderer, engine: str, fingerprint: str, say) -> dict:
     if path.is_file():
         got = np.load(path)
         say(f"  {ENGINES[engine]} reference: from the cache ({path.name}; rendered in {float(got['seconds']):.1f} s)")
-        return {"rgb": got["rgb"], "seconds": float(got["seconds"]), "cached": True, "path": str(path)}
+        return {"rgb": got["rgb"], "seconds": float(got["seconds"]), "cached": True, "file": path.name}
     say(f"  {ENGINES[engine]} reference: rendering {REFERENCE_SAMPLES} samples ...")
     got = r.render(engine, REFERENCE_SAMPLES, 0.0, denoise=False, adaptive=False, seed=REFERENCE_SEED)
     CACHE.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(path, rgb=got["rgb"].astype(np.float32), seconds=got["seconds"])
-    say(f"  {ENGINES[engine]} reference: {got['seconds']:.1f} s -> {path}")
-    return {"rgb": got["rgb"], "seconds": got["seconds"], "cached": False, "path": str(path)}
+    say(f"  {ENGINES[engine]} reference: {got['seconds']:.1f} s -> {path.name} in the cache")
+    return {"rgb": got["rgb"], "seconds": got["seconds"], "cached": False, "file": path.name}
 
 
 def denoise_said_off(report: list) -> bool:
