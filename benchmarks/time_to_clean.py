@@ -22,8 +22,10 @@ renders them anew).
 
 The search, per engine and per denoising mode (on, off): adaptive sampling on at the scene's
 Noise Threshold, the samples doubled from 1 until the error is at most TARGET (1 %); when the
-largest sample count does not reach it, the Noise Threshold is halved and the doubling goes
-on. The cheapest setting that reached it is then timed --runs times (median and spread). Each
+largest sample count (4096) does not reach it, the Noise Threshold is halved there, up to
+three times. The samples are then bisected (REFINE_STEPS times) between the rung that failed and the
+one that passed, so the doubling's overshoot of up to 2x does not count against an engine.
+The cheapest setting that reached it is then timed --runs times (median and spread). Each
 row says whether the engine actually denoised: Splat Tracer's render report, and for both
 engines whether the image with denoising on differs from the same setting's image with it off.
 """
@@ -52,6 +54,7 @@ REFERENCE_SAMPLES = 4096  # the converged reference of both engines (never lower
 REFERENCE_SEED, TRIAL_SEED = 1, 0
 MAX_SAMPLES = 4096        # the search's largest sample count before the Noise Threshold is lowered
 THRESHOLD_STEPS = 3       # how many times the Noise Threshold is halved before giving up
+REFINE_STEPS = 3          # bisections between the rung that failed and the one that passed: within 1/16 of it
 ENGINES = {"SPLAT_TRACER": "Splat Tracer", "CYCLES": "Cycles"}
 CACHE = Path.home() / ".cache" / "splat_tracer" / "time_to_clean"
 
@@ -214,20 +217,53 @@ def denoise_said_off(report: list) -> bool:
     return any("Denoise is not applied" in line for line in report)
 
 
+def refine(failed: int, passed: int, passes, steps: int = REFINE_STEPS) -> int:
+    """The fewest samples between `failed` (too few) and `passed` (enough) that still pass,
+    by bisection: `steps` halvings of the bracket at most. passes(samples) -> bool renders."""
+    lo, hi = failed, passed
+    for _ in range(steps):
+        mid = (lo + hi) // 2
+        if mid in (lo, hi):
+            break
+        if passes(mid):
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
 def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: float, runs: int, max_samples: int,
            say, target: float = TARGET) -> dict:
-    """The cheapest setting of the ladder that reaches `target`, then timed `runs` times."""
+    """The cheapest setting of the ladder that reaches `target`, the samples then refined
+    between the last rung that failed and the one that passed; then timed `runs` times."""
     tried = []
     reached = None
-    for samples, t in sample_ladder(threshold, max_samples):
+
+    def attempt(samples: int, t: float) -> dict:
         got = r.render(engine, samples, t, denoise)
         err = rel_mse(got["rgb"], ref)
         tried.append({"samples": samples, "threshold": t, "seconds": got["seconds"], "rel_mse": err})
         say(f"    {ENGINES[engine]:12s} denoise {'on ' if denoise else 'off'} {samples:5d} samples, threshold "
             f"{t:.4g}: relMSE {100 * err:.3f} % ({got['seconds']:.2f} s)")
-        if err <= target:
-            reached = got | {"samples": samples, "threshold": t, "rel_mse": err}
+        return got | {"samples": samples, "threshold": t, "rel_mse": err}
+
+    failed = None
+    for samples, t in sample_ladder(threshold, max_samples):
+        got = attempt(samples, t)
+        if got["rel_mse"] <= target:
+            reached = got
             break
+        failed = (samples, t)
+    if reached is not None and failed is not None and failed[1] == reached["threshold"]:
+        # The doubling overshoots by up to 2x: bisect the samples between the two rungs.
+        passing = {reached["samples"]: reached}
+
+        def passes(samples: int) -> bool:
+            got = attempt(samples, reached["threshold"])
+            passing[samples] = got
+            return got["rel_mse"] <= target
+
+        reached = passing[refine(failed[0], reached["samples"], passes)]
     row = {"engine": engine, "denoise": denoise, "tried": tried, "reached": reached is not None}
     if reached is None:
         best = min(tried, key=lambda x: x["rel_mse"])

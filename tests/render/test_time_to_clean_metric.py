@@ -52,3 +52,19 @@ def test_images_of_different_sizes_are_refused():
 def test_the_search_tries_cheaper_settings_first():
     ladder = list(ttc.sample_ladder(0.01, max_samples=8, steps=2))
     assert ladder == [(1, 0.01), (2, 0.01), (4, 0.01), (8, 0.01), (8, 0.005), (8, 0.0025)]
+
+
+def test_the_refinement_finds_the_fewest_passing_samples_within_its_steps():
+    rendered = []
+
+    def passes(samples):  # an error that falls below the target from 23 samples on
+        rendered.append(samples)
+        return samples >= 23
+
+    # 16 failed, 32 passed: 24, 20, 22 are tried; 24 is the fewest passing within 3 steps.
+    assert ttc.refine(16, 32, passes, steps=3) == 24
+    assert rendered == [24, 20, 22]
+    rendered.clear()
+    assert ttc.refine(16, 32, passes, steps=5) == 23
+    rendered.clear()
+    assert ttc.refine(1, 2, passes) == 2 and rendered == []  # nothing between: no render
