@@ -25,7 +25,8 @@ Noise Threshold, the samples doubled from 1 until the error is at most TARGET (1
 largest sample count (4096) does not reach it, the Noise Threshold is halved there, up to
 three times. The samples are then bisected (REFINE_STEPS times) between the rung that failed and the
 one that passed, so the doubling's overshoot of up to 2x does not count against an engine.
-The cheapest setting that reached it is then timed --runs times (median and spread). Each
+The cheapest setting that reached it is then timed --runs times (median and spread), in
+rounds over both engines and both modes. Each
 row says whether the engine actually denoised: Splat Tracer's render report, and for both
 engines whether the image with denoising on differs from the same setting's image with it off.
 """
@@ -232,10 +233,10 @@ def refine(failed: int, passed: int, passes, steps: int = REFINE_STEPS) -> int:
     return hi
 
 
-def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: float, runs: int, max_samples: int,
-           say, target: float = TARGET) -> dict:
+def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: float, max_samples: int, say,
+           target: float = TARGET) -> dict:
     """The cheapest setting of the ladder that reaches `target`, the samples then refined
-    between the last rung that failed and the one that passed; then timed `runs` times."""
+    between the last rung that failed and the one that passed (time_rows then times it)."""
     tried = []
     reached = None
 
@@ -269,8 +270,6 @@ def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: 
         best = min(tried, key=lambda x: x["rel_mse"])
         return row | {"samples": best["samples"], "threshold": best["threshold"], "rel_mse": best["rel_mse"],
                       "seconds": [best["seconds"]], "denoised": None}
-    times = [reached["seconds"]] + [r.render(engine, reached["samples"], reached["threshold"], denoise)["seconds"]
-                                    for _ in range(runs - 1)]
     denoised = None
     if denoise:
         # Did the engine denoise? The same setting with denoising off must give another image.
@@ -281,7 +280,18 @@ def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: 
         row["denoise_evidence"] = (f"image {'differs' if changed else 'identical'} with denoising off"
                                    + ("; the report says Denoise is not applied" if said_off else ""))
     return row | {"samples": reached["samples"], "threshold": reached["threshold"], "rel_mse": reached["rel_mse"],
-                  "seconds": times, "denoised": denoised}
+                  "seconds": [], "denoised": denoised}
+
+
+def time_rows(r: Renderer, rows: list, runs: int) -> None:
+    """Times each reached setting `runs` times, in rounds over all the rows (both engines,
+    denoising on and off), so that a change in the shared machine's load falls on every row
+    alike rather than on one engine's runs."""
+    for _ in range(runs):
+        for row in rows:
+            if row["reached"]:
+                row["seconds"].append(r.render(row["engine"], row["samples"], row["threshold"],
+                                               row["denoise"])["seconds"])
 
 
 def build_demo(bpy, width: int, height: int):
@@ -317,7 +327,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help="64x48, a 256-sample reference, one run: proves the benchmark runs, measures nothing")
     ap.add_argument("--output", default=str(HERE / "results"))
-    ap.add_argument("--runs", type=int, default=3, help="timed runs of each engine's cheapest setting")
+    ap.add_argument("--runs", type=int, default=5, help="timed runs of each engine's cheapest setting")
     ap.add_argument("--width", type=int, default=128)
     ap.add_argument("--height", type=int, default=96)
     ap.add_argument("--target", type=float, default=TARGET,
@@ -367,8 +377,9 @@ def main(argv=None) -> int:
         rows = []
         for denoise in (True, False):
             for engine in ENGINES:
-                rows.append(search(r, engine, refs[engine]["rgb"], denoise, threshold, runs, max_samples, say,
+                rows.append(search(r, engine, refs[engine]["rgb"], denoise, threshold, max_samples, say,
                                    args.target))
+        time_rows(r, rows, runs)
         results.append({"target": args.target, "scene": label, "key": key,
                         "size": [width, height], "threshold": threshold,
                         "references": {e: {k: v for k, v in ref.items() if k != "rgb"} for e, ref in refs.items()},
