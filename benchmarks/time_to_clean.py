@@ -184,7 +184,7 @@ class Renderer:
         cycles.use_denoising = denoise
         cycles.seed = seed
         cycles.device = "CPU"
-        path = self.work / f"{engine.lower()}.exr"
+        path = self.work / f"{engine.lower()}_{os.getpid()}.exr"  # two runs at once must not share a file
         t0 = time.perf_counter()
         out = render_to_exr(self.bpy, scene, path, scene.render.resolution_x, scene.render.resolution_y,
                             passes=False)
