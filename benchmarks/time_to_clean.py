@@ -414,6 +414,8 @@ def main(argv=None) -> int:
         for row in res["rows"]:
             if "denoise_evidence" in row:
                 say(f"  {ENGINES[row['engine']]}, denoise on: {row['denoise_evidence']}")
+    for exr in work.glob(f"*_{os.getpid()}.exr"):
+        exr.unlink()
     (out_dir / "time_to_clean.json").write_text(json.dumps(results, indent=1))
     (out_dir / "time_to_clean.md").write_text("# Time to a clean image\n\n" + "\n".join(lines) + "\n")
     return 0
