@@ -18,6 +18,7 @@ import numpy as np
 from ..render import shading
 from ..render.method import Method
 from . import export
+from .export import motion as export_motion
 from .export import settings as export_settings
 from .export import shading as export_shading
 
@@ -151,11 +152,13 @@ def sampling_summary(settings: shading.RenderSettings, counters: dict, pixels: i
 
 def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None, stats=None,
                  use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
-                 settings: Optional[shading.RenderSettings] = None) -> Frame:
+                 settings: Optional[shading.RenderSettings] = None, frame_set=None) -> Frame:
     """Exports the depsgraph's view layer and renders the frame (or its border) with
     `method`. headlight: None follows the scene's Lighting setting (and falls back to the
     headlight, said in the report, when nothing in the scene gives light); True/False
-    force it. keep: keep the geometry for the next frame."""
+    force it. keep: keep the geometry for the next frame. frame_set(frame, subframe): the
+    render engine's, to sample transforms over the shutter (motion blur); None renders the
+    frame's time alone (said in the report when motion blur is on)."""
     scene = depsgraph.scene
     props = scene.splat_tracer
     width, height = image_size(scene.render)
@@ -168,10 +171,16 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     say("Splat Tracer | exporting")
     CACHE.begin_frame()
     try:
+        motion = None
+        if frame_set is not None:
+            motion = export_motion.sample_motion(depsgraph, frame_set, report)
+        elif scene.render.use_motion_blur:
+            report.once("Motion Blur is not rendered here: this render is of the frame's time alone (F12 and "
+                        "animation renders blur)")
         origin = export.camera_origin(depsgraph)
-        camera = export.export_camera(depsgraph, width, height, origin)
+        camera = export.export_camera(depsgraph, width, height, origin, motion)
         export_settings.report_unhonoured(scene, depsgraph.view_layer, report)
-        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report)
+        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report, motion)
     except BaseException:
         CACHE.end_frame(keep=False)
         raise
@@ -182,8 +191,10 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
     say(summary + " | rendering")
     t1 = time.perf_counter()
+    moving = exported.render_scene.moving + (camera.motion is not None)
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
-                                          threads=threads, progress=progress)
+                                          threads=threads, progress=progress,
+                                          shutter_curve=motion.curve if motion is not None and moving else None)
     t_render = time.perf_counter() - t1
     position = result.passes.get("Position")
     if position is not None:
@@ -198,7 +209,8 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                        render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
                        view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
-                       completed=result.completed,
+                       completed=result.completed, moving=exported.render_scene.moving,
+                       camera_moves=camera.motion is not None,
                        sampling=sampling_summary(settings, result.counters, w * h),
                        **result.counters)
     CACHE.end_frame(keep)

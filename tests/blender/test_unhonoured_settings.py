@@ -47,10 +47,11 @@ def small_scene(blender, empty_scene):
     return scene
 
 
-def _motion_blur(bpy, scene):
-    scene.frame_set(7)
+def _rolling_shutter(bpy, scene):
+    # Motion blur itself is rendered (tests/blender/test_motion_blur.py); its rolling shutter is not.
     scene.render.use_motion_blur = True
-    return ("Motion Blur is not rendered", "rendered sharp at frame 7's time", "shutter of 0.5 frames")
+    scene.cycles.rolling_shutter_type = "TOP"
+    return ("Rolling Shutter is not rendered", "a global shutter")
 
 
 def _stereo(bpy, scene):
@@ -87,7 +88,7 @@ def _light_group(bpy, scene):
     return (f"{LAYER}: the light group 'Key' pass is not written",)
 
 
-CASES = {"motion blur": _motion_blur, "stereo 3D": _stereo, "multi-view": _multiview, "denoising": _denoising,
+CASES = {"rolling shutter": _rolling_shutter, "stereo 3D": _stereo, "multi-view": _multiview, "denoising": _denoising,
          "shader AOV": _aov, "light group": _light_group}
 
 

@@ -311,8 +311,9 @@ class _Frame:
 
 
 def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_factor: float = 1.0,
-                 threads: int = 0, report: shading.Report | None = None) -> ExportedScene:
-    """The depsgraph's view layer as a RenderScene in the local frame at `origin`."""
+                 threads: int = 0, report: shading.Report | None = None, motion=None) -> ExportedScene:
+    """The depsgraph's view layer as a RenderScene in the local frame at `origin`. motion:
+    the transforms over the shutter (export/motion.py's Motion), or None (no motion blur)."""
     report = report if report is not None else shading.Report()
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
@@ -354,10 +355,21 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
                         "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "
                         "an emissive mesh is")
+        steps = motion.of(inst) if motion is not None else None
+        if steps is not None:
+            steps = steps.copy()
+            steps[:, :3, 3] -= origin
+            problem = next((p for p in map(transform_problem, steps) if p is not None), None)
+            if problem is not None:
+                report.once(f"object '{obj.name}': within the shutter {problem}; rendered without motion blur")
+                steps = None
+            elif kind == "mesh" and any(any(c > 0 for c in m.emission) for m in materials):
+                report.once(f"object '{obj.name}' emits light and moves: its surface is blurred, but the light it "
+                            "casts comes from where it is at the frame's time")
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
-            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"]))
+            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], motion=steps))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
@@ -392,9 +404,10 @@ def camera_frustum(data, width: int, height: int, aspect_x: float = 1.0, aspect_
     return (dx - half_w, dx + half_w, dy - half_h, dy + half_h)
 
 
-def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> Camera:
+def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin, motion=None) -> Camera:
     """The scene camera from its parameters, in double (not from calc_matrix_camera's
-    float32 projection, which loses clipping ranges of about 1e8 and more)."""
+    float32 projection, which loses clipping ranges of about 1e8 and more). motion: the
+    transforms over the shutter (export/motion.py's Motion), or None."""
     scene = depsgraph.scene
     if scene.camera is None:
         raise RuntimeError("the scene has no active camera")
@@ -420,7 +433,8 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
     if panorama is None:
         frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
     return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
-                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama)
+                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama,
+                               motion.camera if motion is not None else None)
 
 
 def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0) -> tuple:
