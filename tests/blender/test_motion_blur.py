@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from blender_helpers import add_camera
+from blender_helpers import add_camera, extension_module
 from test_scene_export import black_world, mesh_object, principled, render
 
 W, H = 128, 24
@@ -172,8 +172,6 @@ def test_object_switch_and_still_scenes(blender, empty_scene, tmp_path):
 
 def test_report_says_what_is_approximated(blender, empty_scene):
     """Rolling shutter and deformation blur are said once; the moving square is blurred."""
-    from blender_helpers import extension_module
-
     square, _ = _setup(blender, empty_scene, shutter=0.5)
     empty_scene.cycles.rolling_shutter_type = "TOP"
     square.modifiers.new("Wave", "WAVE")
@@ -187,3 +185,33 @@ def test_report_says_what_is_approximated(blender, empty_scene):
     assert "Rolling Shutter is not rendered" in lines
     assert "Deformation motion blur is not rendered ('Square')" in lines
     assert "Motion Blur is not rendered" not in lines
+
+
+def test_the_motion_blur_panels_show_for_the_engine(blender, empty_scene):
+    """Render > Motion Blur (with its Shutter Curve) and Object > Motion Blur show for the
+    engine, as Cycles' do for Cycles (whose own hide for other engines)."""
+    from types import SimpleNamespace
+
+    square = _square(blender)
+    for name in ("SPLAT_TRACER_PT_motion_blur", "SPLAT_TRACER_PT_motion_blur_curve"):
+        panel = getattr(blender.types, name)
+        assert panel.poll(SimpleNamespace(engine="SPLAT_TRACER")) and not panel.poll(SimpleNamespace(engine="CYCLES"))
+    panel = blender.types.SPLAT_TRACER_PT_object_motion_blur
+    assert panel.poll(SimpleNamespace(engine="SPLAT_TRACER", object=square))
+    assert not panel.poll(SimpleNamespace(engine="CYCLES", object=square))
+
+
+def test_the_shutter_curve_is_read(blender, empty_scene):
+    """Blender's default Shutter Curve is flat (a box shutter: nothing passed to the core);
+    a ramp is read as the shutter's openness over time."""
+    motion = extension_module("blender.export.motion")
+    assert motion.shutter_curve(empty_scene) is None
+    curve = empty_scene.render.motion_blur_shutter_curve
+    points = curve.curves[0].points
+    for k, point in enumerate(points):  # y = x through the default curve's points
+        x = k / (len(points) - 1)
+        point.location = (x, x)
+    curve.update()
+    values = motion.shutter_curve(empty_scene)
+    assert values is not None and values[0] == pytest.approx(0.0, abs=1e-3) and values[-1] == pytest.approx(1.0)
+    assert values[len(values) // 2] == pytest.approx(0.5, abs=0.05)
