@@ -272,8 +272,7 @@ def _draw_slot(layout, settings, name: str) -> None:
 
 class SPLAT_TRACER_PT_motion_blur(SplatTracerPanel, bpy.types.Panel):
     """Render > Motion Blur, the settings Cycles' panel shows (Cycles' own hides for other
-    engines), read where Cycles reads them (blender/export/motion.py). Rolling Shutter is
-    shown as Cycles shows it; the render report says it is not rendered."""
+    engines), read where Cycles reads them (blender/export/motion.py)."""
     bl_label = "Motion Blur"
     bl_context = "render"
     bl_options = {"DEFAULT_CLOSED"}

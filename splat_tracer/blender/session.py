@@ -194,7 +194,8 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     moving = exported.render_scene.moving + (camera.motion is not None)
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
                                           threads=threads, progress=progress,
-                                          shutter_curve=motion.curve if motion is not None and moving else None)
+                                          shutter_curve=motion.curve if motion is not None and moving else None,
+                                          rolling_shutter=motion.rolling if motion is not None and moving else None)
     t_render = time.perf_counter() - t1
     position = result.passes.get("Position")
     if position is not None:

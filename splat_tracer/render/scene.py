@@ -214,7 +214,7 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True, shutter_curve=None) -> FrameResult:
+               packets: bool = True, shutter_curve=None, rolling_shutter: Optional[float] = None) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -222,6 +222,9 @@ class RenderScene:
         openness at evenly spaced times from its opening to its closing (>= 2 values, >= 0, not
         all 0; Blender's Shutter Curve); None: a box shutter. Camera rays get a time in the
         shutter only where something moves (an instance's or the camera's `motion`).
+        rolling_shutter: Cycles' rolling shutter (rows exposed from top to bottom), its
+        duration in [0, 1] (a row's exposure as a share of the shutter; 0: an instant);
+        None: off (a global shutter).
 
         With shadow-catcher instances, Combined is formed as Cycles forms it: the catcher is
         left out, and its shadow (its light with everything / its light with catchers only)
@@ -241,6 +244,10 @@ class RenderScene:
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window)
         if shutter_curve is not None:
             kwargs["shutter_table"] = shutter_table(shutter_curve)
+        if rolling_shutter is not None:
+            if not 0.0 <= rolling_shutter <= 1.0:
+                raise ValueError(f"rolling_shutter must be a duration in [0, 1], got {rolling_shutter!r}")
+            kwargs["rolling_shutter_duration"] = float(rolling_shutter)
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)

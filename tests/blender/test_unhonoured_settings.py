@@ -47,13 +47,6 @@ def small_scene(blender, empty_scene):
     return scene
 
 
-def _rolling_shutter(bpy, scene):
-    # Motion blur itself is rendered (tests/blender/test_motion_blur.py); its rolling shutter is not.
-    scene.render.use_motion_blur = True
-    scene.cycles.rolling_shutter_type = "TOP"
-    return ("Rolling Shutter is not rendered", "a global shutter")
-
-
 def _stereo(bpy, scene):
     scene.render.use_multiview = True
     return ("Stereoscopy is not rendered", "every view ('left', 'right') gets the same image")
@@ -88,7 +81,7 @@ def _light_group(bpy, scene):
     return (f"{LAYER}: the light group 'Key' pass is not written",)
 
 
-CASES = {"rolling shutter": _rolling_shutter, "stereo 3D": _stereo, "multi-view": _multiview, "denoising": _denoising,
+CASES = {"stereo 3D": _stereo, "multi-view": _multiview, "denoising": _denoising,
          "shader AOV": _aov, "light group": _light_group}
 
 

@@ -174,3 +174,18 @@ def test_a_moving_cloud_smears_as_a_moving_mesh_and_packets_agree():
     # The splats' disc edges overhang the square by up to a radius: compared away from them.
     row, expected = packed[H // 2, :, 0], _translation_profile(-1.0, 1.0)
     assert np.abs(row - expected).max() < TOLERANCE + 0.05
+
+
+def test_rolling_shutter_gives_each_row_its_instant():
+    """Duration 0: row r (from the top) sees the square at time (r + 1) / height only, so a
+    column's coverage over the rows is the square's position at each row's instant."""
+    row_times = (np.arange(H) + 1) / H
+    scene = RenderScene([_emitter(motion=(_moved(-1.0), _moved(1.0)))], [], World(colour=(0, 0, 0)))
+    image = scene.render(_camera(), W, H, SETTINGS, Method(), rolling_shutter=0.0).passes["Combined"][:, :, 0]
+    x = _columns()
+    for r in (1, H // 2, H - 2):
+        centre = -1.0 + 2.0 * row_times[r]
+        expected = (np.abs(x - centre) <= 0.5).astype(np.float32)
+        assert np.abs(image[r] - expected).mean() < 0.02, r
+    with pytest.raises(ValueError):
+        scene.render(_camera(), W, H, SETTINGS, Method(), rolling_shutter=1.5)

@@ -1,6 +1,6 @@
 """Motion blur from Blender's and Cycles' settings, read where Cycles reads them: the
 shutter (Render > Motion Blur: `render.use_motion_blur`, `motion_blur_shutter`,
-`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type`) and each object's switches (Object > Motion Blur:
+`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type` and `_duration`) and each object's switches (Object > Motion Blur:
 `object.cycles.use_motion_blur`, `motion_steps`). The camera's and each moving instance's
 world matrices are sampled at the shutter's motion steps by evaluating the depsgraph at
 subframes (RenderEngine.frame_set, as Cycles' sync does), then the frame is evaluated again
@@ -72,6 +72,15 @@ def shutter_curve(scene) -> Optional[np.ndarray]:
     return None if np.ptp(values) == 0 else values
 
 
+def rolling_shutter(scene) -> Optional[float]:
+    """Cycles' Rolling Shutter: its Duration when the type is Top (rows exposed from the
+    top down), None for None (a global shutter)."""
+    cycles = getattr(scene, "cycles", None)
+    if getattr(cycles, "rolling_shutter_type", "NONE") != "TOP":
+        return None
+    return min(max(float(cycles.rolling_shutter_duration), 0.0), 1.0)
+
+
 def instance_key(inst) -> tuple:
     """An instance of depsgraph.object_instances that is the same at every subframe: its
     object, and for an instanced one its instancer and persistent id."""
@@ -90,6 +99,7 @@ class Motion:
     objects: dict = field(default_factory=dict)
     camera: Optional[np.ndarray] = None
     curve: Optional[np.ndarray] = None
+    rolling: Optional[float] = None  # the rolling shutter's duration, None: a global shutter
 
     def of(self, inst) -> Optional[np.ndarray]:
         return self.objects.get(instance_key(inst)) if self.objects else None
@@ -113,10 +123,6 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     render = scene.render
     if not render.use_motion_blur or not render.motion_blur_shutter > 0:
         return None
-    cycles = getattr(scene, "cycles", None)
-    if getattr(cycles, "rolling_shutter_type", "NONE") != "NONE":
-        report.once("Rolling Shutter is not rendered: every row of the image sees the whole shutter "
-                    "(a global shutter, as with Rolling Shutter set to None)")
     open_, close = shutter_interval(scene)
     frame, subframe = scene.frame_current, scene.frame_subframe
 
@@ -137,7 +143,7 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     camera_steps = motion_steps(camera) if camera is not None else 0
     total = max([camera_steps, *wanted.values()], default=0)
     if total == 0:
-        return Motion(curve=shutter_curve(scene))
+        return Motion(curve=shutter_curve(scene), rolling=rolling_shutter(scene))
 
     times = np.linspace(open_, close, total)
     objects = {key: [None] * total for key in wanted}
@@ -169,7 +175,7 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     finally:
         frame_set(frame, subframe)
 
-    motion = Motion(curve=shutter_curve(scene))
+    motion = Motion(curve=shutter_curve(scene), rolling=rolling_shutter(scene))
     for key, mats in objects.items():
         if any(m is None for m in mats):
             continue  # not there at every step (appears or vanishes within the shutter): still

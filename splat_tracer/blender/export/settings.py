@@ -1,7 +1,8 @@
 """The one place that says which of Blender's and Cycles' render settings the engine does not
 honour: each, when changed from what the engine does, named once in the render report with
 what the engine does instead (the contract: never ignored in silence). Motion blur's own
-approximations (rolling shutter, deformation) are said where it is read, export/motion.py.
+approximations (deformation, a moving emitter's light) are said where it is read,
+export/motion.py and export/scene.py.
 
 Settings of one object, material, lamp or world are said where they are read (scene.py,
 shading.py); this module checks the scene, the view layer and the camera, once a frame. It

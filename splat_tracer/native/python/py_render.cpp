@@ -254,7 +254,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
                                    "material_index", "mist", "environment", "mist_settings", "camera_motion",
-                                   "shutter_table", nullptr};
+                                   "shutter_table", "rolling_shutter_duration", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
@@ -263,13 +263,14 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOf",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocammotion, &oshutter))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocammotion, &oshutter,
+                                     &cfg.rolling_shutter_duration))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -339,6 +340,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 return PyErr_Format(PyExc_ValueError, "shutter_table must be non-decreasing times in [0, 1]");
         cfg.shutter_table = t, cfg.shutter_table_size = int(k);
     }
+    if (!(cfg.rolling_shutter_duration <= 1.f))  // negative: off; NaN refused
+        return PyErr_Format(PyExc_ValueError, "rolling_shutter_duration must be <= 1 (negative: off)");
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -470,7 +473,9 @@ PyMethodDef RenderScene_methods[] = {
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. camera_motion: "
      "None or (S, 12) float64, local_from_camera's first three rows at S evenly spaced times over the shutter "
-     "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF."},
+     "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF; "
+     "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "
+     "negative (default): off."},
     {nullptr, nullptr, 0, nullptr},
 };
 

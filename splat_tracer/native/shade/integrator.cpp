@@ -300,8 +300,18 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
         // others' numbers unchanged), and the camera where it is then.
         float times[kPacketRays];
         if (timed_)
-            for (int k = 0; k < n; ++k)
-                times[k] = shutter_time(Sampler(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed).get1(Sampler::kTime));
+            for (int k = 0; k < n; ++k) {
+                float t = shutter_time(Sampler(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed).get1(Sampler::kTime));
+                const float duration = settings_.rolling_shutter_duration;
+                if (duration >= 0.f) {
+                    // Cycles' rolling shutter: the row's own instant, (row + 1) / height from
+                    // the top (Cycles' 1 - y / height, its y counted from the bottom), blended
+                    // with the sampled time by the duration.
+                    const float row = float(film_.y0 + rows[k] + 1) / float(film_.height);
+                    t = (t - 0.5f) * duration + (row - 0.5f) * (1.f - duration) + 0.5f;
+                }
+                times[k] = t;
+            }
         Ray rays[kPacketRays];
         if (camera_.moves()) {
             for (int k = 0; k < n; ++k) {

@@ -61,6 +61,10 @@ struct IntegratorSettings : FrameSettings {
     // render; null: a box shutter (the time is the number). Used only when something moves.
     const float *shutter_table = nullptr;
     int shutter_table_size = 0;
+    // Cycles' rolling shutter (Top: the image's rows are exposed from top to bottom): the
+    // duration of a row's exposure as a share of the shutter (0: each row at one instant);
+    // negative: off, every row sees the whole shutter.
+    float rolling_shutter_duration = -1.f;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
