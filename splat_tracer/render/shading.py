@@ -52,6 +52,7 @@ class Material:
         is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
+    name: the material's name in the Cryptomatte Material pass (render/cryptomatte.py).
     """
 
     base_colour: Sequence[float] = (0.8, 0.8, 0.8)
@@ -66,6 +67,7 @@ class Material:
     use_point_alpha: bool = False
     emission_sampling: str = "AUTO"
     pass_index: int = 0
+    name: str = "default_surface"  # cryptomatte.DEFAULT_MATERIAL: Cycles' name for no material
 
     def __post_init__(self):
         if self.emission_sampling not in EMISSION_SAMPLING:

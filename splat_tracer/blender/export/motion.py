@@ -1,7 +1,8 @@
 """Motion blur from Blender's and Cycles' settings, read where Cycles reads them: the
 shutter (Render > Motion Blur: `render.use_motion_blur`, `motion_blur_shutter`,
-`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type` and `_duration`) and each object's switches (Object > Motion Blur:
-`object.cycles.use_motion_blur`, `motion_steps`). The camera's and each moving instance's
+`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type` and `_duration`)
+and each object's switches (Object > Motion Blur: `object.cycles.use_motion_blur`,
+`motion_steps`). The camera's and each moving instance's
 world matrices are sampled at the shutter's motion steps by evaluating the depsgraph at
 subframes (RenderEngine.frame_set, as Cycles' sync does), then the frame is evaluated again
 at its own time; the core interpolates between the steps at each camera ray's time
@@ -94,15 +95,20 @@ def instance_key(inst) -> tuple:
 @dataclass
 class Motion:
     """The transforms over the shutter: world matrices by instance_key (only of instances
-    that move) and of the camera (None when it does not move)."""
+    that move) and by camera object name (only of cameras that move: the scene camera, or a
+    stereo/multi-view render's view cameras)."""
 
     objects: dict = field(default_factory=dict)
-    camera: Optional[np.ndarray] = None
+    cameras: dict = field(default_factory=dict)
     curve: Optional[np.ndarray] = None
     rolling: Optional[float] = None  # the rolling shutter's duration, None: a global shutter
 
     def of(self, inst) -> Optional[np.ndarray]:
         return self.objects.get(instance_key(inst)) if self.objects else None
+
+    def camera_of(self, camera) -> Optional[np.ndarray]:
+        """A camera object's world matrices (normalized) over the shutter, or None."""
+        return self.cameras.get(camera.name_full) if camera is not None else None
 
 
 def _may_deform(obj) -> bool:
@@ -115,10 +121,13 @@ def _may_deform(obj) -> bool:
                for m in getattr(obj, "modifiers", ()))
 
 
-def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: shading.Report) -> Optional[Motion]:
-    """The camera's and the instances' transforms at the shutter's motion steps, or None when
-    motion blur is off. frame_set(frame, subframe) evaluates the depsgraph at another time
-    (RenderEngine.frame_set); the frame's own time is evaluated again before returning."""
+def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: shading.Report,
+                  cameras=None) -> Optional[Motion]:
+    """The cameras' and the instances' transforms at the shutter's motion steps, or None when
+    motion blur is off. cameras: the camera objects rendered (a multi-view render's view
+    cameras); None: the scene camera. frame_set(frame, subframe) evaluates the depsgraph at
+    another time (RenderEngine.frame_set); the frame's own time is evaluated again before
+    returning."""
     scene = depsgraph.scene
     render = scene.render
     if not render.use_motion_blur or not render.motion_blur_shutter > 0:
@@ -139,26 +148,29 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
             source = obj.original or obj
             if getattr(getattr(source, "cycles", None), "use_deform_motion", True) and _may_deform(source):
                 deforming.append(source.name)
-    camera = scene.camera
-    camera_steps = motion_steps(camera) if camera is not None else 0
-    total = max([camera_steps, *wanted.values()], default=0)
+    if cameras is None:
+        cameras = [scene.camera]
+    # By name: a stereo render's two eyes share one camera, sampled once.
+    cameras = {c.name_full: c for c in cameras if c is not None}
+    camera_steps = {name: motion_steps(c) for name, c in cameras.items()}
+    total = max([*camera_steps.values(), *wanted.values()], default=0)
     if total == 0:
         return Motion(curve=shutter_curve(scene), rolling=rolling_shutter(scene))
 
     times = np.linspace(open_, close, total)
     objects = {key: [None] * total for key in wanted}
-    cam = [None] * total
-    lens = set()
+    cam = {name: [None] * total for name in cameras}
+    lens = {name: set() for name in cameras}
 
     def read(i):
         for inst in depsgraph.object_instances:
             key = instance_key(inst)
             if key in objects:
                 objects[key][i] = np.array(inst.matrix_world, np.float64)
-        if camera is not None:
+        for name, camera in cameras.items():
             evaluated = camera.evaluated_get(depsgraph)
-            cam[i] = np.array(evaluated.matrix_world.normalized(), np.float64)
-            lens.add(round(float(evaluated.data.lens), 6))
+            cam[name][i] = np.array(evaluated.matrix_world.normalized(), np.float64)
+            lens[name].add(round(float(evaluated.data.lens), 6))
 
     # The frame's own time first, while the depsgraph is still evaluated there.
     at_frame = [i for i, t in enumerate(times) if t == 0.0]
@@ -182,13 +194,14 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
         mats = _thinned(mats, total, wanted[key])
         if any(not np.array_equal(m, mats[0]) for m in mats[1:]):
             motion.objects[key] = np.array(mats)
-    if camera_steps and all(m is not None for m in cam):
-        mats = _thinned(cam, total, camera_steps)
-        if any(not np.array_equal(m, mats[0]) for m in mats[1:]):
-            motion.camera = np.array(mats)
-    if len(lens) > 1:
-        report.once(f"the camera's focal length changes within the shutter: the frame's is used throughout "
-                    "(its position and rotation are blurred)")
+    for name, mats in cam.items():
+        if camera_steps[name] and all(m is not None for m in mats):
+            mats = _thinned(mats, total, camera_steps[name])
+            if any(not np.array_equal(m, mats[0]) for m in mats[1:]):
+                motion.cameras[name] = np.array(mats)
+        if len(lens[name]) > 1:
+            report.once(f"camera '{name}': its focal length changes within the shutter: the frame's is used "
+                        "throughout (its position and rotation are blurred)")
     if deforming:
         names = ", ".join(f"'{n}'" for n in sorted(set(deforming))[:3]) + (" ..." if len(set(deforming)) > 3 else "")
         report.once(f"Deformation motion blur is not rendered ({names}): objects are blurred as wholes by their "

@@ -173,10 +173,10 @@ class _Sockets:
 # --------------------------------------------------------------------------------------
 # Materials. Each shader reader returns a dict of shading.Material fields (unset: the
 # contract's defaults), so that Mix and Add can blend them before the Material is made.
-# Emission Sampling is the material's setting, not a shader's: material_of sets it.
+# Emission Sampling and the name are the material's, not a shader's: material_of sets them.
 
 _DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
-             if f.name != "emission_sampling"}
+             if f.name not in ("emission_sampling", "name")}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -324,7 +324,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     if bl_material is None:
         return shading.Material()
     return dataclasses.replace(_surface_material(bl_material, report),
-                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index)
+                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index,
+                               name=bl_material.name)
 
 
 def _emission_sampling(bl_material) -> str:
@@ -373,6 +374,10 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+# Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
+_LIGHT_MAX_BOUNCES = 1024
+
+
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
     if _has_custom_nodes(light):
@@ -382,6 +387,14 @@ def _report_lamp_extras(obj, light, say) -> None:
         say("light linking is ignored")
     if light.type != "SUN" and not getattr(light, "normalize", True):
         say("'Normalize' off is ignored (rendered as if on)")
+    factors = [label for prop, label in (("diffuse_factor", "Diffuse"), ("specular_factor", "Glossy"),
+                                         ("transmission_factor", "Transmission"))
+               if getattr(light, prop, 1.0) != 1.0]
+    if factors:
+        say(f"its {'/'.join(factors)} influence is ignored (rendered as 1)")
+    bounces = getattr(getattr(light, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        say(f"its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
 
 
 def _area_fields(light, matrix: np.ndarray, say) -> dict:
@@ -509,6 +522,9 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
+    bounces = getattr(getattr(world, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        report.once(f"world '{world.name}': its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
                 mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff)

@@ -248,29 +248,76 @@ void RenderScene_dealloc(PyObject *self) {
     Py_DECREF(type);
 }
 
+// The arrays of the Cryptomatte argument, held while the render runs.
+struct CryptomatteViews {
+    View out[CryptomatteFilm::kKinds], instance_ids, material_ids;
+};
+
+// render()'s `cryptomatte`: None, or (object, material, asset, slots, instance_ids,
+// material_ids) -- each of the first three None or a writable float32 (h, w, 2 slots) buffer,
+// slots in 1..kMaxCryptomatteSlots, instance_ids float32 (instances, 2) (each instance's
+// object and asset id), material_ids float32 (materials,). Ids must be finite and not 0 (0
+// marks a free slot; render/cryptomatte.py's ids never are).
+bool parse_cryptomatte(PyObject *arg, const RenderScene &scene, int w, int h, CryptomatteFilm &film,
+                       CryptomatteViews &views) {
+    if (arg == Py_None) return true;
+    // Blender's Levels go to 16 (pass_cryptomatte_depth's hard maximum).
+    constexpr int kMaxCryptomatteSlots = 16;
+    PyObject *kinds[CryptomatteFilm::kKinds], *oinst, *omat;
+    int slots = 0;
+    if (!PyArg_ParseTuple(arg, "OOOiOO;cryptomatte must be (object, material, asset, slots, instance_ids, "
+                               "material_ids)",
+                          &kinds[0], &kinds[1], &kinds[2], &slots, &oinst, &omat))
+        return false;
+    if (slots < 1 || slots > kMaxCryptomatteSlots)
+        return PyErr_Format(PyExc_ValueError, "cryptomatte slots must be in 1..%d", kMaxCryptomatteSlots), false;
+    const Py_ssize_t n_inst = Py_ssize_t(scene.instance_count()), n_mat = Py_ssize_t(scene.material_count());
+    const Py_ssize_t inst_shape[2] = {n_inst, 2}, mat_shape[1] = {n_mat};
+    if (!get_array(oinst, "cryptomatte instance_ids", 'f', 2, inst_shape, false, views.instance_ids) ||
+        !get_array(omat, "cryptomatte material_ids", 'f', 1, mat_shape, false, views.material_ids))
+        return false;
+    const float *ids[2] = {views.instance_ids.data<float>(), views.material_ids.data<float>()};
+    const size_t counts[2] = {size_t(n_inst) * 2, size_t(n_mat)};
+    for (int a = 0; a < 2; ++a)
+        for (size_t i = 0; i < counts[a]; ++i)
+            if (!std::isfinite(ids[a][i]) || ids[a][i] == 0.f)
+                return PyErr_Format(PyExc_ValueError, "cryptomatte ids must be finite and not 0"), false;
+    static const char *names[CryptomatteFilm::kKinds] = {"cryptomatte object", "cryptomatte material",
+                                                         "cryptomatte asset"};
+    for (int k = 0; k < CryptomatteFilm::kKinds; ++k) {
+        if (kinds[k] == Py_None) continue;
+        const Py_ssize_t shape[3] = {h, w, 2 * Py_ssize_t(slots)};
+        if (!get_array(kinds[k], names[k], 'f', 3, shape, true, views.out[k])) return false;
+        film.out[k] = views.out[k].data<float>();
+    }
+    film.slots = slots, film.instance_ids = ids[0], film.material_ids = ids[1];
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", "camera_motion",
-                                   "shutter_table", "rolling_shutter_duration", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte",
+                                   "camera_motion", "shutter_table", "rolling_shutter_duration", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocammotion = Py_None, *oshutter = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
+             *oshutter = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOf",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOf",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocammotion, &oshutter,
-                                     &cfg.rolling_shutter_duration))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
+                                     &oshutter, &cfg.rolling_shutter_duration))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -367,16 +414,28 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         *out.target = out.view.data<float>();
     }
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    CryptomatteViews crypto_views;
+    if (!parse_cryptomatte(ocrypto, scene, w, h, film.cryptomatte, crypto_views)) return nullptr;
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
                             {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
             return nullptr;
         for (size_t j = 0; j < i; ++j)
             if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{out, "a cryptomatte buffer"}, {outs[i].view, outs[i].name}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
     }
-
-    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    if (!check_separate({{crypto_views.out[0], "cryptomatte object"}, {crypto_views.out[1], "cryptomatte material"},
+                         {crypto_views.out[2], "cryptomatte asset"}},
+                        {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                         {crypto_views.material_ids, "cryptomatte material ids"},
+                         {cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
     RenderCounters counters;
     std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
     std::string message;
@@ -468,10 +527,12 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1))\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
+     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
-     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. camera_motion: "
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). camera_motion: "
      "None or (S, 12) float64, local_from_camera's first three rows at S evenly spaced times over the shutter "
      "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF; "
      "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "

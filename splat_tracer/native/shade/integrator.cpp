@@ -50,6 +50,7 @@ struct Integrator::Primary {
     float material_index = 0;
     float mist = 0;    // 1 - Cycles' mist there (0 where nothing is hit); only with the Mist pass
     Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
+    int instance = -1, material = 0;  // of the first opaque surface (not a holdout): Cryptomatte's names
 };
 
 struct Integrator::Pixel {
@@ -183,6 +184,12 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
       filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f),
       timed_(scene.any_motion() || camera.moves()) {
+    if (film.cryptomatte.enabled()) {
+        // Its slots are sums until each pixel's finish(), whatever the buffers held (0: free).
+        const size_t floats = size_t(film.w) * size_t(film.h) * 2 * size_t(film.cryptomatte.slots);
+        for (float *buf : film.cryptomatte.out)
+            if (buf) std::fill(buf, buf + floats, 0.f);
+    }
     if (settings.progressive()) {
         const size_t pixels = size_t(film.w) * size_t(film.h);
         half_.assign(pixels, Vec3());
@@ -256,6 +263,7 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.shadow, a.shadow * inv);
         put3(film_.environment, a.environment * inv);
         if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
         write_centre(a.centre, p);
     }
 }
@@ -269,6 +277,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
     const bool half = settings_.adaptive;
     const bool catchers = scene_.any_catcher();
     const Vec3 backdrop = world_seen(kVisCamera);
+    const bool crypto = film_.cryptomatte.enabled();
     // Each pixel's sample 0, by which its pixel points are moved so that it is the centre.
     uint32_t first[2 * kPacketRays];
     if (samples > 1)
@@ -367,6 +376,11 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             a.environment = a.environment + prim.environment, a.mist += prim.mist;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
+            // Each sample counts 1 for the name it meets (Cycles' matte weight: the camera
+            // ray's throughput, 1, times the opacity, 1 where alpha is sampled stochastically).
+            if (crypto && prim.instance >= 0)
+                film_.cryptomatte.add(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]), prim.instance,
+                                      prim.material, 1.f);
             if (s == 0)
                 a.centre = prim, a.centre.t = prim.hit ? float(camera_.at(timed_ ? times[k] : 0.f).depth(rays[k], prim.t)) : 0.f;
         }
@@ -480,6 +494,7 @@ uint64_t Integrator::finish() {
             if (buf)
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
         if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
     }
     return total;
 }
@@ -655,6 +670,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
         primary->position = sp.p, primary->material_index = mat.pass_index;
+        primary->instance = sp.instance, primary->material = sp.material;
         if (film_.mist) primary->mist = mist_term(sp.p);
     }
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
