@@ -343,6 +343,10 @@ class SPLAT_TRACER_PT_motion_blur(SplatTracerPanel, bpy.types.Panel):
             sub = col.column()
             sub.active = cycles.rolling_shutter_type != "NONE"
             sub.prop(cycles, "rolling_shutter_duration")
+        # The view layer's own switch (Cycles draws it in its View Layer > Filter panel,
+        # which it keeps to itself): Cycles blurs a layer when both are on.
+        col.separator()
+        col.prop(context.view_layer, "use_motion_blur", text="View Layer")
         layout.label(text="Final renders only: the viewport shows no blur (as Cycles')")
 
 

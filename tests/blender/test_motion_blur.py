@@ -186,13 +186,21 @@ def test_rolling_shutter_skews_as_in_cycles(blender, empty_scene, tmp_path):
 
 
 def test_object_switch_and_still_scenes(blender, empty_scene, tmp_path):
-    """Object > Motion Blur off keeps that object sharp (as Cycles); with motion blur on and
-    nothing moving, the image is bit-identical to motion blur off (no time dimension)."""
+    """Object > Motion Blur off keeps that object sharp (as Cycles), so does the view layer's
+    Motion Blur off; with motion blur on and nothing moving, the image is bit-identical to
+    motion blur off (no time dimension)."""
     square, _ = _setup(blender, empty_scene, shutter=1.0)
     square.cycles.use_motion_blur = False
     found = _both(blender, empty_scene, tmp_path, "object_off")
     print("object's motion blur off:", found)
     assert found["SPLAT_TRACER"]["ramp"] < 2.0 and found["CYCLES"]["ramp"] < 2.0
+    # The view layer's switch off (the scene's on) renders the layer sharp, as in Cycles.
+    square.cycles.use_motion_blur = True
+    empty_scene.view_layers[0].use_motion_blur = False
+    found = _both(blender, empty_scene, tmp_path, "layer_off")
+    print("view layer's motion blur off:", found)
+    assert found["SPLAT_TRACER"]["ramp"] < 2.0 and found["CYCLES"]["ramp"] < 2.0
+    empty_scene.view_layers[0].use_motion_blur = True
     square.animation_data_clear()
     square.location.x = 0.3
     square.cycles.use_motion_blur = True

@@ -1,8 +1,8 @@
 """Motion blur from Blender's and Cycles' settings, read where Cycles reads them: the
 shutter (Render > Motion Blur: `render.use_motion_blur`, `motion_blur_shutter`,
-`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type` and `_duration`)
-and each object's switches (Object > Motion Blur: `object.cycles.use_motion_blur`,
-`motion_steps`). The camera's and each moving instance's
+`motion_blur_position`, the Shutter Curve; Cycles' `rolling_shutter_type` and `_duration`;
+the view layer's `use_motion_blur`) and each object's switches (Object > Motion Blur:
+`object.cycles.use_motion_blur`, `motion_steps`). The camera's and each moving instance's
 world matrices are sampled at the shutter's motion steps by evaluating the depsgraph at
 subframes (RenderEngine.frame_set, as Cycles' sync does), then the frame is evaluated again
 at its own time; the core interpolates between the steps at each camera ray's time
@@ -130,7 +130,9 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     returning."""
     scene = depsgraph.scene
     render = scene.render
-    if not render.use_motion_blur or not render.motion_blur_shutter > 0:
+    # Cycles blurs a view layer when both the scene's and the layer's Motion Blur are on.
+    if not (render.use_motion_blur and getattr(depsgraph.view_layer, "use_motion_blur", True)
+            and render.motion_blur_shutter > 0):
         return None
     open_, close = shutter_interval(scene)
     frame, subframe = scene.frame_current, scene.frame_subframe
