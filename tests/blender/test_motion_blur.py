@@ -256,3 +256,46 @@ def test_the_shutter_curve_is_read(blender, empty_scene):
     values = motion.shutter_curve(empty_scene)
     assert values is not None and values[0] == pytest.approx(0.0, abs=1e-3) and values[-1] == pytest.approx(1.0)
     assert values[len(values) // 2] == pytest.approx(0.5, abs=0.05)
+
+
+@pytest.mark.parametrize("mode", ["PARALLEL", "TOE"])
+def test_each_stereo_eye_blurs_with_its_own_camera_as_in_cycles(blender, empty_scene, tmp_path, mode):
+    """A stereo render of a camera pan: each eye's camera moves over the shutter with the eye
+    kept beside the camera (Blender's eye matrix at the frame's time, moved as the camera
+    moves), as Cycles moves each eye. Per eye, the smear's ramp and centroid must be Cycles'
+    (RAMP_RTOL, CENTROID_ATOL); the eyes' centroids differ by the disparity (10.7 px for
+    Parallel eyes 0.3 apart, 5 units from the square). Both eyes blurred with the scene
+    camera's own motion would put both smears at the camera's place, half the disparity
+    (5.3 px for Parallel) from each eye's: outside CENTROID_ATOL."""
+    from test_stereo import _render as render_views
+
+    bpy, scene = blender, empty_scene
+    _square(bpy)
+    black_world(bpy, scene)
+    cam = add_camera(bpy, scene, (0, 0, 5), (0, 0, 0), lens=50.0, sensor_width=36.0, sensor_fit="HORIZONTAL")
+    _animate_x(cam, 0.0, SPEED)
+    scene.frame_set(FRAME)
+    stereo = cam.data.stereo
+    # Both eyes beside the camera (pivot Center), converging beyond the square (Toe-in's
+    # disparity then about half Parallel's, not 0).
+    stereo.convergence_mode, stereo.interocular_distance, stereo.convergence_distance = mode, 0.3, 10.0
+    stereo.pivot = "CENTER"
+    r = scene.render
+    r.use_multiview, r.views_format = True, "STEREO_3D"
+    r.use_motion_blur, r.motion_blur_shutter = True, 0.5
+    c = scene.cycles
+    c.samples, c.device, c.use_denoising, c.use_adaptive_sampling, c.max_bounces = SAMPLES, "CPU", False, False, 0
+    got = {}
+    for engine in ("SPLAT_TRACER", "CYCLES"):
+        r.engine = engine
+        views = render_views(bpy, scene, tmp_path / f"stereo_{mode}_{engine}.exr")
+        got[engine] = {view: smear(views[view]["Combined"][..., 0]) for view in ("left", "right")}
+    print(mode, got)
+    for view in ("left", "right"):
+        ours, cycles = got["SPLAT_TRACER"][view], got["CYCLES"][view]
+        assert ours["ramp"] == pytest.approx(cycles["ramp"], rel=RAMP_RTOL)
+        assert abs(ours["centroid"] - cycles["centroid"]) < CENTROID_ATOL
+    ours = got["SPLAT_TRACER"]
+    # Blurred (a 0.375-unit pan, 13 px here; sharp: a 1.6 px ramp), and the eyes apart.
+    assert ours["left"]["ramp"] > 5.0 and ours["right"]["ramp"] > 5.0
+    assert abs(ours["right"]["centroid"] - ours["left"]["centroid"]) > 2 * CENTROID_ATOL
