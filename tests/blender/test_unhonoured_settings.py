@@ -70,6 +70,42 @@ def _light_group(bpy, scene):
     return (f"{LAYER}: the light group 'Key' pass is not written",)
 
 
+def _optix(bpy, scene):
+    # Set as stored (OptiX is 2 in Cycles' items), as a file saved on a machine with an NVIDIA
+    # GPU holds it: here the enum has no OptiX item to set it through.
+    scene.cycles.use_denoising = True
+    system = getattr(scene.cycles, "bl_system_properties_get", None)
+    (system() if system is not None else scene.cycles)["denoiser"] = 2
+    return ("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead",)
+
+
+def _film_exposure(bpy, scene):
+    scene.cycles.film_exposure = 2.0
+    return ("Cycles' Film > Exposure (2) is not applied", "rendered at 1")
+
+
+def _caustics(bpy, scene):
+    scene.cycles.caustics_refractive = False
+    return ("Cycles' Caustics > Reflective/Refractive off is not honoured",)
+
+
+def _layer_samples(bpy, scene):
+    scene.view_layers[0].samples = 8
+    return (f"{LAYER}: its Samples override (8) is not used", "the scene's 1 samples")
+
+
+def _layer_filter(bpy, scene):
+    scene.view_layers[0].use_sky = False
+    return (f"{LAYER}: Filter > Environment off is not honoured",)
+
+
+def _lamp_influence(bpy, scene):
+    lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
+    scene.collection.objects.link(lamp)
+    lamp.data.diffuse_factor = 0.5
+    return ("light 'Lamp': its Diffuse influence is ignored (rendered as 1)",)
+
+
 CASES = {"stereo panorama": _stereo_panorama, "shader AOV": _aov,
          "light group": _light_group, "OptiX denoiser": _optix, "film exposure": _film_exposure,
          "caustics": _caustics, "view layer samples": _layer_samples, "view layer filter": _layer_filter,
