@@ -83,8 +83,6 @@ ENTRIES = (
     Entry("cycles", ("dicing_rate", "max_subdivisions", "offscreen_dicing_scale"), U,
           "Adaptive subdivision (Cycles' experimental feature set) is not used: meshes render as Blender "
           "evaluates them"),
-    Entry("cycles", ("rolling_shutter_type", "rolling_shutter_duration"), U,
-          "Acts with motion blur only, which the engine does not render (said)"),
     Entry("cycles", ("ao_bounces", "ao_bounces_render", "fast_gi_method"), U,
           "Settings of Fast GI, which the engine does not use (said)"),
     Entry("cycles", ("sample_offset", "sample_subset_length"), U,
@@ -115,7 +113,6 @@ ENTRIES = (
     Entry("view_layer", ("use_grease_pencil", "use_strand", "use_ao"), U,
           "Grease Pencil, hair strands as strands, and the legacy AO filter: not rendered by Cycles either "
           "(Blender draws Grease Pencil over the result)"),
-    Entry("view_layer", ("use_motion_blur",), U, "Acts with motion blur only, which the engine does not render (said)"),
     Entry("view_layer.cycles", ("name",), V, "The property group's name, not a setting"),
     # -- objects -------------------------------------------------------------------------
     Entry("object", ("name", "use_fake_user", "use_extra_user", "is_runtime_data", "tag", "active_material_index",
@@ -142,8 +139,6 @@ ENTRIES = (
           "EEVEE's shadow terminator offsets; the engine's shading has none (Cycles' own are "
           "`object.cycles.shadow_terminator_*`)"),
     Entry("object.cycles", ("name",), V, "The property group's name, not a setting"),
-    Entry("object.cycles", ("use_motion_blur", "use_deform_motion", "motion_steps"), U,
-          "Act with motion blur only, which the engine does not render (said)"),
     Entry("object.cycles", ("use_camera_cull", "use_distance_cull"), C,
           "Culling, an optimisation the engine does not make (it renders every object)"),
     Entry("object.cycles", ("ao_distance",), U, "Acts with Fast GI only, which the engine does not use (said)"),
@@ -251,6 +246,12 @@ CONTEXT = {
     **{f"render.border_{b}": {"render.use_border": True} for b in ("min_x", "min_y", "max_x", "max_y")},
     "render.motion_blur_shutter": {"render.use_motion_blur": True},
     "render.motion_blur_position": {"render.use_motion_blur": True},
+    # Motion blur: its settings act with it on (the audit's camera and cloud move).
+    "cycles.rolling_shutter_type": {"render.use_motion_blur": True},
+    "cycles.rolling_shutter_duration": {"render.use_motion_blur": True, "cycles.rolling_shutter_type": "TOP"},
+    "view_layer.use_motion_blur": {"render.use_motion_blur": True},
+    **{f"object.cycles.{p}": {"render.use_motion_blur": True}
+       for p in ("use_motion_blur", "motion_steps", "use_deform_motion")},
     "render.filter_size": {"cycles.samples": 4},
     "cycles.pixel_filter_type": {"cycles.samples": 4},
     "cycles.time_limit": {"cycles.samples": 64},

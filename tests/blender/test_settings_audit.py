@@ -6,8 +6,9 @@ with its reason -- which docs/settings.md shows. A setting a new Blender adds is
 these and fails here instead of going unsaid.
 
 The scene is tiny (24 x 24 pixels, 1 sample): a splat-cloud sphere on a mesh floor (one
-material, partly transmissive and transparent), a point lamp, a grey world with mist, a
-camera moving through the frame. Each setting is changed alone from the scene's value
+material, partly transmissive and transparent), a point lamp, a grey world with mist, the
+camera and the cloud moving through the frame (for motion blur). Each setting is changed
+alone from the scene's value
 (settings_not_rendered.VALUES where the generic change would show nothing in this scene, and
 CONTEXT where it acts only in another mode, e.g. a spot lamp's cone), the frame is rendered
 through the session (the engine's own export and render, passes included) and compared with
@@ -59,6 +60,17 @@ class Audit:
         for frame, dx in ((0, -0.1), (1, 0.0), (2, 0.1)):
             camera.location.x = dx
             camera.keyframe_insert("location", index=0, frame=frame)
+        # The cloud moves and turns too, along Blender's default (Bezier, not linear) keys, so
+        # that its own Motion Blur switch and Motion Steps (more steps follow the curve more
+        # closely) change the image; at frame 1 it is where it was without the keys.
+        x0 = self.cloud.location.x
+        for frame, d in ((0, -1.0), (1, 0.0), (2, 1.0)):
+            self.cloud.location.x, self.cloud.rotation_euler.z = x0 + 0.4 * d, 0.5 * d
+            self.cloud.keyframe_insert("location", index=0, frame=frame)
+            self.cloud.keyframe_insert("rotation_euler", index=2, frame=frame)
+        # A shape key (its Basis alone: the floor's shape is unchanged) makes the floor an
+        # object that may deform, whose Deformation motion blur the report says.
+        self.mesh.shape_key_add(name="Basis")
         scene.frame_set(1)
         scene.world = bpy.data.worlds.new("Grey")
         scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.3, 0.3, 0.3, 1)

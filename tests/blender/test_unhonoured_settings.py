@@ -47,12 +47,6 @@ def small_scene(blender, empty_scene):
     return scene
 
 
-def _motion_blur(bpy, scene):
-    scene.frame_set(7)
-    scene.render.use_motion_blur = True
-    return ("Motion Blur is not rendered", "rendered sharp at frame 7's time", "shutter of 0.5 frames")
-
-
 def _stereo_panorama(bpy, scene):
     scene.render.use_multiview = True
     scene.camera.data.type = "PANO"
@@ -112,7 +106,7 @@ def _lamp_influence(bpy, scene):
     return ("light 'Lamp': its Diffuse influence is ignored (rendered as 1)",)
 
 
-CASES = {"motion blur": _motion_blur, "stereo panorama": _stereo_panorama, "shader AOV": _aov,
+CASES = {"stereo panorama": _stereo_panorama, "shader AOV": _aov,
          "light group": _light_group, "OptiX denoiser": _optix, "film exposure": _film_exposure,
          "caustics": _caustics, "view layer samples": _layer_samples, "view layer filter": _layer_filter,
          "lamp influence": _lamp_influence}
