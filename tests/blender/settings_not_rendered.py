@@ -23,6 +23,18 @@ class Entry:
     names: tuple    # property identifiers, fnmatch patterns allowed
     kind: str       # a key of KINDS
     reason: str
+    # The Blender versions having these settings, where not every version the matrix covers
+    # (tests/release/test_blender_versions.py): since the first version with them, before the
+    # first without them, (major, minor).
+    since: tuple = ()
+    before: tuple = ()
+
+    def versions(self) -> str:
+        """The version note docs/settings.md shows ("" for every version)."""
+        dotted = [".".join(map(str, v)) for v in (self.since, self.before)]
+        if self.since and self.before:
+            return f" (Blender {dotted[0]} to before {dotted[1]})"
+        return f" (Blender {dotted[0]} and later)" if self.since else f" (before Blender {dotted[1]})" if self.before else ""
 
 
 KINDS = {
@@ -281,9 +293,17 @@ CONTEXT = {
 }
 
 
-def listed(key: str):
+def applies(entry: Entry, version: tuple) -> bool:
+    """Whether `entry` is for a Blender `version` ((major, minor, ...), as bpy.app.version)."""
+    v = tuple(version)[:2]
+    return (not entry.since or v >= entry.since) and (not entry.before or v < entry.before)
+
+
+def listed(key: str, version: tuple):
+    """The entry listing setting `key` ('owner.prop') in a Blender `version`, or None."""
     owner, _, prop = key.rpartition(".")
-    return next((e for e in ENTRIES if e.owner == owner and any(fnmatch.fnmatchcase(prop, p) for p in e.names)), None)
+    return next((e for e in ENTRIES if e.owner == owner and applies(e, version)
+                 and any(fnmatch.fnmatchcase(prop, p) for p in e.names)), None)
 
 
 def markdown() -> str:
@@ -302,7 +322,7 @@ def markdown() -> str:
         for e in ENTRIES:
             if e.kind == kind:
                 names = ", ".join(f"every `{e.owner}` setting" if n == "*" else f"`{e.owner}.{n}`" for n in e.names)
-                out.append(f"| {names} | {e.reason} |")
+                out.append(f"| {names}{e.versions()} | {e.reason} |")
         out.append("")
     return "\n".join(out)
 
