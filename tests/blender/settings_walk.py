@@ -82,8 +82,8 @@ def keys(bpy) -> list:
     for obj in (mesh, lamp, camera):
         scene.collection.objects.link(obj)
     scene.camera, scene.world = camera, bpy.data.worlds.new("World")
-    structs = owner_structs(scene, [mesh], lamp)
-    return sorted(key for _, key, _, _ in settings(bpy, structs.__getitem__, lamp))
+    # Asked anew for each owner: the lamp's data is of another RNA class once its type changed.
+    return sorted(key for _, key, _, _ in settings(bpy, lambda name: owner_structs(scene, [mesh], lamp)[name], lamp))
 
 
 def unaudited(found: list, version: tuple, audited: list) -> list:
