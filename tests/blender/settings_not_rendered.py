@@ -33,7 +33,8 @@ class Entry:
         """The version note docs/settings.md shows ("" for every version)."""
         dotted = [".".join(map(str, v)) for v in (self.since, self.before)]
         if self.since and self.before:
-            return f" (Blender {dotted[0]} to before {dotted[1]})"
+            only = self.before == (self.since[0], self.since[1] + 1)
+            return f" (Blender {dotted[0]} only)" if only else f" (Blender {dotted[0]} to before {dotted[1]})"
         return f" (Blender {dotted[0]} and later)" if self.since else f" (before Blender {dotted[1]})" if self.before else ""
 
 
@@ -76,7 +77,7 @@ ENTRIES = (
           "aliasing); the engine reads each image whole, and a pixel's samples average what it covers",
           since=(5, 2)),
     Entry("render", ("bake_*", "use_bake_*"), C,
-          "Baking: the engine never bakes (these moved to `render.bake` in later versions)", before=(5, 0)),
+          "Blender's older bake settings: the engine never bakes", before=(5, 0)),
     # -- scene.cycles --------------------------------------------------------------------
     Entry("cycles", ("name",), V, "The property group's name, not a setting"),
     Entry("cycles", ("device", "shading_system", "denoising_use_gpu", "preview_denoising_use_gpu", "debug_*",
