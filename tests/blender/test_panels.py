@@ -204,7 +204,7 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
     assert not failures, failures
     shown_keys = set(shown)
     unsupported = {key: sorted(panels) for key, panels in shown.items()
-                   if (entry := lists.listed(key)) is not None and entry.kind == "unsupported"}
+                   if (entry := lists.listed(key, bpy.app.version)) is not None and entry.kind == "unsupported"}
     if unsupported:
         # A setting listed as not rendered that a change since made the engine honour or say
         # may be shown: the audit's walk decides, for those alone.

@@ -66,6 +66,11 @@ def _report_cycles_scene(scene, cycles, report: shading.Report) -> None:
         report.once("Cycles' Fast GI Approximation is not used: indirect light is traced to the bounce limits")
     if cycles.use_sample_subset:
         report.once(f"Cycles' Sample Subset is not used: all {cycles.samples} samples are taken")
+    # Blender 5.2's texture cache scales the images Cycles reads (1: full resolution).
+    scale = getattr(cycles, "texture_resolution_render", 1.0)
+    if scale != 1.0:
+        report.once(f"Cycles' Render Texture Resolution ({scale:g}) is not applied: images are read at their full "
+                    "resolution")
 
 
 def _on(owner, prop: str) -> bool:
