@@ -26,9 +26,9 @@ largest sample count (4096) does not reach it, the Noise Threshold is halved the
 three times. The samples are then bisected (REFINE_STEPS times) between the rung that failed and the
 one that passed, so the doubling's overshoot of up to 2x does not count against an engine.
 The cheapest setting that reached it is then timed --runs times (median and spread), in
-rounds over both engines and both modes. Each
-row says whether the engine actually denoised: Splat Tracer's render report, and for both
-engines whether the image with denoising on differs from the same setting's image with it off.
+rounds over both engines and both modes. Each row says whether the engine actually denoised:
+Splat Tracer's info line must name the denoiser that ran, and for both engines the image with
+denoising on must differ from the same setting's image with it off.
 """
 from __future__ import annotations
 
@@ -189,10 +189,10 @@ class Renderer:
         out = render_to_exr(self.bpy, scene, path, scene.render.resolution_x, scene.render.resolution_y,
                             passes=False)
         seconds = time.perf_counter() - t0
-        report = []
+        info = ""
         if engine == "SPLAT_TRACER":
-            report = list(self.session.HISTORY[-1].get("report", []))
-        return {"rgb": out["rgba"][..., :3].astype(np.float64), "seconds": seconds, "report": report}
+            info = self.session.HISTORY[-1].get("sampling", "")  # the info line: names the denoiser that ran
+        return {"rgb": out["rgba"][..., :3].astype(np.float64), "seconds": seconds, "info": info}
 
 
 def reference(r: Renderer, engine: str, fingerprint: str, say) -> dict:
@@ -213,9 +213,11 @@ def reference(r: Renderer, engine: str, fingerprint: str, say) -> dict:
     return {"rgb": got["rgb"], "seconds": got["seconds"], "cached": False, "file": path.name}
 
 
-def denoise_said_off(report: list) -> bool:
-    """Splat Tracer's render report says Cycles' Denoise was not applied."""
-    return any("Denoise is not applied" in line for line in report)
+def denoiser_named(info: str) -> str:
+    """The denoiser Splat Tracer's info line says ran ("... denoised by OpenImageDenoise (CPU)
+    from ..."), or "" when it names none (Denoise off, the library missing, a stopped render)."""
+    head, found, tail = info.partition("denoised by ")
+    return tail.split(" from ")[0] if found else ""
 
 
 def refine(failed: int, passed: int, passes, steps: int = REFINE_STEPS) -> int:
@@ -275,10 +277,15 @@ def search(r: Renderer, engine: str, ref: np.ndarray, denoise: bool, threshold: 
         # Did the engine denoise? The same setting with denoising off must give another image.
         plain = r.render(engine, reached["samples"], reached["threshold"], False)["rgb"]
         changed = bool(np.max(np.abs(plain - reached["rgb"])) > 0)
-        said_off = denoise_said_off(reached["report"])
-        denoised = changed and not said_off
-        row["denoise_evidence"] = (f"image {'differs' if changed else 'identical'} with denoising off"
-                                   + ("; the report says Denoise is not applied" if said_off else ""))
+        evidence = f"image {'differs' if changed else 'identical'} with denoising off"
+        if engine == "SPLAT_TRACER":
+            # Cycles' own denoiser is trusted on the image alone; Splat Tracer's must also be named.
+            named = denoiser_named(reached["info"])
+            changed = changed and bool(named)
+            said = "denoised by " + reached["info"].partition("denoised by ")[2]  # with the denoiser's time
+            evidence += f"; the info line says: {said}" if named else "; the info line names no denoiser"
+        denoised = changed
+        row["denoise_evidence"] = evidence
     return row | {"samples": reached["samples"], "threshold": reached["threshold"], "rel_mse": reached["rel_mse"],
                   "seconds": [], "denoised": denoised}
 

@@ -68,3 +68,13 @@ def test_the_refinement_finds_the_fewest_passing_samples_within_its_steps():
     assert ttc.refine(16, 32, passes, steps=5) == 23
     rendered.clear()
     assert ttc.refine(1, 2, passes) == 2 and rendered == []  # nothing between: no render
+
+
+def test_denoiser_named_reads_the_info_line():
+    from splat_tracer.blender.export.settings import Denoising
+
+    # The info line as blender/session.py joins it, from the describe() it uses.
+    info = f"16 samples; {Denoising('RGB_ALBEDO_NORMAL', 'ACCURATE', 'HIGH').describe()} in 0.05 s"
+    assert ttc.denoiser_named(info) == "OpenImageDenoise (CPU)"
+    assert ttc.denoiser_named("16 samples") == ""
+    assert ttc.denoiser_named("") == ""
