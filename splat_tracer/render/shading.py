@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -52,6 +52,9 @@ class Material:
         is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
+    program: the node program (render/nodes.py) that drives some of the inputs above at
+        each shading point, or None (the constant values are the material). The inputs it
+        does not drive keep their constant values.
     """
 
     base_colour: Sequence[float] = (0.8, 0.8, 0.8)
@@ -66,6 +69,7 @@ class Material:
     use_point_alpha: bool = False
     emission_sampling: str = "AUTO"
     pass_index: int = 0
+    program: Optional[object] = None
 
     def __post_init__(self):
         if self.emission_sampling not in EMISSION_SAMPLING:

@@ -24,14 +24,15 @@ struct MeshObject {
 };
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
-    PyObject *ov, *ot, *on = Py_None, *om = Py_None;
+    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", "corner_uv",
+                                   nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOi", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
-                                     &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads, &ouv))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
-    View v, t, n, m;
+    View v, t, n, m, uv;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
     if (!get_array(ot, "triangles", 'i', 2, s3, false, t)) return nullptr;
@@ -39,11 +40,13 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     Py_ssize_t sn[3] = {nt, 3, 3}, s1[1] = {nt};
     if (on != Py_None && !get_array(on, "corner_normals", 'f', 3, sn, false, n)) return nullptr;
     if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
+    Py_ssize_t suv[3] = {nt, 3, 2};
+    if (ouv != Py_None && !get_array(ouv, "corner_uv", 'f', 3, suv, false, uv)) return nullptr;
     TriangleMesh *mesh = nullptr;
     if (!without_gil([&] {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
-                                    threads);
+                                    threads, uv.held ? uv.data<float>() : nullptr);
         }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
@@ -83,7 +86,7 @@ PyType_Slot Mesh_slots[] = {
     {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
     {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
     {Py_tp_getset, Mesh_getset},
-    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0)")},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None)")},
     {0, nullptr},
 };
 
@@ -105,14 +108,78 @@ Affine affine_of(const float *row) {
     return a;
 }
 
+// A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
+// (Output::Count,)) -- render/nodes.py Program.native(). Checked by NodeProgram::validate.
+bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog) {
+    PyObject *ocode, *odata, *oout;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO", &ocode, &odata, &oout)) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs) tuple", name.c_str());
+        return false;
+    }
+    View code, data, out;
+    Py_ssize_t sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
+    if (!get_array(ocode, "node code", 'i', 2, sc, false, code) || !get_array(odata, "node data", 'f', 1, sd, false, data) ||
+        !get_array(oout, "node outputs", 'i', 1, so, false, out))
+        return false;
+    prog.name = name;
+    prog.code.assign(code.data<int32_t>(), code.data<int32_t>() + code.dim(0) * kNodeWidth);
+    prog.data.assign(data.data<float>(), data.data<float>() + data.dim(0));
+    std::copy(out.data<int32_t>(), out.data<int32_t>() + int(Output::Count), prog.outputs);
+    for (float v : prog.data)
+        if (!within_range(v)) {
+            PyErr_Format(PyExc_ValueError, "%s: a node constant is not finite or beyond 1e18", name.c_str());
+            return false;
+        }
+    try {
+        prog.validate();
+    } catch (const InputError &e) {
+        PyErr_SetString(PyExc_ValueError, e.what());
+        return false;
+    }
+    return true;
+}
+
+// _core.run_nodes(code, data, outputs, globals, out): runs a node program at each row of
+// `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)), the
+// registers after the run. For the evaluator's tests.
+PyObject *run_nodes(PyObject *, PyObject *args) {
+    PyObject *ocode, *odata, *oout, *oglobals, *oregs;
+    if (!PyArg_ParseTuple(args, "OOOOO", &ocode, &odata, &oout, &oglobals, &oregs)) return nullptr;
+    PyObject *triple = PyTuple_Pack(3, ocode, odata, oout);
+    if (!triple) return nullptr;
+    NodeProgram prog;
+    const bool ok = parse_program(triple, "program", prog);
+    Py_DECREF(triple);
+    if (!ok) return nullptr;
+    constexpr int kGlobalFloats = 29;
+    View g, regs;
+    Py_ssize_t sg[2] = {-1, kGlobalFloats};
+    if (!get_array(oglobals, "globals", 'f', 2, sg, false, g)) return nullptr;
+    Py_ssize_t sr[2] = {g.dim(0), Py_ssize_t(prog.data.size())};
+    if (!get_array(oregs, "out", 'f', 2, sr, true, regs)) return nullptr;
+    float r[kMaxNodeRegisters];
+    for (Py_ssize_t i = 0; i < g.dim(0); ++i) {
+        const float *x = g.data<float>() + kGlobalFloats * i;
+        ShaderGlobals s;
+        Vec3 *vecs[9] = {&s.P, &s.N, &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour};
+        for (int k = 0; k < 9; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+        s.point_alpha = x[27], s.backfacing = x[28];
+        prog.run(s, r);
+        std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
+    }
+    Py_RETURN_NONE;
+}
+
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", nullptr};
-    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None;
+                                   "shadow_catcher", "programs", nullptr};
+    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
+             *oprog = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &oprog))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
@@ -168,6 +235,23 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         materials[size_t(i)] = Material::from_row(r);
         if (!(materials[size_t(i)].ior > 0.f)) return PyErr_Format(PyExc_ValueError, "material %zd: ior must be > 0", i);
     }
+    // Node programs: one entry per material, None for a material without one.
+    std::vector<NodeProgram> programs;
+    if (oprog != Py_None) {
+        PyObject *seq = PySequence_Tuple(oprog);
+        if (!seq) return nullptr;
+        std::unique_ptr<PyObject, void (*)(PyObject *)> hold_seq(seq, [](PyObject *o) { Py_XDECREF(o); });
+        if (PyTuple_Size(seq) != n_mat)
+            return PyErr_Format(PyExc_ValueError, "programs has %zd entries for %zd materials", PyTuple_Size(seq), n_mat);
+        for (Py_ssize_t i = 0; i < n_mat; ++i) {
+            PyObject *item = PyTuple_GetItem(seq, i);
+            if (item == Py_None) continue;
+            NodeProgram prog;
+            if (!parse_program(item, "material " + std::to_string(i), prog)) return nullptr;
+            materials[size_t(i)].program = int(programs.size());
+            programs.push_back(std::move(prog));
+        }
+    }
     std::vector<Light> lights(static_cast<size_t>(n_light));
     for (Py_ssize_t i = 0; i < n_light; ++i) {
         const float *r = light.data<float>() + kLightFields * i;
@@ -178,7 +262,8 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         lights[size_t(i)] = Light::from_row(r);
     }
     RenderScene *scene = nullptr;
-    if (!without_gil([&] { scene = new RenderScene(std::move(instances), std::move(materials), std::move(lights), threads); }))
+    if (!without_gil([&] { scene = new RenderScene(std::move(instances), std::move(materials), std::move(lights), threads,
+                                                    std::move(programs)); }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
@@ -414,7 +499,7 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, programs=None)")},
     {0, nullptr},
 };
 
@@ -434,6 +519,15 @@ int add_render_types(PyObject *module) {
     if (!rs) return -1;
     if (PyModule_AddObject(module, "RenderScene", rs) < 0) {
         Py_DECREF(rs);
+        return -1;
+    }
+    static PyMethodDef run_nodes_def = {
+        "run_nodes", run_nodes, METH_VARARGS,
+        "run_nodes(code, data, outputs, globals, out): a node program run at each row of globals; out receives "
+        "the registers (render/nodes.py)."};
+    PyObject *fn = PyCFunction_NewEx(&run_nodes_def, nullptr, nullptr);
+    if (!fn || PyModule_AddObject(module, "run_nodes", fn) < 0) {
+        Py_XDECREF(fn);
         return -1;
     }
     return 0;

@@ -38,7 +38,8 @@ bool finite_in_range(const float *v, size_t n) {
 }  // namespace
 
 TriangleMesh::TriangleMesh(const float *vertices, size_t nv, const int32_t *triangles, size_t nt,
-                           const float *corner_normals, const int32_t *material, int threads) {
+                           const float *corner_normals, const int32_t *material, int threads,
+                           const float *corner_uv) {
     if (nt >= size_t(INT32_MAX)) throw InputError("too many triangles (ids are 32-bit)");
     if (!finite_in_range(vertices, 3 * nv)) throw InputError("a vertex coordinate is not finite or beyond 1e18");
     v0_.resize(nt), v1_.resize(nt), v2_.resize(nt);
@@ -62,6 +63,10 @@ TriangleMesh::TriangleMesh(const float *vertices, size_t nv, const int32_t *tria
             // A zero or broken corner normal falls back to the face's own.
             normals_[i] = std::isfinite(dot(n, n)) && dot(n, n) > 0.f ? normalize(n) : geometric_normal(int32_t(i / 3));
         }
+    }
+    if (corner_uv) {
+        if (!finite_in_range(corner_uv, 6 * nt)) throw InputError("a UV coordinate is not finite or beyond 1e18");
+        uv_.assign(corner_uv, corner_uv + 6 * nt);
     }
     if (material) {
         material_.assign(material, material + nt);

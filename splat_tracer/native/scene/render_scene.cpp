@@ -8,11 +8,16 @@
 namespace splat {
 
 RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
-                         int threads)
-    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
+                         int threads, std::vector<NodeProgram> programs)
+    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)),
+      programs_(std::move(programs)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (const Material &m : materials_)
-        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha, any_emission_ |= m.emits();
+    for (const NodeProgram &p : programs_) p.validate();
+    for (Material &m : materials_) {
+        if (m.program >= int(programs_.size())) m.program = -1;
+        const bool programmed_alpha = m.program >= 0 && programs_[m.program].outputs[int(Output::Alpha)] >= 0;
+        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha || programmed_alpha, any_emission_ |= m.emits();
+    }
     if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_);
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
@@ -33,6 +38,55 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
         boxes[i] = world.empty() ? AABB{Vec3(0, 0, 0), Vec3(0, 0, 0)} : world;
     }
     top_.build(boxes, threads);
+}
+
+Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo) const {
+    const NodeProgram &prog = programs_[m.program];
+    const Instance &inst = instances_[sp.instance];
+    ShaderGlobals sg;
+    sg.P = sp.p, sg.I = wo;
+    // Cycles turns a back face's normals towards the viewer: so do the nodes' normals.
+    const bool back = dot(sp.ng, wo) < 0.f;
+    sg.Ng = back ? sp.ng * -1.f : sp.ng;
+    sg.N = dot(sp.ns, wo) < 0.f ? sp.ns * -1.f : sp.ns;
+    sg.backfacing = back ? 1.f : 0.f;
+    sg.object = inst.to_object.point(sp.p);
+    sg.object_normal = normalize(inst.to_world.transposed_vector(sg.N));
+    // Generated coordinates: the object-space position within the geometry's bounds (Blender's
+    // automatic texture space).
+    const AABB box = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
+    if (!box.empty())
+        for (int k = 0; k < 3; ++k) {
+            const float size = box.hi[k] - box.lo[k];
+            sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
+        }
+    if (inst.mesh) sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
+    if (sp.has_point_colour) sg.point_colour = sp.point_colour;
+    sg.point_alpha = sp.point_alpha;
+    float r[kMaxNodeRegisters];
+    prog.run(sg, r);
+    Material out = m;
+    auto scalar = [&](Output o, float lo, float hi, float &field) {
+        const int32_t i = prog.outputs[int(o)];
+        if (i >= 0 && std::isfinite(r[i])) field = std::fmin(std::fmax(r[i], lo), hi);
+    };
+    auto colour = [&](Output o, Vec3 &field) {
+        const int32_t i = prog.outputs[int(o)];
+        if (i < 0) return;
+        for (int k = 0; k < 3; ++k)  // as the export clamps constants: >= 0, within the coordinate limit
+            if (std::isfinite(r[i + k])) field[k] = std::fmin(std::fmax(r[i + k], 0.f), kMaxCoordinate);
+    };
+    colour(Output::Base, out.base);
+    colour(Output::Emission, out.emission);
+    scalar(Output::Metallic, 0.f, 1.f, out.metallic);
+    scalar(Output::Roughness, 0.f, 1.f, out.roughness);
+    scalar(Output::Transmission, 0.f, 1.f, out.transmission);
+    scalar(Output::Alpha, 0.f, 1.f, out.alpha);
+    scalar(Output::IOR, 1e-3f, kMaxCoordinate, out.ior);  // render/shading.py's smallest IOR
+    scalar(Output::SpecularLevel, 0.f, kMaxCoordinate, out.specular_level);
+    if (prog.outputs[int(Output::Base)] >= 0) out.use_point_colour = false;  // the nodes read them
+    if (prog.outputs[int(Output::Alpha)] >= 0) out.use_point_alpha = false;
+    return out;
 }
 
 Ray RenderScene::to_object(const Instance &inst, const Ray &ray, float *scale) {
@@ -110,7 +164,7 @@ inline bool nearer(float t, int index, const SurfacePoint &best) {
 // `best` when nearer.
 void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
-    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front, best.b1 = h.b1, best.b2 = h.b2;
     best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
     const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
     const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));

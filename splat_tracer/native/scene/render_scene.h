@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "bvh/bvh.h"
+#include "nodes/program.h"
 #include "scene/mesh.h"
 #include "scene/mesh_lights.h"
 #include "shade/shading.h"
@@ -97,6 +98,7 @@ struct SurfacePoint {
     float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
     int material = 0;    // index in the material table
+    float b1 = 0, b2 = 0;  // meshes: barycentric coordinates of the triangle's vertices 1 and 2
     int n_members = 0;   // splats that formed the point
     int32_t members[kMaxLayerHits];
 
@@ -105,12 +107,20 @@ struct SurfacePoint {
 
 class RenderScene {
   public:
+    // `programs`: the materials' node programs (Material::program indexes them), validated.
     RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
-                int threads);
+                int threads, std::vector<NodeProgram> programs = {});
 
     const Instance &instance(int i) const { return instances_[i]; }
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
+    // The material at a surface point seen from direction `wo` (towards the viewer): its
+    // node program run there, or the constant material when it has none. The one place
+    // the integrator asks for a material's inputs.
+    Material material_at(const SurfacePoint &sp, Vec3 wo) const {
+        const Material &m = materials_[sp.material];
+        return m.program < 0 ? m : evaluate_program(m, sp, wo);
+    }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }
@@ -139,6 +149,7 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
+    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
@@ -151,6 +162,7 @@ class RenderScene {
     std::vector<Instance> instances_;
     std::vector<Material> materials_;
     std::vector<Light> lights_;
+    std::vector<NodeProgram> programs_;
     MeshLights mesh_lights_;
     BVH top_;
     bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false;
