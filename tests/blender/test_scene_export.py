@@ -407,8 +407,8 @@ def test_point_colours_render_and_a_texture_falls_back_with_one_report_line(blen
         np.testing.assert_allclose(diffcol[patch(1.2, y)].reshape(-1, 3), np.tile(TEXTURED_DEFAULT, (25, 1)),
                                    rtol=1e-3)
     lines = [line for line in stats()["report"] if "Textured" in line]
-    assert lines == ["material 'Textured': Base Color is driven by a 'Image Texture' node; using its default value "
-                     "(0.2, 0.6, 0.3)"], stats()["report"]
+    assert lines == ["material 'Textured': the 'Image Texture' node is not supported; Base Color uses its unlinked "
+                     "value (0.2, 0.6, 0.3)"], stats()["report"]
 
 
 # --------------------------------------------------------------------------------------

@@ -1,0 +1,226 @@
+"""Materials as node graphs (issue 24, item 1) through Blender, side by side with Cycles.
+
+Every scene is seen straight down by an orthographic camera (80x80 px) over z = 0, under a
+sun 30 degrees off the vertical, with a black world and no bounces in either engine (the
+floor's colour times the sun is what differs), 16 samples (Cycles: CPU, no denoising).
+
+Tolerances (measured with bpy 5.0.1; each test also shows that a wrong render fails):
+- TEXTURE_CORRELATION = 0.95: Pearson correlation of the floor's luminance per pixel with
+  Cycles' (the issue's bar), for a UV Checker, Noise -> Color Ramp, and a Checker behind two
+  nested node groups. A wrong texture (the checker moved by one cell) correlates below 0.
+- COLOUR_RTOL = 0.05: mean colour per region of an emissive "unlit scan" (points' colours
+  through Hue/Saturation into an Emission shader) against Cycles' (and against the colours
+  computed here with colorsys).
+"""
+from __future__ import annotations
+
+import colorsys
+import math
+
+import numpy as np
+import pytest
+
+from blender_helpers import add_camera
+from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, stats
+
+SIZE = 80
+TEXTURE_CORRELATION = 0.95
+COLOUR_RTOL = 0.05
+
+
+def plane(bpy, name, size, location, material):
+    """A square with a UV map (0..1 across it)."""
+    import bmesh
+
+    def build(bm):
+        bm.loops.layers.uv.new("UVMap")
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=size / 2, calc_uvs=True)
+
+    return mesh_object(bpy, name, build, location, [material])
+
+
+def _setup(bpy, scene):
+    add_camera(bpy, scene, (0, 0, 5), (0, 0, 0), type="ORTHO", ortho_scale=2.0)
+    lamp(bpy, "SUN", rotation=(math.radians(30), 0, 0), energy=3.0)
+    black_world(bpy, scene)
+    direct_light_only(scene)
+    c = scene.cycles
+    c.samples, c.device, c.use_denoising, c.use_adaptive_sampling = 16, "CPU", False, False
+
+
+def _material(bpy, name):
+    m = bpy.data.materials.new(name)
+    shader = m.node_tree.nodes["Principled BSDF"]
+    shader.inputs["Roughness"].default_value = 1.0
+    shader.inputs["Specular IOR Level"].default_value = 0.0
+    return m, m.node_tree.nodes, m.node_tree.links, shader
+
+
+def _both(bpy, scene, tmp_path, name):
+    """(ours, Cycles') Combined RGB."""
+    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    report = list(stats()["report"])
+    scene.render.engine = "CYCLES"
+    try:
+        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    finally:
+        scene.render.engine = "SPLAT_TRACER"
+    return ours, theirs, report
+
+
+def correlation(a, b) -> float:
+    a, b = a.mean(axis=-1).ravel(), b.mean(axis=-1).ravel()
+    return float(np.corrcoef(a, b)[0, 1])
+
+
+def _checker(nodes, links, vector_from=None, scale=4.0):
+    checker = nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = scale
+    checker.inputs["Color1"].default_value = (0.9, 0.8, 0.2, 1)
+    checker.inputs["Color2"].default_value = (0.1, 0.2, 0.6, 1)
+    if vector_from is not None:
+        links.new(vector_from, checker.inputs["Vector"])
+    return checker
+
+
+def test_uv_checker_floor_matches_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "UVChecker")
+    coords = nodes.new("ShaderNodeTexCoord")
+    checker = _checker(nodes, links, coords.outputs["UV"])
+    links.new(checker.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)  # fills the view: UV 0..1 across it
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "uv_checker")
+    r = correlation(ours, theirs)
+    assert r >= TEXTURE_CORRELATION, r
+    cell = SIZE // 4
+    assert correlation(np.roll(ours, cell, axis=1), theirs) < 0, "a checker one cell off must fail"
+    assert not [line for line in report if "UVChecker" in line], report
+    # The two colours as Cycles lights them: the same means within 5 %.
+    np.testing.assert_allclose(np.sort(ours.reshape(-1, 3).mean(0)), np.sort(theirs.reshape(-1, 3).mean(0)),
+                               rtol=COLOUR_RTOL)
+
+
+def test_noise_through_a_colour_ramp_matches_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "NoiseRamp")
+    coords = nodes.new("ShaderNodeTexCoord")
+    noise = nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 3.0
+    noise.inputs["Detail"].default_value = 3.0
+    ramp = nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].position, ramp.color_ramp.elements[1].position = 0.35, 0.65
+    ramp.color_ramp.elements[0].color = (0.05, 0.1, 0.4, 1)
+    ramp.color_ramp.elements[1].color = (0.9, 0.7, 0.1, 1)
+    links.new(coords.outputs["Object"], noise.inputs["Vector"])
+    links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "noise_ramp")
+    r = correlation(ours, theirs)
+    assert r >= TEXTURE_CORRELATION, r
+    assert correlation(np.roll(ours, SIZE // 3, axis=0), theirs) < 0.5, "a shifted noise must fail"
+    assert not [line for line in report if "NoiseRamp" in line], report
+
+
+def _group(bpy, name, inner=None):
+    """A node group: Vector in, Color out; a Checker inside (or the group `inner`)."""
+    tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
+    tree.interface.new_socket("Vector", in_out="INPUT", socket_type="NodeSocketVector")
+    tree.interface.new_socket("Color", in_out="OUTPUT", socket_type="NodeSocketColor")
+    gin, gout = tree.nodes.new("NodeGroupInput"), tree.nodes.new("NodeGroupOutput")
+    if inner is None:
+        node = _checker(tree.nodes, tree.links, gin.outputs["Vector"])
+        out = node.outputs["Color"]
+    else:
+        node = tree.nodes.new("ShaderNodeGroup")
+        node.node_tree = inner
+        reroute = tree.nodes.new("NodeReroute")
+        tree.links.new(gin.outputs["Vector"], reroute.inputs[0])
+        tree.links.new(reroute.outputs[0], node.inputs["Vector"])
+        out = node.outputs["Color"]
+    tree.links.new(out, gout.inputs["Color"])
+    return tree
+
+
+def test_nested_node_groups_match_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Nested")
+    outer = nodes.new("ShaderNodeGroup")
+    outer.node_tree = _group(bpy, "Outer", _group(bpy, "Inner"))
+    coords = nodes.new("ShaderNodeTexCoord")
+    links.new(coords.outputs["UV"], outer.inputs["Vector"])
+    links.new(outer.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "nested")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    assert not [line for line in report if "Nested" in line], report
+
+
+def test_an_unknown_node_says_one_line_and_uses_the_unlinked_value(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Bricks")
+    shader.inputs["Base Color"].default_value = (0.2, 0.6, 0.3, 1)
+    brick = nodes.new("ShaderNodeTexBrick")
+    links.new(brick.outputs["Color"], shader.inputs["Base Color"])
+    links.new(brick.outputs["Fac"], shader.inputs["Roughness"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    scene.view_layers[0].use_pass_diffuse_color = True
+    out = render(bpy, scene, tmp_path / "brick.exr", (SIZE, SIZE))["ViewLayer"]
+    lines = [line for line in stats()["report"] if "Bricks" in line]
+    assert lines == ["material 'Bricks': the 'Brick Texture' node is not supported; Base Color uses its unlinked "
+                     "value (0.2, 0.6, 0.3)", "material 'Bricks': the 'Brick Texture' node is not supported; Roughness "
+                     "uses its unlinked value 1"], lines
+    # The unlinked colour, times the (1 - F0) a Principled BSDF's diffuse keeps.
+    np.testing.assert_allclose(out["Diffuse Color"].reshape(-1, 3).mean(0), (0.2, 0.6, 0.3), rtol=0.01)
+
+
+HALVES = ((0.8, 0.1, 0.05), (0.1, 0.2, 0.8))  # the cloud's left and right point colours
+
+
+def _flat_cloud(bpy, material):
+    from splat_tracer.blender import cloud_object
+
+    g = np.stack(np.meshgrid(np.linspace(-0.9, 0.9, 37), np.linspace(-0.9, 0.9, 37)), -1).reshape(-1, 2)
+    colours = np.array([(*HALVES[0], 1.0) if x < 0 else (*HALVES[1], 1.0) for x, _ in g])
+    obj = cloud_object.create_cloud_object("Scan", np.column_stack([g, np.zeros(len(g))]),
+                                           np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.full(len(g), 0.05), colours)
+    # The importer's geometry nodes set the "Splat Cloud" material on the points: set this one.
+    for modifier in obj.modifiers:
+        for node in getattr(modifier, "node_group", None).nodes if modifier.type == "NODES" else ():
+            if node.bl_idname == "GeometryNodeSetMaterial":
+                node.inputs["Material"].default_value = material
+    return obj
+
+
+@pytest.mark.parametrize("hue", [0.25, 0.8])  # 0.5 is no shift
+def test_point_colours_through_hue_saturation_into_emission(blender, empty_scene, tmp_path, hue):
+    """The "unlit scan": the points' colours, hue-shifted, are the emitted colour."""
+    bpy, scene = blender, empty_scene
+    m = bpy.data.materials.new("Unlit")
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    emission = nodes.new("ShaderNodeEmission")
+    attribute = nodes.new("ShaderNodeVertexColor")
+    attribute.layer_name = "splat_color"
+    hsv = nodes.new("ShaderNodeHueSaturation")
+    hsv.inputs["Hue"].default_value = hue
+    links.new(attribute.outputs["Color"], hsv.inputs["Color"])
+    links.new(hsv.outputs["Color"], emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
+    _flat_cloud(bpy, m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"unlit_{hue}")
+    for half, colour in enumerate(HALVES):
+        cols = slice(8, 30) if half == 0 else slice(50, 72)
+        mine, cycles = ours[25:55, cols].reshape(-1, 3).mean(0), theirs[25:55, cols].reshape(-1, 3).mean(0)
+        h, s, v = colorsys.rgb_to_hsv(*colour)
+        want = colorsys.hsv_to_rgb((h + hue + 0.5) % 1.0, s, v)
+        np.testing.assert_allclose(mine, want, rtol=COLOUR_RTOL, atol=0.01)
+        np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
+        assert np.abs(np.subtract(colour, want)).max() > 0.2  # the colours unshifted would fail
+    assert not [line for line in report if "Unlit" in line and "not supported" in line], report
