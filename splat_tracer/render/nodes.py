@@ -24,7 +24,7 @@ MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES")
+       "CURVES", "IMAGE")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING")
@@ -46,9 +46,30 @@ BLENDS = ("MIX", "DARKEN", "MULTIPLY", "BURN", "LIGHTEN", "SCREEN", "DODGE", "AD
 MAP_RANGE_MODES = ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")
 GRADIENTS = ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "RADIAL", "QUADRATIC_SPHERE", "SPHERICAL")
 MAPPINGS = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
+INTERPOLATIONS = ("Closest", "Linear", "Cubic")  # Image Texture (native ImageInterpolation)
+EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")  # Image Texture (native ImageExtension)
 
 # The shading point as run_nodes takes it: these vec3s, then point_alpha and backfacing.
 GLOBAL_FIELDS = ("P", "N", "Ng", "I", "object", "object_normal", "generated", "uv", "point_colour")
+
+
+class Image:
+    """An image's pixels for the core: (height, width, 4) RGBA, bottom row first (Blender's
+    order). uint8: colour bytes, sRGB-encoded when `srgb` (decoded to scene linear after
+    interpolation, as Cycles does with byte sRGB images), else linear values x 255;
+    float32: scene-linear values. Compared by identity: one Image is held once by the core
+    however many programs use it."""
+
+    def __init__(self, pixels, srgb: bool = False):
+        p = np.ascontiguousarray(pixels)
+        if p.dtype not in (np.uint8, np.float32) or p.ndim != 3 or p.shape[2] != 4 or not p.size:
+            raise ValueError(f"image pixels must be (h, w, 4) uint8 or float32, got {p.dtype} {p.shape}")
+        self.pixels, self.srgb = p, bool(srgb)
+        self.native = (p, self.srgb)  # one object, so that the core recognises it when shared
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.pixels.nbytes)
 
 
 @dataclass(frozen=True)
@@ -60,11 +81,12 @@ class Program:
     code: tuple
     data: tuple
     outputs: tuple
+    images: tuple = ()  # Image objects, by the index IMAGE instructions give
 
     def native(self) -> tuple:
-        """(code, data, outputs) as the core takes them."""
+        """(code, data, outputs, images) as the core takes them."""
         return (np.array(self.code, np.int32).reshape(-1, WIDTH), np.array(self.data, np.float32),
-                np.array(self.outputs, np.int32))
+                np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
 
     def drives(self, name: str) -> bool:
         return self.outputs[list(OUTPUTS).index(name)] >= 0
@@ -81,6 +103,15 @@ class Builder:
         self.code: list = []
         self.data: list = []
         self.outputs = {name: -1 for name in OUTPUTS}
+        self.images: list = []
+
+    def image(self, image: Image) -> int:
+        """The index of an image in this program (added once)."""
+        for i, known in enumerate(self.images):
+            if known is image:
+                return i
+        self.images.append(image)
+        return len(self.images) - 1
 
     def register(self, value=0.0, width: int = 1) -> int:
         """A new register (width 1 or 3) holding `value` until written."""
@@ -114,7 +145,7 @@ class Builder:
         self.outputs[name] = reg
 
     def program(self) -> Program:
-        return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS))
+        return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images))
 
 
 def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, **globals_) -> np.ndarray:
@@ -133,6 +164,6 @@ def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, **globals
     g[:, 27] = point_alpha
     g[:, 28] = backfacing
     out = np.zeros((n, len(program.data)), np.float32)
-    code, data, outputs = program.native()
-    _core.run_nodes(code, data, outputs, g, out)
+    code, data, outputs, images = program.native()
+    _core.run_nodes(code, data, outputs, images, g, out)
     return out

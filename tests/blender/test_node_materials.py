@@ -224,3 +224,68 @@ def test_point_colours_through_hue_saturation_into_emission(blender, empty_scene
         np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
         assert np.abs(np.subtract(colour, want)).max() > 0.2  # the colours unshifted would fail
     assert not [line for line in report if "Unlit" in line and "not supported" in line], report
+
+
+def _image_floor(bpy, image, interpolation, extension):
+    """A floor whose UVs run from -0.3 to 1.3 (a Mapping node), so that every extension
+    shows, with `image` magnified about 4x (each interpolation shows)."""
+    m, nodes, links, shader = _material(bpy, f"Image{interpolation}{extension}")
+    coords, mapping, tex = nodes.new("ShaderNodeTexCoord"), nodes.new("ShaderNodeMapping"), nodes.new("ShaderNodeTexImage")
+    mapping.inputs["Location"].default_value = (-0.3, -0.3, 0)
+    mapping.inputs["Scale"].default_value = (1.6, 1.6, 1)
+    tex.image, tex.interpolation, tex.extension = image, interpolation, extension
+    links.new(coords.outputs["UV"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    return m
+
+
+def _grid_image(bpy, tmp_path, source):
+    """A 12x12 colour grid (Blender's generated one): on disk as a PNG, packed, or float."""
+    image = bpy.data.images.new("Grid", 12, 12, float_buffer=source == "float")
+    image.generated_type = "COLOR_GRID"
+    if source == "float":
+        image.colorspace_settings.name = "Linear Rec.709"
+        return image
+    path = tmp_path / "grid.png"
+    image.filepath_raw, image.file_format = str(path), "PNG"
+    image.save()
+    loaded = bpy.data.images.load(str(path))
+    if source == "packed":
+        loaded.pack()
+        path.unlink()  # only the packed copy is left
+    return loaded
+
+
+@pytest.mark.parametrize("interpolation", ["Closest", "Linear", "Cubic"])
+@pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
+def test_image_textured_floor_matches_cycles(blender, empty_scene, tmp_path, interpolation, extension):
+    bpy, scene = blender, empty_scene
+    _image_floor(bpy, _grid_image(bpy, tmp_path, "disk"), interpolation, extension)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"image_{interpolation}_{extension}")
+    r = correlation(ours, theirs)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not [line for line in report if "Image" in line], report
+
+
+@pytest.mark.parametrize("source", ["packed", "float"])
+def test_packed_and_float_images_match_cycles(blender, empty_scene, tmp_path, source):
+    bpy, scene = blender, empty_scene
+    _image_floor(bpy, _grid_image(bpy, tmp_path, source), "Linear", "REPEAT")
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"image_{source}")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+
+
+def test_a_wrong_extension_fails_the_correlation(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m = _image_floor(bpy, _grid_image(bpy, tmp_path, "disk"), "Linear", "REPEAT")
+    _setup(bpy, scene)
+    ours = render(bpy, scene, tmp_path / "repeat.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    next(n for n in m.node_tree.nodes if n.type == "TEX_IMAGE").extension = "CLIP"
+    scene.render.engine = "CYCLES"
+    clip = render(bpy, scene, tmp_path / "clip.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert correlation(ours, clip) < TEXTURE_CORRELATION

@@ -511,3 +511,87 @@ def test_material_without_program_renders_as_before():
     b.output("emission", b.register((0.3, 0.6, 0.9), 3))
     programmed = _render(shading.Material(program=b.program()))
     np.testing.assert_array_equal(plain, programmed)
+
+
+# -------------------------------------------------------------------------------------
+# Image Texture: interpolation and extension, against a numpy lookup written from the
+# definitions (pixel centres at (i + 0.5) / size; bilinear; uniform cubic B-spline).
+
+IMG = RNG.uniform(0, 1, (5, 7, 4)).astype(np.float32)  # 5 rows, 7 columns
+
+
+def _index(i, size, extension):
+    if extension == "REPEAT":
+        return i % size, True
+    if extension == "EXTEND":
+        return min(max(i, 0), size - 1), True
+    if extension == "CLIP":
+        return i, 0 <= i < size
+    m = abs(i + (i < 0)) % (2 * size)  # MIRROR
+    return (2 * size - m - 1 if m >= size else m), True
+
+
+def _texel(img, x, y, extension):
+    h, w = img.shape[:2]
+    (ix, okx), (iy, oky) = _index(x, w, extension), _index(y, h, extension)
+    return img[iy, ix] if okx and oky else np.zeros(4)
+
+
+def _bspline(t):
+    return np.array([(1 - t) ** 3, 3 * t ** 3 - 6 * t ** 2 + 4, -3 * t ** 3 + 3 * t ** 2 + 3 * t + 1, t ** 3]) / 6
+
+
+def image_reference(img, u, v, interpolation, extension):
+    h, w = img.shape[:2]
+    if extension == "CLIP" and not (0 <= u <= 1 and 0 <= v <= 1):
+        return np.zeros(4)
+    x, y = u * w, v * h
+    if interpolation == "Closest":
+        return _texel(img, math.floor(x), math.floor(y), extension)
+    px, py = x - 0.5, y - 0.5
+    ix, iy = math.floor(px), math.floor(py)
+    tx, ty = px - ix, py - iy
+    if interpolation == "Linear":
+        return sum(wx * wy * _texel(img, ix + i, iy + j, extension)
+                   for i, wx in ((0, 1 - tx), (1, tx)) for j, wy in ((0, 1 - ty), (1, ty)))
+    wx, wy = _bspline(tx), _bspline(ty)
+    return sum(wx[i] * wy[j] * _texel(img, ix - 1 + i, iy - 1 + j, extension) for i in range(4) for j in range(4))
+
+
+def _sample(image, uvs, interpolation, extension):
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    b.emit("IMAGE", colour, alpha, b.global_("UV"), b.image(image), nodes.INTERPOLATIONS.index(interpolation),
+           nodes.EXTENSIONS.index(extension))
+    r = nodes.run(b.program(), len(uvs), uv=np.column_stack([uvs, np.zeros(len(uvs))]))
+    return np.column_stack([r[:, colour:colour + 3], r[:, alpha]])
+
+
+@pytest.mark.parametrize("interpolation", nodes.INTERPOLATIONS)
+@pytest.mark.parametrize("extension", nodes.EXTENSIONS)
+def test_image_interpolation_and_extension(interpolation, extension):
+    uvs = np.vstack([RNG.uniform(-1.5, 2.5, (60, 2)), [[0.5, 0.5], [0.0, 0.0], [1.0, 1.0], [0.99, 0.01]]])
+    got = _sample(nodes.Image(IMG), uvs, interpolation, extension)
+    want = np.array([image_reference(IMG.astype(np.float64), u, v, interpolation, extension) for u, v in uvs])
+    np.testing.assert_allclose(got, want, atol=2e-5)
+
+
+def test_byte_srgb_images_decode_after_interpolation():
+    data = (RNG.uniform(0, 1, (4, 4, 4)) * 255).round().astype(np.uint8)
+    uvs = RNG.uniform(0, 1, (40, 2))
+    got = _sample(nodes.Image(data, srgb=True), uvs, "Linear", "REPEAT")
+    encoded = np.array([image_reference(data / 255.0, u, v, "Linear", "REPEAT") for u, v in uvs])
+    rgb = encoded[:, :3]  # the sRGB standard's decoding, after the interpolation
+    linear = np.where(rgb < 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(got[:, :3], linear, rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(got[:, 3], encoded[:, 3], atol=1e-6)  # alpha is not encoded
+    plain = _sample(nodes.Image(data, srgb=False), uvs, "Linear", "REPEAT")
+    np.testing.assert_allclose(plain, encoded, atol=1e-6)
+
+
+def test_an_image_index_out_of_range_is_refused():
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    b.emit("IMAGE", colour, alpha, colour, 0, 0, 0)  # no image given
+    with pytest.raises(ValueError, match="image out of range"):
+        nodes.run(b.program())

@@ -20,6 +20,14 @@ from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised throu
 # read linearly between rows: baking the same table reads the ramp exactly as Cycles does.
 _TABLE_ROWS = 256
 _VECTORS = ("VECTOR", "RGBA")  # socket types held in three registers (colours drop alpha)
+# Image colour spaces read exactly: sRGB-encoded bytes (decoded after interpolation, as Cycles
+# does) and the linear ones that are the scene's linear space (Blender's default, Rec. 709).
+_SRGB = ("sRGB",)
+_LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
+# What Cycles renders for an image it cannot load (its missing-texture colour): magenta.
+MISSING_IMAGE = (1.0, 0.0, 1.0)
+# Images read from Blender, by what identifies their pixels (see _image_pixels).
+_IMAGES: dict = {}
 
 
 class Unsupported(Exception):
@@ -407,6 +415,30 @@ class Compiler:
         return self._ids(node, {"Fresnel": fresnel, "Facing": facing})
 
     # Textures
+    def _tex_image(self, node, stack):
+        image = node.image
+        if image is None:
+            raise Unsupported(node, "no image")
+        if node.projection != "FLAT":
+            raise Unsupported(node, f"{node.projection.lower()} projection")
+        if image.source not in ("FILE", "GENERATED"):
+            raise Unsupported(node, f"{image.source.lower()} images")
+        colour, alpha = self.b.register(width=3), self.b.register()
+        texture = _image_pixels(image, self.say)
+        if texture is None:
+            self.say(f": image '{image.name}' could not be loaded; rendered magenta, as Cycles does")
+            self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
+            self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
+            return self._ids(node, {"Color": colour, "Alpha": alpha})
+        interpolation = node.interpolation
+        if interpolation == "Smart":
+            self.say(": an Image Texture's Smart interpolation is rendered as Cubic")
+            interpolation = "Cubic"
+        vector = self._vector_or(node, stack, "UV")
+        self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), nodes.INTERPOLATIONS.index(interpolation),
+                    nodes.EXTENSIONS.index(node.extension))
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
     def _tex_checker(self, node, stack):
         vector = self._vector_or(node, stack)
         colour, fac = self.b.register(width=3), self.b.register()
@@ -444,6 +476,51 @@ class Compiler:
         value, colour = self.b.register(), self.b.register(width=3)
         self.b.emit("WHITE_NOISE", value, colour, vector, dims)
         return self._ids(node, {"Value": value, "Color": colour})
+
+
+def _image_pixels(image, say):
+    """An image's pixels as a nodes.Image (None when Blender cannot load it), read once and
+    kept while its identity, size, colour space and alpha mode stay (re-read every frame
+    while it has unsaved changes: being painted)."""
+    settings = image.colorspace_settings.name
+    key = (image.name_full, image.as_pointer(), tuple(image.size), image.is_float, settings, image.alpha_mode,
+           image.filepath_raw, image.packed_file is not None)
+    if key in _IMAGES and not image.is_dirty:
+        return _IMAGES[key]
+    w, h = image.size
+    if not w or not h or (image.source == "FILE" and not image.has_data and not _try_load(image)):
+        return None
+    w, h = image.size
+    flat = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(flat)
+    pixels = flat.reshape(h, w, 4)
+    if image.alpha_mode == "NONE":  # Cycles ignores the image's alpha
+        pixels[..., 3] = 1.0
+    if settings not in _SRGB + _LINEAR:
+        say(f": image '{image.name}' is in the '{settings}' colour space, read as "
+            f"{'sRGB' if not image.is_float else 'scene linear'}")
+    if image.is_float:
+        if settings in _SRGB:  # a float image holding sRGB-encoded values: decode them
+            rgb = pixels[..., :3]
+            pixels[..., :3] = np.where(rgb < 0.04045, rgb / 12.92, ((np.maximum(rgb, 0) + 0.055) / 1.055) ** 2.4)
+        texture = nodes.Image(pixels)
+    else:
+        data = np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8)
+        texture = nodes.Image(data, srgb=settings not in _LINEAR)
+    # Keep only the current version of each image (its old pixels are garbage).
+    for old in [k for k in _IMAGES if k[:2] == key[:2]]:
+        del _IMAGES[old]
+    _IMAGES[key] = texture
+    return texture
+
+
+def _try_load(image) -> bool:
+    """Asks Blender to load the image (from disk or its packed copy); whether it has pixels."""
+    try:
+        image.pixels[0]  # reading a pixel loads the buffer
+    except (IndexError, RuntimeError):
+        return False
+    return bool(image.has_data) and image.size[0] > 0
 
 
 # Which inputs of each shader feed which material field (the engine's Material fields).

@@ -54,6 +54,9 @@ const Layout &layout(Op op) {
         /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
         /* Scale */ {{kR3, kR3, kR1}, {}},
         /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
+        /* Image (image checked apart) */
+        {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
+                                                int32_t(ImageExtension::Count)}},
     };
     return table[int(op)];
 }
@@ -530,6 +533,8 @@ void NodeProgram::validate() const {
         if (op == Op::Copy && int64_t(c[2]) + c[3] > n) fail("copy out of range");
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
+        if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
+            fail("image out of range");
         if (op == Op::Curves && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n || int64_t(c[6]) + 2 > n))
             fail("bad curve table");
     }
@@ -732,6 +737,13 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                 }
                 const float fac = r[c[2]];
                 store3(r, c[1], lerp(in, out, fac));
+                break;
+            }
+            case Op::Image: {
+                const Vec3 uv = load3(r, c[3]);
+                const RGBA t = images[size_t(c[4])]->sample(uv.x, uv.y, ImageInterpolation(c[5]), ImageExtension(c[6]));
+                store3(r, c[1], {t.r, t.g, t.b});
+                r[c[2]] = t.a;
                 break;
             }
             default: break;  // unreachable: validate() refused it

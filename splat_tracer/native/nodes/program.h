@@ -14,10 +14,12 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include "base/vec3.h"
+#include "nodes/image.h"
 
 namespace splat {
 
@@ -77,6 +79,7 @@ enum class Op : int32_t {
     WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
+    Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
     Count
 };
 
@@ -84,6 +87,7 @@ struct NodeProgram {
     std::vector<int32_t> code;  // rows of kNodeWidth
     std::vector<float> data;    // initial registers
     int32_t outputs[int(Output::Count)];
+    std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),

@@ -108,14 +108,69 @@ Affine affine_of(const float *row) {
     return a;
 }
 
-// A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
-// (Output::Count,)) -- render/nodes.py Program.native(). Checked by NodeProgram::validate.
-bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog) {
-    PyObject *ocode, *odata, *oout;
-    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO", &ocode, &odata, &oout)) {
+// Images already converted for this scene, by the Python object holding their pixels: a
+// texture used by several materials is held once.
+using ImageTable = std::vector<std::pair<PyObject *, std::shared_ptr<const TextureImage>>>;
+
+// An image from Python: (pixels, srgb) with pixels (h, w, 4) uint8 or float32, bottom row first.
+std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table) {
+    for (auto &entry : table)
+        if (entry.first == obj) return entry.second;
+    PyObject *opix;
+    int srgb = 0;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "Op", &opix, &srgb)) {
         PyErr_Clear();
-        PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs) tuple", name.c_str());
+        PyErr_SetString(PyExc_TypeError, "an image is a (pixels, srgb) tuple");
+        return nullptr;
+    }
+    View bytes, floats;
+    Py_ssize_t shape[3] = {-1, -1, 4};
+    const bool is_bytes = get_array(opix, "image pixels", 'B', 3, shape, false, bytes);
+    if (!is_bytes) {
+        PyErr_Clear();
+        if (!get_array(opix, "image pixels (uint8 or float32, h x w x 4)", 'f', 3, shape, false, floats)) return nullptr;
+    }
+    const View &pix = is_bytes ? bytes : floats;
+    if (pix.dim(0) > INT32_MAX / 4 || pix.dim(1) > INT32_MAX / 4) {
+        PyErr_SetString(PyExc_ValueError, "an image is too large");
+        return nullptr;
+    }
+    std::shared_ptr<const TextureImage> image;
+    try {
+        if (is_bytes)
+            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<uint8_t>(), srgb != 0);
+        else
+            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<float>());
+    } catch (const InputError &e) {
+        PyErr_SetString(PyExc_ValueError, e.what());
+        return nullptr;
+    }
+    table.emplace_back(obj, image);
+    return image;
+}
+
+// A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
+// (Output::Count,)[, images: a sequence of parse_image tuples]) -- render/nodes.py
+// Program.native(). Checked by NodeProgram::validate.
+bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, ImageTable &images) {
+    PyObject *ocode, *odata, *oout, *oimages = nullptr;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|O", &ocode, &odata, &oout, &oimages)) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs[, images]) tuple", name.c_str());
         return false;
+    }
+    if (oimages && oimages != Py_None) {
+        PyObject *seq = PySequence_Tuple(oimages);
+        if (!seq) return false;
+        for (Py_ssize_t i = 0; i < PyTuple_Size(seq); ++i) {
+            auto image = parse_image(PyTuple_GetItem(seq, i), images);
+            if (!image) {
+                Py_DECREF(seq);
+                return false;
+            }
+            prog.images.push_back(image);
+        }
+        Py_DECREF(seq);
     }
     View code, data, out;
     Py_ssize_t sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
@@ -140,16 +195,17 @@ bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog) {
     return true;
 }
 
-// _core.run_nodes(code, data, outputs, globals, out): runs a node program at each row of
-// `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)), the
-// registers after the run. For the evaluator's tests.
+// _core.run_nodes(code, data, outputs, images, globals, out): runs a node program at each row
+// of `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)),
+// the registers after the run. For the evaluator's tests.
 PyObject *run_nodes(PyObject *, PyObject *args) {
-    PyObject *ocode, *odata, *oout, *oglobals, *oregs;
-    if (!PyArg_ParseTuple(args, "OOOOO", &ocode, &odata, &oout, &oglobals, &oregs)) return nullptr;
-    PyObject *triple = PyTuple_Pack(3, ocode, odata, oout);
+    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs;
+    if (!PyArg_ParseTuple(args, "OOOOOO", &ocode, &odata, &oout, &oimages, &oglobals, &oregs)) return nullptr;
+    PyObject *triple = PyTuple_Pack(4, ocode, odata, oout, oimages);
     if (!triple) return nullptr;
     NodeProgram prog;
-    const bool ok = parse_program(triple, "program", prog);
+    ImageTable images;
+    const bool ok = parse_program(triple, "program", prog, images);
     Py_DECREF(triple);
     if (!ok) return nullptr;
     constexpr int kGlobalFloats = 29;
@@ -243,11 +299,12 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         std::unique_ptr<PyObject, void (*)(PyObject *)> hold_seq(seq, [](PyObject *o) { Py_XDECREF(o); });
         if (PyTuple_Size(seq) != n_mat)
             return PyErr_Format(PyExc_ValueError, "programs has %zd entries for %zd materials", PyTuple_Size(seq), n_mat);
+        ImageTable images;
         for (Py_ssize_t i = 0; i < n_mat; ++i) {
             PyObject *item = PyTuple_GetItem(seq, i);
             if (item == Py_None) continue;
             NodeProgram prog;
-            if (!parse_program(item, "material " + std::to_string(i), prog)) return nullptr;
+            if (!parse_program(item, "material " + std::to_string(i), prog, images)) return nullptr;
             materials[size_t(i)].program = int(programs.size());
             programs.push_back(std::move(prog));
         }
@@ -523,7 +580,7 @@ int add_render_types(PyObject *module) {
     }
     static PyMethodDef run_nodes_def = {
         "run_nodes", run_nodes, METH_VARARGS,
-        "run_nodes(code, data, outputs, globals, out): a node program run at each row of globals; out receives "
+        "run_nodes(code, data, outputs, images, globals, out): a node program run at each row of globals; out receives "
         "the registers (render/nodes.py)."};
     PyObject *fn = PyCFunction_NewEx(&run_nodes_def, nullptr, nullptr);
     if (!fn || PyModule_AddObject(module, "run_nodes", fn) < 0) {
