@@ -289,3 +289,130 @@ def test_a_wrong_extension_fails_the_correlation(blender, empty_scene, tmp_path)
     scene.render.engine = "CYCLES"
     clip = render(bpy, scene, tmp_path / "clip.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     assert correlation(ours, clip) < TEXTURE_CORRELATION
+
+
+def _procedural(nodes, links, kind):
+    """(node, output) of a procedural texture over the floor's object coordinates."""
+    coords = nodes.new("ShaderNodeTexCoord")
+    if kind.startswith("voronoi"):
+        tex = nodes.new("ShaderNodeTexVoronoi")
+        tex.inputs["Scale"].default_value = 4.0
+        if kind == "voronoi_manhattan":
+            tex.distance = "MANHATTAN"
+        out = "Distance" if kind != "voronoi_colour" else "Color"
+    elif kind.startswith("wave"):
+        tex = nodes.new("ShaderNodeTexWave")
+        tex.inputs["Scale"].default_value = 0.6
+        if kind == "wave_rings":
+            tex.wave_type, tex.wave_profile = "RINGS", "SAW"
+        else:
+            tex.inputs["Distortion"].default_value = 4.0
+        out = "Fac"
+    elif kind == "magic":
+        tex = nodes.new("ShaderNodeTexMagic")
+        tex.turbulence_depth = 3
+        tex.inputs["Scale"].default_value = 1.5
+        out = "Color"
+    elif kind == "gradient":
+        tex = nodes.new("ShaderNodeTexGradient")
+        tex.gradient_type = "RADIAL"
+        out = "Color"
+    else:  # checker on generated coordinates (nothing linked to its Vector)
+        tex = nodes.new("ShaderNodeTexChecker")
+        tex.inputs["Scale"].default_value = 3.0
+        return tex, tex.outputs["Color"]
+    source = coords.outputs["Object"]
+    if kind.startswith("voronoi"):
+        # Off z = 0: the floor's points lie on a cell boundary there, which each renderer's
+        # rounding puts on either side (a different cell's random point).
+        shift = nodes.new("ShaderNodeVectorMath")
+        shift.inputs[1].default_value = (0.0, 0.0, 0.37)
+        links.new(source, shift.inputs[0])
+        source = shift.outputs["Vector"]
+    links.new(source, tex.inputs["Vector"])
+    return tex, tex.outputs[out]
+
+
+PROCEDURALS = ("checker_generated", "gradient", "voronoi", "voronoi_colour", "voronoi_manhattan", "wave",
+               "wave_rings", "magic")
+
+
+@pytest.mark.parametrize("kind", PROCEDURALS)
+def test_procedural_textures_match_cycles(blender, empty_scene, tmp_path, kind):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, f"Procedural_{kind}")
+    _, output = _procedural(nodes, links, kind)
+    links.new(output, shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, kind)
+    r = correlation(ours, theirs)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not [line for line in report if "Procedural" in line], report
+
+
+def test_a_chain_of_colour_nodes_matches_cycles(blender, empty_scene, tmp_path):
+    """Gradient -> Map Range -> Math -> Mix (Overlay) with a Checker -> Hue/Saturation ->
+    Invert -> Gamma -> Bright/Contrast -> Base Color; Layer Weight -> Roughness."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Chain")
+    coords = nodes.new("ShaderNodeTexCoord")
+    gradient = nodes.new("ShaderNodeTexGradient")
+    links.new(coords.outputs["Object"], gradient.inputs["Vector"])
+    map_range = nodes.new("ShaderNodeMapRange")
+    map_range.inputs["From Min"].default_value, map_range.inputs["From Max"].default_value = -1.0, 1.0
+    math_node = nodes.new("ShaderNodeMath")
+    math_node.operation = "SINE"
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type, mix.blend_type = "RGBA", "OVERLAY"
+    checker = _checker(nodes, links, coords.outputs["UV"])
+    hue = nodes.new("ShaderNodeHueSaturation")
+    hue.inputs["Hue"].default_value = 0.3
+    invert = nodes.new("ShaderNodeInvert")
+    invert.inputs["Fac"].default_value = 0.3
+    gamma = nodes.new("ShaderNodeGamma")
+    gamma.inputs["Gamma"].default_value = 1.4
+    bc = nodes.new("ShaderNodeBrightContrast")
+    bc.inputs["Contrast"].default_value = 0.2
+    links.new(gradient.outputs["Fac"], map_range.inputs["Value"])
+    links.new(map_range.outputs["Result"], math_node.inputs[0])
+    links.new(math_node.outputs[0], mix.inputs["Factor"])
+    links.new(checker.outputs["Color"], mix.inputs["A"])
+    links.new(gradient.outputs["Color"], mix.inputs["B"])
+    links.new(mix.outputs["Result"], hue.inputs["Color"])
+    links.new(hue.outputs["Color"], invert.inputs["Color"])
+    links.new(invert.outputs["Color"], gamma.inputs["Color"])
+    links.new(gamma.outputs["Color"], bc.inputs["Color"])
+    links.new(bc.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "chain")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+    assert not [line for line in report if "Chain" in line], report
+
+
+def test_point_colours_through_a_colour_ramp(blender, empty_scene, tmp_path):
+    """Color Attribute -> Color Ramp (the colour read as a float: its luminance) -> Emission."""
+    bpy, scene = blender, empty_scene
+    m = bpy.data.materials.new("Ramped")
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    emission, attribute, ramp = (nodes.new(t) for t in ("ShaderNodeEmission", "ShaderNodeVertexColor",
+                                                         "ShaderNodeValToRGB"))
+    attribute.layer_name = "splat_color"
+    ramp.color_ramp.elements[0].color, ramp.color_ramp.elements[1].color = (0, 0.2, 0, 1), (1, 0.9, 0, 1)
+    ramp.color_ramp.elements[1].position = 0.4
+    links.new(attribute.outputs["Color"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], emission.inputs["Color"])
+    links.new(emission.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
+    _flat_cloud(bpy, m)
+    _setup(bpy, scene)
+    ours, theirs, _ = _both(bpy, scene, tmp_path, "ramped")
+    for half, colour in enumerate(HALVES):
+        cols = slice(8, 30) if half == 0 else slice(50, 72)
+        mine, cycles = ours[25:55, cols].reshape(-1, 3).mean(0), theirs[25:55, cols].reshape(-1, 3).mean(0)
+        t = min(np.dot(colour, (0.2126729, 0.7151522, 0.0721750)) / 0.4, 1.0)  # luminance, then the ramp
+        np.testing.assert_allclose(mine, np.add(np.multiply(1 - t, (0, 0.2, 0)), np.multiply(t, (1, 0.9, 0))),
+                                   rtol=COLOUR_RTOL, atol=0.01)
+        np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)

@@ -595,3 +595,98 @@ def test_an_image_index_out_of_range_is_refused():
     b.emit("IMAGE", colour, alpha, colour, 0, 0, 0)  # no image given
     with pytest.raises(ValueError, match="image out of range"):
         nodes.run(b.program())
+
+
+# Voronoi F1 (3-D): a port of Blender's definition, its cells hashed by the PCG 3-D hash
+# (Jarzynski and Olano 2020) on signed 32-bit integers.
+def _pcg3(x, y, z):
+    M = 0xFFFFFFFF
+    v = [(c * 1664525 + 1013904223) & M for c in (int(x) & M, int(y) & M, int(z) & M)]
+
+    def mix():
+        v[0] = (v[0] + v[1] * v[2]) & M
+        v[1] = (v[1] + v[2] * v[0]) & M
+        v[2] = (v[2] + v[0] * v[1]) & M
+
+    mix()
+    for i in range(3):
+        signed = v[i] - (1 << 32) if v[i] >> 31 else v[i]
+        v[i] ^= (signed >> 16) & M
+    mix()
+    return np.array([np.float32(c & 0x7FFFFFFF) * np.float32(1 / 0x7FFFFFFF) for c in v], np.float64)
+
+
+def _voronoi(p, metric="EUCLIDEAN", randomness=1.0):
+    cell = np.floor(p).astype(int)
+    local = p - cell
+    best = None
+    for k in (-1, 0, 1):
+        for j in (-1, 0, 1):
+            for i in (-1, 0, 1):
+                point = np.array([i, j, k]) + _pcg3(*(cell + [i, j, k])) * randomness
+                d = np.abs(point - local)
+                dist = {"EUCLIDEAN": np.linalg.norm(d), "MANHATTAN": d.sum(), "CHEBYSHEV": d.max()}[metric]
+                if best is None or dist < best[0]:
+                    best = (dist, _pcg3(*(cell + [i, j, k])), point + cell)
+    return best
+
+
+@pytest.mark.parametrize("metric", ["EUCLIDEAN", "MANHATTAN", "CHEBYSHEV"])
+def test_voronoi_f1(metric):
+    pts = RNG.uniform(-3, 3, (25, 3))
+    scale, randomness = 1.3, 0.8
+    b = nodes.Builder()
+    d, col, pos = b.register(), b.register(width=3), b.register(width=3)
+    b.emit("VORONOI", d, col, pos, b.global_("OBJECT"), b.register((scale, 1.0, randomness), 3),
+           nodes.VORONOI_METRICS.index(metric))
+    r = nodes.run(b.program(), len(pts), object=pts)
+    for p, row in zip(pts.astype(np.float32).astype(np.float64), r):
+        dist, colour, position = _voronoi(p * scale, metric, randomness)
+        assert row[d] == pytest.approx(dist, abs=1e-5)
+        np.testing.assert_allclose(row[col:col + 3], colour, atol=1e-6)
+        np.testing.assert_allclose(row[pos:pos + 3], position / scale, atol=1e-5)
+
+
+@pytest.mark.parametrize("kind", nodes.WAVE_KINDS)
+@pytest.mark.parametrize("profile", nodes.WAVE_PROFILES)
+def test_wave_without_distortion(kind, profile):
+    pts = RNG.uniform(-2, 2, (20, 3))
+    scale, phase = 1.7, 0.4
+    b = nodes.Builder()
+    fac = b.register()
+    params = b.register((scale, 0.0, 2.0), 3)  # no distortion
+    b.register(1.0), b.register(0.5)
+    b.emit("WAVE", fac, b.global_("OBJECT"), params, b.register(phase), nodes.WAVE_KINDS.index(kind),
+           nodes.WAVE_PROFILES.index(profile))
+    r = nodes.run(b.program(), len(pts), object=pts)[:, fac]
+    p = (pts.astype(np.float32) * scale + 1e-6) * 0.999999
+    axis = {"X": 0, "Y": 1, "Z": 2}
+    direction = kind.split("_")[1]
+    if kind.startswith("BANDS"):
+        n = p.sum(axis=1) * 10 if direction == "DIAGONAL" else p[:, axis[direction]] * 20
+    else:
+        q = p.copy()
+        if direction in axis:
+            q[:, axis[direction]] = 0
+        n = np.linalg.norm(q, axis=1) * 20
+    n = n + phase
+    want = {"SIN": 0.5 + 0.5 * np.sin(n - np.pi / 2), "SAW": n / (2 * np.pi) - np.floor(n / (2 * np.pi)),
+            "TRI": np.abs(n / (2 * np.pi) - np.floor(n / (2 * np.pi) + 0.5))}[profile]
+    np.testing.assert_allclose(r, want, atol=2e-4)
+
+
+def test_magic_depth_zero_and_one():
+    pts = RNG.uniform(-2, 2, (20, 3))
+    for depth in (0, 1):
+        b = nodes.Builder()
+        colour, fac = b.register(width=3), b.register()
+        b.emit("MAGIC", colour, fac, b.global_("OBJECT"), b.register(1.0), b.register(1.5), depth)
+        r = nodes.run(b.program(), len(pts), object=pts)
+        x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
+        a, bb, c = np.sin((x + y + z) * 5), np.cos((-x + y - z) * 5), -np.cos((-x - y + z) * 5)
+        if depth == 1:  # one turbulence step (Blender's Magic texture)
+            a, bb, c = a * 1.5, bb * 1.5, c * 1.5
+            bb = -np.cos(a - bb + c) * 1.5
+        want = np.column_stack([0.5 - a / 3, 0.5 - bb / 3, 0.5 - c / 3])  # divided by 2 x distortion
+        np.testing.assert_allclose(r[:, colour:colour + 3], want, atol=1e-5)
+        np.testing.assert_allclose(r[:, fac], want.mean(axis=1), atol=1e-5)

@@ -144,7 +144,12 @@ class Compiler:
                 handler = getattr(self, "_" + node.type.lower(), None)
                 if handler is None:
                     raise Unsupported(node)
-                self.memo[key] = handler(node, stack)
+                try:
+                    self.memo[key] = handler(node, stack)
+                except (KeyError, AttributeError, ValueError, IndexError, StopIteration, TypeError) as e:
+                    # A node this Blender version lays out unlike the one the compiler was
+                    # written for (a renamed socket or option): skip it, don't fail the frame.
+                    raise Unsupported(node, f"{type(e).__name__}: {e}") from e
         outputs = self.memo[key]
         if socket.identifier not in outputs:
             raise Unsupported(node, f"its {socket.name} output")
@@ -166,7 +171,19 @@ class Compiler:
         return result
 
     def _in(self, node, name, width, stack):
-        socket = node.inputs[name] if isinstance(name, (str, int)) else name
+        """An input by index or name; by name among all sockets, unavailable ones included
+        (Blender hides some by the node's options, and lookup by name skips those)."""
+        if isinstance(name, int):
+            socket = node.inputs[name]
+        elif isinstance(name, str):
+            # By name or identifier: Blender 5 renamed some (Fac -> Factor, Bright -> Brightness)
+            # and kept the old names as identifiers.
+            socket = next((s for s in node.inputs if s.name == name), None) or \
+                next((s for s in node.inputs if s.identifier == name), None)
+            if socket is None:
+                raise KeyError(f"no input '{name}'")
+        else:
+            socket = name
         return self.input(socket, width, stack)
 
     def _by_id(self, node, identifier):
@@ -174,13 +191,23 @@ class Compiler:
 
     def _vector_or(self, node, stack, default_global="GENERATED", name="Vector"):
         """A texture's Vector input, or the default coordinates where nothing is linked."""
-        socket = node.inputs[name]
+        socket = next(s for s in node.inputs if s.name == name or s.identifier == name)
         if self.source(socket, stack) is None:
             return self.b.global_(default_global)
         return self.input(socket, 3, stack)
 
+    # Output names that changed between Blender versions (Blender 5: textures' Fac is Factor).
+    _ALIASES = {"Fac": ("Fac", "Factor")}
+
     def _ids(self, node, values: dict):
-        return {node.outputs[name].identifier: reg for name, reg in values.items()}
+        """{output identifier: register} for the outputs named (those the node has)."""
+        result = {}
+        for name, reg in values.items():
+            for alias in self._ALIASES.get(name, (name,)):
+                socket = next((s for s in node.outputs if s.name == alias), None)
+                if socket is not None:
+                    result[socket.identifier] = reg
+        return result
 
     # Inputs
     def _value(self, node, stack):
@@ -219,8 +246,9 @@ class Compiler:
         result = {s.identifier: colour for s in node.outputs if s.name in ("Color", "Vector")}
         alpha = self.b.global_("POINT_ALPHA")
         result.update({s.identifier: alpha for s in node.outputs if s.name == "Alpha"})
-        if fac and "Fac" in node.outputs:
-            result[node.outputs["Fac"].identifier] = self.convert(colour, "VECTOR", 1)
+        for s in node.outputs:
+            if fac and s.name in ("Fac", "Factor"):
+                result[s.identifier] = self.convert(colour, "VECTOR", 1)
         return result
 
     def _vertex_color(self, node, stack):
@@ -466,6 +494,52 @@ class Compiler:
         fac, colour = self.b.register(), self.b.register(width=3)
         self.b.emit("NOISE", fac, colour, vector, params, int(getattr(node, "normalize", True)))
         return self._ids(node, {"Fac": fac, "Color": colour})
+
+    def _params(self, node, stack, names):
+        """Consecutive registers holding the float inputs `names` (a kR3/kR5 operand)."""
+        first = self.b.register()
+        for _ in names[1:]:
+            self.b.register()
+        for k, name in enumerate(names):
+            self.b.emit("COPY", first + k, self._in(node, name, 1, stack), 1)
+        return first
+
+    def _tex_voronoi(self, node, stack):
+        if node.voronoi_dimensions != "3D":
+            raise Unsupported(node, f"{node.voronoi_dimensions} Voronoi")
+        if node.feature != "F1":
+            raise Unsupported(node, f"its {node.feature.replace('_', ' ').title()} feature")
+        detail = node.inputs.get("Detail")
+        if detail is not None and (self.source(detail, stack) is not None or detail.default_value != 0):
+            raise Unsupported(node, "fractal Detail")
+        if getattr(node, "normalize", False):
+            raise Unsupported(node, "Normalize")
+        vector = self._vector_or(node, stack)
+        params = self._params(node, stack, ("Scale", "Exponent", "Randomness"))
+        distance, colour, position = self.b.register(), self.b.register(width=3), self.b.register(width=3)
+        self.b.emit("VORONOI", distance, colour, position, vector, params,
+                    nodes.VORONOI_METRICS.index(node.distance))
+        return self._ids(node, {"Distance": distance, "Color": colour, "Position": position})
+
+    def _tex_wave(self, node, stack):
+        if node.wave_type == "BANDS":
+            kind = "BANDS_" + node.bands_direction
+        else:
+            kind = "RINGS_" + node.rings_direction
+        vector = self._vector_or(node, stack)
+        params = self._params(node, stack, ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness"))
+        fac, colour = self.b.register(), self.b.register(width=3)
+        self.b.emit("WAVE", fac, vector, params, self._in(node, "Phase Offset", 1, stack), nodes.WAVE_KINDS.index(kind),
+                    nodes.WAVE_PROFILES.index(node.wave_profile))
+        self.b.emit("COMBINE", colour, fac, fac, fac)
+        return self._ids(node, {"Fac": fac, "Color": colour})
+
+    def _tex_magic(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("MAGIC", colour, fac, vector, self._in(node, "Scale", 1, stack),
+                    self._in(node, "Distortion", 1, stack), min(max(int(node.turbulence_depth), 0), 10))
+        return self._ids(node, {"Color": colour, "Fac": fac})
 
     def _tex_white_noise(self, node, stack):
         dims = {"1D": 1, "2D": 2, "3D": 3}.get(node.noise_dimensions)

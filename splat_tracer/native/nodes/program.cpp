@@ -57,6 +57,9 @@ const Layout &layout(Op op) {
         /* Image (image checked apart) */
         {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                 int32_t(ImageExtension::Count)}},
+        /* Voronoi */ {{kR1, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
+        /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
+        /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
     };
     return table[int(op)];
 }
@@ -433,6 +436,114 @@ float white_noise(Vec3 p, int dims, Vec3 *colour) {
     return value;
 }
 
+float voronoi_distance(Vec3 a, Vec3 b, int metric, float exponent) {
+    const Vec3 d = vabs(a - b);
+    switch (metric) {
+        case 0: return length(a - b);                                   // EUCLIDEAN
+        case 1: return d.x + d.y + d.z;                                 // MANHATTAN
+        case 2: return std::fmax(d.x, std::fmax(d.y, d.z));             // CHEBYSHEV
+        default:                                                        // MINKOWSKI
+            return std::pow(std::pow(d.x, exponent) + std::pow(d.y, exponent) + std::pow(d.z, exponent),
+                            1.f / exponent);
+    }
+}
+
+// Blender's hash of an integer cell to three numbers in 0..1 (the PCG 3-D hash of Jarzynski
+// and Olano, "Hash Functions for GPU Rendering", 2020, on signed integers as Blender runs it:
+// wrapping products, an arithmetic shift).
+Vec3 hash_cell(int32_t x, int32_t y, int32_t z) {
+    uint32_t v[3] = {uint32_t(x), uint32_t(y), uint32_t(z)};
+    for (uint32_t &c : v) c = c * 1664525u + 1013904223u;
+    auto mix = [&] { v[0] += v[1] * v[2], v[1] += v[2] * v[0], v[2] += v[0] * v[1]; };
+    mix();
+    for (uint32_t &c : v) c ^= uint32_t(int32_t(c) >> 16);
+    mix();
+    constexpr float k = 1.f / float(0x7FFFFFFF);
+    return {float(v[0] & 0x7FFFFFFFu) * k, float(v[1] & 0x7FFFFFFFu) * k, float(v[2] & 0x7FFFFFFFu) * k};
+}
+
+// Voronoi F1 in 3-D: the nearest of the points scattered one per unit cell (offset by the
+// cell's hash x randomness): its distance, its cell's colour and its position.
+void voronoi_f1(Vec3 p, float exponent, float randomness, int metric, float *distance, Vec3 *colour, Vec3 *position) {
+    // Cells beyond int range would overflow: far coordinates are held where they still resolve.
+    for (int a = 0; a < 3; ++a) p[a] = std::fmin(std::fmax(p[a], -1e9f), 1e9f);
+    const int32_t cx = int32_t(std::floor(p.x)), cy = int32_t(std::floor(p.y)), cz = int32_t(std::floor(p.z));
+    const Vec3 local = p - Vec3(float(cx), float(cy), float(cz));
+    float best = 3.4e38f;
+    int32_t bi = 0, bj = 0, bk = 0;
+    Vec3 best_point;
+    for (int32_t k = -1; k <= 1; ++k)
+        for (int32_t j = -1; j <= 1; ++j)
+            for (int32_t i = -1; i <= 1; ++i) {
+                const Vec3 point = Vec3(float(i), float(j), float(k)) + hash_cell(cx + i, cy + j, cz + k) * randomness;
+                const float d = voronoi_distance(point, local, metric, exponent);
+                if (d < best) best = d, bi = i, bj = j, bk = k, best_point = point;
+            }
+    *distance = best;
+    *colour = hash_cell(cx + bi, cy + bj, cz + bk);
+    *position = best_point + Vec3(float(cx), float(cy), float(cz));
+}
+
+float wave(Vec3 p, const float *q, float phase, int kind, int profile) {
+    // q: scale (applied by the caller), distortion, detail, detail scale, detail roughness.
+    p = (p + Vec3(0.000001f, 0.000001f, 0.000001f)) * 0.999999f;  // Blender's nudge off unit coordinates
+    float n;
+    if (kind < 4) {
+        n = kind == 0 ? p.x * 20.f : kind == 1 ? p.y * 20.f : kind == 2 ? p.z * 20.f : (p.x + p.y + p.z) * 10.f;
+    } else {
+        Vec3 r = p;
+        if (kind == 4) r.x = 0.f;
+        else if (kind == 5) r.y = 0.f;
+        else if (kind == 6) r.z = 0.f;
+        n = length(r) * 20.f;
+    }
+    n += phase;
+    if (q[1] != 0.f)
+        n += q[1] * (noise_fbm(p * q[3], std::fmin(std::fmax(q[2], 0.f), 15.f), std::fmax(q[4], 0.f), 2.f, true) * 2.f - 1.f);
+    if (profile == 0) return 0.5f + 0.5f * std::sin(n - 0.5f * kPi);  // SIN
+    n /= 2.f * kPi;
+    if (profile == 1) return n - std::floor(n);                       // SAW
+    return std::fabs(n - std::floor(n + 0.5f));                       // TRI
+}
+
+Vec3 magic(Vec3 p, int depth, float distortion) {
+    float x = std::sin((p.x + p.y + p.z) * 5.f);
+    float y = std::cos((-p.x + p.y - p.z) * 5.f);
+    float z = -std::cos((-p.x - p.y + p.z) * 5.f);
+    const float d = distortion;
+    if (depth > 0) {
+        x *= d, y *= d, z *= d;
+        y = -std::cos(x - y + z) * d;
+        if (depth > 1) {
+            x = std::cos(x - y - z) * d;
+            if (depth > 2) {
+                z = std::sin(-x - y - z) * d;
+                if (depth > 3) {
+                    x = -std::cos(-x + y - z) * d;
+                    if (depth > 4) {
+                        y = -std::sin(-x + y + z) * d;
+                        if (depth > 5) {
+                            y = -std::cos(-x + y + z) * d;
+                            if (depth > 6) {
+                                x = std::cos(x + y + z) * d;
+                                if (depth > 7) {
+                                    z = std::sin(x + y - z) * d;
+                                    if (depth > 8) {
+                                        x = -std::cos(-x - y + z) * d;
+                                        if (depth > 9) y = -std::sin(x - y + z) * d;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if (d != 0.f) x /= 2.f * d, y /= 2.f * d, z /= 2.f * d;
+    return {0.5f - x, 0.5f - y, 0.5f - z};
+}
+
 }  // namespace
 
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
@@ -744,6 +855,28 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                 const RGBA t = images[size_t(c[4])]->sample(uv.x, uv.y, ImageInterpolation(c[5]), ImageExtension(c[6]));
                 store3(r, c[1], {t.r, t.g, t.b});
                 r[c[2]] = t.a;
+                break;
+            }
+            case Op::Voronoi: {
+                const Vec3 q = load3(r, c[5]);  // scale, exponent, randomness
+                float distance;
+                Vec3 colour, position;
+                voronoi_f1(load3(r, c[4]) * q.x, q.y, std::fmin(std::fmax(q.z, 0.f), 1.f), c[6], &distance, &colour,
+                           &position);
+                r[c[1]] = distance;
+                store3(r, c[2], colour);
+                store3(r, c[3], q.x != 0.f ? position * (1.f / q.x) : Vec3());
+                break;
+            }
+            case Op::Wave: {
+                const float *q = r + c[3];
+                r[c[1]] = wave(load3(r, c[2]) * q[0], q, r[c[4]], c[5], c[6]);
+                break;
+            }
+            case Op::Magic: {
+                const Vec3 v = magic(load3(r, c[3]) * r[c[4]], c[6], r[c[5]]);
+                store3(r, c[1], v);
+                r[c[2]] = (v.x + v.y + v.z) * (1.f / 3.f);
                 break;
             }
             default: break;  // unreachable: validate() refused it

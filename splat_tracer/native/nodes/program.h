@@ -80,6 +80,10 @@ enum class Op : int32_t {
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
     Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
+    Voronoi,        // out_distance, out_colour, out_position, vector, params (scale exponent randomness), metric
+    Wave,           // out_fac, vector, params (scale distortion detail detail_scale detail_roughness), phase, kind, profile
+                    // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
+    Magic,          // out_colour, out_fac, vector, scale, distortion, depth
     Count
 };
 
