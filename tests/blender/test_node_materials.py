@@ -416,3 +416,24 @@ def test_point_colours_through_a_colour_ramp(blender, empty_scene, tmp_path):
         np.testing.assert_allclose(mine, np.add(np.multiply(1 - t, (0, 0.2, 0)), np.multiply(t, (1, 0.9, 0))),
                                    rtol=COLOUR_RTOL, atol=0.01)
         np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
+
+
+def test_rgb_curves_match_cycles(blender, empty_scene, tmp_path):
+    """A gradient through RGB Curves (a bent combined curve and a bent red curve)."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Curves")
+    coords, gradient, curves = (nodes.new(t) for t in ("ShaderNodeTexCoord", "ShaderNodeTexGradient",
+                                                       "ShaderNodeRGBCurve"))
+    combined, red = curves.mapping.curves[3], curves.mapping.curves[0]
+    combined.points.new(0.3, 0.7)
+    red.points.new(0.5, 0.1)
+    curves.mapping.update()
+    links.new(coords.outputs["UV"], gradient.inputs["Vector"])
+    links.new(gradient.outputs["Color"], curves.inputs["Color"])
+    links.new(curves.outputs["Color"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "curves")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+    assert not [line for line in report if "Curves" in line], report

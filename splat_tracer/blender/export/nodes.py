@@ -340,11 +340,11 @@ class Compiler:
         lo, hi = float(mapping.clip_min_x), float(mapping.clip_max_x)
         if not mapping.use_clip:
             lo, hi = 0.0, 1.0
-        curves = mapping.curves  # R, G, B, then the combined curve applied after each
+        curves = mapping.curves  # R, G, B, and the combined curve, which each channel's curve follows
         rows = []
         for i in range(_TABLE_ROWS):
             x = lo + (hi - lo) * i / (_TABLE_ROWS - 1)
-            rows.append([mapping.evaluate(curves[3], mapping.evaluate(curves[k], x)) for k in range(3)] + [0.0])
+            rows.append([mapping.evaluate(curves[k], mapping.evaluate(curves[3], x)) for k in range(3)] + [0.0])
         table = self.b.table(rows)
         span = self.b.register((lo, hi, 0.0), 3)
         fac, colour = self._in(node, "Fac", 1, stack), self._in(node, "Color", 3, stack)
