@@ -24,13 +24,13 @@ MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC")
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
-           "emission": 3, "specular_level": 1}
+           "emission": 3, "specular_level": 1, "normal": 3}
 # Blender's identifiers, in the order the core numbers them.
 MATH_OPS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT", "INVERSE_SQRT",
             "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN", "GREATER_THAN", "SIGN", "COMPARE",
@@ -51,9 +51,14 @@ EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")  # Image Texture (native Ima
 VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYSHEV", "MINKOWSKI")
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
 
-# The shading point as run_nodes takes it: these vec3s, then point_alpha and backfacing.
-GLOBAL_FIELDS = ("P", "N", "Ng", "I", "object", "object_normal", "generated", "uv", "point_colour")
+# The shading point as run_nodes takes it: these vec3s, then point_alpha, backfacing and
+# tangent_sign. tangent: the UV map's (unit, perpendicular to surface_normal, the surface's
+# normal before it is turned towards the viewer).
+GLOBAL_FIELDS = ("P", "N", "Ng", "I", "object", "object_normal", "generated", "uv", "point_colour", "tangent",
+                 "surface_normal")
+_GLOBAL_FLOATS = 3 * len(GLOBAL_FIELDS) + 3
 
 
 class Image:
@@ -151,7 +156,7 @@ class Builder:
         return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images))
 
 
-def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, **globals_) -> np.ndarray:
+def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, **globals_) -> np.ndarray:
     """The registers after running `program` at n shading points (n, len(data)): each of
     GLOBAL_FIELDS given as (3,) or (n, 3) (default 0), point_alpha and backfacing as scalars
     or (n,). For tests and tools: renders run programs inside the core."""
@@ -160,12 +165,13 @@ def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, **globals
     unknown = set(globals_) - set(GLOBAL_FIELDS)
     if unknown:
         raise ValueError(f"unknown shading-point fields {sorted(unknown)}; use {GLOBAL_FIELDS}")
-    g = np.zeros((n, 29), np.float32)
+    g = np.zeros((n, _GLOBAL_FLOATS), np.float32)
     for k, name in enumerate(GLOBAL_FIELDS):
         if name in globals_:
             g[:, 3 * k:3 * k + 3] = np.broadcast_to(np.asarray(globals_[name], np.float32), (n, 3))
-    g[:, 27] = point_alpha
-    g[:, 28] = backfacing
+    g[:, -3] = point_alpha
+    g[:, -2] = backfacing
+    g[:, -1] = tangent_sign
     out = np.zeros((n, len(program.data)), np.float32)
     code, data, outputs, images = program.native()
     _core.run_nodes(code, data, outputs, images, g, out)

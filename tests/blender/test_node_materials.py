@@ -437,3 +437,42 @@ def test_rgb_curves_match_cycles(blender, empty_scene, tmp_path):
     assert correlation(ours, theirs) >= TEXTURE_CORRELATION
     np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
     assert not [line for line in report if "Curves" in line], report
+
+
+def test_a_normal_mapped_floor_matches_cycles(blender, empty_scene, tmp_path):
+    """A Normal Map (tangent space, from the UV map) fed by a Wave texture's colour through a
+    Color Ramp that tilts the normal along the UV's u, strength 0.8: the sun's light varies
+    across the floor as in Cycles. A floor without the normal map is uniform (fails)."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Bumpy")
+    coords, wave, ramp, normal_map = (nodes.new(t) for t in ("ShaderNodeTexCoord", "ShaderNodeTexWave",
+                                                             "ShaderNodeValToRGB", "ShaderNodeNormalMap"))
+    wave.inputs["Scale"].default_value = 0.5
+    ramp.color_ramp.elements[0].color = (0.15, 0.5, 0.85, 1)  # tilted towards -u
+    ramp.color_ramp.elements[1].color = (0.85, 0.6, 0.85, 1)  # towards +u (and a little +v)
+    normal_map.inputs["Strength"].default_value = 0.8
+    links.new(coords.outputs["UV"], wave.inputs["Vector"])
+    links.new(wave.outputs["Color"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], normal_map.inputs["Color"])
+    links.new(normal_map.outputs["Normal"], shader.inputs["Normal"])
+    floor = plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    floor.rotation_euler = (0, 0, math.radians(30))  # the tangent frame turns with the object
+    _setup(bpy, scene)
+    scene.objects["Sun"].rotation_euler = (math.radians(40), math.radians(25), 0)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "normal_map")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+    assert theirs.mean(-1).std() > 0.05  # the normal map shows
+    assert not [line for line in report if "Bumpy" in line], report
+
+
+def test_a_bump_node_says_the_normal_is_the_surfaces(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Bumped")
+    bump = nodes.new("ShaderNodeBump")
+    links.new(bump.outputs["Normal"], shader.inputs["Normal"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    render(bpy, scene, tmp_path / "bump.exr", (SIZE, SIZE))
+    assert [line for line in stats()["report"] if "Bumped" in line] == [
+        "material 'Bumped': the 'Bump' node is not supported; Normal is the surface's own"]

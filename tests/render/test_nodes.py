@@ -433,7 +433,7 @@ def test_noise_matches_blenders_definition():
     fac, colour = b.register(), b.register(width=3)
     params = b.register((scale, detail, rough), 3)
     b.register(lac), b.register(0.0)  # lacunarity, no distortion
-    b.emit("NOISE", fac, colour, b.global_("OBJECT"), params, 1)
+    b.emit("NOISE", fac, colour, b.global_("OBJECT"), params, 1, 1)
     r = nodes.run(b.program(), len(pts), object=pts)
     want = [_fbm(p * scale, detail, rough, lac) for p in pts.astype(np.float32)]
     np.testing.assert_allclose(r[:, fac], want, atol=2e-5)
@@ -690,3 +690,25 @@ def test_magic_depth_zero_and_one():
         want = np.column_stack([0.5 - a / 3, 0.5 - bb / 3, 0.5 - c / 3])  # divided by 2 x distortion
         np.testing.assert_allclose(r[:, colour:colour + 3], want, atol=1e-5)
         np.testing.assert_allclose(r[:, fac], want.mean(axis=1), atol=1e-5)
+
+
+def test_normal_map_tangent_space():
+    """Blender's Normal Map: colour c in 0..1 -> v = 2c - 1 in the frame (tangent,
+    sign x normal x tangent, normal), unit; strength blends from the shading normal."""
+    t, n = np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    colour = np.array([0.7, 0.4, 0.9])
+    v = 2 * colour - 1
+    for sign in (1.0, -1.0):
+        for strength in (1.0, 0.5):
+            frame = v[0] * t + v[1] * sign * np.cross(n, t) + v[2] * n
+            want = frame / np.linalg.norm(frame)
+            if strength != 1.0:
+                want = n + (want - n) * strength
+                want /= np.linalg.norm(want)
+            got = run_op("NORMAL_MAP", [(colour, 3), (strength, 1)], [3], 0, N=n, surface_normal=n, tangent=t,
+                         tangent_sign=sign)[0][0]
+            np.testing.assert_allclose(got, want, atol=1e-6)
+    # World space: the vector itself; without a tangent (no UV map): the shading normal.
+    got = run_op("NORMAL_MAP", [(colour, 3), (1.0, 1)], [3], 2, N=n)[0][0]
+    np.testing.assert_allclose(got, v / np.linalg.norm(v), atol=1e-6)
+    np.testing.assert_allclose(run_op("NORMAL_MAP", [(colour, 3), (1.0, 1)], [3], 0, N=n)[0][0], n)

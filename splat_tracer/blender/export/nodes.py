@@ -99,7 +99,10 @@ class Compiler:
             label = e.node.bl_label + (f" ({e.what})" if e.what else "")
             value = np.ravel(np.asarray(getattr(socket, "default_value", 0.0), np.float64))[:3]
             shown = f"{value[0]:.3g}" if value.size == 1 else "(" + ", ".join(f"{v:.3g}" for v in value) + ")"
-            self.say(f": the '{label}' node is not supported; {socket.name} uses its unlinked value {shown}")
+            if socket.name == "Normal" and getattr(socket, "hide_value", False):  # unlinked: the surface's
+                self.say(f": the '{label}' node is not supported; Normal is the surface's own")
+            else:
+                self.say(f": the '{label}' node is not supported; {socket.name} uses its unlinked value {shown}")
             return self.default(socket, width)
         return self.convert(reg, kind, width)
 
@@ -442,19 +445,26 @@ class Compiler:
         self.b.emit("LAYER_WEIGHT", fresnel, facing, self._in(node, "Blend", 1, stack), normal)
         return self._ids(node, {"Fresnel": fresnel, "Facing": facing})
 
+    def _normal_map(self, node, stack):
+        if node.space not in nodes.NORMAL_MAP_SPACES:
+            raise Unsupported(node, f"{node.space.replace('_', ' ').lower()} space")
+        out = self.b.register(width=3)
+        self.b.emit("NORMAL_MAP", out, self._in(node, "Color", 3, stack), self._in(node, "Strength", 1, stack),
+                    nodes.NORMAL_MAP_SPACES.index(node.space))
+        return {node.outputs[0].identifier: out}
+
     # Textures
     def _tex_image(self, node, stack):
         image = node.image
-        if image is None:
-            raise Unsupported(node, "no image")
         if node.projection != "FLAT":
             raise Unsupported(node, f"{node.projection.lower()} projection")
-        if image.source not in ("FILE", "GENERATED"):
+        if image is not None and image.source not in ("FILE", "GENERATED"):
             raise Unsupported(node, f"{image.source.lower()} images")
         colour, alpha = self.b.register(width=3), self.b.register()
-        texture = _image_pixels(image, self.say)
+        texture = _image_pixels(image, self.say) if image is not None else None
         if texture is None:
-            self.say(f": image '{image.name}' could not be loaded; rendered magenta, as Cycles does")
+            what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
+            self.say(f": {what}; rendered magenta, as Cycles does")
             self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
             self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
             return self._ids(node, {"Color": colour, "Alpha": alpha})
@@ -492,7 +502,8 @@ class Compiler:
         for k, name in enumerate(("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")):
             self.b.emit("COPY", params + k, self._in(node, name, 1, stack), 1)
         fac, colour = self.b.register(), self.b.register(width=3)
-        self.b.emit("NOISE", fac, colour, vector, params, int(getattr(node, "normalize", True)))
+        self.b.emit("NOISE", fac, colour, vector, params, int(getattr(node, "normalize", True)),
+                    int(node.outputs["Color"].is_linked))
         return self._ids(node, {"Fac": fac, "Color": colour})
 
     def _params(self, node, stack, names):
@@ -601,12 +612,13 @@ def _try_load(image) -> bool:
 SHADER_INPUTS = {
     "BSDF_PRINCIPLED": {"base_colour": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR",
                         "transmission": "Transmission Weight", "alpha": "Alpha",
-                        "specular_level": "Specular IOR Level", "emission": ("Emission Color", "Emission Strength")},
-    "BSDF_DIFFUSE": {"base_colour": "Color"},
-    "BSDF_GLOSSY": {"base_colour": "Color", "roughness": "Roughness"},
-    "BSDF_METALLIC": {"base_colour": "Base Color", "roughness": "Roughness"},
-    "BSDF_GLASS": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR"},
-    "BSDF_REFRACTION": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR"},
+                        "specular_level": "Specular IOR Level", "emission": ("Emission Color", "Emission Strength"),
+                        "normal": "Normal"},
+    "BSDF_DIFFUSE": {"base_colour": "Color", "normal": "Normal"},
+    "BSDF_GLOSSY": {"base_colour": "Color", "roughness": "Roughness", "normal": "Normal"},
+    "BSDF_METALLIC": {"base_colour": "Base Color", "roughness": "Roughness", "normal": "Normal"},
+    "BSDF_GLASS": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR", "normal": "Normal"},
+    "BSDF_REFRACTION": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR", "normal": "Normal"},
     "EMISSION": {"emission": ("Color", "Strength")},
 }
 

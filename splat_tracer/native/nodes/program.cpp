@@ -50,7 +50,7 @@ const Layout &layout(Op op) {
         /* Gradient */ {{kR3, kR1, kR3, kEnum}, {0, 0, 0, 7}},
         /* Fresnel */ {{kR1, kR1, kR3}, {}},
         /* LayerWeight */ {{kR1, kR1, kR1, kR3}, {}},
-        /* Noise */ {{kR1, kR3, kR3, kR5, kEnum}, {0, 0, 0, 0, 2}},
+        /* Noise */ {{kR1, kR3, kR3, kR5, kEnum, kEnum}, {0, 0, 0, 0, 2, 2}},
         /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
         /* Scale */ {{kR3, kR3, kR1}, {}},
         /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
@@ -60,6 +60,7 @@ const Layout &layout(Op op) {
         /* Voronoi */ {{kR1, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
         /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
         /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
+        /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
     };
     return table[int(op)];
 }
@@ -623,7 +624,7 @@ Vec3 hsv_to_rgb(Vec3 hsv) {
     }
 }
 
-void NodeProgram::validate() const {
+void NodeProgram::validate() {
     const int64_t n = int64_t(data.size());
     if (code.size() % kNodeWidth) throw InputError(name + ": node code is not whole instructions");
     if (n > kMaxNodeRegisters) throw InputError(name + ": node program has too many registers");
@@ -644,6 +645,7 @@ void NodeProgram::validate() const {
         if (op == Op::Copy && int64_t(c[2]) + c[3] > n) fail("copy out of range");
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
+        if (op == Op::NormalMap) uses_tangent = true;
         if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
             fail("image out of range");
         if (op == Op::Curves && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n || int64_t(c[6]) + 2 > n))
@@ -651,7 +653,7 @@ void NodeProgram::validate() const {
     }
     for (int k = 0; k < int(Output::Count); ++k) {
         const int32_t o = outputs[k];
-        const int width = (k == int(Output::Base) || k == int(Output::Emission)) ? 3 : 1;
+        const int width = (k == int(Output::Base) || k == int(Output::Emission) || k == int(Output::Normal)) ? 3 : 1;
         if (o < -1 || (o >= 0 && int64_t(o) + width > n)) throw InputError(name + ": node output out of range");
     }
 }
@@ -823,8 +825,9 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                                  perlin_signed(q + random_offset(2.f))) * dist;
                 const float f = noise_fbm(q, detail, rough, lac, norm);
                 r[c[1]] = f;
-                store3(r, c[2], {f, noise_fbm(q + random_offset(3.f), detail, rough, lac, norm),
-                                 noise_fbm(q + random_offset(4.f), detail, rough, lac, norm)});
+                if (c[6])  // the Color output is read: two more fractal sums at offset points
+                    store3(r, c[2], {f, noise_fbm(q + random_offset(3.f), detail, rough, lac, norm),
+                                     noise_fbm(q + random_offset(4.f), detail, rough, lac, norm)});
                 break;
             }
             case Op::WhiteNoise: {
@@ -877,6 +880,30 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                 const Vec3 v = magic(load3(r, c[3]) * r[c[4]], c[6], r[c[5]]);
                 store3(r, c[1], v);
                 r[c[2]] = (v.x + v.y + v.z) * (1.f / 3.f);
+                break;
+            }
+            case Op::NormalMap: {
+                // Blender's Normal Map node: colour (0..1) -> a vector in -1..1 in the chosen space.
+                const Vec3 c3 = load3(r, c[2]);
+                const Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
+                const bool back = sg.backfacing != 0.f;
+                Vec3 n;
+                if (c[4] == 0) {  // tangent space: the UV map's frame about the surface's own normal
+                    if (dot(sg.tangent, sg.tangent) == 0.f) {
+                        n = sg.N;
+                    } else {
+                        const Vec3 b = cross(sg.surface_normal, sg.tangent) * sg.tangent_sign;
+                        n = normalize(sg.tangent * v.x + b * v.y + sg.surface_normal * v.z);
+                        if (back) n = n * -1.f;  // as the normal the viewer sees is turned
+                    }
+                } else {  // object space (through the transform sg.to_world_normal), or world
+                    n = normalize(c[4] == 1 ? sg.object_to_world_normal(v) : v);
+                    if (back) n = n * -1.f;
+                }
+                const float strength = std::fmax(r[c[3]], 0.f);
+                if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * strength);
+                if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
+                store3(r, c[1], n);
                 break;
             }
             default: break;  // unreachable: validate() refused it

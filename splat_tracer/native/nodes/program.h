@@ -39,6 +39,16 @@ struct ShaderGlobals {
     Vec3 point_colour;   // the points' own colour (0 where there is none)
     float point_alpha = 1.f;
     float backfacing = 0.f;  // 1 when the ray met the back of the surface
+    Vec3 tangent;            // the UV map's tangent (unit, perpendicular to the surface's normal); 0 without
+    float tangent_sign = 1.f;  // the bitangent is tangent_sign x (normal x tangent)
+    Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
+    // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
+    float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    Vec3 object_to_world_normal(Vec3 n) const {
+        const float *m = normal_matrix;
+        return {m[0] * n.x + m[1] * n.y + m[2] * n.z, m[3] * n.x + m[4] * n.y + m[5] * n.z,
+                m[6] * n.x + m[7] * n.y + m[8] * n.z};
+    }
 };
 
 enum class Global : int32_t {
@@ -48,7 +58,7 @@ enum class Global : int32_t {
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
 enum class Output : int32_t {
-    Base = 0, Metallic, Roughness, IOR, Transmission, Alpha, Emission, SpecularLevel, Count
+    Base = 0, Metallic, Roughness, IOR, Transmission, Alpha, Emission, SpecularLevel, Normal, Count
 };
 
 enum class Op : int32_t {
@@ -75,7 +85,8 @@ enum class Op : int32_t {
     Gradient,       // out_colour, out_fac, vector, type
     Fresnel,        // out, ior, normal
     LayerWeight,    // out_fresnel, out_facing, blend, normal
-    Noise,          // out_fac, out_colour, vector, params (scale detail roughness lacunarity distortion), normalize
+    Noise,          // out_fac, out_colour, vector, params (scale detail roughness lacunarity distortion), normalize,
+                    // colour (0: the Color output is not read, not computed)
     WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
@@ -84,6 +95,7 @@ enum class Op : int32_t {
     Wave,           // out_fac, vector, params (scale distortion detail detail_scale detail_roughness), phase, kind, profile
                     // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
     Magic,          // out_colour, out_fac, vector, scale, distortion, depth
+    NormalMap,      // out, colour, strength, space (0 tangent, 1 object, 2 world)
     Count
 };
 
@@ -92,11 +104,12 @@ struct NodeProgram {
     std::vector<float> data;    // initial registers
     int32_t outputs[int(Output::Count)];
     std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
+    bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),
     // so that evaluation never reads or writes outside it; throws InputError naming the row.
-    void validate() const;
+    void validate();
     // Runs the program at one shading point; `r` holds data.size() floats and receives the
     // registers (the outputs are read from there).
     void run(const ShaderGlobals &sg, float *r) const;

@@ -208,19 +208,23 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
     const bool ok = parse_program(triple, "program", prog, images);
     Py_DECREF(triple);
     if (!ok) return nullptr;
-    constexpr int kGlobalFloats = 29;
-    View g, regs;
-    Py_ssize_t sg[2] = {-1, kGlobalFloats};
+    constexpr int kGlobalFloats = 36;
+    View g, regs, code, data, outs;
+    Py_ssize_t sg[2] = {-1, kGlobalFloats}, sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
     if (!get_array(oglobals, "globals", 'f', 2, sg, false, g)) return nullptr;
     Py_ssize_t sr[2] = {g.dim(0), Py_ssize_t(prog.data.size())};
-    if (!get_array(oregs, "out", 'f', 2, sr, true, regs)) return nullptr;
+    if (!get_array(oregs, "out", 'f', 2, sr, true, regs) || !get_array(ocode, "code", 'i', 2, sc, false, code) ||
+        !get_array(odata, "data", 'f', 1, sd, false, data) || !get_array(oout, "outputs", 'i', 1, so, false, outs) ||
+        !check_separate({{regs, "out"}}, {{g, "globals"}, {code, "code"}, {data, "data"}, {outs, "outputs"}}))
+        return nullptr;
     float r[kMaxNodeRegisters];
     for (Py_ssize_t i = 0; i < g.dim(0); ++i) {
         const float *x = g.data<float>() + kGlobalFloats * i;
         ShaderGlobals s;
-        Vec3 *vecs[9] = {&s.P, &s.N, &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour};
-        for (int k = 0; k < 9; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
-        s.point_alpha = x[27], s.backfacing = x[28];
+        Vec3 *vecs[11] = {&s.P,  &s.N,  &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour,
+                          &s.tangent, &s.surface_normal};
+        for (int k = 0; k < 11; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+        s.point_alpha = x[33], s.backfacing = x[34], s.tangent_sign = x[35];
         prog.run(s, r);
         std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
     }

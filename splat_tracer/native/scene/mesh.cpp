@@ -138,6 +138,20 @@ Vec3 TriangleMesh::point_error(const MeshHit &h) const {
     return a * kGamma7;
 }
 
+bool TriangleMesh::uv_tangent(int32_t tri, Vec3 *tangent, float *sign) const {
+    if (uv_.empty()) return false;
+    const float *t = &uv_[6 * size_t(tri)];
+    const Vec3 e1 = v1_[tri] - v0_[tri], e2 = v2_[tri] - v0_[tri];
+    const float du1 = t[2] - t[0], dv1 = t[3] - t[1], du2 = t[4] - t[0], dv2 = t[5] - t[1];
+    const float det = du1 * dv2 - du2 * dv1;
+    if (!(std::fabs(det) > 0.f)) return false;
+    const float inv = 1.f / det;
+    *tangent = (e1 * dv2 - e2 * dv1) * inv;                    // dP/du
+    const Vec3 bitangent = (e2 * du1 - e1 * du2) * inv;        // dP/dv
+    *sign = dot(cross(cross(e1, e2), *tangent), bitangent) < 0.f ? -1.f : 1.f;
+    return std::isfinite(dot(*tangent, *tangent)) && dot(*tangent, *tangent) > 0.f;
+}
+
 Vec3 TriangleMesh::geometric_normal(int32_t tri) const {
     return normalize(cross(v1_[tri] - v0_[tri], v2_[tri] - v0_[tri]));
 }

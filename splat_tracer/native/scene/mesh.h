@@ -44,6 +44,10 @@ class TriangleMesh {
     Vec3 geometric_normal(int32_t tri) const;  // unit, along e1 x e2
     Vec3 shading_normal(const MeshHit &h) const;
     int32_t material(int32_t tri) const { return material_.empty() ? 0 : material_[tri]; }
+    // The direction of increasing u on a triangle (object space, unnormalised) and the sign of
+    // the direction of increasing v relative to n x that (1 or -1): the UV map's tangent
+    // frame, per triangle. False without a UV map or where the UVs are degenerate.
+    bool uv_tangent(int32_t tri, Vec3 *tangent, float *sign) const;
     // The UV map at barycentric (b1, b2) of a triangle, as (u, v, 0); 0 without a UV map.
     Vec3 uv(int32_t tri, float b1, float b2) const {
         if (uv_.empty()) return Vec3();

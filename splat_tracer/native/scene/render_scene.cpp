@@ -12,7 +12,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)),
       programs_(std::move(programs)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (const NodeProgram &p : programs_) p.validate();
+    for (NodeProgram &p : programs_) p.validate();
     for (Material &m : materials_) {
         if (m.program >= int(programs_.size())) m.program = -1;
         const bool programmed_alpha = m.program >= 0 && programs_[m.program].outputs[int(Output::Alpha)] >= 0;
@@ -40,7 +40,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     top_.build(boxes, threads);
 }
 
-Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo) const {
+Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     ShaderGlobals sg;
@@ -60,7 +60,21 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             const float size = box.hi[k] - box.lo[k];
             sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
         }
-    if (inst.mesh) sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
+    sg.surface_normal = sp.ns;
+    for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
+        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = inst.to_object.m[4 * col + row];
+    if (inst.mesh) {
+        sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
+        Vec3 t;
+        float sign;
+        if (prog.uses_tangent && inst.mesh->uv_tangent(sp.prim, &t, &sign)) {
+            // Into the scene frame, then perpendicular to the shading normal (Gram-Schmidt), as
+            // a tangent interpolated over a smooth surface is.
+            t = inst.to_world.vector(t);
+            t = t - sp.ns * dot(sp.ns, t);
+            if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
+        }
+    }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
     float r[kMaxNodeRegisters];
@@ -85,6 +99,11 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     scalar(Output::IOR, 1e-3f, kMaxCoordinate, out.ior);  // render/shading.py's smallest IOR
     scalar(Output::SpecularLevel, 0.f, kMaxCoordinate, out.specular_level);
     if (prog.outputs[int(Output::Base)] >= 0) out.use_point_colour = false;  // the nodes read them
+    const int32_t normal = prog.outputs[int(Output::Normal)];
+    if (normal >= 0 && normal_out) {
+        const Vec3 n(r[normal], r[normal + 1], r[normal + 2]);
+        if (std::isfinite(dot(n, n)) && dot(n, n) > 0.f) *normal_out = normalize(n);
+    }
     if (prog.outputs[int(Output::Alpha)] >= 0) out.use_point_alpha = false;
     return out;
 }

@@ -116,10 +116,11 @@ class RenderScene {
     const Material &material(int i) const { return materials_[i]; }
     // The material at a surface point seen from direction `wo` (towards the viewer): its
     // node program run there, or the constant material when it has none. The one place
-    // the integrator asks for a material's inputs.
-    Material material_at(const SurfacePoint &sp, Vec3 wo) const {
+    // the integrator asks for a material's inputs. A program that drives the normal (Normal
+    // Map) replaces sp.ns with it.
+    Material material_at(SurfacePoint &sp, Vec3 wo) const {
         const Material &m = materials_[sp.material];
-        return m.program < 0 ? m : evaluate_program(m, sp, wo);
+        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
@@ -149,7 +150,7 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
-    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo) const;
+    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
