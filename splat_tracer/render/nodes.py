@@ -24,7 +24,7 @@ MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP")
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING")

@@ -712,3 +712,41 @@ def test_normal_map_tangent_space():
     got = run_op("NORMAL_MAP", [(colour, 3), (1.0, 1)], [3], 2, N=n)[0][0]
     np.testing.assert_allclose(got, v / np.linalg.norm(v), atol=1e-6)
     np.testing.assert_allclose(run_op("NORMAL_MAP", [(colour, 3), (1.0, 1)], [3], 0, N=n)[0][0], n)
+
+
+def _brick_noise(n):
+    M = 0xFFFFFFFF
+    n = ((n & M) + 1013) & 0x7FFFFFFF
+    n = (n >> 13) ^ n
+    nn = (n * ((n * n * 60493 + 19990303) & M) + 1376312589) & 0x7FFFFFFF
+    return 0.5 * nn / 1073741824.0
+
+
+def test_brick():
+    """Blender's Brick texture: rows of height h, bricks of width w (every other row offset,
+    squashed), a tint per brick from Blender's integer noise, mortar within `size` of an edge."""
+    scale, size, smooth, bias, width, height, offset, squash = 1.3, 0.05, 0.3, 0.1, 0.5, 0.25, 0.4, 0.8
+    c1, c2, mortar = np.array([0.8, 0.2, 0.1]), np.array([0.2, 0.7, 0.3]), np.array([0.1, 0.1, 0.1])
+    pts = RNG.uniform(-2, 2, (60, 3))
+    b = nodes.Builder()
+    colour, fac = b.register(width=3), b.register()
+    colours = b.register(c1, 3)
+    b.register(c2, 3), b.register(mortar, 3)
+    params = b.register((scale, size, smooth), 3)
+    for v in (bias, width, height, offset, squash):
+        b.register(v)
+    b.emit("BRICK", colour, fac, b.global_("OBJECT"), colours, params, 2, 3)
+    r = nodes.run(b.program(), len(pts), object=pts)
+    for p, row in zip(pts.astype(np.float32).astype(np.float64) * scale, r):
+        rownum = math.floor(p[1] / height)
+        w = width * (1.0 if int(math.fmod(rownum, 3)) else squash)
+        shift = 0.0 if int(math.fmod(rownum, 2)) else w * offset
+        col = math.floor((p[0] + shift) / w)
+        x, y = p[0] + shift - w * col, p[1] - height * rownum
+        tint = min(max(_brick_noise(((rownum << 16) & 0xFFFFFFFF) + (col & 0xFFFF)) + bias, 0), 1)
+        d = min(x, y, w - x, height - y)
+        t = min(max((1 - d / size) / smooth, 0), 1)
+        m = 0.0 if d >= size else t * t * (3 - 2 * t)
+        want = ((1 - tint) * c1 + tint * c2) * (1 - m) + mortar * m
+        assert row[fac] == pytest.approx(m, abs=2e-4)
+        np.testing.assert_allclose(row[colour:colour + 3], want, atol=2e-4)

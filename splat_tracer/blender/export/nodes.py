@@ -506,11 +506,14 @@ class Compiler:
                     int(node.outputs["Color"].is_linked))
         return self._ids(node, {"Fac": fac, "Color": colour})
 
-    def _params(self, node, stack, names):
-        """Consecutive registers holding the float inputs `names` (a kR3/kR5 operand)."""
+    def _params(self, node, stack, names, extra=()):
+        """Consecutive registers holding the float inputs `names`, then the constants `extra`
+        (a block operand: allocated together, before any input's own registers)."""
         first = self.b.register()
         for _ in names[1:]:
             self.b.register()
+        for value in extra:
+            self.b.register(float(value))
         for k, name in enumerate(names):
             self.b.emit("COPY", first + k, self._in(node, name, 1, stack), 1)
         return first
@@ -550,6 +553,19 @@ class Compiler:
         colour, fac = self.b.register(width=3), self.b.register()
         self.b.emit("MAGIC", colour, fac, vector, self._in(node, "Scale", 1, stack),
                     self._in(node, "Distortion", 1, stack), min(max(int(node.turbulence_depth), 0), 10))
+        return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_brick(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colours = self.b.register(width=3)
+        self.b.register(width=3), self.b.register(width=3)
+        for k, name in enumerate(("Color1", "Color2", "Mortar")):
+            self.b.emit("COPY", colours + 3 * k, self._in(node, name, 3, stack), 3)
+        params = self._params(node, stack, ("Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width",
+                                            "Row Height"), extra=(node.offset, node.squash))
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("BRICK", colour, fac, vector, colours, params, min(max(int(node.offset_frequency), 0), 99),
+                    min(max(int(node.squash_frequency), 0), 99))
         return self._ids(node, {"Color": colour, "Fac": fac})
 
     def _tex_white_noise(self, node, stack):

@@ -17,7 +17,7 @@ constexpr float kPi = 3.14159265358979323846f;
 // ----------------------------------------------------------------------------------------
 // Operand kinds, per opcode, for validate(): a register of width 1 or 3, an enumeration
 // below a bound, a table, or unused.
-enum Kind : int8_t { kNone = 0, kR1, kR3, kR5, kEnum };
+enum Kind : int8_t { kNone = 0, kR1, kR3, kR5, kEnum, kRW };  // kRW: `bound` consecutive registers
 struct Layout {
     Kind kind[kNodeWidth - 1];
     int32_t bound[kNodeWidth - 1];  // kEnum: values 0..bound-1
@@ -61,6 +61,7 @@ const Layout &layout(Op op) {
         /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
         /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
         /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
+        /* Brick */ {{kR3, kR1, kR3, kRW, kRW, kEnum, kEnum}, {0, 0, 0, 9, 8, 100, 100}},
     };
     return table[int(op)];
 }
@@ -545,6 +546,40 @@ Vec3 magic(Vec3 p, int depth, float distortion) {
     return {0.5f - x, 0.5f - y, 0.5f - z};
 }
 
+// Blender's integer noise for a brick's tint (0..1).
+float brick_noise(uint32_t n) {
+    n = (n + 1013u) & 0x7fffffffu;
+    n = (n >> 13) ^ n;
+    const uint32_t nn = (n * (n * n * 60493u + 19990303u) + 1376312589u) & 0x7fffffffu;
+    return 0.5f * (float(nn) / 1073741824.f);
+}
+
+// Blender's Brick texture at p (already scaled): (tint, mortar) per its definition.
+void brick(Vec3 p, const float *q, int offset_frequency, int squash_frequency, float *tint, float *mortar) {
+    const float mortar_size = q[1], mortar_smooth = q[2], bias = q[3], row_height = q[5];
+    float brick_width = q[4];
+    const float offset_amount = q[6], squash_amount = q[7];
+    const int row = int(std::floor(p.y / row_height));
+    float offset = 0.f;
+    if (offset_frequency && squash_frequency) {
+        brick_width *= (row % squash_frequency) ? 1.f : squash_amount;
+        offset = (row % offset_frequency) ? 0.f : brick_width * offset_amount;
+    }
+    const int column = int(std::floor((p.x + offset) / brick_width));
+    const float x = (p.x + offset) - brick_width * float(column), y = p.y - row_height * float(row);
+    *tint = saturate(brick_noise((uint32_t(row) << 16) + (uint32_t(column) & 0xFFFFu)) + bias);
+    float d = std::fmin(std::fmin(x, y), std::fmin(brick_width - x, row_height - y));
+    if (d >= mortar_size) {
+        *mortar = 0.f;
+    } else if (mortar_smooth == 0.f) {
+        *mortar = 1.f;
+    } else {
+        d = 1.f - d / mortar_size;
+        const float t = saturate(d / mortar_smooth);
+        *mortar = t * t * (3.f - 2.f * t);
+    }
+}
+
 }  // namespace
 
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
@@ -638,7 +673,11 @@ void NodeProgram::validate() {
         const Layout &l = layout(op);
         for (int k = 0; k < kNodeWidth - 1; ++k) {
             const int32_t v = c[k + 1];
-            const int width = l.kind[k] == kR1 ? 1 : l.kind[k] == kR3 ? 3 : l.kind[k] == kR5 ? 5 : 0;
+            const int width = l.kind[k] == kR1   ? 1
+                              : l.kind[k] == kR3 ? 3
+                              : l.kind[k] == kR5 ? 5
+                              : l.kind[k] == kRW ? l.bound[k]
+                                                 : 0;
             if (width && (v < 0 || int64_t(v) + width > n)) fail("register out of range");
             if (l.kind[k] == kEnum && (v < 0 || v >= l.bound[k])) fail("value out of range");
         }
@@ -904,6 +943,21 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                 if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * strength);
                 if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
                 store3(r, c[1], n);
+                break;
+            }
+            case Op::Brick: {
+                const float *q = r + c[5];
+                if (!(q[4] != 0.f) || !(q[5] != 0.f)) {  // a zero-sized brick: all mortar
+                    store3(r, c[1], load3(r, c[4] + 6));
+                    r[c[2]] = 1.f;
+                    break;
+                }
+                float tint, m;
+                brick(load3(r, c[3]) * q[0], q, c[6], c[7], &tint, &m);
+                Vec3 colour = load3(r, c[4]);
+                if (m != 1.f) colour = colour * (1.f - tint) + load3(r, c[4] + 3) * tint;
+                store3(r, c[1], colour * (1.f - m) + load3(r, c[4] + 6) * m);
+                r[c[2]] = m;
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -96,6 +96,9 @@ enum class Op : int32_t {
                     // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
     Magic,          // out_colour, out_fac, vector, scale, distortion, depth
     NormalMap,      // out, colour, strength, space (0 tangent, 1 object, 2 world)
+    Brick,          // out_colour, out_fac, vector, colours (9: colour 1, colour 2, mortar), params (8: scale,
+                    // mortar size, mortar smooth, bias, brick width, row height, offset, squash),
+                    // offset frequency, squash frequency
     Count
 };
 
