@@ -486,3 +486,21 @@ def test_a_bump_node_says_the_normal_is_the_surfaces(blender, empty_scene, tmp_p
     render(bpy, scene, tmp_path / "bump.exr", (SIZE, SIZE))
     assert [line for line in stats()["report"] if "Bumped" in line] == [
         "material 'Bumped': the 'Bump' node is not supported; Normal is the surface's own"]
+
+
+def test_an_attribute_other_than_the_colour_is_said(blender, empty_scene):
+    """An Attribute node naming a scan's other attribute (intensity) through a Color Ramp:
+    not evaluated (the points' colour would be a false answer), said once."""
+    bpy = blender
+    from splat_tracer.blender.export import shading as export_shading
+    from splat_tracer.render import shading
+
+    m, nodes, links, shader = _material(bpy, "Intensity")
+    attribute, ramp = nodes.new("ShaderNodeAttribute"), nodes.new("ShaderNodeValToRGB")
+    attribute.attribute_name = "intensity"
+    links.new(attribute.outputs["Fac"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
+    report = shading.Report()
+    export_shading.material_of(m, report)
+    assert report.lines == ["material 'Intensity': the 'Attribute (attribute 'intensity')' node is not supported; "
+                            "Factor uses its unlinked value 0.5"]

@@ -24,6 +24,9 @@ _VECTORS = ("VECTOR", "RGBA")  # socket types held in three registers (colours d
 # does) and the linear ones that are the scene's linear space (Blender's default, Rec. 709).
 _SRGB = ("sRGB",)
 _LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
+# Attribute names read as the points' own colour: the importer's, and the usual names of a
+# colour attribute. Another name (a scan's intensity, classification, ...) is not evaluated.
+_COLOUR_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", "Colour", "Cd", "rgb", "RGB", "rgba", "RGBA")
 # What Cycles renders for an image it cannot load (its missing-texture colour): magenta.
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 # Images read from Blender, by what identifies their pixels (see _image_pixels).
@@ -260,6 +263,8 @@ class Compiler:
     def _attribute(self, node, stack):
         if node.attribute_type != "GEOMETRY":
             raise Unsupported(node, f"{node.attribute_type.lower()} attributes")
+        if node.attribute_name not in _COLOUR_NAMES:
+            raise Unsupported(node, f"attribute '{node.attribute_name}'")
         return self._point_data(node, True)
 
     # Math and colour
