@@ -750,3 +750,28 @@ def test_brick():
         want = ((1 - tint) * c1 + tint * c2) * (1 - m) + mortar * m
         assert row[fac] == pytest.approx(m, abs=2e-4)
         np.testing.assert_allclose(row[colour:colour + 3], want, atol=2e-4)
+
+
+def test_an_alpha_driven_by_nodes_lets_light_through_shadows_too():
+    """A card above a floor whose alpha a program sets to 0 casts no shadow and is not seen
+    (camera and shadow rays both run the program); with alpha 1 it is seen."""
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    floor, card = scene.Mesh(v * 3, t), scene.Mesh(v * 0.5 + [0, 0, 0.5], t)
+    sun = [shading.Light(type="SUN", power=3.0, direction=(0, 0, -1))]
+    cam = Camera.look_at((0.0, -0.3, 3), (0.0, -0.3, 0), up=(0, 1, 0), fov_y=40, aspect=1, ortho_height=2.0)
+
+    def render(instances):
+        rs = scene.RenderScene(instances, lights=sun, world=shading.World(colour=(0, 0, 0)))
+        return rs.render(cam, 16, 16, shading.RenderSettings(samples=1, max_bounces=0)).passes["Combined"][..., :3]
+
+    def card_with(alpha):
+        b = nodes.Builder()
+        b.output("alpha", b.register(alpha))
+        return scene.Instance(card, materials=(shading.Material(base_colour=(1, 0, 0), program=b.program()),))
+
+    plain = render([scene.Instance(floor)])
+    np.testing.assert_allclose(render([scene.Instance(floor), card_with(0.0)]), plain, atol=1e-6)
+    opaque = render([scene.Instance(floor), card_with(1.0)])
+    # The card is seen where it is opaque: red, where the floor is grey.
+    assert (opaque[..., 0] - opaque[..., 1]).max() > 0.5 > np.abs(plain[..., 0] - plain[..., 1]).max()
