@@ -314,6 +314,16 @@ def _procedural(nodes, links, kind):
         tex.turbulence_depth = 3
         tex.inputs["Scale"].default_value = 1.5
         out = "Color"
+    elif kind == "white_noise":
+        # Per cell (the floor's object coordinates x 4, floored, off z = 0): a value per cell.
+        tex = nodes.new("ShaderNodeTexWhiteNoise")
+        cells, shift = nodes.new("ShaderNodeVectorMath"), nodes.new("ShaderNodeVectorMath")
+        shift.operation, cells.operation = "MULTIPLY_ADD", "FLOOR"
+        shift.inputs[1].default_value, shift.inputs[2].default_value = (4, 4, 4), (0.5, 0.5, 0.5)
+        links.new(coords.outputs["Object"], shift.inputs[0])
+        links.new(shift.outputs["Vector"], cells.inputs[0])
+        links.new(cells.outputs["Vector"], tex.inputs["Vector"])
+        return tex, tex.outputs["Color"]
     elif kind.startswith("brick"):
         tex = nodes.new("ShaderNodeTexBrick")
         # Bricks of about 13 pixels: mortar lines well below a pixel alias differently in
@@ -344,7 +354,7 @@ def _procedural(nodes, links, kind):
 
 
 PROCEDURALS = ("checker_generated", "gradient", "voronoi", "voronoi_colour", "voronoi_manhattan", "wave",
-               "wave_rings", "magic", "brick", "brick_smooth")
+               "wave_rings", "magic", "brick", "brick_smooth", "white_noise")
 
 
 @pytest.mark.parametrize("kind", PROCEDURALS)
