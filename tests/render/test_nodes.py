@@ -775,3 +775,23 @@ def test_an_alpha_driven_by_nodes_lets_light_through_shadows_too():
     opaque = render([scene.Instance(floor), card_with(1.0)])
     # The card is seen where it is opaque: red, where the floor is grey.
     assert (opaque[..., 0] - opaque[..., 1]).max() > 0.5 > np.abs(plain[..., 0] - plain[..., 1]).max()
+
+
+def test_hostile_programs_and_images_are_refused_or_neutralised():
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    pixels = np.full((2, 2, 4), np.nan, np.float32)  # an EXR's NaNs read as 0, as in Cycles
+    b.emit("IMAGE", colour, alpha, b.global_("UV"), b.image(nodes.Image(pixels)), 1, 0)
+    r = nodes.run(b.program(), uv=(0.3, 0.6, 0))[0]
+    assert not r[colour:colour + 3].any() and r[alpha] == 0
+    with pytest.raises(ValueError, match="must be"):
+        nodes.Image(np.zeros((0, 4, 4), np.uint8))
+    b = nodes.Builder()
+    b.output("base_colour", b.register((np.nan, 0, 0), 3))
+    with pytest.raises(ValueError, match="not finite"):
+        nodes.run(b.program())
+    b = nodes.Builder()
+    b.output("base_colour", 5)  # past the registers
+    b.register()
+    with pytest.raises(ValueError, match="output out of range"):
+        nodes.run(b.program())

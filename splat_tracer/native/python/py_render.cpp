@@ -131,8 +131,10 @@ std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table
         if (!get_array(opix, "image pixels (uint8 or float32, h x w x 4)", 'f', 3, shape, false, floats)) return nullptr;
     }
     const View &pix = is_bytes ? bytes : floats;
-    if (pix.dim(0) > INT32_MAX / 4 || pix.dim(1) > INT32_MAX / 4) {
-        PyErr_SetString(PyExc_ValueError, "an image is too large");
+    // Texel coordinates reach 5x a side (TextureImage::sample keeps u, v in -4..5): a side of
+    // at most 2^24 keeps them far inside int (and is beyond any image Blender makes).
+    if (pix.dim(0) > (1 << 24) || pix.dim(1) > (1 << 24)) {
+        PyErr_SetString(PyExc_ValueError, "an image is too large (more than 16777216 pixels a side)");
         return nullptr;
     }
     std::shared_ptr<const TextureImage> image;
