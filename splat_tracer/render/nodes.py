@@ -27,7 +27,7 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
-           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING")
+           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
            "emission": 3, "specular_level": 1, "normal": 3}

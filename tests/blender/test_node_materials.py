@@ -514,3 +514,33 @@ def test_an_attribute_other_than_the_colour_is_said(blender, empty_scene):
     export_shading.material_of(m, report)
     assert report.lines == ["material 'Intensity': the 'Attribute (attribute 'intensity')' node is not supported; "
                             "Factor uses its unlinked value 0.5"]
+
+
+def test_camera_coordinates_match_cycles(blender, empty_scene, tmp_path):
+    """Texture Coordinate > Camera (Cycles' camera space: +Z along the view) seen by a
+    perspective camera looking down at a floor: depth Z through a Map Range into red, X
+    into green. A camera space with Z negated (Blender's own convention) fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "CameraSpace")
+    coords, separate, depth, side, combine = (nodes.new(t) for t in (
+        "ShaderNodeTexCoord", "ShaderNodeSeparateXYZ", "ShaderNodeMapRange", "ShaderNodeMath",
+        "ShaderNodeCombineXYZ"))
+    depth.inputs["From Min"].default_value, depth.inputs["From Max"].default_value = 2.0, 6.0
+    side.operation = "MULTIPLY_ADD"
+    side.inputs[1].default_value, side.inputs[2].default_value = 0.3, 0.5
+    links.new(coords.outputs["Camera"], separate.inputs["Vector"])
+    links.new(separate.outputs["Z"], depth.inputs["Value"])
+    links.new(separate.outputs["X"], side.inputs[0])
+    links.new(depth.outputs["Result"], combine.inputs["X"])
+    links.new(side.outputs["Value"], combine.inputs["Y"])
+    links.new(combine.outputs["Vector"], shader.inputs["Base Color"])
+    plane(bpy, "Floor", 6.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    scene.camera.data.type = "PERSP"
+    scene.camera.location, scene.camera.rotation_euler = (0, -3.5, 2.5), (math.radians(55), 0, 0)
+    bpy.context.view_layer.update()
+    ours, theirs, report = _both(bpy, scene, tmp_path, "camera_space")
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL, atol=0.005)
+    assert theirs[..., 0].mean() > 0.05  # the depth shows: negated, it would be all 0
+    assert not [line for line in report if "CameraSpace" in line], report

@@ -226,7 +226,9 @@ class Compiler:
         if getattr(node, "object", None) is not None:
             raise Unsupported(node, "Object from another object")
         out = {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV", "Object": "OBJECT",
-               "Reflection": "REFLECTION"}
+               "Reflection": "REFLECTION", "Camera": "CAMERA"}
+        if node.outputs["Window"].is_linked:
+            raise Unsupported(node, "its Window output")
         return self._lazy(node, out)
 
     def _lazy(self, node, names: dict):

@@ -685,6 +685,7 @@ void NodeProgram::validate() {
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
         if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
             fail("image out of range");
         if (op == Op::Curves && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n || int64_t(c[6]) + 2 > n))
@@ -733,6 +734,7 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                     case Global::PointColour: v = sg.point_colour; break;
                     case Global::PointAlpha: v = Vec3(sg.point_alpha, sg.point_alpha, sg.point_alpha); break;
                     case Global::Reflection: v = sg.N * (2.f * dot(sg.N, sg.I)) - sg.I; break;
+                    case Global::Camera: v = sg.camera; break;
                     default: v = Vec3(sg.backfacing, sg.backfacing, sg.backfacing); break;
                 }
                 store3(r, c[1], v);

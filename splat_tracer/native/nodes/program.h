@@ -42,6 +42,7 @@ struct ShaderGlobals {
     Vec3 tangent;            // the UV map's tangent (unit, perpendicular to the surface's normal); 0 without
     float tangent_sign = 1.f;  // the bitangent is tangent_sign x (normal x tangent)
     Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
+    Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     Vec3 object_to_world_normal(Vec3 n) const {
@@ -53,7 +54,7 @@ struct ShaderGlobals {
 
 enum class Global : int32_t {
     Position = 0, Normal, TrueNormal, Incoming, Object, ObjectNormal, Generated, UV, PointColour, PointAlpha,
-    Reflection, Backfacing, Count
+    Reflection, Backfacing, Camera, Count
 };
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
@@ -108,6 +109,7 @@ struct NodeProgram {
     int32_t outputs[int(Output::Count)];
     std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
     bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
+    bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),

@@ -40,7 +40,8 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     top_.build(boxes, threads);
 }
 
-Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out) const {
+Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
+                                       const Camera *camera) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     ShaderGlobals sg;
@@ -61,6 +62,17 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
         }
     sg.surface_normal = sp.ns;
+    if (camera && prog.uses_camera) {
+        // Into the camera's frame by the transpose of its rotation (its axes are unit and
+        // orthogonal), with Z negated: Cycles' camera space looks along +Z.
+        const double *c = camera->local_from_camera;
+        const double d[3] = {double(sp.p.x) - c[3], double(sp.p.y) - c[7], double(sp.p.z) - c[11]};
+        for (int k = 0; k < 3; ++k) {
+            const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
+            const double v = (c[k] * d[0] + c[4 + k] * d[1] + c[8 + k] * d[2]) / (len > 0 ? len : 1.0);
+            sg.camera[k] = float(k == 2 ? -v : v);
+        }
+    }
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
         for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = inst.to_object.m[4 * col + row];
     if (inst.mesh) {

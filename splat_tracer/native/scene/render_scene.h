@@ -12,6 +12,7 @@
 
 #include "bvh/bvh.h"
 #include "nodes/program.h"
+#include "scene/camera.h"
 #include "scene/mesh.h"
 #include "scene/mesh_lights.h"
 #include "shade/shading.h"
@@ -117,10 +118,10 @@ class RenderScene {
     // The material at a surface point seen from direction `wo` (towards the viewer): its
     // node program run there, or the constant material when it has none. The one place
     // the integrator asks for a material's inputs. A program that drives the normal (Normal
-    // Map) replaces sp.ns with it.
-    Material material_at(SurfacePoint &sp, Vec3 wo) const {
+    // Map) replaces sp.ns with it. `camera`: the render's, for the Camera texture coordinate.
+    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr) const {
         const Material &m = materials_[sp.material];
-        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns);
+        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
@@ -150,7 +151,8 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
-    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out) const;
+    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
+                              const Camera *camera) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
