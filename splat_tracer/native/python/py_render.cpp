@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <iterator>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "python/py_util.h"
@@ -233,22 +235,50 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
     Py_RETURN_NONE;
 }
 
+// The most motion steps a transform may have: Cycles' 2^(7-1) x 2 + 1 for its largest
+// Motion Steps (7), with room to spare.
+constexpr Py_ssize_t kMaxMotionSteps = 1025;
+
+// Motion steps (motion.h) from `count` rows of 12 doubles (row-major 3x4 transforms at
+// evenly spaced times over the shutter), each finite, within the coordinate limit and
+// invertible. Sets an exception and returns false otherwise.
+bool motion_keys(const double *rows, Py_ssize_t count, const char *what, Py_ssize_t which,
+                 std::vector<MotionKey> &keys) {
+    if (count < 2 || count > kMaxMotionSteps)
+        return PyErr_Format(PyExc_ValueError, "%s %zd: %zd motion steps (2..%zd)", what, which, count, kMaxMotionSteps),
+               false;
+    keys.resize(size_t(count));
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const double *m = rows + 12 * i;
+        for (int k = 0; k < 12; ++k)
+            if (!within_range(float(m[k])) || !std::isfinite(m[k]))
+                return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is not finite or beyond 1e18", what,
+                                    which, i),
+                       false;
+        if (!motion::decompose(m, keys[size_t(i)]))
+            return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is singular", what, which, i), false;
+    }
+    motion::align_quaternions(keys.data(), int(count));
+    return true;
+}
+
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", "programs", nullptr};
+                                   "shadow_catcher", "motion", "motion_range", "programs", nullptr};
     PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
-             *oprog = Py_None;
+             *omotion = Py_None, *omrange = Py_None, *oprog = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &oprog))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &omotion,
+                                     &omrange, &oprog))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
     const Py_ssize_t n_geo = PyTuple_Size(geometries);
-    View idx, w, o, range, vis, holdout, pass, mat, light, catcher;
+    View idx, w, o, range, vis, holdout, pass, mat, light, catcher, motion, mrange;
     Py_ssize_t s1[1] = {-1};
     if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
     const Py_ssize_t n = idx.dim(0);
@@ -261,6 +291,14 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
         !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light) ||
         (ocatch != Py_None && !get_array(ocatch, "shadow_catcher", 'B', 1, sn, false, catcher)))
+        return nullptr;
+    // Motion blur: instance i's steps are rows [first, first + count) of `motion` (count 0:
+    // it does not move). Both or neither.
+    if ((omotion == Py_None) != (omrange == Py_None))
+        return PyErr_Format(PyExc_TypeError, "motion and motion_range go together");
+    Py_ssize_t sm12[2] = {-1, 12};
+    if (omotion != Py_None && (!get_array(omotion, "motion", 'd', 2, sm12, false, motion) ||
+                               !get_array(omrange, "motion_range", 'i', 2, s2, false, mrange)))
         return nullptr;
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
@@ -288,6 +326,15 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
         inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
+        if (mrange.held) {
+            const int32_t mfirst = mrange.data<int32_t>()[2 * i], mcount = mrange.data<int32_t>()[2 * i + 1];
+            if (mcount == 0) continue;
+            if (mfirst < 0 || mcount < 0 || int64_t(mfirst) + mcount > int64_t(motion.dim(0)))
+                return PyErr_Format(PyExc_ValueError, "instance %zd: motion range (%d, %d) is not inside the %zd steps",
+                                    i, mfirst, mcount, motion.dim(0));
+            if (!motion_keys(motion.data<double>() + 12 * size_t(mfirst), mcount, "instance", i, inst.motion))
+                return nullptr;
+        }
     }
     std::vector<Material> materials(static_cast<size_t>(n_mat));
     for (Py_ssize_t i = 0; i < n_mat; ++i) {
@@ -350,27 +397,148 @@ void RenderScene_dealloc(PyObject *self) {
     Py_DECREF(type);
 }
 
+// The arrays of the Cryptomatte argument, held while the render runs.
+struct CryptomatteViews {
+    View out[CryptomatteFilm::kKinds], instance_ids, material_ids;
+};
+
+// render()'s `cryptomatte`: None, or (object, material, asset, slots, instance_ids,
+// material_ids) -- each of the first three None or a writable float32 (h, w, 2 slots) buffer,
+// slots in 1..kMaxCryptomatteSlots, instance_ids float32 (instances, 2) (each instance's
+// object and asset id), material_ids float32 (materials,). Ids must be finite and not 0 (0
+// marks a free slot; render/cryptomatte.py's ids never are).
+bool parse_cryptomatte(PyObject *arg, const RenderScene &scene, int w, int h, CryptomatteFilm &film,
+                       CryptomatteViews &views) {
+    if (arg == Py_None) return true;
+    // Blender's Levels go to 16 (pass_cryptomatte_depth's hard maximum).
+    constexpr int kMaxCryptomatteSlots = 16;
+    PyObject *kinds[CryptomatteFilm::kKinds], *oinst, *omat;
+    int slots = 0;
+    if (!PyArg_ParseTuple(arg, "OOOiOO;cryptomatte must be (object, material, asset, slots, instance_ids, "
+                               "material_ids)",
+                          &kinds[0], &kinds[1], &kinds[2], &slots, &oinst, &omat))
+        return false;
+    if (slots < 1 || slots > kMaxCryptomatteSlots)
+        return PyErr_Format(PyExc_ValueError, "cryptomatte slots must be in 1..%d", kMaxCryptomatteSlots), false;
+    const Py_ssize_t n_inst = Py_ssize_t(scene.instance_count()), n_mat = Py_ssize_t(scene.material_count());
+    const Py_ssize_t inst_shape[2] = {n_inst, 2}, mat_shape[1] = {n_mat};
+    if (!get_array(oinst, "cryptomatte instance_ids", 'f', 2, inst_shape, false, views.instance_ids) ||
+        !get_array(omat, "cryptomatte material_ids", 'f', 1, mat_shape, false, views.material_ids))
+        return false;
+    const float *ids[2] = {views.instance_ids.data<float>(), views.material_ids.data<float>()};
+    const size_t counts[2] = {size_t(n_inst) * 2, size_t(n_mat)};
+    for (int a = 0; a < 2; ++a)
+        for (size_t i = 0; i < counts[a]; ++i)
+            if (!std::isfinite(ids[a][i]) || ids[a][i] == 0.f)
+                return PyErr_Format(PyExc_ValueError, "cryptomatte ids must be finite and not 0"), false;
+    static const char *names[CryptomatteFilm::kKinds] = {"cryptomatte object", "cryptomatte material",
+                                                         "cryptomatte asset"};
+    for (int k = 0; k < CryptomatteFilm::kKinds; ++k) {
+        if (kinds[k] == Py_None) continue;
+        const Py_ssize_t shape[3] = {h, w, 2 * Py_ssize_t(slots)};
+        if (!get_array(kinds[k], names[k], 'f', 3, shape, true, views.out[k])) return false;
+        film.out[k] = views.out[k].data<float>();
+    }
+    film.slots = slots, film.instance_ids = ids[0], film.material_ids = ids[1];
+    return true;
+}
+
+// world_map: None, or (light, camera): the environment image lighting the scene and the one
+// camera rays see (None: the same), each a height x width x 3 float32 array of finite values
+// >= 0 (shade/environment.h's layout).
+// The environment maps of the last renders, by content: building one costs ~30 ns a pixel
+// (66 ms for 2048 x 1024), which the viewport would pay on every pass of every redraw; the
+// images' bytes are hashed (~1 ns a byte) and compared in full before one is reused.
+struct CachedMap {
+    uint64_t hash = 0;
+    int width = 0, height = 0;
+    std::vector<float> rgb;
+    std::shared_ptr<const EnvironmentMap> map;
+};
+
+std::shared_ptr<const EnvironmentMap> environment_map_of(const float *data, int w, int h) {
+    static std::mutex mutex;
+    static CachedMap cache[2];  // the world being edited and the one before it
+    static int next = 0;
+    const size_t n = size_t(w) * size_t(h) * 3;
+    uint64_t hash = 1469598103934665603ull;  // FNV-1a over the words: a quick first check
+    for (size_t k = 0; k < n; ++k) {
+        uint32_t bits;
+        std::memcpy(&bits, data + k, 4);
+        hash = (hash ^ bits) * 1099511628211ull;
+    }
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const CachedMap &c : cache)
+            if (c.map && c.hash == hash && c.width == w && c.height == h &&
+                std::memcmp(c.rgb.data(), data, n * sizeof(float)) == 0)
+                return c.map;
+    }
+    auto map = std::make_shared<const EnvironmentMap>(data, w, h);
+    std::lock_guard<std::mutex> lock(mutex);
+    CachedMap &slot = cache[next];
+    next = (next + 1) % 2;
+    slot.hash = hash, slot.width = w, slot.height = h;
+    slot.rgb.assign(data, data + n);
+    slot.map = map;
+    return map;
+}
+
+bool parse_world_map(PyObject *obj, std::shared_ptr<const EnvironmentMap> &light,
+                     std::shared_ptr<const EnvironmentMap> &camera) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj) || PyTuple_Size(obj) != 2)
+        return PyErr_SetString(PyExc_TypeError, "world_map must be None or a (light, camera) tuple"), false;
+    for (int i = 0; i < 2; ++i) {
+        PyObject *item = PyTuple_GetItem(obj, i);
+        if (item == Py_None) {
+            if (i == 0) return PyErr_SetString(PyExc_TypeError, "world_map's light image is required"), false;
+            continue;
+        }
+        const char *name = i == 0 ? "world_map light" : "world_map camera";
+        View view;
+        const Py_ssize_t shape[3] = {-1, -1, 3};
+        if (!get_array(item, name, 'f', 3, shape, false, view)) return false;
+        const Py_ssize_t h = view.buf.shape[0], w = view.buf.shape[1];
+        if (w < 2 || h < 2 || w > 65536 || h > 32768)
+            return PyErr_Format(PyExc_ValueError, "%s must be 2..65536 wide and 2..32768 high", name), false;
+        const float *data = view.data<float>();
+        for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+            if (!(std::isfinite(data[k]) && data[k] >= 0.f))
+                return PyErr_Format(PyExc_ValueError, "%s must be finite, >= 0", name), false;
+        std::string message;
+        std::shared_ptr<const EnvironmentMap> &target = i == 0 ? light : camera;
+        if (PyObject *type = run_native([&] { target = environment_map_of(data, int(w), int(h)); }, message))
+            return PyErr_SetString(type, message.c_str()), false;
+    }
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte",
+                                   "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
+                                   nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
+             *oshutter = Py_None, *oworldmap = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
+                                     &oshutter, &cfg.rolling_shutter_duration, &oworldmap))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -412,12 +580,42 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (world_visibility < 0 || world_visibility > int(kVisAll))
         return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
     cfg.world_visibility = uint32_t(world_visibility);
+    std::shared_ptr<const EnvironmentMap> environment, camera_environment;
+    if (!parse_world_map(oworldmap, environment, camera_environment)) return nullptr;
+    if (environment) {
+        cfg.environment = environment.get(), cfg.camera_environment = camera_environment.get();
+        cfg.world = environment->mean();  // what the uniform world's uses (sky AO, "is the scene lit") see
+    }
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
     Camera cam;
     CameraViews cam_views;
     if (!parse_camera(om, ofrustum, orthographic, cam, cam_views) || !parse_lens(olens, cam)) return nullptr;
+    // Motion blur: the camera's local_from_camera rows (S, 12) over the shutter, and the
+    // shutter curve's table (K,) of times in [0, 1], non-decreasing.
+    View cam_motion_view, shutter_view;
+    std::vector<MotionKey> cam_motion;
+    if (ocammotion != Py_None) {
+        Py_ssize_t sm12[2] = {-1, 12};
+        if (!get_array(ocammotion, "camera_motion", 'd', 2, sm12, false, cam_motion_view) ||
+            !motion_keys(cam_motion_view.data<double>(), cam_motion_view.dim(0), "camera", 0, cam_motion))
+            return nullptr;
+        cam.motion = cam_motion.data(), cam.motion_steps = int(cam_motion.size());
+    }
+    if (oshutter != Py_None) {
+        Py_ssize_t sk[1] = {-1};
+        if (!get_array(oshutter, "shutter_table", 'f', 1, sk, false, shutter_view)) return nullptr;
+        const Py_ssize_t k = shutter_view.dim(0);
+        const float *t = shutter_view.data<float>();
+        if (k < 2 || k > 65536) return PyErr_Format(PyExc_ValueError, "shutter_table must have 2..65536 entries");
+        for (Py_ssize_t i = 0; i < k; ++i)
+            if (!(t[i] >= 0.f && t[i] <= 1.f) || (i > 0 && t[i] < t[i - 1]))
+                return PyErr_Format(PyExc_ValueError, "shutter_table must be non-decreasing times in [0, 1]");
+        cfg.shutter_table = t, cfg.shutter_table_size = int(k);
+    }
+    if (!(cfg.rolling_shutter_duration <= 1.f))  // negative: off; NaN refused
+        return PyErr_Format(PyExc_ValueError, "rolling_shutter_duration must be <= 1 (negative: off)");
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -443,16 +641,28 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         *out.target = out.view.data<float>();
     }
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    CryptomatteViews crypto_views;
+    if (!parse_cryptomatte(ocrypto, scene, w, h, film.cryptomatte, crypto_views)) return nullptr;
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
                             {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
             return nullptr;
         for (size_t j = 0; j < i; ++j)
             if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{out, "a cryptomatte buffer"}, {outs[i].view, outs[i].name}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
     }
-
-    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    if (!check_separate({{crypto_views.out[0], "cryptomatte object"}, {crypto_views.out[1], "cryptomatte material"},
+                         {crypto_views.out[2], "cryptomatte asset"}},
+                        {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                         {crypto_views.material_ids, "cryptomatte material ids"},
+                         {cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
     RenderCounters counters;
     std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
     std::string message;
@@ -544,10 +754,18 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1))\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
+     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
-     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). camera_motion: "
+     "None or (S, 12) float64, local_from_camera's first three rows at S evenly spaced times over the shutter "
+     "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF; "
+     "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "
+     "negative (default): off. world_map: None "
+     "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
     {nullptr, nullptr, 0, nullptr},
 };
 
@@ -562,7 +780,11 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, programs=None)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, "
+                                   "motion=None, motion_range=None, programs=None)\n\nmotion: (M, 12) float64 to_world rows of "
+                                   "the moving instances at evenly spaced times over the shutter; motion_range: "
+                                   "(n, 2) int32 each instance's (first row, count), count 0 when it does not move; "
+                                   "programs: per material its node program (render/nodes.py Program.native()) or None.")},
     {0, nullptr},
 };
 

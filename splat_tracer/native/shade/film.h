@@ -10,6 +10,7 @@
 
 #include "base/ray.h"
 #include "scene/camera.h"
+#include "shade/cryptomatte.h"
 #include "shade/sampling.h"
 #include "splats/visibility.h"
 
@@ -46,6 +47,8 @@ struct Film {
     // 3 floats: Cycles' Environment -- the world as camera rays that leave the scene see it
     // (black where they meet a surface, as Cycles' background pass), averaged over samples.
     float *environment = nullptr;
+    // Cryptomatte's object, material and asset passes (shade/cryptomatte.h), integrator only.
+    CryptomatteFilm cryptomatte;
 };
 
 // What both renderers take the same way.
