@@ -84,9 +84,15 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera) const {
+                                       const Camera *camera, float time) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
+    // A moving instance's object space is where it is at the ray's time: the point was found
+    // there (take_mesh_hit, take_splat_hit), so its object and Generated coordinates are the
+    // same at every time, as Cycles' are.
+    PlacementScratch scratch;
+    const Placement at = inst.at(time, scratch.a);
+    const Affine &to_world = *at.to_world, &to_object = *at.to_object;
     ShaderGlobals sg;
     sg.P = sp.p, sg.I = wo;
     // Cycles turns a back face's normals towards the viewer: so do the nodes' normals.
@@ -94,8 +100,8 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     sg.Ng = back ? sp.ng * -1.f : sp.ng;
     sg.N = dot(sp.ns, wo) < 0.f ? sp.ns * -1.f : sp.ns;
     sg.backfacing = back ? 1.f : 0.f;
-    sg.object = inst.to_object.point(sp.p);
-    sg.object_normal = normalize(inst.to_world.transposed_vector(sg.N));
+    sg.object = to_object.point(sp.p);
+    sg.object_normal = normalize(to_world.transposed_vector(sg.N));
     // Generated coordinates: the object-space position within the geometry's bounds (Blender's
     // automatic texture space).
     const AABB box = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
@@ -107,8 +113,11 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     sg.surface_normal = sp.ns;
     if (camera && prog.uses_camera) {
         // Into the camera's frame by the transpose of its rotation (its axes are unit and
-        // orthogonal), with Z negated: Cycles' camera space looks along +Z.
-        const double *c = camera->local_from_camera;
+        // orthogonal), with Z negated: Cycles' camera space looks along +Z. A moving camera
+        // is where it is at the ray's time.
+        double moved[12];
+        if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
+        const double *c = camera->moves() ? moved : camera->local_from_camera;
         const double d[3] = {double(sp.p.x) - c[3], double(sp.p.y) - c[7], double(sp.p.z) - c[11]};
         for (int k = 0; k < 3; ++k) {
             const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
@@ -117,7 +126,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         }
     }
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
-        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = inst.to_object.m[4 * col + row];
+        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
         sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
         Vec3 t;
@@ -125,7 +134,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         if (prog.uses_tangent && inst.mesh->uv_tangent(sp.prim, &t, &sign)) {
             // Into the scene frame, then perpendicular to the shading normal (Gram-Schmidt), as
             // a tangent interpolated over a smooth surface is.
-            t = inst.to_world.vector(t);
+            t = to_world.vector(t);
             t = t - sp.ns * dot(sp.ns, t);
             if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
         }

@@ -145,13 +145,14 @@ class RenderScene {
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
     size_t material_count() const { return materials_.size(); }
-    // The material at a surface point seen from direction `wo` (towards the viewer): its
-    // node program run there, or the constant material when it has none. The one place
-    // the integrator asks for a material's inputs. A program that drives the normal (Normal
-    // Map) replaces sp.ns with it. `camera`: the render's, for the Camera texture coordinate.
-    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr) const {
+    // The material at a surface point seen from direction `wo` (towards the viewer) at shutter
+    // time `time` (motion blur: where a moving instance is then): its node program run there,
+    // or the constant material when it has none. The one place the integrator asks for a
+    // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
+    // `camera`: the render's, for the Camera texture coordinate.
+    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f) const {
         const Material &m = materials_[sp.material];
-        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera);
+        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera, time);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
@@ -184,7 +185,7 @@ class RenderScene {
 
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                              const Camera *camera) const;
+                              const Camera *camera, float time) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
