@@ -55,10 +55,11 @@ class InstanceRow(NamedTuple):
 
 
 def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: Sequence, lights: Sequence,
-                 threads: int = 0) -> "_core.RenderScene":
+                 threads: int = 0, programs: Optional[Sequence] = None) -> "_core.RenderScene":
     """The core's RenderScene over native geometries (SplatCloud._scene, Mesh._mesh), one
-    row per instance, materials and lights as their pack() rows. Nothing is checked here:
-    RenderScene checks first, and the fuzz harness passes unchecked rows on purpose."""
+    row per instance, materials and lights as their pack() rows, and per material its node
+    program (nodes.Program.native()) or None -- None for all: no programs. Nothing is checked
+    here: RenderScene checks first, and the fuzz harness passes unchecked rows on purpose."""
     n = len(rows)
     col = lambda name, dtype, width=(): np.ascontiguousarray(
         np.array([getattr(r, name) for r in rows], dtype).reshape((n, *width)))
@@ -80,16 +81,20 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
         threads,
         # Only a scene with a catcher passes the column: one without is the core's as before.
         shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None,
-        motion=motion, motion_range=motion_range)
+        motion=motion, motion_range=motion_range,
+        # Only materials with node programs pay for them: without any, the core's path is as before.
+        programs=programs if programs is not None and any(p is not None for p in programs) else None)
 
 
 class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
-    normals express them; None: flat) and material_index (T,) slots. Immutable; share one
-    Mesh between any number of instances."""
+    normals express them; None: flat), material_index (T,) slots and corner_uv (T,3,2), the
+    UV map node programs read (None: 0). Immutable; share one Mesh between any number of
+    instances."""
 
-    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0):
+    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0,
+                 corner_uv=None):
         v = as_f32(vertices, "vertices", (-1, 3))
         t = np.asarray(triangles)
         if t.size and not np.issubdtype(t.dtype, np.integer):
@@ -100,7 +105,8 @@ class Mesh:
         n = None if corner_normals is None else as_f32(np.asarray(corner_normals).reshape(-1, 3, 3), "corner_normals",
                                                      (len(t), 3, 3))
         m = None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32)
-        self._mesh = _core.Mesh(v, t, n, m, threads)
+        uv = None if corner_uv is None else as_f32(np.asarray(corner_uv).reshape(-1, 3, 2), "corner_uv", (len(t), 3, 2))
+        self._mesh = _core.Mesh(v, t, n, m, threads, corner_uv=uv)
 
     def __len__(self) -> int:
         return self._mesh.size
@@ -207,7 +213,7 @@ class RenderScene:
         self.world = world
         self.lights = tuple(lights)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads)
+                                   threads, [m.program.native() if m.program is not None else None for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
         self.moving = sum(r.motion is not None for r in rows)  # instances that move over the shutter

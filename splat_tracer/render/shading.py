@@ -53,6 +53,9 @@ class Material:
         is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
+    program: the node program (render/nodes.py) that drives some of the inputs above at
+        each shading point, or None (the constant values are the material). The inputs it
+        does not drive keep their constant values.
     name: the material's name in the Cryptomatte Material pass (render/cryptomatte.py).
     """
 
@@ -68,6 +71,7 @@ class Material:
     use_point_alpha: bool = False
     emission_sampling: str = "AUTO"
     pass_index: int = 0
+    program: Optional[object] = None
     name: str = "default_surface"  # cryptomatte.DEFAULT_MATERIAL: Cycles' name for no material
 
     def __post_init__(self):

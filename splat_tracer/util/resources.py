@@ -14,10 +14,10 @@ from typing import Optional
 # binary nodes about 13), plus the Python arrays being passed in (position, normal,
 # radius, colour as float32: 40). benchmarks/scale.py measures the peak (RSS) next to it.
 BYTES_PER_SPLAT = 66 + 77 + 40
-# Per triangle: kept 184 (packed triangle 40; three corners 36; three corner normals 36;
-# material 4; BVH 64; leaf order 4) + build temporaries 64 + Python arrays (indices 12,
-# corner normals 36, material 4; vertices are shared and fewer).
-BYTES_PER_TRIANGLE = 184 + 64 + 52
+# Per triangle: kept 208 (packed triangle 40; three corners 36; three corner normals 36;
+# material 4; corner UVs 24; BVH 64; leaf order 4) + build temporaries 64 + Python arrays
+# (indices 12, corner normals 36, material 4, corner UVs 24; vertices are shared and fewer).
+BYTES_PER_TRIANGLE = 208 + 64 + 76
 # A fraction of the available memory left for Blender itself, the render result and the
 # film buffers: a build may use the rest.
 HEADROOM = 0.25

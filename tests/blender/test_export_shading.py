@@ -111,18 +111,32 @@ def test_an_object_attribute_is_not_a_point_colour(blender, empty_scene, es, rep
     attribute.attribute_type, attribute.attribute_name = "OBJECT", "color"
     material.node_tree.links.new(attribute.outputs["Color"], principled.inputs["Base Color"])
     assert not es.material_of(material, report).use_point_colour
-    assert len(report.lines) == 1 and "driven by a 'Attribute' node" in report.lines[0]
+    assert report.lines == ["material 'Tinted': the 'Attribute (object attributes)' node is not supported; "
+                            "Base Color uses its unlinked value (0.8, 0.8, 0.8)"]
 
 
-def test_image_texture_falls_back_to_the_default_with_one_report_line(blender, empty_scene, es, report):
+def test_an_unsupported_texture_falls_back_to_the_default_with_one_report_line(blender, empty_scene, es, report):
     material, principled = new_material(blender, "Floor", "ShaderNodeBsdfPrincipled")
-    texture = material.node_tree.nodes.new("ShaderNodeTexImage")
+    texture = material.node_tree.nodes.new("ShaderNodeTexSky")
     material.node_tree.links.new(texture.outputs["Color"], principled.inputs["Base Color"])
     m = es.material_of(material, report)
     es.material_of(material, report)  # the same material twice: still one line
     assert m.base_colour == approx((0.8, 0.8, 0.8)) and not m.use_point_colour
     assert report.lines == [
-        "material 'Floor': Base Color is driven by a 'Image Texture' node; using its default value (0.8, 0.8, 0.8)"]
+        "material 'Floor': the 'Sky Texture' node is not supported; Base Color uses its unlinked value (0.8, 0.8, 0.8)"]
+
+
+def test_an_image_texture_without_an_image_is_magenta_as_in_cycles(blender, empty_scene, es, report):
+    material, principled = new_material(blender, "Floor", "ShaderNodeBsdfPrincipled")
+    texture = material.node_tree.nodes.new("ShaderNodeTexImage")
+    material.node_tree.links.new(texture.outputs["Color"], principled.inputs["Base Color"])
+    m = es.material_of(material, report)
+    assert m.program is not None and m.program.drives("base_colour")
+    from splat_tracer.render import nodes
+    regs = nodes.run(m.program)[0]
+    base = m.program.outputs[0]
+    assert tuple(regs[base:base + 3]) == (1.0, 0.0, 1.0)
+    assert report.lines == ["material 'Floor': an Image Texture has no image; rendered magenta, as Cycles does"]
 
 
 def test_mix_shader_blends_the_parameters_and_reports_once(blender, empty_scene, es, report):

@@ -91,8 +91,20 @@ def _index():
     return _core.PointIndex(_points())
 
 
+def _run_nodes():
+    from splat_tracer.render import nodes
+
+    b = nodes.Builder()
+    r = b.register(width=3)
+    b.emit("GLOBAL", r, nodes.GLOBALS.index("POSITION"))
+    code, data, outputs, images = b.program().native()
+    return (_core.run_nodes, [code, data, outputs, images, np.zeros((N, 36), np.float32),
+                              np.empty((N, len(data)), np.float32)], {})
+
+
 ROWS = np.arange(N, dtype=np.int32)
 CASES = {
+    "run_nodes": (_run_nodes, [5]),
     "SplatCloud.trace": (_trace, [4, 5, 6, "out_normal", "out_stats"]),
     "SplatCloud.trace_surface": (_trace_surface, [5, 6, 7, 8, 9, "out_members"]),
     "SplatCloud.render": (_splat_render, [7, "out_depth", "out_normal"]),

@@ -143,7 +143,9 @@ def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Repo
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
-    """(vertices, triangles, corner normals (T,3,3), material indices) of an evaluated mesh."""
+    """(vertices, triangles, corner normals (T,3,3), material indices, corner UVs (T,3,2) of
+    the UV map Cycles renders with (the active render one), or None without one) of an
+    evaluated mesh."""
     mesh.calc_loop_triangles()
     nv, nt = len(mesh.vertices), len(mesh.loop_triangles)
     verts = mesh_positions(mesh).ravel()
@@ -156,7 +158,13 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     normals = corner.reshape(-1, 3)[loops].reshape(nt, 3, 3)
     mats = np.empty(nt, np.int32)
     mesh.loop_triangles.foreach_get("material_index", mats)
-    return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats
+    layer = next((uv for uv in mesh.uv_layers if uv.active_render), None)
+    uv = None
+    if layer is not None and len(mesh.loops):
+        flat = np.empty(len(mesh.loops) * 2, np.float32)
+        layer.uv.foreach_get("vector", flat)
+        uv = np.nan_to_num(flat.reshape(-1, 2)[loops].reshape(nt, 3, 2), nan=0.0, posinf=0.0, neginf=0.0)
+    return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats, uv
 
 
 def _materials(slots: list, cache: dict, report: shading.Report) -> tuple:
@@ -246,28 +254,28 @@ class _Frame:
         if mesh is None:
             return None
         try:
-            verts, tris, normals, mats = _mesh_arrays(mesh)
+            verts, tris, normals, mats, uv = _mesh_arrays(mesh)
         finally:
             if temporary:
                 obj.to_mesh_clear()
-        verts, tris, normals, mats = self._usable_triangles(obj.name, verts, tris, normals, mats)
+        verts, tris, normals, mats, uv = self._usable_triangles(obj.name, verts, tris, normals, mats, uv)
         if len(tris) == 0:
             return None
-        key = ("mesh", _digest(verts, tris, normals, mats))
+        key = ("mesh", _digest(verts, tris, normals, mats, *(() if uv is None else (uv,))))
         geometry = self._cached(key, f"mesh '{obj.name}' ({len(tris):,} triangles)",
                                 len(tris) * resources.BYTES_PER_TRIANGLE,
-                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads))
+                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads, corner_uv=uv))
         self.triangles += self._first_use(key, geometry)
         return geometry
 
-    def _usable_triangles(self, name: str, verts, tris, normals, mats):
+    def _usable_triangles(self, name: str, verts, tris, normals, mats, uv=None):
         """The mesh without the triangles that touch a vertex the core cannot hold (not
         finite, or beyond its limit: a NaN from a driver or a modifier), which are counted
         in the report; the rest of the mesh renders. Those vertices are set to 0, as the
         core checks every vertex, used or not."""
         bad = ~rows_within(verts, MAX_COORDINATE)
         if not bad.any():
-            return verts, tris, normals, mats
+            return verts, tris, normals, mats, uv
         touching = bad[tris].any(axis=1)
         self.report.once(f"mesh '{name}': {int(bad.sum())} vertices are not finite or beyond the renderer's limit "
                          f"({MAX_COORDINATE:.0e}) (first: vertex {int(np.flatnonzero(bad)[0])}); the "
@@ -275,7 +283,7 @@ class _Frame:
         keep = ~touching
         verts = verts.copy()
         verts[bad] = 0.0
-        return verts, tris[keep], normals[keep], mats[keep]
+        return verts, tris[keep], normals[keep], mats[keep], None if uv is None else uv[keep]
 
     def geometry(self, obj):
         """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""

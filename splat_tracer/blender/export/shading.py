@@ -23,7 +23,9 @@ Materials are read from their node tree, following the Material Output's Surface
 - A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
   name; through reroutes) means the points' own colours; an Alpha fed by such a node's
   Alpha output means the points' own alpha.
-Any other link into a socket the engine reads falls back to that socket's default value.
+Other links into the inputs of a material's one shader (not under a Mix or Add Shader) are
+compiled into a node program (export/nodes.py) the core runs at each shading point; any
+other link into a socket the engine reads falls back to that socket's default value.
 """
 from __future__ import annotations
 
@@ -37,6 +39,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
+from . import nodes
 from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
@@ -128,6 +131,7 @@ class _Sockets:
     def __init__(self, kind: str, name: str, report: shading.Report):
         self.prefix = f"{kind} '{name}'"
         self.report = report
+        self.compiled = []  # sockets a node program drives: their defaults stand in silently
 
     def say(self, text: str) -> None:
         self.report.once(f"{self.prefix}{text}")
@@ -136,7 +140,7 @@ class _Sockets:
         """The default value of an input (by name, or the socket itself)."""
         socket = node.inputs[name] if isinstance(name, str) else name
         source = _upstream(socket)
-        if source is not None:
+        if source is not None and socket not in self.compiled:
             self.say(f": {socket.name} is driven by a '{source[0].bl_label}' node; "
                      f"using its default value {_fmt(socket.default_value)}")
         return socket.default_value
@@ -173,7 +177,7 @@ class _Sockets:
 # Emission Sampling and the name are the material's, not a shader's: material_of sets them.
 
 _DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
-             if f.name not in ("emission_sampling", "name")}
+             if f.name not in ("emission_sampling", "program", "name")}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -320,8 +324,15 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
-    return dataclasses.replace(_surface_material(bl_material, report),
-                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index,
+    material = _surface_material(bl_material, report)
+    sampling = _emission_sampling(bl_material)
+    if material.program is not None and material.program.drives("emission") and sampling != "NONE":
+        # The core samples emissive triangles by their constant emission: a node-driven one is
+        # found by the rays that meet it instead (unbiased, noisier for a small bright texture).
+        report.once(f"material '{bl_material.name}': emission driven by nodes is not sampled as a light "
+                    f"(found by rays only)")
+        sampling = "NONE"
+    return dataclasses.replace(material, emission_sampling=sampling, pass_index=bl_material.pass_index,
                                name=bl_material.name)
 
 
@@ -344,9 +355,27 @@ def _surface_material(bl_material, report: shading.Report) -> shading.Material:
     ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
-    if _upstream(output.inputs["Surface"]) is None:
+    source = _upstream(output.inputs["Surface"])
+    if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
-    return _clamped(_shader(output.inputs["Surface"], sockets), sockets)
+    program = _program(source[0], sockets) if source is not None else None
+    material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
+    return dataclasses.replace(material, program=program) if program is not None else material
+
+
+def _program(shader, sockets: _Sockets):
+    """The node program for the linked inputs of the material's shader, or None (nothing
+    needs one). Colour Attribute and Attribute nodes linked straight into the colour or alpha
+    keep the constant path (the points' own colours; no program to run)."""
+    direct = [s for s in shader.inputs if s.name in ("Base Color", "Color") and _is_point_data(_upstream(s), "Color")]
+    direct += [s for s in shader.inputs if s.name == "Alpha" and _is_point_data(_upstream(s), "Alpha")]
+    try:
+        program, driven = nodes.compile_shader(shader, sockets.say, skip=direct)
+    except nodes.ProgramTooLarge as e:
+        sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
+        return None
+    sockets.compiled = driven
+    return program
 
 
 # --------------------------------------------------------------------------------------

@@ -26,14 +26,15 @@ struct MeshObject {
 };
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
-    PyObject *ov, *ot, *on = Py_None, *om = Py_None;
+    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", "corner_uv",
+                                   nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOi", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
-                                     &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads, &ouv))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
-    View v, t, n, m;
+    View v, t, n, m, uv;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
     if (!get_array(ot, "triangles", 'i', 2, s3, false, t)) return nullptr;
@@ -41,11 +42,13 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     Py_ssize_t sn[3] = {nt, 3, 3}, s1[1] = {nt};
     if (on != Py_None && !get_array(on, "corner_normals", 'f', 3, sn, false, n)) return nullptr;
     if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
+    Py_ssize_t suv[3] = {nt, 3, 2};
+    if (ouv != Py_None && !get_array(ouv, "corner_uv", 'f', 3, suv, false, uv)) return nullptr;
     TriangleMesh *mesh = nullptr;
     if (!without_gil([&] {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
-                                    threads);
+                                    threads, uv.held ? uv.data<float>() : nullptr);
         }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
@@ -85,7 +88,7 @@ PyType_Slot Mesh_slots[] = {
     {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
     {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
     {Py_tp_getset, Mesh_getset},
-    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0)")},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None)")},
     {0, nullptr},
 };
 
@@ -105,6 +108,131 @@ Affine affine_of(const float *row) {
     Affine a;
     std::copy(row, row + 12, a.m);
     return a;
+}
+
+// Images already converted for this scene, by the Python object holding their pixels: a
+// texture used by several materials is held once.
+using ImageTable = std::vector<std::pair<PyObject *, std::shared_ptr<const TextureImage>>>;
+
+// An image from Python: (pixels, srgb) with pixels (h, w, 4) uint8 or float32, bottom row first.
+std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table) {
+    for (auto &entry : table)
+        if (entry.first == obj) return entry.second;
+    PyObject *opix;
+    int srgb = 0;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "Op", &opix, &srgb)) {
+        PyErr_Clear();
+        PyErr_SetString(PyExc_TypeError, "an image is a (pixels, srgb) tuple");
+        return nullptr;
+    }
+    View bytes, floats;
+    Py_ssize_t shape[3] = {-1, -1, 4};
+    const bool is_bytes = get_array(opix, "image pixels", 'B', 3, shape, false, bytes);
+    if (!is_bytes) {
+        PyErr_Clear();
+        if (!get_array(opix, "image pixels (uint8 or float32, h x w x 4)", 'f', 3, shape, false, floats)) return nullptr;
+    }
+    const View &pix = is_bytes ? bytes : floats;
+    // Texel coordinates reach 5x a side (TextureImage::sample keeps u, v in -4..5): a side of
+    // at most 2^24 keeps them far inside int (and is beyond any image Blender makes).
+    if (pix.dim(0) > (1 << 24) || pix.dim(1) > (1 << 24)) {
+        PyErr_SetString(PyExc_ValueError, "an image is too large (more than 16777216 pixels a side)");
+        return nullptr;
+    }
+    std::shared_ptr<const TextureImage> image;
+    try {
+        if (is_bytes)
+            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<uint8_t>(), srgb != 0);
+        else
+            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<float>());
+    } catch (const InputError &e) {
+        PyErr_SetString(PyExc_ValueError, e.what());
+        return nullptr;
+    }
+    table.emplace_back(obj, image);
+    return image;
+}
+
+// A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
+// (Output::Count,)[, images: a sequence of parse_image tuples]) -- render/nodes.py
+// Program.native(). Checked by NodeProgram::validate.
+bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, ImageTable &images) {
+    PyObject *ocode, *odata, *oout, *oimages = nullptr;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|O", &ocode, &odata, &oout, &oimages)) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs[, images]) tuple", name.c_str());
+        return false;
+    }
+    if (oimages && oimages != Py_None) {
+        PyObject *seq = PySequence_Tuple(oimages);
+        if (!seq) return false;
+        for (Py_ssize_t i = 0; i < PyTuple_Size(seq); ++i) {
+            auto image = parse_image(PyTuple_GetItem(seq, i), images);
+            if (!image) {
+                Py_DECREF(seq);
+                return false;
+            }
+            prog.images.push_back(image);
+        }
+        Py_DECREF(seq);
+    }
+    View code, data, out;
+    Py_ssize_t sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
+    if (!get_array(ocode, "node code", 'i', 2, sc, false, code) || !get_array(odata, "node data", 'f', 1, sd, false, data) ||
+        !get_array(oout, "node outputs", 'i', 1, so, false, out))
+        return false;
+    prog.name = name;
+    prog.code.assign(code.data<int32_t>(), code.data<int32_t>() + code.dim(0) * kNodeWidth);
+    prog.data.assign(data.data<float>(), data.data<float>() + data.dim(0));
+    std::copy(out.data<int32_t>(), out.data<int32_t>() + int(Output::Count), prog.outputs);
+    for (float v : prog.data)
+        if (!within_range(v)) {
+            PyErr_Format(PyExc_ValueError, "%s: a node constant is not finite or beyond 1e18", name.c_str());
+            return false;
+        }
+    try {
+        prog.validate();
+    } catch (const InputError &e) {
+        PyErr_SetString(PyExc_ValueError, e.what());
+        return false;
+    }
+    return true;
+}
+
+// _core.run_nodes(code, data, outputs, images, globals, out): runs a node program at each row
+// of `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)),
+// the registers after the run. For the evaluator's tests.
+PyObject *run_nodes(PyObject *, PyObject *args) {
+    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs;
+    if (!PyArg_ParseTuple(args, "OOOOOO", &ocode, &odata, &oout, &oimages, &oglobals, &oregs)) return nullptr;
+    PyObject *triple = PyTuple_Pack(4, ocode, odata, oout, oimages);
+    if (!triple) return nullptr;
+    NodeProgram prog;
+    ImageTable images;
+    const bool ok = parse_program(triple, "program", prog, images);
+    Py_DECREF(triple);
+    if (!ok) return nullptr;
+    constexpr int kGlobalFloats = 36;
+    View g, regs, code, data, outs;
+    Py_ssize_t sg[2] = {-1, kGlobalFloats}, sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
+    if (!get_array(oglobals, "globals", 'f', 2, sg, false, g)) return nullptr;
+    Py_ssize_t sr[2] = {g.dim(0), Py_ssize_t(prog.data.size())};
+    if (!get_array(oregs, "out", 'f', 2, sr, true, regs) || !get_array(ocode, "code", 'i', 2, sc, false, code) ||
+        !get_array(odata, "data", 'f', 1, sd, false, data) || !get_array(oout, "outputs", 'i', 1, so, false, outs) ||
+        !check_separate({{regs, "out"}}, {{g, "globals"}, {code, "code"}, {data, "data"}, {outs, "outputs"}}))
+        return nullptr;
+    float r[kMaxNodeRegisters];
+    for (Py_ssize_t i = 0; i < g.dim(0); ++i) {
+        const float *x = g.data<float>() + kGlobalFloats * i;
+        ShaderGlobals s;
+        Vec3 *vecs[11] = {&s.P,  &s.N,  &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour,
+                          &s.tangent, &s.surface_normal};
+        for (int k = 0; k < 11; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
+        s.point_alpha = x[33], s.backfacing = x[34], s.tangent_sign = x[35];
+        prog.run(s, r);
+        std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
+    }
+    Py_RETURN_NONE;
 }
 
 // The most motion steps a transform may have: Cycles' 2^(7-1) x 2 + 1 for its largest
@@ -137,13 +265,13 @@ bool motion_keys(const double *rows, Py_ssize_t count, const char *what, Py_ssiz
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", "motion", "motion_range", nullptr};
+                                   "shadow_catcher", "motion", "motion_range", "programs", nullptr};
     PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
-             *omotion = Py_None, *omrange = Py_None;
+             *omotion = Py_None, *omrange = Py_None, *oprog = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
                                      &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &omotion,
-                                     &omrange))
+                                     &omrange, &oprog))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
@@ -216,6 +344,24 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         materials[size_t(i)] = Material::from_row(r);
         if (!(materials[size_t(i)].ior > 0.f)) return PyErr_Format(PyExc_ValueError, "material %zd: ior must be > 0", i);
     }
+    // Node programs: one entry per material, None for a material without one.
+    std::vector<NodeProgram> programs;
+    if (oprog != Py_None) {
+        PyObject *seq = PySequence_Tuple(oprog);
+        if (!seq) return nullptr;
+        std::unique_ptr<PyObject, void (*)(PyObject *)> hold_seq(seq, [](PyObject *o) { Py_XDECREF(o); });
+        if (PyTuple_Size(seq) != n_mat)
+            return PyErr_Format(PyExc_ValueError, "programs has %zd entries for %zd materials", PyTuple_Size(seq), n_mat);
+        ImageTable images;
+        for (Py_ssize_t i = 0; i < n_mat; ++i) {
+            PyObject *item = PyTuple_GetItem(seq, i);
+            if (item == Py_None) continue;
+            NodeProgram prog;
+            if (!parse_program(item, "material " + std::to_string(i), prog, images)) return nullptr;
+            materials[size_t(i)].program = int(programs.size());
+            programs.push_back(std::move(prog));
+        }
+    }
     std::vector<Light> lights(static_cast<size_t>(n_light));
     for (Py_ssize_t i = 0; i < n_light; ++i) {
         const float *r = light.data<float>() + kLightFields * i;
@@ -226,7 +372,8 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         lights[size_t(i)] = Light::from_row(r);
     }
     RenderScene *scene = nullptr;
-    if (!without_gil([&] { scene = new RenderScene(std::move(instances), std::move(materials), std::move(lights), threads); }))
+    if (!without_gil([&] { scene = new RenderScene(std::move(instances), std::move(materials), std::move(lights), threads,
+                                                    std::move(programs)); }))
         return nullptr;
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
@@ -634,9 +781,10 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
                                    "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, "
-                                   "motion=None, motion_range=None)\n\nmotion: (M, 12) float64 to_world rows of "
+                                   "motion=None, motion_range=None, programs=None)\n\nmotion: (M, 12) float64 to_world rows of "
                                    "the moving instances at evenly spaced times over the shutter; motion_range: "
-                                   "(n, 2) int32 each instance's (first row, count), count 0 when it does not move.")},
+                                   "(n, 2) int32 each instance's (first row, count), count 0 when it does not move; "
+                                   "programs: per material its node program (render/nodes.py Program.native()) or None.")},
     {0, nullptr},
 };
 
@@ -656,6 +804,15 @@ int add_render_types(PyObject *module) {
     if (!rs) return -1;
     if (PyModule_AddObject(module, "RenderScene", rs) < 0) {
         Py_DECREF(rs);
+        return -1;
+    }
+    static PyMethodDef run_nodes_def = {
+        "run_nodes", run_nodes, METH_VARARGS,
+        "run_nodes(code, data, outputs, images, globals, out): a node program run at each row of globals; out receives "
+        "the registers (render/nodes.py)."};
+    PyObject *fn = PyCFunction_NewEx(&run_nodes_def, nullptr, nullptr);
+    if (!fn || PyModule_AddObject(module, "run_nodes", fn) < 0) {
+        Py_XDECREF(fn);
         return -1;
     }
     return 0;

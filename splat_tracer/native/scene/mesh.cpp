@@ -38,7 +38,8 @@ bool finite_in_range(const float *v, size_t n) {
 }  // namespace
 
 TriangleMesh::TriangleMesh(const float *vertices, size_t nv, const int32_t *triangles, size_t nt,
-                           const float *corner_normals, const int32_t *material, int threads) {
+                           const float *corner_normals, const int32_t *material, int threads,
+                           const float *corner_uv) {
     if (nt >= size_t(INT32_MAX)) throw InputError("too many triangles (ids are 32-bit)");
     if (!finite_in_range(vertices, 3 * nv)) throw InputError("a vertex coordinate is not finite or beyond 1e18");
     v0_.resize(nt), v1_.resize(nt), v2_.resize(nt);
@@ -62,6 +63,10 @@ TriangleMesh::TriangleMesh(const float *vertices, size_t nv, const int32_t *tria
             // A zero or broken corner normal falls back to the face's own.
             normals_[i] = std::isfinite(dot(n, n)) && dot(n, n) > 0.f ? normalize(n) : geometric_normal(int32_t(i / 3));
         }
+    }
+    if (corner_uv) {
+        if (!finite_in_range(corner_uv, 6 * nt)) throw InputError("a UV coordinate is not finite or beyond 1e18");
+        uv_.assign(corner_uv, corner_uv + 6 * nt);
     }
     if (material) {
         material_.assign(material, material + nt);
@@ -131,6 +136,20 @@ Vec3 TriangleMesh::point_error(const MeshHit &h) const {
     const float b0 = 1.f - h.b1 - h.b2;
     const Vec3 a = vabs(v0_[h.tri] * b0) + vabs(v1_[h.tri] * h.b1) + vabs(v2_[h.tri] * h.b2);
     return a * kGamma7;
+}
+
+bool TriangleMesh::uv_tangent(int32_t tri, Vec3 *tangent, float *sign) const {
+    if (uv_.empty()) return false;
+    const float *t = &uv_[6 * size_t(tri)];
+    const Vec3 e1 = v1_[tri] - v0_[tri], e2 = v2_[tri] - v0_[tri];
+    const float du1 = t[2] - t[0], dv1 = t[3] - t[1], du2 = t[4] - t[0], dv2 = t[5] - t[1];
+    const float det = du1 * dv2 - du2 * dv1;
+    if (!(std::fabs(det) > 0.f)) return false;
+    const float inv = 1.f / det;
+    *tangent = (e1 * dv2 - e2 * dv1) * inv;                    // dP/du
+    const Vec3 bitangent = (e2 * du1 - e1 * du2) * inv;        // dP/dv
+    *sign = dot(cross(cross(e1, e2), *tangent), bitangent) < 0.f ? -1.f : 1.f;
+    return std::isfinite(dot(*tangent, *tangent)) && dot(*tangent, *tangent) > 0.f;
 }
 
 Vec3 TriangleMesh::geometric_normal(int32_t tri) const {

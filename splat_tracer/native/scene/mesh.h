@@ -24,10 +24,11 @@ class TriangleMesh {
     // `vertices`: nv x 3; `triangles`: nt x 3 vertex indices; `corner_normals`: nt x 3 x 3
     // shading normals (one per triangle corner, as Blender's corner normals: smooth, flat
     // and sharp edges all expressed), or null for flat shading; `material`: nt slot
-    // indices, or null (all 0). Throws InputError for an index out of range, a non-finite
+    // indices, or null (all 0); `corner_uv`: nt x 3 x 2 texture coordinates (the active UV
+    // map, one per corner), or null (0 everywhere). Throws InputError for an index out of range, a non-finite
     // or out-of-range value. Degenerate (zero-area) triangles are kept but never hit.
     TriangleMesh(const float *vertices, size_t nv, const int32_t *triangles, size_t nt, const float *corner_normals,
-                 const int32_t *material, int threads);
+                 const int32_t *material, int threads, const float *corner_uv = nullptr);
 
     size_t size() const { return tris_.size(); }
     const AABB &bounds() const { return bounds_; }
@@ -43,6 +44,16 @@ class TriangleMesh {
     Vec3 geometric_normal(int32_t tri) const;  // unit, along e1 x e2
     Vec3 shading_normal(const MeshHit &h) const;
     int32_t material(int32_t tri) const { return material_.empty() ? 0 : material_[tri]; }
+    // The direction of increasing u on a triangle (object space, unnormalised) and the sign of
+    // the direction of increasing v relative to n x that (1 or -1): the UV map's tangent
+    // frame, per triangle. False without a UV map or where the UVs are degenerate.
+    bool uv_tangent(int32_t tri, Vec3 *tangent, float *sign) const;
+    // The UV map at barycentric (b1, b2) of a triangle, as (u, v, 0); 0 without a UV map.
+    Vec3 uv(int32_t tri, float b1, float b2) const {
+        if (uv_.empty()) return Vec3();
+        const float *t = &uv_[6 * size_t(tri)], b0 = 1.f - b1 - b2;
+        return {b0 * t[0] + b1 * t[2] + b2 * t[4], b0 * t[1] + b1 * t[3] + b2 * t[5], 0.f};
+    }
     // Bound on the rounding error of point(h), per axis: a secondary ray starting there is
     // moved this far off the surface (pbrt-v4's error bounds for barycentric interpolation).
     Vec3 point_error(const MeshHit &h) const;
@@ -56,6 +67,7 @@ class TriangleMesh {
     std::vector<Vec3> v0_, v1_, v2_;  // input order, for shading
     std::vector<Vec3> normals_;       // 3 per triangle, or empty
     std::vector<int32_t> material_;
+    std::vector<float> uv_;           // 6 per triangle, or empty
     AABB bounds_;
     BVH bvh_;
 };

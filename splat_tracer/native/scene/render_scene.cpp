@@ -44,11 +44,16 @@ static AABB swept_bounds(const Instance &inst, const AABB &local) {
 }
 
 RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
-                         int threads)
-    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)) {
+                         int threads, std::vector<NodeProgram> programs)
+    : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)),
+      programs_(std::move(programs)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (const Material &m : materials_)
-        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha, any_emission_ |= m.emits();
+    for (NodeProgram &p : programs_) p.validate();
+    for (Material &m : materials_) {
+        if (m.program >= int(programs_.size())) m.program = -1;
+        const bool programmed_alpha = m.program >= 0 && programs_[m.program].outputs[int(Output::Alpha)] >= 0;
+        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha || programmed_alpha, any_emission_ |= m.emits();
+    }
     if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_);
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
@@ -76,6 +81,95 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
         boxes[i] = world.empty() ? AABB{Vec3(0, 0, 0), Vec3(0, 0, 0)} : world;
     }
     top_.build(boxes, threads);
+}
+
+Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
+                                       const Camera *camera, float time) const {
+    const NodeProgram &prog = programs_[m.program];
+    const Instance &inst = instances_[sp.instance];
+    // A moving instance's object space is where it is at the ray's time: the point was found
+    // there (take_mesh_hit, take_splat_hit), so its object and Generated coordinates are the
+    // same at every time, as Cycles' are.
+    PlacementScratch scratch;
+    const Placement at = inst.at(time, scratch.a);
+    const Affine &to_world = *at.to_world, &to_object = *at.to_object;
+    ShaderGlobals sg;
+    sg.P = sp.p, sg.I = wo;
+    // Cycles turns a back face's normals towards the viewer: so do the nodes' normals.
+    const bool back = dot(sp.ng, wo) < 0.f;
+    sg.Ng = back ? sp.ng * -1.f : sp.ng;
+    sg.N = dot(sp.ns, wo) < 0.f ? sp.ns * -1.f : sp.ns;
+    sg.backfacing = back ? 1.f : 0.f;
+    sg.object = to_object.point(sp.p);
+    sg.object_normal = normalize(to_world.transposed_vector(sg.N));
+    // Generated coordinates: the object-space position within the geometry's bounds (Blender's
+    // automatic texture space).
+    const AABB box = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
+    if (!box.empty())
+        for (int k = 0; k < 3; ++k) {
+            const float size = box.hi[k] - box.lo[k];
+            sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
+        }
+    sg.surface_normal = sp.ns;
+    if (camera && prog.uses_camera) {
+        // Into the camera's frame by the transpose of its rotation (its axes are unit and
+        // orthogonal), with Z negated: Cycles' camera space looks along +Z. A moving camera
+        // is where it is at the ray's time.
+        double moved[12];
+        if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
+        const double *c = camera->moves() ? moved : camera->local_from_camera;
+        const double d[3] = {double(sp.p.x) - c[3], double(sp.p.y) - c[7], double(sp.p.z) - c[11]};
+        for (int k = 0; k < 3; ++k) {
+            const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
+            const double v = (c[k] * d[0] + c[4 + k] * d[1] + c[8 + k] * d[2]) / (len > 0 ? len : 1.0);
+            sg.camera[k] = float(k == 2 ? -v : v);
+        }
+    }
+    for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
+        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
+    if (inst.mesh) {
+        sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
+        Vec3 t;
+        float sign;
+        if (prog.uses_tangent && inst.mesh->uv_tangent(sp.prim, &t, &sign)) {
+            // Into the scene frame, then perpendicular to the shading normal (Gram-Schmidt), as
+            // a tangent interpolated over a smooth surface is.
+            t = to_world.vector(t);
+            t = t - sp.ns * dot(sp.ns, t);
+            if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
+        }
+    }
+    if (sp.has_point_colour) sg.point_colour = sp.point_colour;
+    sg.point_alpha = sp.point_alpha;
+    float r[kMaxNodeRegisters];
+    prog.run(sg, r);
+    Material out = m;
+    auto scalar = [&](Output o, float lo, float hi, float &field) {
+        const int32_t i = prog.outputs[int(o)];
+        if (i >= 0 && std::isfinite(r[i])) field = std::fmin(std::fmax(r[i], lo), hi);
+    };
+    auto colour = [&](Output o, Vec3 &field) {
+        const int32_t i = prog.outputs[int(o)];
+        if (i < 0) return;
+        for (int k = 0; k < 3; ++k)  // as the export clamps constants: >= 0, within the coordinate limit
+            if (std::isfinite(r[i + k])) field[k] = std::fmin(std::fmax(r[i + k], 0.f), kMaxCoordinate);
+    };
+    colour(Output::Base, out.base);
+    colour(Output::Emission, out.emission);
+    scalar(Output::Metallic, 0.f, 1.f, out.metallic);
+    scalar(Output::Roughness, 0.f, 1.f, out.roughness);
+    scalar(Output::Transmission, 0.f, 1.f, out.transmission);
+    scalar(Output::Alpha, 0.f, 1.f, out.alpha);
+    scalar(Output::IOR, 1e-3f, kMaxCoordinate, out.ior);  // render/shading.py's smallest IOR
+    scalar(Output::SpecularLevel, 0.f, kMaxCoordinate, out.specular_level);
+    if (prog.outputs[int(Output::Base)] >= 0) out.use_point_colour = false;  // the nodes read them
+    const int32_t normal = prog.outputs[int(Output::Normal)];
+    if (normal >= 0 && normal_out) {
+        const Vec3 n(r[normal], r[normal + 1], r[normal + 2]);
+        if (std::isfinite(dot(n, n)) && dot(n, n) > 0.f) *normal_out = normalize(n);
+    }
+    if (prog.outputs[int(Output::Alpha)] >= 0) out.use_point_alpha = false;
+    return out;
 }
 
 Ray RenderScene::to_object(const Affine &to_object, const Ray &ray, float *scale) {
@@ -156,7 +250,7 @@ inline bool nearer(float t, int index, const SurfacePoint &best) {
 void RenderScene::take_mesh_hit(int index, const Instance &inst, Placement at, const MeshHit &h, float s,
                                 SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
-    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+    best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front, best.b1 = h.b1, best.b2 = h.b2;
     best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
     const Vec3 ng = normalize(at.to_object->transposed_vector(inst.mesh->geometric_normal(h.tri)));
     const Vec3 ns = normalize(at.to_object->transposed_vector(inst.mesh->shading_normal(h)));

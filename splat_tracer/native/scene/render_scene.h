@@ -11,6 +11,8 @@
 #include <vector>
 
 #include "bvh/bvh.h"
+#include "nodes/program.h"
+#include "scene/camera.h"
 #include "scene/mesh.h"
 #include "scene/mesh_lights.h"
 #include "scene/motion.h"
@@ -126,6 +128,7 @@ struct SurfacePoint {
     float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
     int material = 0;    // index in the material table
+    float b1 = 0, b2 = 0;  // meshes: barycentric coordinates of the triangle's vertices 1 and 2
     int n_members = 0;   // splats that formed the point
     int32_t members[kMaxLayerHits];
 
@@ -134,13 +137,23 @@ struct SurfacePoint {
 
 class RenderScene {
   public:
+    // `programs`: the materials' node programs (Material::program indexes them), validated.
     RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
-                int threads);
+                int threads, std::vector<NodeProgram> programs = {});
 
     const Instance &instance(int i) const { return instances_[i]; }
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
     size_t material_count() const { return materials_.size(); }
+    // The material at a surface point seen from direction `wo` (towards the viewer) at shutter
+    // time `time` (motion blur: where a moving instance is then): its node program run there,
+    // or the constant material when it has none. The one place the integrator asks for a
+    // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
+    // `camera`: the render's, for the Camera texture coordinate.
+    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f) const {
+        const Material &m = materials_[sp.material];
+        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera, time);
+    }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }
@@ -171,6 +184,8 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
+    Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
+                              const Camera *camera, float time) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
@@ -184,6 +199,7 @@ class RenderScene {
     std::vector<Instance> instances_;
     std::vector<Material> materials_;
     std::vector<Light> lights_;
+    std::vector<NodeProgram> programs_;
     MeshLights mesh_lights_;
     BVH top_;
     bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false, any_motion_ = false;

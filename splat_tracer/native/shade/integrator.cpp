@@ -608,7 +608,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        mat = scene_.material(sp.material);
+        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
         if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces ||
@@ -1027,7 +1027,7 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
         sp = scene_.intersect(ray, method, kVisShadow, from, nullptr, &tally.stats);
         if (!sp.valid()) return t;
-        const Material &m = scene_.material(sp.material);
+        const Material m = scene_.material_at(sp, ray.d * -1.f, &camera_, from.time);
         const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);
         if (a >= 1.f) return Vec3();
         t = t * (1.f - a);

@@ -30,6 +30,9 @@ struct Material {
     // Cycles' Emission Sampling, Auto resolved by render/shading.py); 0: found by rays only.
     int emission_sides = 0;
     float pass_index = 0;  // Blender's material pass index: the Material Index pass
+    // Its node program in the scene's table (RenderScene::material_at), or -1: the constant
+    // values above are the material. Not part of the packed row (programs come apart).
+    int program = -1;
 
     static Material from_row(const float *r) {
         Material m;

@@ -1,0 +1,676 @@
+"""Blender shader-node trees -> node programs (render/nodes.py) the core runs per shading point.
+
+The compiler walks back from a shader's linked inputs (Base Color, Roughness, ...), through
+reroutes, muted nodes (their internal links) and node groups (nested: a Group Input reads the
+group node's input, in the group that holds it), writing one instruction per node output
+reached (each once, however many links read it). Definitions are Blender's (see
+docs/nodes.md: which nodes are exact, approximate or unsupported).
+
+A node it cannot compile makes the input it feeds keep its unlinked value (the socket's
+default value), said once in the report naming the material and the node.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...render import nodes
+from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised through compile_shader)
+
+# Cycles bakes Color Ramps and RGB Curves into tables of this many rows (its RAMP_TABLE_SIZE),
+# read linearly between rows: baking the same table reads the ramp exactly as Cycles does.
+_TABLE_ROWS = 256
+_VECTORS = ("VECTOR", "RGBA")  # socket types held in three registers (colours drop alpha)
+# Image colour spaces read exactly: sRGB-encoded bytes (decoded after interpolation, as Cycles
+# does) and the linear ones that are the scene's linear space (Blender's default, Rec. 709).
+_SRGB = ("sRGB",)
+_LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
+# Attribute names read as the points' own colour: the importer's, and the usual names of a
+# colour attribute. Another name (a scan's intensity, classification, ...) is not evaluated.
+_COLOUR_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", "Colour", "Cd", "rgb", "RGB", "rgba", "RGBA")
+# What Cycles renders for an image it cannot load (its missing-texture colour): magenta.
+MISSING_IMAGE = (1.0, 0.0, 1.0)
+# Images read from Blender, by what identifies their pixels (see _image_pixels).
+_IMAGES: dict = {}
+
+
+class Unsupported(Exception):
+    """A node (or a node's option) the compiler does not handle."""
+
+    def __init__(self, node, what: str = ""):
+        super().__init__(what)
+        self.node, self.what = node, what
+
+
+def _live_link(socket):
+    return next((link for link in socket.links if link.is_valid and not link.is_muted), None)
+
+
+class Compiler:
+    """Compiles one material's node inputs into one Program. `say(text)`: a report line."""
+
+    def __init__(self, say):
+        self.b = Builder()
+        self.say = say
+        self.memo: dict = {}
+        self.consts: dict = {}
+
+    # ---------------------------------------------------------------- sockets and links
+
+    def const(self, value, width: int) -> int:
+        key = (width, tuple(np.round(np.ravel(value)[:width], 9)) if width == 3 else float(value))
+        if key not in self.consts:
+            self.consts[key] = self.b.register(value, width)
+        return self.consts[key]
+
+    def source(self, socket, stack: tuple):
+        """(node, output socket, stack) feeding an input socket, through reroutes, muted
+        nodes and group boundaries; None when nothing is."""
+        link = _live_link(socket)
+        while link is not None:
+            node, out = link.from_node, link.from_socket
+            if node.type == "REROUTE":
+                link = _live_link(node.inputs[0])
+            elif node.mute:
+                passed = next((l for l in node.internal_links if l.to_socket == out), None)
+                link = _live_link(passed.from_socket) if passed is not None else None
+            elif node.type == "GROUP_INPUT":
+                if not stack:
+                    return None
+                group = stack[-1]
+                outer = next((s for s in group.inputs if s.identifier == out.identifier), None)
+                if outer is None:
+                    return None
+                stack = stack[:-1]
+                socket = outer
+                link = _live_link(outer)
+                if link is None:
+                    return ("DEFAULT", outer, stack)
+            else:
+                return node, out, stack
+        return None
+
+    def input(self, socket, width: int, stack: tuple = ()) -> int:
+        """The register (width 1 or 3) holding an input socket's value."""
+        found = self.source(socket, stack)
+        if found is None or found[0] == "DEFAULT":
+            default = (found[1] if found else socket)
+            return self.default(default, width)
+        node, out, inner = found
+        try:
+            reg, kind = self.output(node, out, inner)
+        except Unsupported as e:
+            label = e.node.bl_label + (f" ({e.what})" if e.what else "")
+            value = np.ravel(np.asarray(getattr(socket, "default_value", 0.0), np.float64))[:3]
+            shown = f"{value[0]:.3g}" if value.size == 1 else "(" + ", ".join(f"{v:.3g}" for v in value) + ")"
+            if socket.name == "Normal" and getattr(socket, "hide_value", False):  # unlinked: the surface's
+                self.say(f": the '{label}' node is not supported; Normal is the surface's own")
+            else:
+                self.say(f": the '{label}' node is not supported; {socket.name} uses its unlinked value {shown}")
+            return self.default(socket, width)
+        return self.convert(reg, kind, width)
+
+    def default(self, socket, width: int) -> int:
+        value = getattr(socket, "default_value", 0.0)
+        if width == 3:
+            v = np.ravel(np.asarray(value, np.float64))
+            return self.const(v[:3] if v.size >= 3 else np.repeat(v[:1] if v.size else [0.0], 3), 3)
+        v = np.ravel(np.asarray(value, np.float64))
+        if v.size >= 3:  # a colour or vector read as a float: as the link below converts
+            return self.const(float(v[:3].mean()), 1)
+        return self.const(float(v[0]) if v.size else 0.0, 1)
+
+    def convert(self, reg: int, kind: str, width: int) -> int:
+        """Blender's implicit conversions: a colour read as a float is its luminance, a
+        vector its average; a float read as a vector fills all three."""
+        have = 3 if kind in _VECTORS else 1
+        if have == width:
+            return reg
+        if width == 1:
+            out = self.b.register()
+            if kind == "RGBA":
+                self.b.emit("RGB_TO_BW", out, reg)
+            else:
+                vec_out = self.b.register(width=3)
+                self.b.emit("VECTOR_MATH", vec_out, out, reg, self.const((1 / 3, 1 / 3, 1 / 3), 3), reg,
+                            self.const(1.0, 1), nodes.VECTOR_OPS.index("DOT_PRODUCT"))
+            return out
+        out = self.b.register(width=3)
+        self.b.emit("COMBINE", out, reg, reg, reg)
+        return out
+
+    # ---------------------------------------------------------------- nodes
+
+    def output(self, node, socket, stack: tuple):
+        """(register, socket type) of a node's output socket, compiling the node once."""
+        key = (node.as_pointer(), tuple(g.as_pointer() for g in stack))
+        if key not in self.memo:
+            if node.type == "GROUP":
+                self.memo[key] = self._group(node, stack)
+            else:
+                handler = getattr(self, "_" + node.type.lower(), None)
+                if handler is None:
+                    raise Unsupported(node)
+                try:
+                    self.memo[key] = handler(node, stack)
+                except (KeyError, AttributeError, ValueError, IndexError, StopIteration, TypeError) as e:
+                    # A node this Blender version lays out unlike the one the compiler was
+                    # written for (a renamed socket or option): skip it, don't fail the frame.
+                    raise Unsupported(node, f"{type(e).__name__}: {e}") from e
+        outputs = self.memo[key]
+        if socket.identifier not in outputs:
+            raise Unsupported(node, f"its {socket.name} output")
+        return outputs[socket.identifier], socket.type
+
+    def _group(self, node, stack):
+        tree = node.node_tree
+        if tree is None:
+            raise Unsupported(node, "no node group")
+        outs = [n for n in tree.nodes if n.type == "GROUP_OUTPUT"]
+        out_node = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+        if out_node is None:
+            raise Unsupported(node, "no Group Output")
+        result = {}
+        for s in node.outputs:
+            inner = next((i for i in out_node.inputs if i.identifier == s.identifier), None)
+            if inner is not None and s.type in ("VALUE", "INT", "BOOLEAN", "VECTOR", "RGBA"):
+                result[s.identifier] = self.input(inner, 3 if s.type in _VECTORS else 1, stack + (node,))
+        return result
+
+    def _in(self, node, name, width, stack):
+        """An input by index or name; by name among all sockets, unavailable ones included
+        (Blender hides some by the node's options, and lookup by name skips those)."""
+        if isinstance(name, int):
+            socket = node.inputs[name]
+        elif isinstance(name, str):
+            # By name or identifier: Blender 5 renamed some (Fac -> Factor, Bright -> Brightness)
+            # and kept the old names as identifiers.
+            socket = next((s for s in node.inputs if s.name == name), None) or \
+                next((s for s in node.inputs if s.identifier == name), None)
+            if socket is None:
+                raise KeyError(f"no input '{name}'")
+        else:
+            socket = name
+        return self.input(socket, width, stack)
+
+    def _by_id(self, node, identifier):
+        return next(s for s in node.inputs if s.identifier == identifier)
+
+    def _vector_or(self, node, stack, default_global="GENERATED", name="Vector"):
+        """A texture's Vector input, or the default coordinates where nothing is linked."""
+        socket = next(s for s in node.inputs if s.name == name or s.identifier == name)
+        if self.source(socket, stack) is None:
+            return self.b.global_(default_global)
+        return self.input(socket, 3, stack)
+
+    # Output names that changed between Blender versions (Blender 5: textures' Fac is Factor).
+    _ALIASES = {"Fac": ("Fac", "Factor")}
+
+    def _ids(self, node, values: dict):
+        """{output identifier: register} for the outputs named (those the node has)."""
+        result = {}
+        for name, reg in values.items():
+            for alias in self._ALIASES.get(name, (name,)):
+                socket = next((s for s in node.outputs if s.name == alias), None)
+                if socket is not None:
+                    result[socket.identifier] = reg
+        return result
+
+    # Inputs
+    def _value(self, node, stack):
+        return self._ids(node, {"Value": self.b.register(float(node.outputs[0].default_value))})
+
+    def _rgb(self, node, stack):
+        return self._ids(node, {"Color": self.b.register(tuple(node.outputs[0].default_value[:3]), 3)})
+
+    def _tex_coord(self, node, stack):
+        if getattr(node, "object", None) is not None:
+            raise Unsupported(node, "Object from another object")
+        out = {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV", "Object": "OBJECT",
+               "Reflection": "REFLECTION", "Camera": "CAMERA"}
+        if node.outputs["Window"].is_linked:
+            raise Unsupported(node, "its Window output")
+        return self._lazy(node, out)
+
+    def _lazy(self, node, names: dict):
+        """Globals for the node's outputs that something reads (unread ones cost nothing)."""
+        result = {}
+        for s in node.outputs:
+            if s.name in names and s.is_linked:
+                result[s.identifier] = self.b.global_(names[s.name])
+        return result
+
+    def _new_geometry(self, node, stack):
+        result = self._lazy(node, {"Position": "POSITION", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL",
+                                   "Incoming": "INCOMING"})
+        if node.outputs["Backfacing"].is_linked:
+            result[node.outputs["Backfacing"].identifier] = self.b.global_("BACKFACING")
+        return result
+
+    def _uvmap(self, node, stack):
+        return self._ids(node, {"UV": self.b.global_("UV")})
+
+    def _point_data(self, node, fac: bool):
+        colour = self.b.global_("POINT_COLOUR")
+        result = {s.identifier: colour for s in node.outputs if s.name in ("Color", "Vector")}
+        alpha = self.b.global_("POINT_ALPHA")
+        result.update({s.identifier: alpha for s in node.outputs if s.name == "Alpha"})
+        for s in node.outputs:
+            if fac and s.name in ("Fac", "Factor"):
+                result[s.identifier] = self.convert(colour, "VECTOR", 1)
+        return result
+
+    def _vertex_color(self, node, stack):
+        return self._point_data(node, False)
+
+    def _attribute(self, node, stack):
+        if node.attribute_type != "GEOMETRY":
+            raise Unsupported(node, f"{node.attribute_type.lower()} attributes")
+        if node.attribute_name not in _COLOUR_NAMES:
+            raise Unsupported(node, f"attribute '{node.attribute_name}'")
+        return self._point_data(node, True)
+
+    # Math and colour
+    def _math(self, node, stack):
+        a, b, c = (self._in(node, i, 1, stack) for i in range(3))
+        out = self.b.register()
+        self.b.emit("MATH", out, a, b, c, nodes.MATH_OPS.index(node.operation), int(node.use_clamp))
+        return {node.outputs[0].identifier: out}
+
+    def _vect_math(self, node, stack):
+        vecs = [s for s in node.inputs if s.type == "VECTOR"]
+        a, b, c = (self.input(vecs[i], 3, stack) for i in range(3))
+        scale = self._in(node, "Scale", 1, stack)
+        v, f = self.b.register(width=3), self.b.register()
+        self.b.emit("VECTOR_MATH", v, f, a, b, c, scale, nodes.VECTOR_OPS.index(node.operation))
+        return self._ids(node, {"Vector": v, "Value": f})
+
+    def _mix(self, node, stack):
+        kind = node.data_type
+        if kind not in ("FLOAT", "VECTOR", "RGBA"):
+            raise Unsupported(node, f"{kind.lower()} mixing")
+        out_socket = next(s for s in node.outputs if s.enabled)
+        suffix = {"FLOAT": "Float", "VECTOR": "Vector", "RGBA": "Color"}[kind]
+        width = 1 if kind == "FLOAT" else 3
+        a = self.input(self._by_id(node, f"A_{suffix}"), width, stack)
+        b = self.input(self._by_id(node, f"B_{suffix}"), width, stack)
+        non_uniform = kind == "VECTOR" and node.factor_mode == "NON_UNIFORM"
+        fac = self.input(self._by_id(node, "Factor_Vector" if non_uniform else "Factor_Float"),
+                         3 if non_uniform else 1, stack)
+        out = self.b.register(width=width)
+        if kind == "FLOAT":
+            self.b.emit("MIX_FLOAT", out, fac, a, b, int(node.clamp_factor))
+        elif kind == "VECTOR":
+            self.b.emit("MIX_VECTOR", out, fac, a, b, int(node.clamp_factor), int(non_uniform))
+        else:
+            self.b.emit("MIX_COLOUR", out, fac, a, b, nodes.BLENDS.index(node.blend_type), int(node.clamp_factor),
+                        int(node.clamp_result))
+        return {out_socket.identifier: out}
+
+    def _mix_rgb(self, node, stack):  # the legacy MixRGB node
+        fac, a, b = self._in(node, "Fac", 1, stack), self._in(node, "Color1", 3, stack), self._in(node, "Color2", 3, stack)
+        out = self.b.register(width=3)
+        self.b.emit("MIX_COLOUR", out, fac, a, b, nodes.BLENDS.index(node.blend_type), 1, int(node.use_clamp))
+        return {node.outputs[0].identifier: out}
+
+    def _map_range(self, node, stack):
+        if node.data_type != "FLOAT":
+            raise Unsupported(node, "vector mapping")
+        value = self._in(node, "Value", 1, stack)
+        params = self.b.register(width=1)  # five consecutive registers: from/to min/max, steps
+        for _ in range(4):
+            self.b.register()
+        names = ("From Min", "From Max", "To Min", "To Max", "Steps")
+        float_inputs = [s for s in node.inputs if s.type == "VALUE"]
+        for k, name in enumerate(names):
+            socket = next(s for s in float_inputs if s.name == name)
+            self.b.emit("COPY", params + k, self.input(socket, 1, stack), 1)
+        out = self.b.register()
+        self.b.emit("MAP_RANGE", out, value, params, nodes.MAP_RANGE_MODES.index(node.interpolation_type),
+                    int(node.clamp))
+        return {next(s for s in node.outputs if s.name == "Result" and s.type == "VALUE").identifier: out}
+
+    def _clamp(self, node, stack):
+        v, lo, hi = (self._in(node, n, 1, stack) for n in ("Value", "Min", "Max"))
+        out = self.b.register()
+        self.b.emit("CLAMP", out, v, lo, hi, 1 if node.clamp_type == "RANGE" else 0)
+        return {node.outputs[0].identifier: out}
+
+    def _valtorgb(self, node, stack):  # Color Ramp
+        ramp = node.color_ramp
+        rows = [tuple(ramp.evaluate(i / (_TABLE_ROWS - 1))) for i in range(_TABLE_ROWS)]
+        table = self.b.table(rows)
+        fac = self._in(node, "Fac", 1, stack)
+        colour, alpha = self.b.register(width=3), self.b.register()
+        self.b.emit("RAMP", colour, alpha, fac, table, _TABLE_ROWS, int(ramp.interpolation != "CONSTANT"))
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _curve_rgb(self, node, stack):
+        mapping = node.mapping
+        mapping.initialize()
+        lo, hi = float(mapping.clip_min_x), float(mapping.clip_max_x)
+        if not mapping.use_clip:
+            lo, hi = 0.0, 1.0
+        curves = mapping.curves  # R, G, B, and the combined curve, which each channel's curve follows
+        rows = []
+        for i in range(_TABLE_ROWS):
+            x = lo + (hi - lo) * i / (_TABLE_ROWS - 1)
+            rows.append([mapping.evaluate(curves[k], mapping.evaluate(curves[3], x)) for k in range(3)] + [0.0])
+        table = self.b.table(rows)
+        span = self.b.register((lo, hi, 0.0), 3)
+        fac, colour = self._in(node, "Fac", 1, stack), self._in(node, "Color", 3, stack)
+        out = self.b.register(width=3)
+        self.b.emit("CURVES", out, fac, colour, table, _TABLE_ROWS, span)
+        return {node.outputs[0].identifier: out}
+
+    def _hue_sat(self, node, stack):
+        h, s, v, f = (self._in(node, n, 1, stack) for n in ("Hue", "Saturation", "Value", "Fac"))
+        colour = self._in(node, "Color", 3, stack)
+        out = self.b.register(width=3)
+        self.b.emit("HUE_SAT_VAL", out, h, s, v, f, colour)
+        return {node.outputs[0].identifier: out}
+
+    def _invert(self, node, stack):
+        out = self.b.register(width=3)
+        self.b.emit("INVERT", out, self._in(node, "Fac", 1, stack), self._in(node, "Color", 3, stack))
+        return {node.outputs[0].identifier: out}
+
+    def _brightcontrast(self, node, stack):
+        out = self.b.register(width=3)
+        self.b.emit("BRIGHT_CONTRAST", out, self._in(node, "Color", 3, stack), self._in(node, "Bright", 1, stack),
+                    self._in(node, "Contrast", 1, stack))
+        return {node.outputs[0].identifier: out}
+
+    def _gamma(self, node, stack):
+        out = self.b.register(width=3)
+        self.b.emit("GAMMA", out, self._in(node, "Color", 3, stack), self._in(node, "Gamma", 1, stack))
+        return {node.outputs[0].identifier: out}
+
+    def _rgbtobw(self, node, stack):
+        out = self.b.register()
+        self.b.emit("RGB_TO_BW", out, self._in(node, "Color", 3, stack))
+        return {node.outputs[0].identifier: out}
+
+    def _separate(self, node, stack, name, mode="RGB"):
+        v = self._in(node, name, 3, stack)
+        if mode == "HSV":
+            hsv = self.b.register(width=3)
+            self.b.emit("RGB_TO_HSV", hsv, v)
+            v = hsv
+        elif mode != "RGB":
+            raise Unsupported(node, f"{mode} mode")
+        # The three outputs are the vector's own registers.
+        return {s.identifier: v + k for k, s in enumerate(node.outputs[:3])}
+
+    def _combine(self, node, stack, mode="RGB"):
+        x, y, z = (self.input(node.inputs[k], 1, stack) for k in range(3))
+        out = self.b.register(width=3)
+        self.b.emit("COMBINE", out, x, y, z)
+        if mode == "HSV":
+            rgb = self.b.register(width=3)
+            self.b.emit("HSV_TO_RGB", rgb, out)
+            out = rgb
+        elif mode != "RGB":
+            raise Unsupported(node, f"{mode} mode")
+        return {node.outputs[0].identifier: out}
+
+    def _separate_color(self, node, stack):
+        return self._separate(node, stack, "Color", node.mode)
+
+    def _combine_color(self, node, stack):
+        return self._combine(node, stack, node.mode)
+
+    def _sepxyz(self, node, stack):
+        return self._separate(node, stack, "Vector")
+
+    def _combxyz(self, node, stack):
+        return self._combine(node, stack)
+
+    def _seprgb(self, node, stack):
+        return self._separate(node, stack, "Image")
+
+    def _combrgb(self, node, stack):
+        return self._combine(node, stack)
+
+    def _mapping(self, node, stack):
+        v = self._in(node, "Vector", 3, stack)
+        kind = node.vector_type
+        loc = self._in(node, "Location", 3, stack) if kind in ("POINT", "TEXTURE") else self.const((0, 0, 0), 3)
+        rot, scale = self._in(node, "Rotation", 3, stack), self._in(node, "Scale", 3, stack)
+        out = self.b.register(width=3)
+        self.b.emit("MAPPING", out, v, loc, rot, scale, nodes.MAPPINGS.index(kind))
+        return {node.outputs[0].identifier: out}
+
+    def _fresnel(self, node, stack):
+        out = self.b.register()
+        normal = self._vector_or(node, stack, "NORMAL", "Normal")
+        self.b.emit("FRESNEL", out, self._in(node, "IOR", 1, stack), normal)
+        return {node.outputs[0].identifier: out}
+
+    def _layer_weight(self, node, stack):
+        fresnel, facing = self.b.register(), self.b.register()
+        normal = self._vector_or(node, stack, "NORMAL", "Normal")
+        self.b.emit("LAYER_WEIGHT", fresnel, facing, self._in(node, "Blend", 1, stack), normal)
+        return self._ids(node, {"Fresnel": fresnel, "Facing": facing})
+
+    def _normal_map(self, node, stack):
+        if node.space not in nodes.NORMAL_MAP_SPACES:
+            raise Unsupported(node, f"{node.space.replace('_', ' ').lower()} space")
+        out = self.b.register(width=3)
+        self.b.emit("NORMAL_MAP", out, self._in(node, "Color", 3, stack), self._in(node, "Strength", 1, stack),
+                    nodes.NORMAL_MAP_SPACES.index(node.space))
+        return {node.outputs[0].identifier: out}
+
+    # Textures
+    def _tex_image(self, node, stack):
+        image = node.image
+        if node.projection != "FLAT":
+            raise Unsupported(node, f"{node.projection.lower()} projection")
+        if image is not None and image.source not in ("FILE", "GENERATED"):
+            raise Unsupported(node, f"{image.source.lower()} images")
+        colour, alpha = self.b.register(width=3), self.b.register()
+        texture = _image_pixels(image, self.say) if image is not None else None
+        if texture is None:
+            what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
+            self.say(f": {what}; rendered magenta, as Cycles does")
+            self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
+            self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
+            return self._ids(node, {"Color": colour, "Alpha": alpha})
+        interpolation = node.interpolation
+        if interpolation == "Smart":
+            self.say(": an Image Texture's Smart interpolation is rendered as Cubic")
+            interpolation = "Cubic"
+        vector = self._vector_or(node, stack, "UV")
+        self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), nodes.INTERPOLATIONS.index(interpolation),
+                    nodes.EXTENSIONS.index(node.extension))
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _tex_checker(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("CHECKER", colour, fac, vector, self._in(node, "Color1", 3, stack),
+                    self._in(node, "Color2", 3, stack), self._in(node, "Scale", 1, stack))
+        return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_gradient(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("GRADIENT", colour, fac, vector, nodes.GRADIENTS.index(node.gradient_type))
+        return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_noise(self, node, stack):
+        if node.noise_dimensions != "3D":
+            raise Unsupported(node, f"{node.noise_dimensions} noise")
+        if getattr(node, "noise_type", "FBM") != "FBM":
+            raise Unsupported(node, f"{node.noise_type.replace('_', ' ').lower()} noise")
+        vector = self._vector_or(node, stack)
+        params = self.b.register()
+        for _ in range(4):
+            self.b.register()
+        for k, name in enumerate(("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")):
+            self.b.emit("COPY", params + k, self._in(node, name, 1, stack), 1)
+        fac, colour = self.b.register(), self.b.register(width=3)
+        self.b.emit("NOISE", fac, colour, vector, params, int(getattr(node, "normalize", True)),
+                    int(node.outputs["Color"].is_linked))
+        return self._ids(node, {"Fac": fac, "Color": colour})
+
+    def _params(self, node, stack, names, extra=()):
+        """Consecutive registers holding the float inputs `names`, then the constants `extra`
+        (a block operand: allocated together, before any input's own registers)."""
+        first = self.b.register()
+        for _ in names[1:]:
+            self.b.register()
+        for value in extra:
+            self.b.register(float(value))
+        for k, name in enumerate(names):
+            self.b.emit("COPY", first + k, self._in(node, name, 1, stack), 1)
+        return first
+
+    def _tex_voronoi(self, node, stack):
+        if node.voronoi_dimensions != "3D":
+            raise Unsupported(node, f"{node.voronoi_dimensions} Voronoi")
+        if node.feature != "F1":
+            raise Unsupported(node, f"its {node.feature.replace('_', ' ').title()} feature")
+        detail = node.inputs.get("Detail")
+        if detail is not None and (self.source(detail, stack) is not None or detail.default_value != 0):
+            raise Unsupported(node, "fractal Detail")
+        if getattr(node, "normalize", False):
+            raise Unsupported(node, "Normalize")
+        vector = self._vector_or(node, stack)
+        params = self._params(node, stack, ("Scale", "Exponent", "Randomness"))
+        distance, colour, position = self.b.register(), self.b.register(width=3), self.b.register(width=3)
+        self.b.emit("VORONOI", distance, colour, position, vector, params,
+                    nodes.VORONOI_METRICS.index(node.distance))
+        return self._ids(node, {"Distance": distance, "Color": colour, "Position": position})
+
+    def _tex_wave(self, node, stack):
+        if node.wave_type == "BANDS":
+            kind = "BANDS_" + node.bands_direction
+        else:
+            kind = "RINGS_" + node.rings_direction
+        vector = self._vector_or(node, stack)
+        params = self._params(node, stack, ("Scale", "Distortion", "Detail", "Detail Scale", "Detail Roughness"))
+        fac, colour = self.b.register(), self.b.register(width=3)
+        self.b.emit("WAVE", fac, vector, params, self._in(node, "Phase Offset", 1, stack), nodes.WAVE_KINDS.index(kind),
+                    nodes.WAVE_PROFILES.index(node.wave_profile))
+        self.b.emit("COMBINE", colour, fac, fac, fac)
+        return self._ids(node, {"Fac": fac, "Color": colour})
+
+    def _tex_magic(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("MAGIC", colour, fac, vector, self._in(node, "Scale", 1, stack),
+                    self._in(node, "Distortion", 1, stack), min(max(int(node.turbulence_depth), 0), 10))
+        return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_brick(self, node, stack):
+        vector = self._vector_or(node, stack)
+        colours = self.b.register(width=3)
+        self.b.register(width=3), self.b.register(width=3)
+        for k, name in enumerate(("Color1", "Color2", "Mortar")):
+            self.b.emit("COPY", colours + 3 * k, self._in(node, name, 3, stack), 3)
+        params = self._params(node, stack, ("Scale", "Mortar Size", "Mortar Smooth", "Bias", "Brick Width",
+                                            "Row Height"), extra=(node.offset, node.squash))
+        colour, fac = self.b.register(width=3), self.b.register()
+        self.b.emit("BRICK", colour, fac, vector, colours, params, min(max(int(node.offset_frequency), 0), 99),
+                    min(max(int(node.squash_frequency), 0), 99))
+        return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_white_noise(self, node, stack):
+        dims = {"1D": 1, "2D": 2, "3D": 3}.get(node.noise_dimensions)
+        if dims is None:
+            raise Unsupported(node, f"{node.noise_dimensions} noise")
+        socket = node.inputs["W"] if dims == 1 else node.inputs["Vector"]
+        vector = self.input(socket, 3, stack)  # W (1-D) fills all three: the first is read
+        value, colour = self.b.register(), self.b.register(width=3)
+        self.b.emit("WHITE_NOISE", value, colour, vector, dims)
+        return self._ids(node, {"Value": value, "Color": colour})
+
+
+def _image_pixels(image, say):
+    """An image's pixels as a nodes.Image (None when Blender cannot load it), read once and
+    kept while its identity, size, colour space and alpha mode stay (re-read every frame
+    while it has unsaved changes: being painted)."""
+    settings = image.colorspace_settings.name
+    key = (image.name_full, image.as_pointer(), tuple(image.size), image.is_float, settings, image.alpha_mode,
+           image.filepath_raw, image.packed_file is not None)
+    if key in _IMAGES and not image.is_dirty:
+        return _IMAGES[key]
+    w, h = image.size
+    if not w or not h or (image.source == "FILE" and not image.has_data and not _try_load(image)):
+        return None
+    w, h = image.size
+    flat = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(flat)
+    pixels = flat.reshape(h, w, 4)
+    if image.alpha_mode == "NONE":  # Cycles ignores the image's alpha
+        pixels[..., 3] = 1.0
+    if settings not in _SRGB + _LINEAR:
+        say(f": image '{image.name}' is in the '{settings}' colour space, read as "
+            f"{'sRGB' if not image.is_float else 'scene linear'}")
+    if image.is_float:
+        if settings in _SRGB:  # a float image holding sRGB-encoded values: decode them
+            rgb = pixels[..., :3]
+            pixels[..., :3] = np.where(rgb < 0.04045, rgb / 12.92, ((np.maximum(rgb, 0) + 0.055) / 1.055) ** 2.4)
+        texture = nodes.Image(pixels)
+    else:
+        data = np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8)
+        texture = nodes.Image(data, srgb=settings not in _LINEAR)
+    # Keep only the current version of each image (its old pixels are garbage).
+    for old in [k for k in _IMAGES if k[:2] == key[:2]]:
+        del _IMAGES[old]
+    _IMAGES[key] = texture
+    return texture
+
+
+def _try_load(image) -> bool:
+    """Asks Blender to load the image (from disk or its packed copy); whether it has pixels."""
+    try:
+        image.pixels[0]  # reading a pixel loads the buffer
+    except (IndexError, RuntimeError):
+        return False
+    return bool(image.has_data) and image.size[0] > 0
+
+
+# Which inputs of each shader feed which material field (the engine's Material fields).
+SHADER_INPUTS = {
+    "BSDF_PRINCIPLED": {"base_colour": "Base Color", "metallic": "Metallic", "roughness": "Roughness", "ior": "IOR",
+                        "transmission": "Transmission Weight", "alpha": "Alpha",
+                        "specular_level": "Specular IOR Level", "emission": ("Emission Color", "Emission Strength"),
+                        "normal": "Normal"},
+    "BSDF_DIFFUSE": {"base_colour": "Color", "normal": "Normal"},
+    "BSDF_GLOSSY": {"base_colour": "Color", "roughness": "Roughness", "normal": "Normal"},
+    "BSDF_METALLIC": {"base_colour": "Base Color", "roughness": "Roughness", "normal": "Normal"},
+    "BSDF_GLASS": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR", "normal": "Normal"},
+    "BSDF_REFRACTION": {"base_colour": "Color", "roughness": "Roughness", "ior": "IOR", "normal": "Normal"},
+    "EMISSION": {"emission": ("Color", "Strength")},
+}
+
+
+def compile_shader(node, say, skip=()) -> tuple:
+    """(Program or None, the input sockets it drives) for a shader node's linked inputs
+    (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads).
+    None when nothing needs a program: such a material costs nothing more to render."""
+    fields = SHADER_INPUTS.get(node.type, {})
+    compiler = Compiler(say)
+    driven = []
+    for field, names in fields.items():
+        if isinstance(names, tuple):  # emission: colour x strength
+            colour, strength = (node.inputs[n] for n in names)
+            if not any(compiler.source(s, ()) is not None for s in (colour, strength)):
+                continue
+            c, s = compiler.input(colour, 3), compiler.input(strength, 1)
+            out = compiler.b.register(width=3)
+            compiler.b.emit("SCALE", out, c, s)
+            compiler.b.output(field, out)
+            driven += [colour, strength]
+            continue
+        if names not in node.inputs:
+            continue
+        socket = node.inputs[names]
+        if socket in skip or compiler.source(socket, ()) is None:
+            continue
+        compiler.b.output(field, compiler.input(socket, nodes.OUTPUTS[field]))
+        driven.append(socket)
+    if not driven:
+        return None, []
+    return compiler.b.program(), driven

@@ -1,0 +1,970 @@
+// The shader-node interpreter. Node definitions follow Blender's manual and Cycles' SVM (read
+// to learn them; this is a separate implementation): each case's comment names the node.
+#include "nodes/program.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "base/errors.h"
+
+namespace splat {
+
+namespace {
+
+constexpr float kPi = 3.14159265358979323846f;
+
+// ----------------------------------------------------------------------------------------
+// Operand kinds, per opcode, for validate(): a register of width 1 or 3, an enumeration
+// below a bound, a table, or unused.
+enum Kind : int8_t { kNone = 0, kR1, kR3, kR5, kEnum, kRW };  // kRW: `bound` consecutive registers
+struct Layout {
+    Kind kind[kNodeWidth - 1];
+    int32_t bound[kNodeWidth - 1];  // kEnum: values 0..bound-1
+};
+
+constexpr int kMathOps = 41, kVectorOps = 29, kBlends = 19;  // render/nodes.py MATH_OPS, VECTOR_OPS, BLENDS
+
+const Layout &layout(Op op) {
+    static const Layout table[int(Op::Count)] = {
+        /* Global */ {{kR3, kEnum}, {0, int32_t(Global::Count)}},
+        /* Copy */ {{kR1, kR1, kEnum}, {0, 0, 4}},
+        /* Math */ {{kR1, kR1, kR1, kR1, kEnum, kEnum}, {0, 0, 0, 0, kMathOps, 2}},
+        /* VectorMath */ {{kR3, kR1, kR3, kR3, kR3, kR1, kEnum}, {0, 0, 0, 0, 0, 0, kVectorOps}},
+        /* MixFloat */ {{kR1, kR1, kR1, kR1, kEnum}, {0, 0, 0, 0, 2}},
+        /* MixVector */ {{kR3, kR3, kR3, kR3, kEnum, kEnum}, {0, 0, 0, 0, 2, 2}},
+        /* MixColour */ {{kR3, kR1, kR3, kR3, kEnum, kEnum, kEnum}, {0, 0, 0, 0, kBlends, 2, 2}},
+        /* MapRange */ {{kR1, kR1, kR5, kEnum, kEnum}, {0, 0, 0, 4, 2}},
+        /* Clamp */ {{kR1, kR1, kR1, kR1, kEnum}, {0, 0, 0, 0, 2}},
+        /* Ramp (checked apart) */ {{kR3, kR1, kR1, kNone, kNone, kEnum}, {0, 0, 0, 0, 0, 2}},
+        /* HueSatVal */ {{kR3, kR1, kR1, kR1, kR1, kR3}, {}},
+        /* Invert */ {{kR3, kR1, kR3}, {}},
+        /* BrightContrast */ {{kR3, kR3, kR1, kR1}, {}},
+        /* Gamma */ {{kR3, kR3, kR1}, {}},
+        /* RGBToBW */ {{kR1, kR3}, {}},
+        /* Combine */ {{kR3, kR1, kR1, kR1}, {}},
+        /* RGBToHSV */ {{kR3, kR3}, {}},
+        /* HSVToRGB */ {{kR3, kR3}, {}},
+        /* Mapping */ {{kR3, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
+        /* Checker */ {{kR3, kR1, kR3, kR3, kR3, kR1}, {}},
+        /* Gradient */ {{kR3, kR1, kR3, kEnum}, {0, 0, 0, 7}},
+        /* Fresnel */ {{kR1, kR1, kR3}, {}},
+        /* LayerWeight */ {{kR1, kR1, kR1, kR3}, {}},
+        /* Noise */ {{kR1, kR3, kR3, kR5, kEnum, kEnum}, {0, 0, 0, 0, 2, 2}},
+        /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
+        /* Scale */ {{kR3, kR3, kR1}, {}},
+        /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
+        /* Image (image checked apart) */
+        {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
+                                                int32_t(ImageExtension::Count)}},
+        /* Voronoi */ {{kR1, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
+        /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
+        /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
+        /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
+        /* Brick */ {{kR3, kR1, kR3, kRW, kRW, kEnum, kEnum}, {0, 0, 0, 9, 8, 100, 100}},
+    };
+    return table[int(op)];
+}
+
+inline float saturate(float x) { return std::fmin(std::fmax(x, 0.f), 1.f); }
+inline float lerp(float a, float b, float t) { return (1.f - t) * a + t * b; }
+inline Vec3 lerp(Vec3 a, Vec3 b, float t) { return a * (1.f - t) + b * t; }
+inline Vec3 load3(const float *r, int32_t i) { return {r[i], r[i + 1], r[i + 2]}; }
+inline void store3(float *r, int32_t i, Vec3 v) { r[i] = v.x, r[i + 1] = v.y, r[i + 2] = v.z; }
+inline float fract(float x) { return x - std::floor(x); }
+inline float safe_divide(float a, float b) { return b != 0.f ? a / b : 0.f; }
+inline Vec3 vsaturate(Vec3 v) { return {saturate(v.x), saturate(v.y), saturate(v.z)}; }
+
+// Rec. 709 luminance: the scene-linear colour space's Y (Blender's default, and Cycles'
+// rgb_to_y for it) -- RGB to BW and colour-to-float conversions.
+inline float luma(Vec3 c) { return 0.2126729f * c.x + 0.7151522f * c.y + 0.0721750f * c.z; }
+
+// ----------------------------------------------------------------------------------------
+// Math node (Blender's operations, in render/nodes.py MATH_OPS order).
+
+float wrap(float value, float max, float min) {
+    const float range = max - min;
+    return range != 0.f ? value - range * std::floor((value - min) / range) : min;
+}
+float pingpong(float a, float b) { return b != 0.f ? std::fabs(fract((a - b) / (b * 2.f)) * b * 2.f - b) : 0.f; }
+float smooth_min(float a, float b, float k) {
+    if (k == 0.f) return std::fmin(a, b);
+    const float h = std::fmax(k - std::fabs(a - b), 0.f) / k;
+    return std::fmin(a, b) - h * h * h * k * (1.f / 6.f);
+}
+
+float math(int op, float a, float b, float c) {
+    switch (op) {
+        case 0: return a + b;                                           // ADD
+        case 1: return a - b;                                           // SUBTRACT
+        case 2: return a * b;                                           // MULTIPLY
+        case 3: return safe_divide(a, b);                               // DIVIDE
+        case 4: return a * b + c;                                       // MULTIPLY_ADD
+        case 5:                                                         // POWER
+            if (a >= 0.f) return std::pow(a, b);
+            return std::fmod(b, 1.f) == 0.f ? std::pow(a, b) : 0.f;    // a real result only
+        case 6: return (a > 0.f && b > 0.f) ? safe_divide(std::log(a), std::log(b)) : 0.f;  // LOGARITHM
+        case 7: return a > 0.f ? std::sqrt(a) : 0.f;                    // SQRT
+        case 8: return a > 0.f ? 1.f / std::sqrt(a) : 0.f;              // INVERSE_SQRT
+        case 9: return std::fabs(a);                                    // ABSOLUTE
+        case 10: return std::exp(a);                                    // EXPONENT
+        case 11: return std::fmin(a, b);                                // MINIMUM
+        case 12: return std::fmax(a, b);                                // MAXIMUM
+        case 13: return a < b ? 1.f : 0.f;                              // LESS_THAN
+        case 14: return a > b ? 1.f : 0.f;                              // GREATER_THAN
+        case 15: return a > 0.f ? 1.f : a < 0.f ? -1.f : 0.f;           // SIGN
+        case 16: return std::fabs(a - b) <= std::fmax(c, 1e-5f) ? 1.f : 0.f;  // COMPARE (epsilon at least Blender's)
+        case 17: return smooth_min(a, b, c);                            // SMOOTH_MIN
+        case 18: return -smooth_min(-a, -b, c);                         // SMOOTH_MAX
+        case 19: return std::floor(a + 0.5f);                           // ROUND
+        case 20: return std::floor(a);                                  // FLOOR
+        case 21: return std::ceil(a);                                   // CEIL
+        case 22: return std::trunc(a);                                  // TRUNCATE
+        case 23: return a - std::floor(a);                              // FRACT
+        case 24: return b != 0.f ? std::fmod(a, b) : 0.f;               // MODULO (truncated)
+        case 25: return b != 0.f ? a - std::floor(a / b) * b : 0.f;    // FLOORED_MODULO
+        case 26: return wrap(a, b, c);                                  // WRAP (value, max, min)
+        case 27: return std::floor(safe_divide(a, b)) * b;              // SNAP
+        case 28: return pingpong(a, b);                                 // PINGPONG
+        case 29: return std::sin(a);                                    // SINE
+        case 30: return std::cos(a);                                    // COSINE
+        case 31: return std::tan(a);                                    // TANGENT
+        case 32: return std::asin(std::fmin(std::fmax(a, -1.f), 1.f));  // ARCSINE (clamped input)
+        case 33: return std::acos(std::fmin(std::fmax(a, -1.f), 1.f));  // ARCCOSINE
+        case 34: return std::atan(a);                                   // ARCTANGENT
+        case 35: return std::atan2(a, b);                               // ARCTAN2
+        case 36: return std::sinh(a);                                   // SINH
+        case 37: return std::cosh(a);                                   // COSH
+        case 38: return std::tanh(a);                                   // TANH
+        case 39: return a * (kPi / 180.f);                              // RADIANS
+        default: return a * (180.f / kPi);                              // DEGREES
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Vector Math node (render/nodes.py VECTOR_OPS order); value: the float output.
+
+Vec3 vfloor(Vec3 a) { return {std::floor(a.x), std::floor(a.y), std::floor(a.z)}; }
+
+void vector_math(int op, Vec3 a, Vec3 b, Vec3 c, float s, Vec3 *v, float *f) {
+    *v = Vec3(), *f = 0.f;
+    switch (op) {
+        case 0: *v = a + b; break;                                       // ADD
+        case 1: *v = a - b; break;                                       // SUBTRACT
+        case 2: *v = a * b; break;                                       // MULTIPLY
+        case 3: *v = {safe_divide(a.x, b.x), safe_divide(a.y, b.y), safe_divide(a.z, b.z)}; break;  // DIVIDE
+        case 4: *v = a * b + c; break;                                   // MULTIPLY_ADD
+        case 5: *v = cross(a, b); break;                                 // CROSS_PRODUCT
+        case 6: {                                                        // PROJECT (a onto b)
+            const float bb = dot(b, b);
+            *v = bb != 0.f ? b * (dot(a, b) / bb) : Vec3();
+            break;
+        }
+        case 7: {                                                        // REFLECT (a about the normal b)
+            const Vec3 n = normalize(b);
+            *v = a - n * (2.f * dot(n, a));
+            break;
+        }
+        case 8: {                                                        // REFREACT (a through normal b, eta s)
+            const Vec3 n = normalize(b);
+            const float d = dot(n, a), k = 1.f - s * s * (1.f - d * d);
+            *v = k < 0.f ? Vec3() : a * s - n * (s * d + std::sqrt(k));
+            break;
+        }
+        case 9: *v = dot(c, b) < 0.f ? a : a * -1.f; break;             // FACEFORWARD (a, incident b, reference c)
+        case 10: *f = dot(a, b); break;                                  // DOT_PRODUCT
+        case 11: *f = length(a - b); break;                              // DISTANCE
+        case 12: *f = length(a); break;                                  // LENGTH
+        case 13: *v = a * s; break;                                      // SCALE
+        case 14: *v = normalize(a); break;                               // NORMALIZE
+        case 15: *v = vabs(a); break;                                    // ABSOLUTE
+        case 16:                                                         // POWER (per component, as Math)
+            *v = {math(5, a.x, b.x, 0), math(5, a.y, b.y, 0), math(5, a.z, b.z, 0)};
+            break;
+        case 17: *v = {math(15, a.x, 0, 0), math(15, a.y, 0, 0), math(15, a.z, 0, 0)}; break;  // SIGN
+        case 18: *v = vmin(a, b); break;                                 // MINIMUM
+        case 19: *v = vmax(a, b); break;                                 // MAXIMUM
+        case 20: *v = vfloor(a); break;                                  // FLOOR
+        case 21: *v = {std::ceil(a.x), std::ceil(a.y), std::ceil(a.z)}; break;  // CEIL
+        case 22: *v = a - vfloor(a); break;                              // FRACTION
+        case 23: *v = {math(24, a.x, b.x, 0), math(24, a.y, b.y, 0), math(24, a.z, b.z, 0)}; break;  // MODULO
+        case 24: *v = {wrap(a.x, b.x, c.x), wrap(a.y, b.y, c.y), wrap(a.z, b.z, c.z)}; break;  // WRAP
+        case 25: *v = {math(27, a.x, b.x, 0), math(27, a.y, b.y, 0), math(27, a.z, b.z, 0)}; break;  // SNAP
+        default: {                                                       // SINE, COSINE, TANGENT
+            const int m = 29 + (op - 26);
+            *v = {math(m, a.x, 0, 0), math(m, a.y, 0, 0), math(m, a.z, 0, 0)};
+        }
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Mix node's colour blend modes (render/nodes.py BLENDS order), factor t.
+
+Vec3 blend(int mode, float t, Vec3 a, Vec3 b) {
+    const float tm = 1.f - t;
+    switch (mode) {
+        case 0: return lerp(a, b, t);                                    // MIX
+        case 1: return lerp(a, vmin(a, b), t);                           // DARKEN
+        case 2: return lerp(a, a * b, t);                                // MULTIPLY
+        case 3: {                                                        // BURN
+            Vec3 o = a;
+            for (int i = 0; i < 3; ++i) {
+                const float tmp = tm + t * b[i];
+                o[i] = tmp <= 0.f ? 0.f : saturate(1.f - (1.f - a[i]) / tmp);
+            }
+            return o;
+        }
+        case 4: return lerp(a, vmax(a, b), t);                           // LIGHTEN
+        case 5: {                                                        // SCREEN
+            Vec3 o;
+            for (int i = 0; i < 3; ++i) o[i] = 1.f - (tm + t * (1.f - b[i])) * (1.f - a[i]);
+            return o;
+        }
+        case 6: {                                                        // DODGE
+            Vec3 o = a;
+            for (int i = 0; i < 3; ++i)
+                if (a[i] != 0.f) {
+                    const float tmp = 1.f - t * b[i];
+                    o[i] = tmp <= 0.f ? 1.f : std::fmin(a[i] / tmp, 1.f);
+                }
+            return o;
+        }
+        case 7: return a + b * t;                                        // ADD
+        case 8: {                                                        // OVERLAY
+            Vec3 o;
+            for (int i = 0; i < 3; ++i)
+                o[i] = a[i] < 0.5f ? a[i] * (tm + 2.f * t * b[i]) : 1.f - (tm + 2.f * t * (1.f - b[i])) * (1.f - a[i]);
+            return o;
+        }
+        case 9: {                                                        // SOFT_LIGHT
+            const Vec3 one(1, 1, 1);
+            const Vec3 screen = one - (one - b) * (one - a);
+            return a * tm + ((one - a) * b * a + a * screen) * t;
+        }
+        case 10: return a + (b * 2.f - Vec3(1, 1, 1)) * t;               // LINEAR_LIGHT
+        case 11: return lerp(a, vabs(a - b), t);                         // DIFFERENCE
+        case 12: return vmax(lerp(a, a + b - a * b * 2.f, t), Vec3());   // EXCLUSION
+        case 13: return a - b * t;                                       // SUBTRACT
+        case 14: {                                                       // DIVIDE
+            Vec3 o = a;
+            for (int i = 0; i < 3; ++i)
+                if (b[i] != 0.f) o[i] = tm * a[i] + t * a[i] / b[i];
+            return o;
+        }
+        case 15: {                                                       // HUE
+            const Vec3 h2 = rgb_to_hsv(b);
+            if (h2.y == 0.f) return a;
+            Vec3 h = rgb_to_hsv(a);
+            h.x = h2.x;
+            return lerp(a, hsv_to_rgb(h), t);
+        }
+        case 16: {                                                       // SATURATION
+            Vec3 h = rgb_to_hsv(a);
+            if (h.y == 0.f) return a;
+            h.y = tm * h.y + t * rgb_to_hsv(b).y;
+            return hsv_to_rgb(h);
+        }
+        case 17: {                                                       // COLOR
+            const Vec3 h2 = rgb_to_hsv(b);
+            if (h2.y == 0.f) return a;
+            Vec3 h = rgb_to_hsv(a);
+            h.x = h2.x, h.y = h2.y;
+            return lerp(a, hsv_to_rgb(h), t);
+        }
+        default: {                                                       // VALUE
+            Vec3 h = rgb_to_hsv(a);
+            h.z = tm * h.z + t * rgb_to_hsv(b).z;
+            return hsv_to_rgb(h);
+        }
+    }
+}
+
+// ----------------------------------------------------------------------------------------
+// Map Range, Mapping, Fresnel.
+
+float smoothstep(float e0, float e1, float x) {
+    if (x < e0) return 0.f;
+    if (x >= e1) return 1.f;
+    const float t = (x - e0) / (e1 - e0);
+    return t * t * (3.f - 2.f * t);
+}
+float smootherstep(float e0, float e1, float x) {
+    const float t = saturate((x - e0) / (e1 - e0));
+    return t * t * t * (t * (t * 6.f - 15.f) + 10.f);
+}
+
+float map_range(float v, const float *p, int mode, bool clamp) {
+    const float from_min = p[0], from_max = p[1], to_min = p[2], to_max = p[3], steps = p[4];
+    if (from_max == from_min) return 0.f;
+    float f = (v - from_min) / (from_max - from_min);
+    if (mode == 1) f = steps > 0.f ? std::floor(f * (steps + 1.f)) / steps : 0.f;
+    else if (mode == 2)
+        f = from_min > from_max ? 1.f - smoothstep(from_max, from_min, v) : smoothstep(from_min, from_max, v);
+    else if (mode == 3)
+        f = from_min > from_max ? 1.f - smootherstep(from_max, from_min, v) : smootherstep(from_min, from_max, v);
+    float result = to_min + f * (to_max - to_min);
+    if (clamp && mode <= 1)
+        result = to_max > to_min ? std::fmin(std::fmax(result, to_min), to_max)
+                                 : std::fmin(std::fmax(result, to_max), to_min);
+    return result;
+}
+
+// Euler XYZ rotation (Blender's: X first, then Y, then Z), and its inverse.
+Vec3 rotate_xyz(Vec3 v, Vec3 e, bool inverse) {
+    const float cx = std::cos(e.x), sx = std::sin(e.x), cy = std::cos(e.y), sy = std::sin(e.y), cz = std::cos(e.z),
+                sz = std::sin(e.z);
+    // R = Rz Ry Rx, rows:
+    const float m[9] = {cy * cz, sy * sx * cz - cx * sz, sy * cx * cz + sx * sz,
+                        cy * sz, sy * sx * sz + cx * cz, sy * cx * sz - sx * cz,
+                        -sy,     cy * sx,                cy * cx};
+    if (inverse)
+        return {m[0] * v.x + m[3] * v.y + m[6] * v.z, m[1] * v.x + m[4] * v.y + m[7] * v.z,
+                m[2] * v.x + m[5] * v.y + m[8] * v.z};
+    return {m[0] * v.x + m[1] * v.y + m[2] * v.z, m[3] * v.x + m[4] * v.y + m[5] * v.z,
+            m[6] * v.x + m[7] * v.y + m[8] * v.z};
+}
+
+Vec3 mapping(int type, Vec3 v, Vec3 loc, Vec3 rot, Vec3 scale) {
+    switch (type) {
+        case 0: return rotate_xyz(v * scale, rot, false) + loc;                 // POINT
+        case 1: {                                                               // TEXTURE (the inverse of POINT)
+            const Vec3 r = rotate_xyz(v - loc, rot, true);
+            return {safe_divide(r.x, scale.x), safe_divide(r.y, scale.y), safe_divide(r.z, scale.z)};
+        }
+        case 2: return rotate_xyz(v * scale, rot, false);                       // VECTOR
+        default:                                                                // NORMAL
+            return normalize(rotate_xyz({safe_divide(v.x, scale.x), safe_divide(v.y, scale.y),
+                                         safe_divide(v.z, scale.z)}, rot, false));
+    }
+}
+
+// Fresnel reflectance of a dielectric for cos of the incidence and relative IOR eta.
+float fresnel_cos(float cosi, float eta) {
+    const float c = std::fabs(cosi);
+    float g = eta * eta - 1.f + c * c;
+    if (g <= 0.f) return 1.f;  // total internal reflection
+    g = std::sqrt(g);
+    const float a = (g - c) / (g + c), b = (c * (g + c) - 1.f) / (c * (g - c) + 1.f);
+    return 0.5f * a * a * (1.f + b * b);
+}
+
+// ----------------------------------------------------------------------------------------
+// Textures.
+
+float checker(Vec3 p) {
+    // Nudged as Blender does, so that integer coordinates (a plane at z = 0) fall on one
+    // side of the cell boundary the same way in both renderers.
+    auto cell = [](float x) { return std::abs(int(std::floor((x + 0.000001f) * 0.999999f))) % 2; };
+    return ((cell(p.x) == cell(p.y)) == (cell(p.z) == 1)) ? 1.f : 0.f;
+}
+
+float gradient(Vec3 p, int type) {
+    switch (type) {
+        case 0: return p.x;                                                     // LINEAR
+        case 1: { const float r = std::fmax(p.x, 0.f); return r * r; }          // QUADRATIC
+        case 2: { const float r = saturate(p.x), t = r * r; return 3.f * t - 2.f * t * r; }  // EASING
+        case 3: return (p.x + p.y) * 0.5f;                                      // DIAGONAL
+        case 4: return std::atan2(p.y, p.x) / (2.f * kPi) + 0.5f;               // RADIAL
+        case 5: { const float r = std::fmax(0.999999f - length(p), 0.f); return r * r; }  // QUADRATIC_SPHERE
+        default: return std::fmax(0.999999f - length(p), 0.f);                  // SPHERICAL
+    }
+}
+
+inline uint32_t rot(uint32_t x, int k) { return (x << k) | (x >> (32 - k)); }
+inline void final_mix(uint32_t &a, uint32_t &b, uint32_t &c) {  // Bob Jenkins' lookup3 final()
+    c ^= b, c -= rot(b, 14);
+    a ^= c, a -= rot(c, 11);
+    b ^= a, b -= rot(a, 25);
+    c ^= b, c -= rot(b, 16);
+    a ^= c, a -= rot(c, 4);
+    b ^= a, b -= rot(a, 14);
+    c ^= b, c -= rot(b, 24);
+}
+inline uint32_t float_bits(float f) {
+    uint32_t u;
+    std::memcpy(&u, &f, 4);
+    return u;
+}
+// lookup3 hashes of 1-3 words, as Blender seeds them (0xdeadbeef + words * 4 + 13).
+uint32_t hash_words(int n, uint32_t x, uint32_t y, uint32_t z) {
+    uint32_t a, b, c;
+    a = b = c = 0xdeadbeefu + (uint32_t(n) << 2) + 13u;
+    if (n >= 3) c += z;
+    if (n >= 2) b += y;
+    a += x;
+    final_mix(a, b, c);
+    return c;
+}
+inline float to_unit(uint32_t h) { return float(h) * (1.f / float(0xFFFFFFFFu)); }
+
+inline float fade(float t) { return t * t * t * (t * (t * 6.f - 15.f) + 10.f); }
+inline float grad3(uint32_t hash, float x, float y, float z) {
+    const uint32_t h = hash & 15u;
+    const float u = h < 8u ? x : y;
+    const float vt = (h == 12u || h == 14u) ? x : z;
+    const float v = h < 4u ? y : vt;
+    return ((h & 1u) ? -u : u) + ((h & 2u) ? -v : v);
+}
+
+// A point offset by a fixed pseudo-random amount per seed (for Noise's distortion and colour).
+Vec3 random_offset(float seed) {
+    auto h = [&](float k) { return 100.f + to_unit(hash_words(2, float_bits(seed), float_bits(k), 0)) * 100.f; };
+    return {h(0.f), h(1.f), h(2.f)};
+}
+
+float white_noise(Vec3 p, int dims, Vec3 *colour) {
+    const uint32_t x = float_bits(p.x), y = float_bits(p.y), z = float_bits(p.z);
+    auto hash = [&](uint32_t extra) {  // the vector, then one more word for each colour channel
+        if (dims == 1) return extra ? hash_words(2, x, extra, 0) : hash_words(1, x, 0, 0);
+        if (dims == 2) return extra ? hash_words(3, x, y, extra) : hash_words(2, x, y, 0);
+        if (!extra) return hash_words(3, x, y, z);
+        // Four words: lookup3's mix() over the first three, then the fourth.
+        uint32_t a, b, c;
+        a = b = c = 0xdeadbeefu + (4u << 2) + 13u;
+        a += x, b += y, c += z;
+        a -= c, a ^= rot(c, 4), c += b;
+        b -= a, b ^= rot(a, 6), a += c;
+        c -= b, c ^= rot(b, 8), b += a;
+        a -= c, a ^= rot(c, 16), c += b;
+        b -= a, b ^= rot(a, 19), a += c;
+        c -= b, c ^= rot(b, 4), b += a;
+        a += extra;
+        final_mix(a, b, c);
+        return c;
+    };
+    // Blender's colour: the value, then the vector with 1 and 2 appended as one more word.
+    const float value = to_unit(hash(0));
+    *colour = {value, to_unit(hash(float_bits(1.f))), to_unit(hash(float_bits(2.f)))};
+    return value;
+}
+
+float voronoi_distance(Vec3 a, Vec3 b, int metric, float exponent) {
+    const Vec3 d = vabs(a - b);
+    switch (metric) {
+        case 0: return length(a - b);                                   // EUCLIDEAN
+        case 1: return d.x + d.y + d.z;                                 // MANHATTAN
+        case 2: return std::fmax(d.x, std::fmax(d.y, d.z));             // CHEBYSHEV
+        default:                                                        // MINKOWSKI
+            return std::pow(std::pow(d.x, exponent) + std::pow(d.y, exponent) + std::pow(d.z, exponent),
+                            1.f / exponent);
+    }
+}
+
+// Blender's hash of an integer cell to three numbers in 0..1 (the PCG 3-D hash of Jarzynski
+// and Olano, "Hash Functions for GPU Rendering", 2020, on signed integers as Blender runs it:
+// wrapping products, an arithmetic shift).
+Vec3 hash_cell(int32_t x, int32_t y, int32_t z) {
+    uint32_t v[3] = {uint32_t(x), uint32_t(y), uint32_t(z)};
+    for (uint32_t &c : v) c = c * 1664525u + 1013904223u;
+    auto mix = [&] { v[0] += v[1] * v[2], v[1] += v[2] * v[0], v[2] += v[0] * v[1]; };
+    mix();
+    for (uint32_t &c : v) c ^= uint32_t(int32_t(c) >> 16);
+    mix();
+    constexpr float k = 1.f / float(0x7FFFFFFF);
+    return {float(v[0] & 0x7FFFFFFFu) * k, float(v[1] & 0x7FFFFFFFu) * k, float(v[2] & 0x7FFFFFFFu) * k};
+}
+
+// Voronoi F1 in 3-D: the nearest of the points scattered one per unit cell (offset by the
+// cell's hash x randomness): its distance, its cell's colour and its position.
+void voronoi_f1(Vec3 p, float exponent, float randomness, int metric, float *distance, Vec3 *colour, Vec3 *position) {
+    // Cells beyond int range would overflow: far coordinates are held where they still resolve.
+    for (int a = 0; a < 3; ++a) p[a] = std::fmin(std::fmax(p[a], -1e9f), 1e9f);
+    const int32_t cx = int32_t(std::floor(p.x)), cy = int32_t(std::floor(p.y)), cz = int32_t(std::floor(p.z));
+    const Vec3 local = p - Vec3(float(cx), float(cy), float(cz));
+    float best = 3.4e38f;
+    int32_t bi = 0, bj = 0, bk = 0;
+    Vec3 best_point;
+    for (int32_t k = -1; k <= 1; ++k)
+        for (int32_t j = -1; j <= 1; ++j)
+            for (int32_t i = -1; i <= 1; ++i) {
+                const Vec3 point = Vec3(float(i), float(j), float(k)) + hash_cell(cx + i, cy + j, cz + k) * randomness;
+                const float d = voronoi_distance(point, local, metric, exponent);
+                if (d < best) best = d, bi = i, bj = j, bk = k, best_point = point;
+            }
+    *distance = best;
+    *colour = hash_cell(cx + bi, cy + bj, cz + bk);
+    *position = best_point + Vec3(float(cx), float(cy), float(cz));
+}
+
+float wave(Vec3 p, const float *q, float phase, int kind, int profile) {
+    // q: scale (applied by the caller), distortion, detail, detail scale, detail roughness.
+    p = (p + Vec3(0.000001f, 0.000001f, 0.000001f)) * 0.999999f;  // Blender's nudge off unit coordinates
+    float n;
+    if (kind < 4) {
+        n = kind == 0 ? p.x * 20.f : kind == 1 ? p.y * 20.f : kind == 2 ? p.z * 20.f : (p.x + p.y + p.z) * 10.f;
+    } else {
+        Vec3 r = p;
+        if (kind == 4) r.x = 0.f;
+        else if (kind == 5) r.y = 0.f;
+        else if (kind == 6) r.z = 0.f;
+        n = length(r) * 20.f;
+    }
+    n += phase;
+    if (q[1] != 0.f)
+        n += q[1] * (noise_fbm(p * q[3], std::fmin(std::fmax(q[2], 0.f), 15.f), std::fmax(q[4], 0.f), 2.f, true) * 2.f - 1.f);
+    if (profile == 0) return 0.5f + 0.5f * std::sin(n - 0.5f * kPi);  // SIN
+    n /= 2.f * kPi;
+    if (profile == 1) return n - std::floor(n);                       // SAW
+    return std::fabs(n - std::floor(n + 0.5f));                       // TRI
+}
+
+Vec3 magic(Vec3 p, int depth, float distortion) {
+    float x = std::sin((p.x + p.y + p.z) * 5.f);
+    float y = std::cos((-p.x + p.y - p.z) * 5.f);
+    float z = -std::cos((-p.x - p.y + p.z) * 5.f);
+    const float d = distortion;
+    if (depth > 0) {
+        x *= d, y *= d, z *= d;
+        y = -std::cos(x - y + z) * d;
+        if (depth > 1) {
+            x = std::cos(x - y - z) * d;
+            if (depth > 2) {
+                z = std::sin(-x - y - z) * d;
+                if (depth > 3) {
+                    x = -std::cos(-x + y - z) * d;
+                    if (depth > 4) {
+                        y = -std::sin(-x + y + z) * d;
+                        if (depth > 5) {
+                            y = -std::cos(-x + y + z) * d;
+                            if (depth > 6) {
+                                x = std::cos(x + y + z) * d;
+                                if (depth > 7) {
+                                    z = std::sin(x + y - z) * d;
+                                    if (depth > 8) {
+                                        x = -std::cos(-x - y + z) * d;
+                                        if (depth > 9) y = -std::sin(x - y + z) * d;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if (d != 0.f) x /= 2.f * d, y /= 2.f * d, z /= 2.f * d;
+    return {0.5f - x, 0.5f - y, 0.5f - z};
+}
+
+// Blender's integer noise for a brick's tint (0..1).
+float brick_noise(uint32_t n) {
+    n = (n + 1013u) & 0x7fffffffu;
+    n = (n >> 13) ^ n;
+    const uint32_t nn = (n * (n * n * 60493u + 19990303u) + 1376312589u) & 0x7fffffffu;
+    return 0.5f * (float(nn) / 1073741824.f);
+}
+
+// Blender's Brick texture at p (already scaled): (tint, mortar) per its definition.
+void brick(Vec3 p, const float *q, int offset_frequency, int squash_frequency, float *tint, float *mortar) {
+    const float mortar_size = q[1], mortar_smooth = q[2], bias = q[3], row_height = q[5];
+    float brick_width = q[4];
+    const float offset_amount = q[6], squash_amount = q[7];
+    const int row = int(std::floor(p.y / row_height));
+    float offset = 0.f;
+    if (offset_frequency && squash_frequency) {
+        brick_width *= (row % squash_frequency) ? 1.f : squash_amount;
+        offset = (row % offset_frequency) ? 0.f : brick_width * offset_amount;
+    }
+    const int column = int(std::floor((p.x + offset) / brick_width));
+    const float x = (p.x + offset) - brick_width * float(column), y = p.y - row_height * float(row);
+    *tint = saturate(brick_noise((uint32_t(row) << 16) + (uint32_t(column) & 0xFFFFu)) + bias);
+    float d = std::fmin(std::fmin(x, y), std::fmin(brick_width - x, row_height - y));
+    if (d >= mortar_size) {
+        *mortar = 0.f;
+    } else if (mortar_smooth == 0.f) {
+        *mortar = 1.f;
+    } else {
+        d = 1.f - d / mortar_size;
+        const float t = saturate(d / mortar_smooth);
+        *mortar = t * t * (3.f - 2.f * t);
+    }
+}
+
+}  // namespace
+
+uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
+
+float perlin_signed(Vec3 p) {
+    // Blender repeats the noise every 100000 units (float precision), nudging beyond 1e6.
+    for (int i = 0; i < 3; ++i) {
+        const float correction = std::fabs(p[i]) >= 1000000.f ? 0.5f : 0.f;
+        p[i] = std::fmod(p[i], 100000.f) + correction;
+    }
+    const int X = int(std::floor(p.x)), Y = int(std::floor(p.y)), Z = int(std::floor(p.z));
+    const float fx = p.x - float(X), fy = p.y - float(Y), fz = p.z - float(Z);
+    const float u = fade(fx), v = fade(fy), w = fade(fz);
+    auto g = [&](int dx, int dy, int dz) {
+        return grad3(hash_words(3, uint32_t(X + dx), uint32_t(Y + dy), uint32_t(Z + dz)), fx - float(dx),
+                     fy - float(dy), fz - float(dz));
+    };
+    auto bimix = [](float v0, float v1, float v2, float v3, float x, float y) {
+        const float x1 = 1.f - x;
+        return (1.f - y) * (v0 * x1 + v1 * x) + y * (v2 * x1 + v3 * x);
+    };
+    const float r = (1.f - w) * bimix(g(0, 0, 0), g(1, 0, 0), g(0, 1, 0), g(1, 1, 0), u, v) +
+                    w * bimix(g(0, 0, 1), g(1, 0, 1), g(0, 1, 1), g(1, 1, 1), u, v);
+    // Blender's scale for 3-D Perlin noise (about -1..1), and 0 for a non-finite input.
+    return std::isfinite(r) ? 0.9820f * r : 0.f;
+}
+
+float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize) {
+    float scale = 1.f, amp = 1.f, max_amp = 0.f, sum = 0.f;
+    for (int i = 0; i <= int(detail); ++i) {
+        sum += perlin_signed(p * scale) * amp;
+        max_amp += amp;
+        amp *= roughness;
+        scale *= lacunarity;
+    }
+    const float rest = detail - std::floor(detail);
+    if (rest != 0.f) {
+        const float sum2 = sum + perlin_signed(p * scale) * amp;
+        return normalize ? lerp(0.5f * sum / max_amp + 0.5f, 0.5f * sum2 / (max_amp + amp) + 0.5f, rest)
+                         : lerp(sum, sum2, rest);
+    }
+    return normalize ? 0.5f * sum / max_amp + 0.5f : sum;
+}
+
+Vec3 rgb_to_hsv(Vec3 rgb) {
+    const float cmax = std::fmax(rgb.x, std::fmax(rgb.y, rgb.z));
+    const float cmin = std::fmin(rgb.x, std::fmin(rgb.y, rgb.z));
+    const float delta = cmax - cmin;
+    const float s = cmax != 0.f ? delta / cmax : 0.f;
+    float h = 0.f;
+    if (s != 0.f) {
+        const Vec3 c = (Vec3(cmax, cmax, cmax) - rgb) * (1.f / delta);
+        if (rgb.x == cmax) h = c.z - c.y;
+        else if (rgb.y == cmax) h = 2.f + c.x - c.z;
+        else h = 4.f + c.y - c.x;
+        h /= 6.f;
+        if (h < 0.f) h += 1.f;
+    }
+    return {h, s, cmax};
+}
+
+Vec3 hsv_to_rgb(Vec3 hsv) {
+    float h = hsv.x;
+    const float s = hsv.y, v = hsv.z;
+    if (s == 0.f) return {v, v, v};
+    if (h == 1.f) h = 0.f;
+    h *= 6.f;
+    const float i = std::floor(h), f = h - i;
+    const float p = v * (1.f - s), q = v * (1.f - s * f), t = v * (1.f - s * (1.f - f));
+    switch (int(i)) {
+        case 0: return {v, t, p};
+        case 1: return {q, v, p};
+        case 2: return {p, v, t};
+        case 3: return {p, q, v};
+        case 4: return {t, p, v};
+        default: return {v, p, q};
+    }
+}
+
+void NodeProgram::validate() {
+    const int64_t n = int64_t(data.size());
+    if (code.size() % kNodeWidth) throw InputError(name + ": node code is not whole instructions");
+    if (n > kMaxNodeRegisters) throw InputError(name + ": node program has too many registers");
+    for (size_t row = 0; row < code.size() / kNodeWidth; ++row) {
+        const int32_t *c = &code[row * kNodeWidth];
+        auto fail = [&](const char *what) {
+            throw InputError(name + ": node instruction " + std::to_string(row) + ": " + what);
+        };
+        if (c[0] < 0 || c[0] >= int32_t(Op::Count)) fail("unknown opcode");
+        const Op op = Op(c[0]);
+        const Layout &l = layout(op);
+        for (int k = 0; k < kNodeWidth - 1; ++k) {
+            const int32_t v = c[k + 1];
+            const int width = l.kind[k] == kR1   ? 1
+                              : l.kind[k] == kR3 ? 3
+                              : l.kind[k] == kR5 ? 5
+                              : l.kind[k] == kRW ? l.bound[k]
+                                                 : 0;
+            if (width && (v < 0 || int64_t(v) + width > n)) fail("register out of range");
+            if (l.kind[k] == kEnum && (v < 0 || v >= l.bound[k])) fail("value out of range");
+        }
+        if (op == Op::Copy && int64_t(c[2]) + c[3] > n) fail("copy out of range");
+        if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
+        if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
+        if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
+        if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
+            fail("image out of range");
+        if (op == Op::Curves && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n || int64_t(c[6]) + 2 > n))
+            fail("bad curve table");
+    }
+    for (int k = 0; k < int(Output::Count); ++k) {
+        const int32_t o = outputs[k];
+        const int width = (k == int(Output::Base) || k == int(Output::Emission) || k == int(Output::Normal)) ? 3 : 1;
+        if (o < -1 || (o >= 0 && int64_t(o) + width > n)) throw InputError(name + ": node output out of range");
+    }
+}
+
+namespace {
+
+// A table of `size` RGBA rows sampled evenly over 0..1, read at f (linearly between rows when
+// `interpolate`); outside 0..1 it holds its ends.
+void table_lookup(const float *t, int size, float f, bool interpolate, float *rgba) {
+    f = saturate(f) * float(size - 1);
+    const int i = std::min(std::max(int(f), 0), size - 1);
+    const float frac = f - float(i);
+    for (int k = 0; k < 4; ++k) {
+        rgba[k] = t[4 * i + k];
+        if (interpolate && frac > 0.f && i + 1 < size) rgba[k] = (1.f - frac) * rgba[k] + frac * t[4 * (i + 1) + k];
+    }
+}
+
+}  // namespace
+
+void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
+    std::memcpy(r, data.data(), data.size() * sizeof(float));
+    const size_t rows = code.size() / kNodeWidth;
+    for (size_t row = 0; row < rows; ++row) {
+        const int32_t *c = &code[row * kNodeWidth];
+        switch (Op(c[0])) {
+            case Op::Global: {
+                Vec3 v;
+                switch (Global(c[2])) {
+                    case Global::Position: v = sg.P; break;
+                    case Global::Normal: v = sg.N; break;
+                    case Global::TrueNormal: v = sg.Ng; break;
+                    case Global::Incoming: v = sg.I; break;
+                    case Global::Object: v = sg.object; break;
+                    case Global::ObjectNormal: v = sg.object_normal; break;
+                    case Global::Generated: v = sg.generated; break;
+                    case Global::UV: v = sg.uv; break;
+                    case Global::PointColour: v = sg.point_colour; break;
+                    case Global::PointAlpha: v = Vec3(sg.point_alpha, sg.point_alpha, sg.point_alpha); break;
+                    case Global::Reflection: v = sg.N * (2.f * dot(sg.N, sg.I)) - sg.I; break;
+                    case Global::Camera: v = sg.camera; break;
+                    default: v = Vec3(sg.backfacing, sg.backfacing, sg.backfacing); break;
+                }
+                store3(r, c[1], v);
+                break;
+            }
+            case Op::Copy: std::memmove(r + c[1], r + c[2], size_t(c[3]) * sizeof(float)); break;
+            case Op::Math: {
+                const float v = math(c[5], r[c[2]], r[c[3]], r[c[4]]);
+                r[c[1]] = c[6] ? saturate(v) : v;
+                break;
+            }
+            case Op::VectorMath: {
+                Vec3 v;
+                float f;
+                vector_math(c[7], load3(r, c[3]), load3(r, c[4]), load3(r, c[5]), r[c[6]], &v, &f);
+                store3(r, c[1], v);
+                r[c[2]] = f;
+                break;
+            }
+            case Op::MixFloat: {
+                const float t = c[5] ? saturate(r[c[2]]) : r[c[2]];
+                r[c[1]] = lerp(r[c[3]], r[c[4]], t);
+                break;
+            }
+            case Op::MixVector: {
+                Vec3 t = c[6] ? load3(r, c[2]) : Vec3(r[c[2]], r[c[2]], r[c[2]]);
+                if (c[5]) t = vsaturate(t);
+                const Vec3 a = load3(r, c[3]), b = load3(r, c[4]);
+                store3(r, c[1], a * (Vec3(1, 1, 1) - t) + b * t);
+                break;
+            }
+            case Op::MixColour: {
+                const float t = c[6] ? saturate(r[c[2]]) : r[c[2]];
+                const Vec3 v = blend(c[5], t, load3(r, c[3]), load3(r, c[4]));
+                store3(r, c[1], c[7] ? vsaturate(v) : v);
+                break;
+            }
+            case Op::MapRange: r[c[1]] = map_range(r[c[2]], r + c[3], c[4], c[5] != 0); break;
+            case Op::Clamp: {
+                float lo = r[c[3]], hi = r[c[4]];
+                if (c[5] == 1 && lo > hi) std::swap(lo, hi);
+                r[c[1]] = std::fmin(std::fmax(r[c[2]], lo), hi);
+                break;
+            }
+            case Op::Ramp: {
+                float rgba[4];
+                table_lookup(r + c[4], c[5], r[c[3]], c[6] != 0, rgba);
+                store3(r, c[1], {rgba[0], rgba[1], rgba[2]});
+                r[c[2]] = rgba[3];
+                break;
+            }
+            case Op::HueSatVal: {
+                const Vec3 in = load3(r, c[6]);
+                Vec3 h = rgb_to_hsv(in);
+                h.x = fract(h.x + r[c[2]] + 0.5f);
+                h.y = saturate(h.y * r[c[3]]);
+                h.z *= r[c[4]];
+                const float fac = r[c[5]];
+                store3(r, c[1], vmax(hsv_to_rgb(h) * fac + in * (1.f - fac), Vec3()));
+                break;
+            }
+            case Op::Invert: {
+                const Vec3 in = load3(r, c[3]);
+                store3(r, c[1], lerp(in, Vec3(1, 1, 1) - in, r[c[2]]));
+                break;
+            }
+            case Op::BrightContrast: {
+                const float a = 1.f + r[c[4]], b = r[c[3]] - r[c[4]] * 0.5f;
+                const Vec3 in = load3(r, c[2]);
+                store3(r, c[1], vmax(in * a + Vec3(b, b, b), Vec3()));
+                break;
+            }
+            case Op::Gamma: {
+                Vec3 v = load3(r, c[2]);
+                const float g = r[c[3]];
+                for (int i = 0; i < 3; ++i)
+                    if (v[i] > 0.f) v[i] = std::pow(v[i], g);
+                store3(r, c[1], v);
+                break;
+            }
+            case Op::RGBToBW: r[c[1]] = luma(load3(r, c[2])); break;
+            case Op::Combine: store3(r, c[1], {r[c[2]], r[c[3]], r[c[4]]}); break;
+            case Op::RGBToHSV: store3(r, c[1], rgb_to_hsv(load3(r, c[2]))); break;
+            case Op::HSVToRGB: store3(r, c[1], hsv_to_rgb(load3(r, c[2]))); break;
+            case Op::Mapping:
+                store3(r, c[1], mapping(c[6], load3(r, c[2]), load3(r, c[3]), load3(r, c[4]), load3(r, c[5])));
+                break;
+            case Op::Checker: {
+                const float f = checker(load3(r, c[3]) * r[c[6]]);
+                store3(r, c[1], f == 1.f ? load3(r, c[4]) : load3(r, c[5]));
+                r[c[2]] = f;
+                break;
+            }
+            case Op::Gradient: {
+                const float f = saturate(gradient(load3(r, c[3]), c[4]));
+                store3(r, c[1], {f, f, f});
+                r[c[2]] = f;
+                break;
+            }
+            case Op::Fresnel: {
+                float eta = std::fmax(r[c[2]], 1e-5f);
+                if (sg.backfacing != 0.f) eta = 1.f / eta;
+                r[c[1]] = fresnel_cos(dot(sg.I, load3(r, c[3])), eta);
+                break;
+            }
+            case Op::LayerWeight: {
+                float blend_ = r[c[3]];
+                const Vec3 n = load3(r, c[4]);
+                float eta = std::fmax(1.f - blend_, 1e-5f);
+                eta = sg.backfacing != 0.f ? eta : 1.f / eta;
+                r[c[1]] = fresnel_cos(dot(sg.I, n), eta);
+                float f = std::fabs(dot(sg.I, n));
+                if (blend_ != 0.5f) {
+                    blend_ = std::fmin(std::fmax(blend_, 0.f), 1.f - 1e-5f);
+                    blend_ = blend_ < 0.5f ? 2.f * blend_ : 0.5f / (1.f - blend_);
+                    f = std::pow(f, blend_);
+                }
+                r[c[2]] = 1.f - f;
+                break;
+            }
+            case Op::Noise: {
+                const float *p = r + c[4];  // scale, detail, roughness, lacunarity, distortion
+                Vec3 q = load3(r, c[3]) * p[0];
+                const float detail = std::fmin(std::fmax(p[1], 0.f), 15.f), rough = std::fmax(p[2], 0.f);
+                const float lac = p[3], dist = p[4];
+                const bool norm = c[5] != 0;
+                if (dist != 0.f)
+                    q = q + Vec3(perlin_signed(q + random_offset(0.f)), perlin_signed(q + random_offset(1.f)),
+                                 perlin_signed(q + random_offset(2.f))) * dist;
+                const float f = noise_fbm(q, detail, rough, lac, norm);
+                r[c[1]] = f;
+                if (c[6])  // the Color output is read: two more fractal sums at offset points
+                    store3(r, c[2], {f, noise_fbm(q + random_offset(3.f), detail, rough, lac, norm),
+                                     noise_fbm(q + random_offset(4.f), detail, rough, lac, norm)});
+                break;
+            }
+            case Op::WhiteNoise: {
+                Vec3 colour;
+                r[c[1]] = white_noise(load3(r, c[3]), c[4], &colour);
+                store3(r, c[2], colour);
+                break;
+            }
+            case Op::Scale: store3(r, c[1], load3(r, c[2]) * r[c[3]]); break;
+            case Op::Curves: {
+                // RGB Curves: each channel through its curve (table rows: r, g, b curves and the
+                // combined curve, sampled over the range [min, max]), then mixed by fac.
+                const float lo = r[c[6]], hi = r[c[6] + 1];
+                const float scale = hi > lo ? 1.f / (hi - lo) : 1.f;
+                const Vec3 in = load3(r, c[3]);
+                Vec3 out;
+                for (int i = 0; i < 3; ++i) {
+                    float rgba[4];
+                    table_lookup(r + c[4], c[5], (in[i] - lo) * scale, true, rgba);
+                    out[i] = rgba[i];
+                }
+                const float fac = r[c[2]];
+                store3(r, c[1], lerp(in, out, fac));
+                break;
+            }
+            case Op::Image: {
+                const Vec3 uv = load3(r, c[3]);
+                const RGBA t = images[size_t(c[4])]->sample(uv.x, uv.y, ImageInterpolation(c[5]), ImageExtension(c[6]));
+                store3(r, c[1], {t.r, t.g, t.b});
+                r[c[2]] = t.a;
+                break;
+            }
+            case Op::Voronoi: {
+                const Vec3 q = load3(r, c[5]);  // scale, exponent, randomness
+                float distance;
+                Vec3 colour, position;
+                voronoi_f1(load3(r, c[4]) * q.x, q.y, std::fmin(std::fmax(q.z, 0.f), 1.f), c[6], &distance, &colour,
+                           &position);
+                r[c[1]] = distance;
+                store3(r, c[2], colour);
+                store3(r, c[3], q.x != 0.f ? position * (1.f / q.x) : Vec3());
+                break;
+            }
+            case Op::Wave: {
+                const float *q = r + c[3];
+                r[c[1]] = wave(load3(r, c[2]) * q[0], q, r[c[4]], c[5], c[6]);
+                break;
+            }
+            case Op::Magic: {
+                const Vec3 v = magic(load3(r, c[3]) * r[c[4]], c[6], r[c[5]]);
+                store3(r, c[1], v);
+                r[c[2]] = (v.x + v.y + v.z) * (1.f / 3.f);
+                break;
+            }
+            case Op::NormalMap: {
+                // Blender's Normal Map node: colour (0..1) -> a vector in -1..1 in the chosen space.
+                const Vec3 c3 = load3(r, c[2]);
+                const Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
+                const bool back = sg.backfacing != 0.f;
+                Vec3 n;
+                if (c[4] == 0) {  // tangent space: the UV map's frame about the surface's own normal
+                    if (dot(sg.tangent, sg.tangent) == 0.f) {
+                        n = sg.N;
+                    } else {
+                        const Vec3 b = cross(sg.surface_normal, sg.tangent) * sg.tangent_sign;
+                        n = normalize(sg.tangent * v.x + b * v.y + sg.surface_normal * v.z);
+                        if (back) n = n * -1.f;  // as the normal the viewer sees is turned
+                    }
+                } else {  // object space (through the transform sg.to_world_normal), or world
+                    n = normalize(c[4] == 1 ? sg.object_to_world_normal(v) : v);
+                    if (back) n = n * -1.f;
+                }
+                const float strength = std::fmax(r[c[3]], 0.f);
+                if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * strength);
+                if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
+                store3(r, c[1], n);
+                break;
+            }
+            case Op::Brick: {
+                const float *q = r + c[5];
+                if (!(q[4] != 0.f) || !(q[5] != 0.f)) {  // a zero-sized brick: all mortar
+                    store3(r, c[1], load3(r, c[4] + 6));
+                    r[c[2]] = 1.f;
+                    break;
+                }
+                float tint, m;
+                brick(load3(r, c[3]) * q[0], q, c[6], c[7], &tint, &m);
+                Vec3 colour = load3(r, c[4]);
+                if (m != 1.f) colour = colour * (1.f - tint) + load3(r, c[4] + 3) * tint;
+                store3(r, c[1], colour * (1.f - m) + load3(r, c[4] + 6) * m);
+                r[c[2]] = m;
+                break;
+            }
+            default: break;  // unreachable: validate() refused it
+        }
+    }
+}
+
+}  // namespace splat

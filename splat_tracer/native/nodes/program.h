@@ -1,0 +1,131 @@
+// Shader-node programs: a material's node tree compiled once at export (by
+// splat_tracer/blender/export/nodes.py through splat_tracer/render/nodes.py) into a flat list of
+// instructions over a register file of floats, evaluated at every shading point a ray meets --
+// the idea of Cycles' SVM, with this engine's own encoding.
+//
+// Encoding (mirrored by render/nodes.py: OPS and the operand comments there are the one list):
+// - `code`: rows of kWidth int32, [opcode, operands...]; operands are register indices (a
+//   vec3 takes three consecutive registers), enumeration values or table offsets, as each
+//   opcode says.
+// - `data`: the registers' initial values: constants, the unlinked sockets' values and the
+//   read-only tables (Color Ramp stops, curves), so that a program is one copy and a loop.
+// - `outputs`: for each material input (Output below) the register that holds it, or -1 when
+//   the material's constant value stands.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "base/vec3.h"
+#include "nodes/image.h"
+
+namespace splat {
+
+constexpr int kNodeWidth = 8;          // int32 per instruction
+constexpr int kMaxNodeRegisters = 4096;  // a program's registers live on the stack (16 KiB)
+
+// What a program reads from the shading point (Texture Coordinate, Geometry, Attribute).
+struct ShaderGlobals {
+    Vec3 P;          // position, scene frame
+    Vec3 N;          // shading normal, towards the viewer's side (as Cycles flips a back face's)
+    Vec3 Ng;         // geometric normal, same side
+    Vec3 I;          // towards the viewer (unit)
+    Vec3 object;     // position in the object's space
+    Vec3 object_normal;  // N in the object's space (unit)
+    Vec3 generated;  // object-space position in the geometry's bounds, 0..1
+    Vec3 uv;         // the mesh's UV map (u, v, 0); 0 on clouds
+    Vec3 point_colour;   // the points' own colour (0 where there is none)
+    float point_alpha = 1.f;
+    float backfacing = 0.f;  // 1 when the ray met the back of the surface
+    Vec3 tangent;            // the UV map's tangent (unit, perpendicular to the surface's normal); 0 without
+    float tangent_sign = 1.f;  // the bitangent is tangent_sign x (normal x tangent)
+    Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
+    Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
+    // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
+    float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    Vec3 object_to_world_normal(Vec3 n) const {
+        const float *m = normal_matrix;
+        return {m[0] * n.x + m[1] * n.y + m[2] * n.z, m[3] * n.x + m[4] * n.y + m[5] * n.z,
+                m[6] * n.x + m[7] * n.y + m[8] * n.z};
+    }
+};
+
+enum class Global : int32_t {
+    Position = 0, Normal, TrueNormal, Incoming, Object, ObjectNormal, Generated, UV, PointColour, PointAlpha,
+    Reflection, Backfacing, Camera, Count
+};
+
+// The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
+enum class Output : int32_t {
+    Base = 0, Metallic, Roughness, IOR, Transmission, Alpha, Emission, SpecularLevel, Normal, Count
+};
+
+enum class Op : int32_t {
+    Global = 0,     // out, Global
+    Copy,           // out, in, width
+    Math,           // out, a, b, c, MathOp, clamp
+    VectorMath,     // out_vector, out_value, a, b, c, scale, VectorOp
+    MixFloat,       // out, fac, a, b, clamp_factor
+    MixVector,      // out, fac, a, b, clamp_factor, non_uniform (fac is a vec3 then)
+    MixColour,      // out, fac, a, b, Blend, clamp_factor, clamp_result
+    MapRange,       // out, value, from_min (5 consecutive: from_min from_max to_min to_max steps), mode, clamp
+    Clamp,          // out, value, min, max, mode (0 min-max, 1 range)
+    Ramp,           // out_colour, out_alpha, fac, table, size, interpolate (tables of rgba rows over 0..1)
+    HueSatVal,      // out, hue, saturation, value, fac, colour
+    Invert,         // out, fac, colour
+    BrightContrast, // out, colour, bright, contrast
+    Gamma,          // out, colour, gamma
+    RGBToBW,        // out, colour
+    Combine,        // out, x, y, z  (three floats into a vec3)
+    RGBToHSV,       // out, colour
+    HSVToRGB,       // out, colour (h, s, v)
+    Mapping,        // out, vector, location, rotation, scale, type (0 point, 1 texture, 2 vector, 3 normal)
+    Checker,        // out_colour, out_fac, vector, colour1, colour2, scale
+    Gradient,       // out_colour, out_fac, vector, type
+    Fresnel,        // out, ior, normal
+    LayerWeight,    // out_fresnel, out_facing, blend, normal
+    Noise,          // out_fac, out_colour, vector, params (scale detail roughness lacunarity distortion), normalize,
+                    // colour (0: the Color output is not read, not computed)
+    WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
+    Scale,          // out, vector, factor (vec3 x float)
+    Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
+    Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
+    Voronoi,        // out_distance, out_colour, out_position, vector, params (scale exponent randomness), metric
+    Wave,           // out_fac, vector, params (scale distortion detail detail_scale detail_roughness), phase, kind, profile
+                    // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
+    Magic,          // out_colour, out_fac, vector, scale, distortion, depth
+    NormalMap,      // out, colour, strength, space (0 tangent, 1 object, 2 world)
+    Brick,          // out_colour, out_fac, vector, colours (9: colour 1, colour 2, mortar), params (8: scale,
+                    // mortar size, mortar smooth, bias, brick width, row height, offset, squash),
+                    // offset frequency, squash frequency
+    Count
+};
+
+struct NodeProgram {
+    std::vector<int32_t> code;  // rows of kNodeWidth
+    std::vector<float> data;    // initial registers
+    int32_t outputs[int(Output::Count)];
+    std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
+    bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
+    bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
+    std::string name;           // the material's, for errors
+
+    // Checks every instruction's operands against the register file (and enumerations),
+    // so that evaluation never reads or writes outside it; throws InputError naming the row.
+    void validate();
+    // Runs the program at one shading point; `r` holds data.size() floats and receives the
+    // registers (the outputs are read from there).
+    void run(const ShaderGlobals &sg, float *r) const;
+};
+
+// Blender's colour helpers, shared by the nodes and their tests.
+Vec3 rgb_to_hsv(Vec3 rgb);
+Vec3 hsv_to_rgb(Vec3 hsv);
+// Blender's Perlin noise in 3-D, signed (about -1..1) and its fractal sum; Cycles' definitions.
+float perlin_signed(Vec3 p);
+float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize);
+uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
+
+}  // namespace splat

@@ -1,0 +1,178 @@
+"""Shader-node programs: a material's node tree as the native evaluator runs it.
+
+Blender-free: `blender/export/nodes.py` walks a node tree and writes the program through a
+`Builder`; the core (`native/nodes/program.h`, whose enumerations these tuples mirror: keep
+both in step) runs it at every shading point a ray meets, secondary rays included. The idea
+is Cycles' SVM: compiled once per material at export, a flat list of instructions over a
+register file of floats (a colour or a vector takes three consecutive registers).
+
+Instruction: (opcode, operands...) padded to WIDTH int32. Operands are register indices,
+enumeration values (an index into one of the tuples below) or, for tables, a register offset
+and a row count. `data`: every register's initial value (constants, unlinked sockets, tables).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+import numpy as np
+
+WIDTH = 8            # int32 per instruction (native kNodeWidth)
+MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at export
+
+# Opcodes, in the native Op order; the operand layout of each is in program.h.
+OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
+       "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
+       "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK")
+# What a program reads at the shading point (native Global), all vec3 registers.
+GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
+           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA")
+# The material inputs a program may drive (native Output), with their widths.
+OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
+           "emission": 3, "specular_level": 1, "normal": 3}
+# Blender's identifiers, in the order the core numbers them.
+MATH_OPS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT", "INVERSE_SQRT",
+            "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN", "GREATER_THAN", "SIGN", "COMPARE",
+            "SMOOTH_MIN", "SMOOTH_MAX", "ROUND", "FLOOR", "CEIL", "TRUNC", "FRACT", "MODULO", "FLOORED_MODULO",
+            "WRAP", "SNAP", "PINGPONG", "SINE", "COSINE", "TANGENT", "ARCSINE", "ARCCOSINE", "ARCTANGENT",
+            "ARCTAN2", "SINH", "COSH", "TANH", "RADIANS", "DEGREES")
+VECTOR_OPS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "CROSS_PRODUCT", "PROJECT", "REFLECT",
+              "REFRACT", "FACEFORWARD", "DOT_PRODUCT", "DISTANCE", "LENGTH", "SCALE", "NORMALIZE", "ABSOLUTE",
+              "POWER", "SIGN", "MINIMUM", "MAXIMUM", "FLOOR", "CEIL", "FRACTION", "MODULO", "WRAP", "SNAP", "SINE",
+              "COSINE", "TANGENT")
+BLENDS = ("MIX", "DARKEN", "MULTIPLY", "BURN", "LIGHTEN", "SCREEN", "DODGE", "ADD", "OVERLAY", "SOFT_LIGHT",
+          "LINEAR_LIGHT", "DIFFERENCE", "EXCLUSION", "SUBTRACT", "DIVIDE", "HUE", "SATURATION", "COLOR", "VALUE")
+MAP_RANGE_MODES = ("LINEAR", "STEPPED", "SMOOTHSTEP", "SMOOTHERSTEP")
+GRADIENTS = ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "RADIAL", "QUADRATIC_SPHERE", "SPHERICAL")
+MAPPINGS = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
+INTERPOLATIONS = ("Closest", "Linear", "Cubic")  # Image Texture (native ImageInterpolation)
+EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")  # Image Texture (native ImageExtension)
+VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYSHEV", "MINKOWSKI")
+WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
+WAVE_PROFILES = ("SIN", "SAW", "TRI")
+NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
+
+# The shading point as run_nodes takes it: these vec3s, then point_alpha, backfacing and
+# tangent_sign. tangent: the UV map's (unit, perpendicular to surface_normal, the surface's
+# normal before it is turned towards the viewer).
+GLOBAL_FIELDS = ("P", "N", "Ng", "I", "object", "object_normal", "generated", "uv", "point_colour", "tangent",
+                 "surface_normal")
+_GLOBAL_FLOATS = 3 * len(GLOBAL_FIELDS) + 3
+
+
+class Image:
+    """An image's pixels for the core: (height, width, 4) RGBA, bottom row first (Blender's
+    order). uint8: colour bytes, sRGB-encoded when `srgb` (decoded to scene linear after
+    interpolation, as Cycles does with byte sRGB images), else linear values x 255;
+    float32: scene-linear values. Compared by identity: one Image is held once by the core
+    however many programs use it."""
+
+    def __init__(self, pixels, srgb: bool = False):
+        p = np.ascontiguousarray(pixels)
+        if p.dtype not in (np.uint8, np.float32) or p.ndim != 3 or p.shape[2] != 4 or not p.size:
+            raise ValueError(f"image pixels must be (h, w, 4) uint8 or float32, got {p.dtype} {p.shape}")
+        self.pixels, self.srgb = p, bool(srgb)
+        self.native = (p, self.srgb)  # one object, so that the core recognises it when shared
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.pixels.nbytes)
+
+
+@dataclass(frozen=True)
+class Program:
+    """One material's compiled node tree: `code` (rows of WIDTH ints), `data` (initial
+    registers), `outputs` (per OUTPUTS entry, the register holding it or -1). Hashable, so
+    that a Material holding it stays a value."""
+
+    code: tuple
+    data: tuple
+    outputs: tuple
+    images: tuple = ()  # Image objects, by the index IMAGE instructions give
+
+    def native(self) -> tuple:
+        """(code, data, outputs, images) as the core takes them."""
+        return (np.array(self.code, np.int32).reshape(-1, WIDTH), np.array(self.data, np.float32),
+                np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
+
+    def drives(self, name: str) -> bool:
+        return self.outputs[list(OUTPUTS).index(name)] >= 0
+
+
+class ProgramTooLarge(ValueError):
+    pass
+
+
+class Builder:
+    """Writes a Program: registers (constants or results), instructions, outputs."""
+
+    def __init__(self):
+        self.code: list = []
+        self.data: list = []
+        self.outputs = {name: -1 for name in OUTPUTS}
+        self.images: list = []
+
+    def image(self, image: Image) -> int:
+        """The index of an image in this program (added once)."""
+        for i, known in enumerate(self.images):
+            if known is image:
+                return i
+        self.images.append(image)
+        return len(self.images) - 1
+
+    def register(self, value=0.0, width: int = 1) -> int:
+        """A new register (width 1 or 3) holding `value` until written."""
+        values = np.broadcast_to(np.asarray(value, np.float64).ravel()[:width] if np.ndim(value) else value, (width,))
+        first = len(self.data)
+        self.data.extend(float(v) for v in values)
+        if len(self.data) > MAX_REGISTERS:
+            raise ProgramTooLarge(f"more than {MAX_REGISTERS} registers")
+        return first
+
+    def table(self, rows) -> int:
+        """Read-only rows (e.g. RGBA stops) laid out flat in the registers; their offset."""
+        flat = np.asarray(rows, np.float64).ravel()
+        first = len(self.data)
+        self.data.extend(float(v) for v in flat)
+        if len(self.data) > MAX_REGISTERS:
+            raise ProgramTooLarge(f"more than {MAX_REGISTERS} registers")
+        return first
+
+    def emit(self, op: str, *operands: int) -> None:
+        if len(operands) > WIDTH - 1:
+            raise ValueError(f"{op}: too many operands")
+        self.code.append((OPS.index(op), *(int(o) for o in operands), *([0] * (WIDTH - 1 - len(operands)))))
+
+    def global_(self, name: str) -> int:
+        out = self.register(width=3)
+        self.emit("GLOBAL", out, GLOBALS.index(name))
+        return out
+
+    def output(self, name: str, reg: int) -> None:
+        self.outputs[name] = reg
+
+    def program(self) -> Program:
+        return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images))
+
+
+def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, **globals_) -> np.ndarray:
+    """The registers after running `program` at n shading points (n, len(data)): each of
+    GLOBAL_FIELDS given as (3,) or (n, 3) (default 0), point_alpha and backfacing as scalars
+    or (n,). For tests and tools: renders run programs inside the core."""
+    from .. import _core
+
+    unknown = set(globals_) - set(GLOBAL_FIELDS)
+    if unknown:
+        raise ValueError(f"unknown shading-point fields {sorted(unknown)}; use {GLOBAL_FIELDS}")
+    g = np.zeros((n, _GLOBAL_FLOATS), np.float32)
+    for k, name in enumerate(GLOBAL_FIELDS):
+        if name in globals_:
+            g[:, 3 * k:3 * k + 3] = np.broadcast_to(np.asarray(globals_[name], np.float32), (n, 3))
+    g[:, -3] = point_alpha
+    g[:, -2] = backfacing
+    g[:, -1] = tangent_sign
+    out = np.zeros((n, len(program.data)), np.float32)
+    code, data, outputs, images = program.native()
+    _core.run_nodes(code, data, outputs, images, g, out)
+    return out
