@@ -16,7 +16,7 @@ sky Cycles gives:
   four wavelengths whose combination into XYZ is fitted to the full spectrum.
 - Single Scattering (Nishita's): the same single scattering with exponential density
   profiles, at 21 wavelengths from 380 to 780 nm weighted by the CIE 1931 colour matching
-  functions; nothing below the horizon but a fade of the horizon's colour.
+  functions; below the horizon the horizon's colour fading to black.
 
 Units follow Cycles': the result is a radiance whose scale is the models' (W m^-2 sr^-1
 integrated against the matching functions), so a sky at sun elevation 30 degrees lights an
@@ -370,12 +370,13 @@ def _table(multiple: bool, sun_elevation: float, altitude: float, air: float, ae
         model = MultipleScattering(air, aerosol, ozone)
         rows = range(h)
     else:
-        # Nishita's table: the upper half only (the ground is black), rows at y / (h/2) - 1,
-        # the sun at longitude 0 between columns w/2 - 1 and w/2.
+        # Nishita's table: the upper half from the model, rows at latitude (y / (h/2) - 1)^2
+        # (the horizon at row h/2), the sun at longitude 0 between columns w/2 - 1 and w/2;
+        # the lower half below.
         az = 2.0 * math.pi * np.arange(half) / w - math.pi
         elev = (math.pi / 2) * (np.arange(h) / (h // 2) - 1.0) ** 2
         model = SingleScattering(air, aerosol, ozone)
-        rows = range(h // 2 + 1, h)
+        rows = range(h // 2, h)
     table = np.zeros((h, w, 3))
     rows = np.array(list(rows))
     e, a = np.meshgrid(elev[rows], az, indexing="ij")
@@ -383,6 +384,12 @@ def _table(multiple: bool, sun_elevation: float, altitude: float, air: float, ae
     xyz = model.radiance_xyz(dirs.reshape(-1, 3), sun_elevation, altitude).reshape(len(rows), half, 3)
     table[rows, :half] = xyz
     table[rows, half:] = xyz[:, ::-1]
+    if not multiple:
+        # Below the horizon Nishita's sky has no ground: the horizon's row faded to black by
+        # (1 - 2.5 sin(depth))^3, black from 0.4 (24 degrees) down -- a look, not physics.
+        depth = np.sin(elev[: h // 2])
+        fade = np.where(depth < 0.4, (1.0 - 2.5 * depth) ** 3, 0.0)
+        table[: h // 2] = table[h // 2][None] * fade[:, None, None]
     return table
 
 
@@ -449,12 +456,7 @@ class Sky:
         sun = self.sun_direction
         # The table's middle column is the sun's azimuth (the table is symmetric about it).
         u = np.remainder(0.5 + (phi - math.atan2(sun[1], sun[0])) / (2 * math.pi), 1.0)
-        z = np.clip(d[:, 2], -1.0, 1.0)
-        elev = np.arcsin(z)
-        if not self.multiple:
-            out = xyz_to_rgb(_lookup(self.table, u, np.where(z < 0, 0.508, 0.5 + 0.5 * np.sqrt(np.abs(elev) / (math.pi / 2)))))
-            fade = np.where(z < -0.4, 0.0, np.maximum(1.0 + 2.5 * z, 0.0) ** 3)
-            return np.where(z[:, None] < 0, out * fade[:, None], out)
+        elev = np.arcsin(np.clip(d[:, 2], -1.0, 1.0))
         v = 0.5 + 0.5 * np.sign(elev) * np.sqrt(np.abs(elev) / (math.pi / 2))
         return xyz_to_rgb(_lookup(self.table, u, v))
 
@@ -468,8 +470,6 @@ class Sky:
         angle = np.arccos(np.clip(d @ self.sun_direction, -1.0, 1.0))
         elev = np.arcsin(np.clip(d[:, 2], -1.0, 1.0))
         inside = (angle < half) & (elev > -earth_dip(self.altitude))
-        if not self.multiple:
-            inside &= d[:, 2] >= 0
         y = ((elev - self.elevation) / self.size + 0.5)[:, None]
         limb = 1.0 - LIMB_DARKENING * (1.0 - np.sqrt(np.maximum(1.0 - (angle / half) ** 2, 0.0)))
         rgb = (self.sun_bottom + (self.sun_top - self.sun_bottom) * y) * limb[:, None]
