@@ -350,12 +350,13 @@ def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, rep
     sky = nodes.new("ShaderNodeTexSky")
     links.new(sky.outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    # The Sky Texture is baked: its measured dome x strength and a sun disc (compared with
-    # Cycles in test_world_environment.py), said once.
-    assert w.environment is not None and w.environment[-1, 0] == approx((0.86, 1.425, 2.415), rel=0.01)  # the zenith
-    assert w.environment[0, 0] == approx((0.185, 0.19, 0.2), rel=0.01)  # the ground below
-    assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform dome of radiance (1.72, 2.85, 4.83)" \
-        in report.lines[0]
+    # The Sky Texture is baked from its model (render/sky.py; compared with Cycles in
+    # test_world_environment.py) x strength: the default sky (Multiple Scattering, sun 15
+    # degrees up) at the zenith and straight down; its sun, smaller than the bake's pixels,
+    # spread over them, said once.
+    assert w.environment is not None and w.environment[-1, 0] == approx((0.310, 0.633, 1.328), rel=0.01)
+    assert w.environment[0, 0] == approx((0.00715, 0.0111, 0.0201), rel=0.01)
+    assert len(report.lines) == 1 and "sun disc (0.55 degrees) is smaller than 2 pixels" in report.lines[0]
     background.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
     # An Environment Texture is baked (tests/blender/test_world_environment.py); without an
     # image, Cycles renders its missing-image pink (measured: (1.02, 0.0004, 1.04) on 8x8

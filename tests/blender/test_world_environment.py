@@ -31,7 +31,7 @@ W, H = 160, 120
 SAMPLES = 64
 FLOOR, SCAN = 1, 2
 REGION_RTOL, SHADOW_RTOL, SHADOW_IOU, MOVED_IOU = 0.08, 0.15, 0.6, 0.3
-SKY_LIT_RTOL, SKY_SHADOW_RTOL, SKY_GROUND_RTOL = 0.05, 0.5, 1.5  # see the Sky Texture's test
+SKY_LIT_RTOL, SKY_SHADOW_RTOL, SKY_GROUND_RTOL = 0.04, 0.4, 0.02  # see the Sky Texture's test
 SKY, GROUND = (0.25, 0.32, 0.45), (0.12, 0.09, 0.06)
 SUN_U, SUN_V = 0.3, 0.5 + 50 / 180  # the sun's image position: azimuth 72 degrees, 50 up
 SUN = 150.0  # radiance of its 2 x 2 pixels: ~2.3 irradiance on the floor, ~7x the sky's
@@ -107,8 +107,11 @@ def _scene(bpy, folder):
                        plain=env.image)
 
 
+SKY_DEFAULTS = dict(sun_elevation=30.0, sun_disc=True, aerosol_density=1.0)
 CASES = {"plain": {}, "mirrored": dict(mirrored=True), "rotated": dict(rotation=90.0),
-         "camera_ray": dict(camera_ray=True), "sky": dict(sky=True)}
+         "camera_ray": dict(camera_ray=True), "sky": dict(sky={}),
+         "sky 15": dict(sky=dict(sun_elevation=15.0)), "sky 60": dict(sky=dict(sun_elevation=60.0)),
+         "sky aerosol 5": dict(sky=dict(aerosol_density=5.0)), "sky no disc": dict(sky=dict(sun_disc=False))}
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +127,11 @@ def renders(blender, tmp_path_factory):
         n["mapping"].inputs["Rotation"].default_value = (0, 0, math.radians(cfg.get("rotation", 0.0)))
         source = n["mix"] if cfg.get("camera_ray") else n["background"]
         links.new(source.outputs[0], n["output"].inputs["Surface"])
-        links.new(n["sky" if cfg.get("sky") else "env"].outputs["Color"], n["background"].inputs["Color"])
+        links.new(n["sky" if "sky" in cfg else "env"].outputs["Color"], n["background"].inputs["Color"])
+        settings = dict(SKY_DEFAULTS, **cfg.get("sky", {}))
+        n["sky"].sun_elevation = math.radians(settings.pop("sun_elevation"))
+        for k, v in settings.items():
+            setattr(n["sky"], k, v)
 
     def get(case, engine="SPLAT_TRACER"):
         if (case, engine) not in cache:
@@ -203,31 +210,52 @@ def test_is_camera_ray_shows_one_backdrop_and_lights_with_another(renders):
     assert not close(plain["sky"], mc["sky"])
 
 
-def test_the_sky_texture_lights_the_floor_and_casts_the_sun_shadow_as_in_cycles(renders):
-    """The Sky Texture (Nishita, Multiple Scattering) as a measured model: a uniform dome,
-    a uniform ground and the sun disc through the atmosphere (blender/export/world.py).
-    Measured with the sun at 30 degrees, turned 120 (the model was measured at 15, 40 and 70):
-    lit floor (21.09, 18.75, 16.22) here, (21.49, 19.17, 16.66) in Cycles (-2 to -3 %); the
-    shadow's outline overlaps 86 %; in the shadow (2.46, 3.47, 5.36) against (1.84, 2.97, 5.02):
-    +7 to +34 %, the dome being uniform (Cycles' is brightest near the sun, which the ball
-    hides); the ground below the horizon (0.23, 0.27, 0.36) against (0.10, 0.16, 0.28), up to
-    2.3x: a uniform ground where Cycles' darkens away from the sun. The tolerances say so:
-    SKY_LIT_RTOL 0.05, SKY_SHADOW_RTOL 0.5, SKY_GROUND_RTOL 1.5 (relative)."""
-    cycles, ours = renders("sky", "CYCLES"), renders("sky")
+@pytest.mark.parametrize("case", ["sky", "sky 15", "sky 60", "sky aerosol 5", "sky no disc"])
+def test_the_sky_texture_lights_the_floor_and_casts_the_sun_shadow_as_in_cycles(renders, case):
+    """The Sky Texture (Multiple Scattering, Blender's default) from its model
+    (render/sky.py), the sun 15, 30 or 60 degrees up and turned 120, or with five times the
+    aerosols, or without its disc. Measured, ours against Cycles (R, G, B):
+    - lit floor: 30 degrees -1.2, -1.1, -0.9 % (the fitted model of before: -1.9, -2.2,
+      -2.6 %); 15 degrees -3.3, -2.8, -1.8 %; 60 degrees -0.3, -0.3, -0.2 %; aerosols x5
+      -1.4, -1.2, -1.0 %; without the disc (the sky alone) +0.1, +0.2, +0.3 %. So the sky's
+      light agrees and the sun's is 1.4 % (30 degrees) to 4 % (15) short of Cycles', growing
+      with the air mass; the disc's power as the model gives it (limb mean x centre radiance
+      x solid angle) is checked to 1e-4 against the disc integrated texel by texel. Part of
+      the gap is the floor's response to light at that angle: a Sun lamp there gives -1.2 %
+      (15 degrees), -0.7 % (30), -0.35 % (60) on this floor; the rest, up to 2 % at 15
+      degrees (red most), is in how Cycles 5.0.1 evaluates or samples its sun: not found.
+    - the ground below the horizon: within 0.4 % (before: +130, +69, +29 %).
+    - the shadow's outline overlaps 85 % (before 86 %); in the shadow, lit by the sky alone,
+      +28, +15, +7 % at 30 degrees (before +34, +17, +7 %), up to +34 % (red) at 60: the
+      occluder -- the same scene under an HDRI is +12 % there (SHADOW_RTOL), Cycles
+      rendering the cloud's points as spheres; the penumbra's red sunlight weighs on the
+      mask's mean.
+    SKY_LIT_RTOL 0.04, SKY_SHADOW_RTOL 0.4, SKY_GROUND_RTOL 0.02 (before 0.05, 0.5, 1.5)."""
+    cycles, ours = renders(case, "CYCLES"), renders(case)
     lit, shadow = floor_masks(cycles)
-    masks = {"lit floor": lit, "shadow": shadow, "ground": erode(cycles[INDEX] == 0, 2)}
+    disc = CASES[case]["sky"].get("sun_disc", True)
+    masks = {"lit floor": lit, "ground": erode(cycles[INDEX] == 0, 2)}
+    if disc:
+        masks["shadow"] = shadow
     assert all(m.sum() > 100 for m in masks.values()), {k: int(m.sum()) for k, m in masks.items()}
     mc, mo = region_means(cycles, masks), region_means(ours, masks)
-    print({k: (mo[k].round(3).tolist(), mc[k].round(3).tolist()) for k in masks})
-    _, ours_shadow = floor_masks(ours, cycles)
-    print("sky shadow IoU", iou(ours_shadow, shadow))
+    print(case, {k: (mo[k].round(3).tolist(), mc[k].round(3).tolist()) for k in masks})
     assert close(mo["lit floor"], mc["lit floor"], SKY_LIT_RTOL)
-    assert close(mo["shadow"], mc["shadow"], SKY_SHADOW_RTOL)
     assert close(mo["ground"], mc["ground"], SKY_GROUND_RTOL)
-    assert iou(ours_shadow, shadow) > SHADOW_IOU
-    # What the engine did before (the default sky's dome alone, no sun: 0.8 x (1.7, 2.9, 4.8)
-    # on this floor) is 10x too dark.
-    assert not close(0.8 * np.array([1.7, 2.9, 4.8]), mc["lit floor"], 5 * SKY_LIT_RTOL)
+    if disc:
+        _, ours_shadow = floor_masks(ours, cycles)
+        print(case, "sky shadow IoU", iou(ours_shadow, shadow))
+        assert close(mo["shadow"], mc["shadow"], SKY_SHADOW_RTOL)
+        assert iou(ours_shadow, shadow) > SHADOW_IOU
+        # The fitted model of before (the default atmosphere whatever the settings) is far off:
+        # five times the aerosols brighten the ground below the horizon threefold.
+        if case == "sky aerosol 5":
+            default = region_means(renders("sky", "CYCLES"), {"ground": masks["ground"]})["ground"]
+            assert not close(default, mc["ground"], 10 * SKY_GROUND_RTOL)
+    else:
+        # Without the disc the sky alone lights the floor: no sun shadow, far darker.
+        with_disc = region_means(renders("sky", "CYCLES"), {"lit floor": lit})["lit floor"]
+        assert np.all(mc["lit floor"] < 0.5 * with_disc)
 
 
 def test_the_world_bake_is_cached_and_a_plain_background_is_not_baked(blender, renders):
@@ -385,3 +413,83 @@ def test_a_bake_that_fails_renders_the_viewport_colour_and_says_so(blender, tmp_
     assert w.environment is None and w.radiance() == pytest.approx((0.2, 0.3, 0.4))
     assert report.lines == ["world 'Broken': its node tree could not be baked (ValueError: no); "
                             "using the world's viewport colour"]
+
+
+# --------------------------------------------------------------------------------------
+# The Sky Texture's model against Cycles' own: the world alone seen by the panoramic camera,
+# by bands of elevation, the sun's neighbourhood left out (a disc of 0.27 degrees in pixels of
+# 1.4 is noise at 4 samples; its light is measured on the floor above).
+
+SKY_PANO_CASES = {
+    "multiple 30": dict(),
+    "multiple 5": dict(sun_elevation=5.0),
+    "multiple 60": dict(sun_elevation=60.0),
+    "single 30": dict(sky_type="SINGLE_SCATTERING"),
+    "altitude 20 km": dict(altitude=20000.0),
+    "air 3": dict(air_density=3.0),
+    "aerosol 5": dict(aerosol_density=5.0),
+    "ozone 0": dict(ozone_density=0.0),
+}
+SKY_BANDS = {"zenith": slice(0, 20), "upper sky": slice(20, 50), "horizon": slice(58, 64), "ground": slice(70, 128)}
+# Band means within SKY_PANO_RTOL of Cycles' (relative; 1e-3 absolute for a black ground).
+# Measured: within 0.2 % in every band and case (Cycles' table and ours are the same model),
+# the worst the horizon at 5 degrees. Each changed setting moves some band by more than
+# SKY_PANO_MOVED (measured: ozone 0 the least, +9.7 %), so ignoring it fails.
+SKY_PANO_RTOL, SKY_PANO_MOVED = 0.01, 0.05
+
+
+@pytest.fixture(scope="module")
+def sky_panos(blender, tmp_path_factory):
+    folder = tmp_path_factory.mktemp("sky")
+    cache = {}
+
+    def get(case):
+        if case in cache:
+            return cache[case]
+        cfg = dict(SKY_PANO_CASES[case])
+        scene, _, _ = _pano_scene(blender, folder)
+        nodes, links = scene.world.node_tree.nodes, scene.world.node_tree.links
+        sky = nodes.new("ShaderNodeTexSky")
+        elevation = math.radians(cfg.pop("sun_elevation", 30.0))
+        sky.sun_elevation, sky.sun_rotation = elevation, math.radians(120)
+        for k, v in cfg.items():
+            setattr(sky, k, v)
+        links.new(sky.outputs["Color"], nodes["Background"].inputs["Color"])
+        nodes["Background"].inputs["Strength"].default_value = 1.0
+        out = {}
+        for engine in ("CYCLES", "SPLAT_TRACER"):
+            scene.render.engine = engine
+            out[engine] = render(blender, scene, folder / f"{case}_{engine}.exr",
+                                 (PANO_W, PANO_H))["ViewLayer"]["Combined"][..., :3]
+        # The pixels' directions (the camera looks along +x, the image's centre), and those
+        # within 5 degrees of the sun left out.
+        u = (np.arange(PANO_W) + 0.5) / PANO_W
+        v = (np.arange(PANO_H) + 0.5) / PANO_H
+        phi, el = np.meshgrid((0.5 - u) * 2 * np.pi, (0.5 - v) * np.pi)
+        d = np.stack([np.cos(el) * np.cos(phi), np.cos(el) * np.sin(phi), np.sin(el)], -1)
+        rot = math.radians(120)
+        sun = np.array([math.sin(rot) * math.cos(elevation), math.cos(rot) * math.cos(elevation), math.sin(elevation)])
+        keep = d @ sun < math.cos(math.radians(5))
+        means = {engine: {k: img[r][keep[r]].mean(0) for k, r in SKY_BANDS.items()} for engine, img in out.items()}
+        cache[case] = means
+        return means
+    return get
+
+
+@pytest.mark.parametrize("case", list(SKY_PANO_CASES))
+def test_the_baked_sky_is_the_sky_cycles_renders(sky_panos, case):
+    means = sky_panos(case)
+    ours, cycles = means["SPLAT_TRACER"], means["CYCLES"]
+    print(case, {k: (ours[k].round(4).tolist(), cycles[k].round(4).tolist()) for k in SKY_BANDS})
+    for k in SKY_BANDS:
+        assert np.all(np.abs(ours[k] - cycles[k]) <= SKY_PANO_RTOL * cycles[k] + 1e-3), (k, ours[k], cycles[k])
+    if case not in ("multiple 30", "multiple 5", "multiple 60"):
+        # The setting changes Cycles' sky, and ours the same way: the default's is outside the
+        # tolerance (what the fitted model of before did: the default atmosphere always).
+        default = sky_panos("multiple 30")["CYCLES"]
+        moved = max(float(np.max(np.abs(cycles[k] - default[k]) / np.maximum(default[k], 1e-3))) for k in SKY_BANDS)
+        print(case, "moved", moved)
+        assert moved > SKY_PANO_MOVED
+        for k in SKY_BANDS:
+            assert np.all(np.sign(ours[k] - default[k]) == np.sign(cycles[k] - default[k])) or \
+                np.all(np.abs(cycles[k] - default[k]) <= SKY_PANO_RTOL * default[k] + 1e-3), k

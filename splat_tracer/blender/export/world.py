@@ -18,9 +18,10 @@ samples it as a light. What the bake reads:
   backdrop other than the light).
 - RGB and Value nodes. Anything else linked falls back to the socket's default value, said
   once with the node's name.
-- Sky Texture: Nishita's (Single, Multiple Scattering) as a model measured on Cycles -- a
-  uniform dome by sun elevation and the sun disc, its irradiance through the atmosphere by air
-  mass (at the default atmosphere); Preetham and Hosek-Wilkie as that dome. Said once.
+- Sky Texture: Single and Multiple Scattering from their physical model as Cycles computes
+  them (render/sky.py: every setting of the node), the sun disc drawn, or its power spread
+  over the pixels that carry it when it is smaller than a few pixels of the bake (said once);
+  Preetham and Hosek-Wilkie stood in for by Multiple Scattering (said once).
 The image is as large as the largest Environment Texture image (at most MAX_WIDTH wide), so
 that an equirectangular HDRI without mapping is baked pixel for pixel; BAKE_WIDTH otherwise.
 """
@@ -192,77 +193,64 @@ class _Bake:
 
 
     def sky(self, node) -> np.ndarray:
-        """The Sky Texture: Nishita's (Single and Multiple Scattering) as a measured model --
-        a uniform dome and the sun disc (see _sky_dome, _sun_irradiance); the older models as
-        the dome alone."""
-        elevation, rotation = float(node.sun_elevation), float(node.sun_rotation)
+        """The Sky Texture from its model (render/sky.py): the sky as Cycles' table gives it,
+        and the sun's disc -- drawn with its limb darkening when it spans a few pixels of the
+        bake, else its power spread over the pixels that carry it (see _sun_pixels)."""
         vector = next((s for s in node.inputs if s.name == "Vector"), None)  # not found by key in bpy 5.0
-        if vector is not None and self.upstream(vector) is not None:
-            self.sockets.say(f": the Sky Texture '{node.name}''s Vector input is ignored (the view direction is used)")
-        nishita = node.sky_type in ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING")
-        dome = _sky_dome(elevation)
-        say = self.sockets.say
-        if not nishita:
-            say(f": the {node.sky_type.replace('_', ' ').title()} Sky Texture is approximated by a uniform sky of "
-                f"radiance {_fmt(dome)}, Nishita's dome at its sun's elevation; no sun")
-            return np.broadcast_to(dome, (len(self.d), 3))
-        say(f": the Sky Texture is approximated by a uniform dome of radiance {_fmt(dome)} (Cycles' dome as an "
-            f"upward-facing surface sees it at this sun elevation, measured), a uniform ground below the horizon "
-            f"and its sun disc (Cycles' sun irradiance, measured, through the atmosphere by air mass); the sky's "
-            f"gradient and glow are not drawn")
-        defaults = dict(altitude=100.0, air_density=1.0, aerosol_density=1.0, ozone_density=1.0)  # Blender's
-        changed = [k for k, v in defaults.items() if abs(float(getattr(node, k, v)) - v) > 1e-6]
-        if changed:
-            say(f": the Sky Texture's {', '.join(k.replace('_', ' ') for k in changed)} "
-                f"{'is' if len(changed) == 1 else 'are'} ignored (the model is measured for the default atmosphere)")
-        out = np.array(np.broadcast_to(dome, (len(self.d), 3)))
-        out[self.d[:, 2] < 0] = _sky_dome(elevation, _GROUND, _GROUND_ELEVATIONS)
-        if not node.sun_disc or self.grid is None:
+        d = self.d if vector is None or self.upstream(vector) is None else self.vector(vector)
+        d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
+        model = _sky_model(node, self.sockets)
+        out = model.sky(d)
+        if not model.sun_disc or self.grid is None:
             return out
-        sun = np.array([math.sin(rotation) * math.cos(elevation), math.cos(rotation) * math.cos(elevation),
-                        math.sin(elevation)])
-        radius = 0.5 * max(float(node.sun_size), 1e-6)
-        pixels, solid_angle = _sun_pixels(self.grid, tuple(sun), radius)
-        # Cycles' sun: a radiance, so that its irradiance grows with the disc's solid angle.
-        irradiance = _sun_irradiance(elevation) * float(node.sun_intensity) * (
-            _cone(radius) / _cone(0.5 * _DEFAULT_SUN_SIZE))
-        inside = np.einsum("ij,j->i", self.d, sun) >= math.cos(pixels)
-        out[inside] = out[inside] + irradiance / solid_angle
+        width, height = self.grid
+        texel = math.pi / height
+        if model.size / 2 >= _DRAWN_SUN_TEXELS * texel:
+            return out + model.sun_radiance(d)
+        power = model.sun_power()
+        if not power.any():
+            return out
+        pixels, solid_angle = _sun_pixels(self.grid, tuple(model.sun_direction), model.size / 2)
+        self.sockets.say(f": the Sky Texture's sun disc ({math.degrees(model.size):.2g} degrees) is smaller than "
+                         f"{_DRAWN_SUN_TEXELS:g} pixels of the baked {width} x {height} image; its light is spread "
+                         f"over the {math.degrees(2 * pixels):.2g} degrees that carry it (the same power; no limb "
+                         f"darkening seen)")
+        inside = np.einsum("ij,j->i", d, model.sun_direction) >= math.cos(pixels)
+        out[inside] = out[inside] + power / solid_angle
         return out
 
 
-# Cycles 5.0.1's Nishita sky at its default atmosphere (altitude 100 m, densities 1), measured on a
-# diffuse floor (tests/blender/test_world_environment.py): the dome's radiance as an
-# upward-facing surface sees it, at sun elevations of 15, 40 and 70 degrees (between them
-# interpolated, beyond them held), and the sun's irradiance on a surface facing it: a
-# Beer-Lambert fit E0 exp(-tau m) over the Kasten-Young air mass m, within 1 % of all three.
-_DOME_ELEVATIONS = np.radians([15.0, 40.0, 70.0])
-_DOME = np.array([[1.72, 2.85, 4.83], [2.41, 4.14, 7.27], [2.79, 4.86, 8.64]])
-# Below the horizon Nishita's sky is a dark ground: its mean radiance as a camera looking 9 to
-# 20 degrees down sees it, at sun elevations of 15, 40 and 55 degrees.
-_GROUND_ELEVATIONS = np.radians([15.0, 40.0, 55.0])
-_GROUND = np.array([[0.37, 0.38, 0.40], [0.13, 0.19, 0.33], [0.14, 0.22, 0.40]])
-_SUN_E0 = np.array([179.3, 164.4, 150.3])
-_SUN_TAU = np.array([0.091, 0.147, 0.273])
-_DEFAULT_SUN_SIZE = math.radians(0.545)  # Blender's default Sun Size (the measured one)
+# A sun disc at least this many bake pixels in radius is drawn pixel by pixel (its limb seen);
+# a smaller one is its power over the pixels it covers: what lights the scene is the same.
+_DRAWN_SUN_TEXELS = 2.0
+_SKY_MODELS: dict = {}  # the last few Sky models by settings: one per bake, not one per block of rows
 
 
-def _sky_dome(elevation: float, table=None, at=None) -> np.ndarray:
-    table, at = (_DOME, _DOME_ELEVATIONS) if table is None else (table, at)
-    return np.array([np.interp(elevation, at, table[:, c]) for c in range(3)])
+def _sky_model(node, sockets):
+    """render.sky.Sky for a Sky Texture node's settings. Preetham and Hosek-Wilkie (Blender's
+    legacy models) are not modelled: the Multiple Scattering sky with the sun at their Sun
+    Direction's elevation stands in, said once."""
+    from ...render.sky import Sky
 
-
-def _sun_irradiance(elevation: float) -> np.ndarray:
-    """The sun's irradiance (RGB) on a surface facing it; 0 once it has set."""
-    if elevation <= 0.0:
-        return np.zeros(3)
-    degrees = math.degrees(elevation)
-    air_mass = 1.0 / (math.sin(elevation) + 0.50572 * (degrees + 6.07995) ** -1.6364)  # Kasten & Young 1989
-    return _SUN_E0 * np.exp(-_SUN_TAU * air_mass)
-
-
-def _cone(half_angle: float) -> float:
-    return 2.0 * math.pi * (1.0 - math.cos(half_angle))
+    kind = node.sky_type
+    if kind in ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING"):
+        key = (kind, float(node.sun_elevation), float(node.sun_rotation), float(node.altitude),
+               float(node.air_density), float(node.aerosol_density), float(node.ozone_density),
+               bool(node.sun_disc), float(node.sun_size), float(node.sun_intensity))
+    else:
+        x, y, z = (float(c) for c in node.sun_direction)
+        n = math.sqrt(x * x + y * y + z * z) or 1.0
+        key = ("MULTIPLE_SCATTERING", math.asin(max(-1.0, min(1.0, z / n))), math.atan2(x, y), 100.0, 1.0, 1.0,
+               1.0, False, 0.0, 0.0)
+        sockets.say(f": the {kind.replace('_', ' ').title()} Sky Texture '{node.name}' is not modelled; the Multiple "
+                    f"Scattering sky with the sun at its Sun Direction stands in (no sun disc)")
+    if key not in _SKY_MODELS:
+        while len(_SKY_MODELS) >= 4:
+            _SKY_MODELS.pop(next(iter(_SKY_MODELS)))
+        _SKY_MODELS[key] = Sky(multiple=key[0] == "MULTIPLE_SCATTERING", sun_elevation=key[1], sun_rotation=key[2],
+                               altitude=key[3], air=key[4], aerosol=key[5], ozone=key[6], sun_disc=key[7],
+                               sun_size=key[8], sun_intensity=key[9])
+    return _SKY_MODELS[key]
 
 
 def _sun_pixels(grid, sun, radius):
