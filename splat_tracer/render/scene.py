@@ -12,7 +12,8 @@ from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
-from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
+from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
+                      Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
 
 RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
@@ -112,6 +113,7 @@ class Instance:
     holdout: bool = False
     pass_index: int = 0
     shadow_catcher: bool = False
+    light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
 
 
 class FrameResult(NamedTuple):
@@ -171,6 +173,7 @@ class RenderScene:
             materials.extend(mats)
         self.world = world
         self.lights = tuple(lights)
+        self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
                                    threads)
         self.geometry_count = len(geometries)
@@ -187,7 +190,7 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True) -> FrameResult:
+               packets: bool = True, light_groups: Sequence[str] = ()) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -198,7 +201,12 @@ class RenderScene:
         becomes alpha on a transparent film (1 - the shadow's average, so that Alpha Over
         onto a photograph darkens it), or darkens the world behind it on an opaque film. With
         the "Shadow Catcher" pass asked for, Combined leaves the shadow out entirely (the
-        catcher is a hole) and the pass holds it, to multiply the photograph by."""
+        catcher is a hole) and the pass holds it, to multiply the photograph by.
+
+        light_groups: group names (at most shading.MAX_LIGHT_GROUPS); each gets a pass
+        "Combined_<name>" holding the light of the lamps, emissive instances and world whose
+        light_group is that name (Cycles' light groups: the groups sum to Combined less what
+        belongs to none)."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -209,16 +217,36 @@ class RenderScene:
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window)
+        if light_groups:
+            if isinstance(light_groups, str):
+                raise TypeError("light_groups must be a sequence of group names, not one string")
+            kwargs.update(self._light_group_arguments(light_groups, buffers, *buffers["Combined"].shape[:2]))
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)
+
+
+    def _light_group_arguments(self, groups: Sequence[str], buffers: dict, h: int, w: int) -> dict:
+        """The core's light-group keywords, and each group's pass added to `buffers`."""
+        groups = list(dict.fromkeys(groups))
+        if len(groups) > MAX_LIGHT_GROUPS:
+            raise ValueError(f"at most {MAX_LIGHT_GROUPS} light groups, got {len(groups)}")
+        planes = np.zeros((len(groups), h, w, 3), np.float32)
+        for i, name in enumerate(groups):
+            buffers[LIGHT_GROUP_PREFIX + name] = planes[i]
+        index = {name: i for i, name in enumerate(groups)}
+        of = lambda name: index.get(name, -1) if name else -1  # noqa: E731
+        return dict(light_groups=planes,
+                    light_group_lamps=np.array([of(l.light_group) for l in self.lights], np.int32),
+                    light_group_instances=np.array([of(g) for g in self.instance_light_groups], np.int32),
+                    light_group_world=of(self.world.light_group))
 
 
 # The core's keyword for each pass's buffer (Combined: "combined").
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao"}
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
@@ -231,6 +259,8 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
     x0, y0, w, h = window_rect(window, width, height)
     buffers = {}
     for name in ("Combined", *passes):
+        if name in LIGHT_PASSES and name != "DiffCol":
+            continue  # a plane of the light passes' buffer, below
         c = PASSES[name]
         buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
     local_from_camera, frustum, orthographic = camera.native()
@@ -241,5 +271,16 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
-    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items()})
+    if "AO" in passes:
+        kwargs["ao_distance"] = float(world.ao_distance)
+    light = [name for name in LIGHT_PASSES if name in passes and name != "DiffCol"]
+    if light:
+        # All nine planes or none (the direct and indirect passes are divided by the colours'
+        # sums); the passes asked for are views of it. DiffCol keeps its own buffer (the
+        # integrator's colour there is the same).
+        planes = np.zeros((len(LIGHT_PASSES), h, w, 3), np.float32)
+        kwargs["light"] = planes
+        for name in light:
+            buffers[name] = planes[LIGHT_PASSES.index(name)]
+    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name in PASS_KEYWORDS})
     return kwargs, buffers
