@@ -183,7 +183,8 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     say(summary + " | rendering")
     t1 = time.perf_counter()
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
-                                          threads=threads, progress=progress)
+                                          threads=threads, progress=progress,
+                                          light_groups=export_settings.light_groups(depsgraph.view_layer))
     t_render = time.perf_counter() - t1
     position = result.passes.get("Position")
     if position is not None:

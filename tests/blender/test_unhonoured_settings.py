@@ -78,17 +78,25 @@ def _aov(bpy, scene):
     return (f"{LAYER}: the Shader AOV 'Wetness' pass is not written",)
 
 
-def _light_group(bpy, scene):
-    scene.view_layers[0].lightgroups.add(name="Key")
-    # A lamp in the group lights the image as usual: the group's missing pass is the one line.
+def _light_groups_past_the_bound(bpy, scene):
+    # Each group up to the core's bound gets its Combined_<group> pass (test_light_passes.py);
+    # the one past it is the one line.
+    bound = extension_module("render.shading").MAX_LIGHT_GROUPS
+    for i in range(bound + 1):
+        scene.view_layers[0].lightgroups.add(name=f"Group{i}")
     lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "POINT"))
     scene.collection.objects.link(lamp)
-    lamp.lightgroup = "Key"
-    return (f"{LAYER}: the light group 'Key' pass is not written",)
+    lamp.lightgroup = f"Group{bound}"
+    return (f"{LAYER}: the light group 'Group{bound}' pass is not written", f"only the first {bound}")
+
+
+def _vector(bpy, scene):
+    scene.view_layers[0].use_pass_vector = True
+    return (f"{LAYER}: the Vector pass is written as zero", "no motion between frames is computed")
 
 
 CASES = {"motion blur": _motion_blur, "stereo 3D": _stereo, "multi-view": _multiview, "denoising": _denoising,
-         "shader AOV": _aov, "light group": _light_group}
+         "shader AOV": _aov, "light groups past the bound": _light_groups_past_the_bound, "vector": _vector}
 
 
 @pytest.mark.parametrize("case", sorted(CASES))

@@ -357,7 +357,8 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
-            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"]))
+            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"],
+            light_group=getattr(_source(obj), "lightgroup", "")))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
