@@ -15,11 +15,13 @@ the engine (each piece of light goes to one pass), 1 % for Cycles' own; AO withi
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from blender_helpers import add_camera
+from test_method_settings import _Layout
 from test_scene_export import INDEX, cloud_sphere, erode, lamp, plane, principled, render, uv_sphere
 
 W, H = 96, 72
@@ -206,3 +208,28 @@ def test_each_light_group_matches_cycles_per_region(renders):
         swapped = region_error(ours, cycles, "Combined_Fill", mask, combined_ours="Combined_Key")
         print(region, "swapped", round(swapped, 4))
         assert swapped > 2 * REGION_TOL, region
+
+
+def test_the_panels_show_the_passes_and_the_light_groups(blender, empty_scene):
+    """Every pass this engine writes has its switch in the engine's Passes panel; the view
+    layer's light groups, an object's (a lamp's too) and the world's light group are shown."""
+    bpy = blender
+    engine = bpy.types.SPLAT_TRACER_PT_passes
+    layer = empty_scene.view_layers[0]
+    drawn = []
+    engine.draw(SimpleNamespace(layout=_Layout(drawn)), SimpleNamespace(view_layer=layer))
+    for lobe in ("diffuse", "glossy", "transmission"):
+        assert {f"use_pass_{lobe}_{kind}" for kind in ("direct", "indirect", "color")} <= set(drawn)
+    assert {"use_pass_ambient_occlusion", "use_pass_vector"} <= set(drawn)
+    assert bpy.types.SPLAT_TRACER_PT_passes_light_groups.bl_parent_id == "SPLAT_TRACER_PT_passes"
+    lamp_obj = lamp(bpy, "POINT")
+    for panel, context in ((bpy.types.SPLAT_TRACER_PT_object_light_group, SimpleNamespace(
+            object=lamp_obj, view_layer=layer, engine="SPLAT_TRACER")),
+            (bpy.types.SPLAT_TRACER_PT_world_light_group, SimpleNamespace(
+                world=bpy.data.worlds.new("W"), view_layer=layer, engine="SPLAT_TRACER"))):
+        assert panel.poll(context)
+        searched = []
+        layout = _Layout(searched)
+        layout.prop_search = lambda data, key, *args, **kwargs: searched.append(key)
+        panel.draw(SimpleNamespace(layout=layout), context)
+        assert searched == ["lightgroup"], panel
