@@ -49,6 +49,8 @@ _PASSES = (
     ("use_pass_ambient_occlusion", "AO", "Ambient Occlusion" if _NEW_PASS_NAMES else "AO", 3, "RGB", "COLOR"),
     # Zero: no motion is computed (said in the render report, export/settings.py).
     ("use_pass_vector", "Vector", "Vector", 4, "XYZW", "VECTOR"),
+    # The mesh's UV map at the first hit (0 on clouds, said in the report).
+    ("use_pass_uv", "UV", "UV", 3, "UVA", "VECTOR"),
     # Cycles' own switch (view_layer.cycles, the Cycles add-on's), name and channels.
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )

@@ -75,10 +75,12 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
 class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
-    normals express them; None: flat) and material_index (T,) slots. Immutable; share one
-    Mesh between any number of instances."""
+    normals express them; None: flat), material_index (T,) slots and corner_uvs (T,3,2), the
+    UV map the UV pass shows (None: 0). Immutable; share one Mesh between any number of
+    instances."""
 
-    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0):
+    def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0,
+                 corner_uvs=None):
         v = as_f32(vertices, "vertices", (-1, 3))
         t = np.asarray(triangles)
         if t.size and not np.issubdtype(t.dtype, np.integer):
@@ -89,7 +91,9 @@ class Mesh:
         n = None if corner_normals is None else as_f32(np.asarray(corner_normals).reshape(-1, 3, 3), "corner_normals",
                                                      (len(t), 3, 3))
         m = None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32)
-        self._mesh = _core.Mesh(v, t, n, m, threads)
+        uv = None if corner_uvs is None else as_f32(np.asarray(corner_uvs).reshape(-1, 3, 2), "corner_uvs",
+                                                    (len(t), 3, 2))
+        self._mesh = _core.Mesh(v, t, n, m, threads, uv)
 
     def __len__(self) -> int:
         return self._mesh.size
@@ -246,7 +250,7 @@ class RenderScene:
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment", "AO": "ao"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,

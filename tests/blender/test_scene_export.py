@@ -141,7 +141,7 @@ def render(bpy, scene, path: Path, size=(W, H)) -> dict:
     for layer, passes in grouped.items():
         out[layer] = {}
         for pass_name, letters in passes.items():
-            letters.sort(key="RGBAXYZW".index)  # W: the Vector pass's 4th
+            letters.sort(key="RGBXYZWUVA".index)  # W: the Vector pass's 4th; U, V, A: the UV pass
             arrays = [channels[f"{layer}.{pass_name}.{c}"] for c in letters]
             out[layer][pass_name] = arrays[0] if len(arrays) == 1 else np.stack(arrays, axis=-1)
     keep_png(path.stem, out)

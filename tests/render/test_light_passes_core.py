@@ -87,3 +87,22 @@ def test_bad_light_group_arguments_are_refused():
         s.render(CAM, 8, 8, light_groups="key")
     with pytest.raises(ValueError, match="ao_distance"):
         World(ao_distance=-1.0)
+
+
+def test_the_uv_pass_interpolates_the_corner_uvs():
+    """A quad seen straight on, its UV map (x, y) / 4 + 0.5: the UV pass is the map at each
+    pixel centre, A 1; a cloud's UV is 0; a UV that is not finite is refused."""
+    quad = Mesh(np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0]], np.float32),
+                np.array([[0, 1, 2], [0, 2, 3]], np.int32),
+                corner_uvs=np.array([[[0, 0], [1, 0], [1, 1]], [[0, 0], [1, 1], [0, 1]]], np.float32))
+    cam = Camera.look_at((0, 0, 5), (0, 0, 0), up=(0, 1, 0), fov_y=30, aspect=1.0)
+    p = RenderScene([Instance(quad)], [Light("SUN", power=1.0)]).render(cam, 16, 16, passes=("UV", "Position"))
+    uv, pos = p.passes["UV"], p.passes["Position"]
+    hit = pos.any(axis=-1)
+    assert hit.all()
+    np.testing.assert_allclose(uv[..., 0], pos[..., 0] / 4 + 0.5, atol=1e-5)
+    np.testing.assert_allclose(uv[..., 1], pos[..., 1] / 4 + 0.5, atol=1e-5)
+    assert (uv[..., 2] == 1).all()
+    with pytest.raises(ValueError, match="UV"):
+        Mesh(np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.int32),
+             corner_uvs=np.full((1, 3, 2), np.nan, np.float32))

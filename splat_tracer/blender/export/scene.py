@@ -159,6 +159,19 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats
 
 
+def _mesh_uvs(mesh: bpy.types.Mesh):
+    """The corner UVs (T,3,2) of the UV map Cycles renders (the active render one, of the
+    loop triangles computed by _mesh_arrays), or None for a mesh without UV maps."""
+    layer = next((layer for layer in mesh.uv_layers if layer.active_render), None)
+    if layer is None:
+        return None
+    loops = np.empty(len(mesh.loop_triangles) * 3, np.int32)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    uv = np.empty(len(mesh.loops) * 2, np.float32)
+    layer.uv.foreach_get("vector", uv)
+    return np.ascontiguousarray(uv.reshape(-1, 2)[loops].reshape(-1, 3, 2))
+
+
 def _materials(slots: list, cache: dict, report: shading.Report) -> tuple:
     """Blender materials (an object's slots, see _slot_materials) as shading.Material (one
     default for none)."""
@@ -197,6 +210,7 @@ class _Frame:
         self.closed = set()    # id() of the closed clouds' geometry
         self.materials = {}
         self.splats = self.triangles = 0
+        self.want_uv = False   # the UV pass is on: meshes carry their UV map (only then)
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -247,27 +261,29 @@ class _Frame:
             return None
         try:
             verts, tris, normals, mats = _mesh_arrays(mesh)
+            uvs = _mesh_uvs(mesh) if self.want_uv else None
         finally:
             if temporary:
                 obj.to_mesh_clear()
-        verts, tris, normals, mats = self._usable_triangles(obj.name, verts, tris, normals, mats)
+        verts, tris, normals, mats, uvs = self._usable_triangles(obj.name, verts, tris, normals, mats, uvs)
         if len(tris) == 0:
             return None
-        key = ("mesh", _digest(verts, tris, normals, mats))
+        # Without UVs the key is what it always was (the cache keeps a frame's meshes).
+        key = ("mesh", _digest(verts, tris, normals, mats, *(() if uvs is None else (uvs,))))
         geometry = self._cached(key, f"mesh '{obj.name}' ({len(tris):,} triangles)",
                                 len(tris) * resources.BYTES_PER_TRIANGLE,
-                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads))
+                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads, corner_uvs=uvs))
         self.triangles += self._first_use(key, geometry)
         return geometry
 
-    def _usable_triangles(self, name: str, verts, tris, normals, mats):
+    def _usable_triangles(self, name: str, verts, tris, normals, mats, uvs=None):
         """The mesh without the triangles that touch a vertex the core cannot hold (not
         finite, or beyond its limit: a NaN from a driver or a modifier), which are counted
         in the report; the rest of the mesh renders. Those vertices are set to 0, as the
         core checks every vertex, used or not."""
         bad = ~rows_within(verts, MAX_COORDINATE)
         if not bad.any():
-            return verts, tris, normals, mats
+            return verts, tris, normals, mats, uvs
         touching = bad[tris].any(axis=1)
         self.report.once(f"mesh '{name}': {int(bad.sum())} vertices are not finite or beyond the renderer's limit "
                          f"({MAX_COORDINATE:.0e}) (first: vertex {int(np.flatnonzero(bad)[0])}); the "
@@ -275,7 +291,7 @@ class _Frame:
         keep = ~touching
         verts = verts.copy()
         verts[bad] = 0.0
-        return verts, tris[keep], normals[keep], mats[keep]
+        return verts, tris[keep], normals[keep], mats[keep], None if uvs is None else uvs[keep]
 
     def geometry(self, obj):
         """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""
@@ -317,6 +333,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
+    frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights = [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
     for inst in depsgraph.object_instances:
@@ -350,6 +367,9 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
+        if kind == "cloud" and frame.want_uv:
+            report.once(f"view layer '{view_layer.name}': the UV pass is 0 on point clouds (a scan has no UV map; "
+                        "meshes show theirs)")
         if kind == "cloud" and materials[0].emission_sides:
             report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
                         "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "

@@ -18,7 +18,6 @@ from ...render import shading
 # tests/blender/test_unhonoured_settings.py checks that the two tables cover every pass switch
 # of Blender's RNA, so a pass a new Blender adds fails that test instead of going unsaid.
 UNWRITTEN_PASSES = (
-    ("", "use_pass_uv", "UV"),  # meshes' UV maps are not exported (and clouds have none)
     ("", "use_pass_subsurface_direct", "Subsurface Direct"),
     ("", "use_pass_subsurface_indirect", "Subsurface Indirect"),
     ("", "use_pass_subsurface_color", "Subsurface Color"),

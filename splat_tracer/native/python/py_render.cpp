@@ -24,11 +24,12 @@ struct MeshObject {
 };
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", nullptr};
-    PyObject *ov, *ot, *on = Py_None, *om = Py_None;
+    static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads",
+                                   "corner_uvs", nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOi", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
-                                     &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads, &ouv))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     View v, t, n, m;
@@ -39,13 +40,19 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     Py_ssize_t sn[3] = {nt, 3, 3}, s1[1] = {nt};
     if (on != Py_None && !get_array(on, "corner_normals", 'f', 3, sn, false, n)) return nullptr;
     if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
+    View uv;
+    Py_ssize_t suv[3] = {nt, 3, 2};
+    if (ouv != Py_None && !get_array(ouv, "corner_uvs", 'f', 3, suv, false, uv)) return nullptr;
     TriangleMesh *mesh = nullptr;
     if (!without_gil([&] {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
                                     threads);
-        }))
+            if (uv.held) mesh->set_corner_uvs(uv.data<float>());
+        })) {
+        delete mesh;  // null, or built before its UVs were refused
         return nullptr;
+    }
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
     if (!self) {
@@ -83,7 +90,7 @@ PyType_Slot Mesh_slots[] = {
     {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
     {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
     {Py_tp_getset, Mesh_getset},
-    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0)")},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uvs=None)")},
     {0, nullptr},
 };
 
@@ -249,24 +256,25 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
                                    "material_index", "mist", "environment", "mist_settings", "light", "ao", "ao_distance",
                                    "light_groups", "light_group_lamps", "light_group_instances",
-                                   "light_group_world", nullptr};
+                                   "light_group_world", "uv", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
              *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *olight = Py_None, *oao = Py_None,
-             *ogroups = Py_None, *ogroup_lamps = Py_None, *ogroup_instances = Py_None;
+             *ogroups = Py_None, *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOfOOOi",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOfOOOiO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
                                      &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &olight, &oao,
-                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world))
+                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
+                                     &ouvpass))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -336,6 +344,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 {omist, "mist", 1, &film.mist, {}},
                 {oenv, "environment", 3, &film.environment, {}},
                 {oao, "ao", 3, &film.ao, {}},
+                {ouvpass, "uv", 3, &film.uv, {}},
                 {olight, "light", 3, &film.light, {}, 3 * kLobes},
                 {ogroups, "light_groups", 3, &film.light_groups, {}, -1}};
     for (Out &out : outs) {
@@ -455,7 +464,7 @@ PyMethodDef RenderScene_methods[] = {
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), light=None, ao=None, "
-     "ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, light_group_world=-1)\n--\n\n"
+     "ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, light_group_world=-1, uv=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},

@@ -144,4 +144,20 @@ Vec3 TriangleMesh::shading_normal(const MeshHit &h) const {
     return dot(n, n) > 0.f ? normalize(n) : geometric_normal(h.tri);
 }
 
+void TriangleMesh::set_corner_uvs(const float *uvs) {
+    const size_t n = 6 * v0_.size();
+    for (size_t i = 0; i < n; ++i)
+        if (!std::isfinite(uvs[i])) throw InputError("a corner UV is not finite");
+    uvs_.assign(uvs, uvs + n);
+}
+
+void TriangleMesh::uv(int32_t tri, float b1, float b2, float *u, float *v) const {
+    if (uvs_.empty() || tri < 0) {
+        *u = *v = 0.f;
+        return;
+    }
+    const float *c = uvs_.data() + 6 * size_t(tri), b0 = 1.f - b1 - b2;
+    *u = c[0] * b0 + c[2] * b1 + c[4] * b2, *v = c[1] * b0 + c[3] * b1 + c[5] * b2;
+}
+
 }  // namespace splat

@@ -46,6 +46,10 @@ class TriangleMesh {
     // Bound on the rounding error of point(h), per axis: a secondary ray starting there is
     // moved this far off the surface (pbrt-v4's error bounds for barycentric interpolation).
     Vec3 point_error(const MeshHit &h) const;
+    // The UV map (Cycles' UV pass): nt x 3 x 2 corner UVs, copied; throws InputError for a
+    // value that is not finite. Without it, uv() gives (0, 0).
+    void set_corner_uvs(const float *uvs);
+    void uv(int32_t tri, float b1, float b2, float *u, float *v) const;
 
   private:
     struct PackedTriangle {  // BVH order
@@ -55,6 +59,7 @@ class TriangleMesh {
     std::vector<PackedTriangle> tris_;
     std::vector<Vec3> v0_, v1_, v2_;  // input order, for shading
     std::vector<Vec3> normals_;       // 3 per triangle, or empty
+    std::vector<float> uvs_;          // 3 x 2 per triangle, or empty
     std::vector<int32_t> material_;
     AABB bounds_;
     BVH bvh_;

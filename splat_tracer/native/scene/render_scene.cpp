@@ -111,6 +111,7 @@ inline bool nearer(float t, int index, const SurfacePoint &best) {
 void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
     best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front;
+    best.b1 = h.b1, best.b2 = h.b2;
     best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
     const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
     const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));

@@ -88,6 +88,7 @@ struct SurfacePoint {
     float t = kInfinity;
     int instance = -1;
     int32_t prim = -1;   // splat or triangle id within the instance's geometry
+    float b1 = 0, b2 = 0;  // a triangle's barycentrics of the point (its UV, for the UV pass)
     bool front = false;  // the side the normal points to faces the ray
     Vec3 p, ng, ns;      // point, geometric and shading normal (scene frame, unit)
     float offset = 0;    // how far a secondary ray must start off the surface (triangles always;

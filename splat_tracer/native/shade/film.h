@@ -55,6 +55,9 @@ struct Film {
     // IntegratorSettings::light_groups.count planes of w x h x 3 floats: each light group's
     // Combined (Cycles' "Combined_<group>"), averaged over samples.
     float *light_groups = nullptr;
+    // 3 floats: Cycles' UV pass -- the mesh's UV map at the pixel-centre sample's first hit
+    // (U, V, A = 1 on a mesh), 0 on clouds and where nothing is hit.
+    float *uv = nullptr;
 };
 
 // What both renderers take the same way.

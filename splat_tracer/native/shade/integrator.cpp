@@ -55,6 +55,7 @@ struct Integrator::Primary {
     float mist = 0;    // 1 - Cycles' mist there (0 where nothing is hit); only with the Mist pass
     Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
     float ao = 0;      // the AO pass's term (only with that pass)
+    Vec3 uv;           // the UV pass's (U, V, 1) on a mesh; 0 on a cloud
 };
 
 struct Integrator::Pixel {
@@ -474,6 +475,7 @@ void Integrator::write_centre(const Primary &c, size_t p) const {
     if (film_.index) film_.index[p] = c.hit ? c.index : 0.f;
     if (film_.material_index) film_.material_index[p] = c.hit ? c.material_index : 0.f;
     if (film_.splat_count) film_.splat_count[p] = float(c.splats);
+    put3(film_.uv, c.hit ? c.uv : Vec3());
 }
 
 // Cycles' mist (kernel/film/data_passes.h): the distance from the camera (along its view
@@ -644,6 +646,13 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
         primary->position = sp.p, primary->material_index = mat.pass_index;
         if (film_.mist) primary->mist = mist_term(sp.p);
+        if (film_.uv) {
+            if (const TriangleMesh *mesh = scene_.instance(sp.instance).mesh) {
+                float u, v;
+                mesh->uv(sp.prim, sp.b1, sp.b2, &u, &v);
+                primary->uv = Vec3(u, v, 1.f);
+            }
+        }
         if (st.split) {
             // Cycles' colour passes: the lobes' albedos seen from the camera.
             LightSums &ls = *st.split;
