@@ -550,14 +550,16 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera ? camera_inside_.data() : nullptr,
                                   &tally.stats);
         if (st.specular && !cfg.headlight) {
-            const std::vector<Light> &lights = scene_.lights();
-            for (size_t i = 0; i < lights.size(); ++i)
-                if (lights[i].visibility & st.kind) {
-                    const Vec3 seen = lamp_radiance(lights[i], ray, sp.t);
+            // A pointer range, as a range-for: the end is not reloaded each lamp.
+            const Light *first_lamp = scene_.lights().data(), *end = first_lamp + scene_.lights().size();
+            for (const Light *light = first_lamp; light != end; ++light)
+                if (light->visibility & st.kind) {
+                    const Vec3 seen = lamp_radiance(*light, ray, sp.t);
                     lamps = lamps + seen;
                     // (With Clamp on, each lamp is clamped alone here; Combined clamps their sum.)
                     if (st.split)
-                        tap(st, clamped(seen, st.weight, st.bounces > 1), cfg.light_groups.of_lamp(i), true);
+                        tap(st, clamped(seen, st.weight, st.bounces > 1),
+                            cfg.light_groups.of_lamp(size_t(light - first_lamp)), true);
                 }
         }
         if (!sp.valid()) {
@@ -747,7 +749,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         }
         next.weight = st.weight * weight;
         next.min_pdf = std::fmin(st.min_pdf, pdf);
-        if (st.lobe == kLobeNone)  // the first bounce names the light passes of all that follows
+        if (st.split && st.lobe == kLobeNone)  // the first bounce names the light passes of all that follows
             next.lobe = kind == kVisDiffuse ? kLobeDiffuse : kind == kVisGlossy ? kLobeGlossy : kLobeTransmission;
         ++(tally.*count);
         L = L + weight * radiance(spawn(dir), next, next_rng, nullptr, tally);
@@ -873,6 +875,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
+    const bool split = st.split != nullptr;  // read once: the stores below may alias it
     // Light passes: one source's light `all` here, of which `diffuse_part` lit the diffuse
     // lobe (the rest the glossy one), and `added`, what the path got of it after the clamp.
     auto tap_split = [&](Vec3 all, Vec3 diffuse_part, Vec3 added, int group) {
@@ -885,7 +888,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     Vec3 L;
     for (size_t i = 0; i < lights.size(); ++i) {
         const Light &light = lights[i];
-        Vec3 lamp, lamp_diffuse;  // lamp_diffuse: light passes only
+        Vec3 lamp, lamp_diffuse;  // lamp_diffuse, and lamp without the clamp: light passes only
         for (int s = 0; s < k; ++s) {
             float u[2];
             rng.get(Sampler::kLamp + Sampler::kDimStride * uint32_t(i), u, 2, uint32_t(s), uint32_t(k));
@@ -903,13 +906,16 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                 ++tally.shadow;
                 visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
             }
-            if (clamp || st.split) lamp = lamp + c * visible;
-            if (!clamp) L = L + c * visible;
-            if (st.split) lamp_diffuse = lamp_diffuse + diffuse * ls.irradiance * visible * (cos_i * share);
+            if (clamp) lamp = lamp + c * visible;
+            else L = L + c * visible;
+            if (split) {
+                if (!clamp) lamp = lamp + c * visible;
+                lamp_diffuse = lamp_diffuse + diffuse * ls.irradiance * visible * (cos_i * share);
+            }
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }
         if (clamp) L = L + clamped(lamp, weight, indirect);
-        if (st.split) tap_split(lamp, lamp_diffuse, clamp ? clamped(lamp, weight, indirect) : lamp,
+        if (split) tap_split(lamp, lamp_diffuse, clamp ? clamped(lamp, weight, indirect) : lamp,
                                 settings_.light_groups.of_lamp(i));
     }
     // Emissive triangles: a point of one picked by power, weighed against the chance that
@@ -947,7 +953,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
             const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
             L = L + added;
-            if (st.split) {
+            if (split) {
                 const Vec3 diffuse_part = (emitter.visibility & kVisDiffuse ? diffuse : Vec3()) * ls.emission *
                                           through * (cos_i * w / light_pdf);
                 tap_split(lit, diffuse_part, added, settings_.light_groups.of_instance(ls.instance));
