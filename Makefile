@@ -134,6 +134,7 @@ bench-quick: build
 	$(VPY) -m benchmarks.viewport_latency --quick
 	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 	$(VPY) -m benchmarks.real_scans --quick --output build/bench-quick
+	$(VPY) -m benchmarks.time_to_clean --quick --output build/bench-quick
 
 # Open3D for the import benchmark's comparison rows, in its own environment (its wheel
 # brings dependencies the add-on's environment must not get); it needs libusb at load
@@ -153,6 +154,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
 	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 	$(VPY) -m benchmarks.real_scans --output benchmarks/results
+	$(VPY) -m benchmarks.time_to_clean --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

@@ -1,4 +1,6 @@
 """Panels, shown only when Splat Tracer is the render engine."""
+import fnmatch
+
 import bpy
 
 ENGINE = "SPLAT_TRACER"
@@ -83,9 +85,16 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
                 sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
                 if not prefix:
                     col.prop(cycles, "time_limit")
-                    # Cycles' Denoise is on by default and the engine does not denoise: the
-                    # render report says so, and this is where it is switched off.
-                    col.prop(cycles, "use_denoising", text="Cycles' Denoise (not applied)")
+                # Cycles' Denoise, applied with OpenImageDenoise (blender/denoise.py; the
+                # viewport's to its last pass). Not `denoiser`/`preview_denoiser`: drawing
+                # those enums computes their items, which enumerates GPU devices (a CUDA
+                # warning in every session).
+                col.prop(cycles, f"use_{prefix}denoising", text="Denoise")
+                sub = col.column()
+                sub.active = getattr(cycles, f"use_{prefix}denoising")
+                sub.prop(cycles, f"{prefix}denoising_input_passes", text="Passes")
+                sub.prop(cycles, f"{prefix}denoising_prefilter", text="Prefilter")
+                sub.prop(cycles, f"{prefix}denoising_quality", text="Quality")
         col = layout.column()
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")
@@ -249,6 +258,27 @@ class SPLAT_TRACER_PT_world_light_group(SplatTracerPanel, bpy.types.Panel):
         _draw_light_group(self.layout, context.world, context.view_layer)
 
 
+class SPLAT_TRACER_PT_passes_cryptomatte(SplatTracerPanel, bpy.types.Panel):
+    """Blender's Cryptomatte settings of the view layer, as Cycles' panel shows them (Accurate
+    Mode left out, as there: neither Cycles nor the engine reads it)."""
+    bl_label = "Cryptomatte"
+    bl_context = "view_layer"
+    bl_parent_id = "SPLAT_TRACER_PT_passes"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        view_layer = context.view_layer
+        col = layout.column()
+        col.prop(view_layer, "use_pass_cryptomatte_object", text="Object")
+        col.prop(view_layer, "use_pass_cryptomatte_material", text="Material")
+        col.prop(view_layer, "use_pass_cryptomatte_asset", text="Asset")
+        col = layout.column()
+        col.active = any((view_layer.use_pass_cryptomatte_object, view_layer.use_pass_cryptomatte_material,
+                          view_layer.use_pass_cryptomatte_asset))
+        col.prop(view_layer, "pass_cryptomatte_depth", text="Levels")
+
+
 class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
     """Mask (shadow catcher, holdout) and ray visibility, as Cycles reads them, inside
     Blender's Object > Visibility panel (Cycles' own copy hides for other engines)."""
@@ -276,7 +306,9 @@ class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
 
 
 class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
-    """The lamp settings the engine reads (Cycles' light panel hides for other engines)."""
+    """The lamp's settings, the one Light panel (Blender's own, DATA_PT_light, is not opened:
+    it holds only a second type selector). Drawn as Cycles' Light panel draws them, less what
+    the engine does not render."""
     bl_label = "Light"
     bl_context = "data"
 
@@ -290,8 +322,22 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
         layout.row().prop(light, "type", expand=True)
         layout.use_property_split = True
         col = layout.column()
-        col.prop(light, "color")
+        row = col.column(align=True, heading="Temperature").row(align=True)
+        row.use_property_decorate = False
+        row.prop(light, "use_temperature", text="")
+        sub = row.row()
+        sub.active = light.use_temperature
+        sub.prop(light, "temperature", text="")
+        row.prop_decorator(light, "temperature")
+        col.prop(light, "color", text="Tint" if light.use_temperature else "Color")
+        layout.separator()
+        col = layout.column()
         col.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
+        col.prop(light, "exposure")
+        if light.type != "SUN":
+            col.prop(light, "normalize")  # off is said in the render report (rendered as on)
+        layout.separator()
+        col = layout.column()
         if light.type in {"POINT", "SPOT"}:
             col.prop(light, "shadow_soft_size", text="Radius")
             col.prop(light, "use_soft_falloff")
@@ -307,6 +353,7 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
         if light.type == "SPOT":
             col.prop(light, "spot_size", text="Spot Size")
             col.prop(light, "spot_blend", text="Blend")
+            col.prop(light, "show_cone")
         col.prop(light, "use_shadow", text="Cast Shadow")
 
 
@@ -465,24 +512,69 @@ class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
+           SPLAT_TRACER_PT_passes_cryptomatte,
            SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
            SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab,
            SPLAT_TRACER_PT_passes_light_groups, SPLAT_TRACER_PT_object_light_group,
            SPLAT_TRACER_PT_world_light_group)
 
-# Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
-# show for; the ones that show for the built-in BLENDER_RENDER also make sense here, and so
-# do these, whose settings the engine honours as Cycles does (Cycles shows its own copies).
-_HONOURED_PANELS = ("DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture")  # the camera's Depth of Field
+# Blender's engine-agnostic panels opened for this engine: the ones whose settings apply to it
+# (honoured, said in the render report, or applied by Blender: output, colour management,
+# object data, physics), as Cycles' add-on keeps its list (cycles/ui.py get_panels). Names, or
+# fnmatch patterns for whole families. Left out on purpose: DATA_PT_light (a second light-type
+# selector; SPLAT_TRACER_PT_light is the one Light panel), DATA_PT_spot (in that panel),
+# DATA_PT_preview and MATERIAL_PT_preview (no preview renders: bl_use_preview), the volume and
+# light-probe render settings, Freestyle and Grease Pencil render settings (not offered by this engine),
+# EEVEE_MATERIAL_PT_viewport_settings (EEVEE's material settings) and OBJECT_PT_shading (an
+# empty parent for engines' shading settings). tests/blender/test_panels.py checks that every
+# panel opened is here and that none shows a setting the settings audit lists as not rendered.
+GENERIC_PANELS = (
+    # Render and Output properties
+    "RENDER_PT_color_management", "RENDER_PT_color_management_*", "RENDER_PT_simplify",
+    "RENDER_PT_simplify_render", "RENDER_PT_simplify_viewport", "RENDER_PT_format", "RENDER_PT_frame_range",
+    "RENDER_PT_time_stretching", "RENDER_PT_stereoscopy", "RENDER_PT_output", "RENDER_PT_output_*",
+    "RENDER_PT_encoding", "RENDER_PT_encoding_*", "RENDER_PT_stamp", "RENDER_PT_stamp_*",
+    "RENDER_PT_post_processing",
+    # View layer, object, world, material
+    "VIEWLAYER_PT_layer", "VIEWLAYER_PT_context_layer", "OBJECT_PT_visibility", "OBJECT_PT_custom_props",
+    "WORLD_PT_context_world", "WORLD_PT_animation", "WORLD_PT_custom_props", "MATERIAL_PT_animation",
+    "MATERIAL_PT_custom_props", "MATERIAL_PT_freestyle_line",
+    # Camera: Depth of Field is honoured as Cycles does (Cycles opens its own copy); the stereo
+    # eyes' cameras are rendered (Blender gives each view's to the engine)
+    "CAMERA_PT_presets", "CAMERA_PT_safe_areas_presets", "DATA_PT_context_camera", "DATA_PT_camera",
+    "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_camera_stereoscopy",
+    "DATA_PT_camera_display",
+    "DATA_PT_camera_display_composition_guides", "DATA_PT_camera_safe_areas",
+    "DATA_PT_camera_safe_areas_center_cut", "DATA_PT_camera_background_image", "DATA_PT_camera_animation",
+    "DATA_PT_custom_props_camera",
+    # Lamps: the ID, animation and custom properties (the settings: SPLAT_TRACER_PT_light)
+    "DATA_PT_context_light", "DATA_PT_light_animation", "DATA_PT_custom_props_light",
+    # Object data the engine renders or Blender evaluates into it: meshes, point clouds,
+    # curves, their attributes; speakers (sound); a volume's grids (the object is said as
+    # not rendered)
+    "DATA_PT_context_mesh", "DATA_PT_context_pointcloud", "DATA_PT_context_curves", "DATA_PT_context_speaker",
+    "DATA_PT_context_volume", "DATA_PT_context_lightprobe", "DATA_PT_vertex_groups", "DATA_PT_shape_keys",
+    "DATA_PT_uv_texture", "DATA_PT_vertex_colors", "DATA_PT_customdata", "DATA_PT_mesh_attributes",
+    "DATA_PT_pointcloud_attributes", "DATA_PT_CURVES_attributes", "DATA_PT_curves_surface",
+    "DATA_PT_texture_space", "DATA_PT_remesh", "DATA_PT_mesh_animation", "DATA_PT_curves_animation",
+    "DATA_PT_volume_animation", "DATA_PT_volume_file", "DATA_PT_volume_grids", "DATA_PT_speaker",
+    "DATA_PT_distance", "DATA_PT_cone", "DATA_PT_speaker_animation", "DATA_PT_custom_props_*",
+    # Particles, physics and textures: Blender simulates and evaluates them into the scene
+    "PARTICLE_PT_*", "PHYSICS_PT_*", "TEXTURE_PT_*", "NODE_PT_texture_mapping",
+    # Custom properties elsewhere
+    "STRIP_PT_custom_props", "SEQUENCER_PT_custom_props",
+)
 _extended_panels = []
+
+
+def generic_panel_included(name: str) -> bool:
+    return any(fnmatch.fnmatchcase(name, pattern) for pattern in GENERIC_PANELS)
 
 
 def _extend_builtin_panels():
     for panel in bpy.types.Panel.__subclasses__():
         engines = getattr(panel, "COMPAT_ENGINES", None)
-        if not isinstance(engines, set) or ENGINE in engines:
-            continue
-        if "BLENDER_RENDER" in engines or panel.__name__ in _HONOURED_PANELS:
+        if isinstance(engines, set) and ENGINE not in engines and generic_panel_included(panel.__name__):
             engines.add(ENGINE)
             _extended_panels.append(panel)
 

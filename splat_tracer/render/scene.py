@@ -8,6 +8,7 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from .. import _core
+from . import cryptomatte
 from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
@@ -108,7 +109,8 @@ class Instance:
     RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
     pass_index: the Object Index pass value. shadow_catcher: it receives the other
     instances' shadows and reflections but is left out of Combined (Cycles' shadow catcher;
-    see RenderScene.render)."""
+    see RenderScene.render). name, asset: its object's and asset's names in the Cryptomatte
+    passes (render/cryptomatte.py; asset "" : the object's name)."""
 
     geometry: object
     matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -117,6 +119,8 @@ class Instance:
     holdout: bool = False
     pass_index: int = 0
     shadow_catcher: bool = False
+    name: str = ""
+    asset: str = ""
     light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
 
 
@@ -146,6 +150,8 @@ class RenderScene:
         geometries, index_of = [], {}
         rows = []
         materials = []
+        # Cryptomatte's names: (object, asset) per instance, one per material-table entry.
+        self.instance_names, self.material_names = [], []
         for inst in instances:
             if not isinstance(inst, Instance):
                 raise TypeError(f"instances must be scene.Instance objects, got {type(inst).__name__}")
@@ -175,6 +181,8 @@ class RenderScene:
                                     holdout=inst.holdout, pass_index=inst.pass_index,
                                     shadow_catcher=inst.shadow_catcher))
             materials.extend(mats)
+            self.instance_names.append((inst.name, inst.asset or inst.name))
+            self.material_names.extend(m.name for m in mats)
         self.world = world
         self.lights = tuple(lights)
         self.instance_light_groups = tuple(inst.light_group for inst in instances)
@@ -194,7 +202,8 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True, light_groups: Sequence[str] = ()) -> FrameResult:
+               packets: bool = True, cryptomatte_levels: int = 6,
+               light_groups: Sequence[str] = ()) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -207,6 +216,11 @@ class RenderScene:
         the "Shadow Catcher" pass asked for, Combined leaves the shadow out entirely (the
         catcher is a hole) and the pass holds it, to multiply the photograph by.
 
+        The Cryptomatte passes (cryptomatte.KINDS) are (h, w, 2 slots) arrays of (id,
+        coverage) pairs, cryptomatte.slots_of(cryptomatte_levels) of them, sorted by coverage;
+        the ids are those of the instances' name and asset and the materials' name.
+
+
         light_groups: group names (at most shading.MAX_LIGHT_GROUPS); each gets a pass
         "Combined_<name>" holding the light of the lamps, emissive instances and world whose
         light_group is that name (Cycles' light groups: the groups sum to Combined less what
@@ -217,10 +231,17 @@ class RenderScene:
                 raise TypeError(f"{name} must be a {kind.__name__}, got {type(value).__name__}")
         if isinstance(passes, str):
             raise TypeError("passes must be a sequence of pass names, not one string")
-        unknown = set(passes) - set(PASSES)
+        unknown = set(passes) - set(PASSES) - set(cryptomatte.KINDS)
         if unknown:
-            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
-        kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window)
+            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES) + list(cryptomatte.KINDS)}")
+        ids = None
+        if set(passes) & set(cryptomatte.KINDS):
+            ids = (np.array([[cryptomatte.name_id(n) for n in pair] for pair in self.instance_names],
+                            np.float32).reshape(-1, 2),
+                   # The core's table has its default material when no instance brings one.
+                   np.array([cryptomatte.name_id(n) for n in self.material_names or [Material().name]], np.float32))
+        kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
+                                           cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels)
         if light_groups:
             if isinstance(light_groups, str):
                 raise TypeError("light_groups must be a sequence of group names, not one string")
@@ -254,17 +275,23 @@ PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
-                     passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None) -> tuple[dict, dict]:
+                     passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None,
+                     cryptomatte_ids: Optional[tuple] = None, cryptomatte_levels: int = 6) -> tuple[dict, dict]:
     """The keyword arguments of the core's RenderScene.render for a frame (all but threads,
     progress, tile_size and packets), and the zeroed buffers they write, by pass name. It
     checks only the window (before allocating): RenderScene.render checks its arguments
     first, and fuzz/fuzz_core.py passes unchecked ones on purpose, so that the fuzzed
-    layout is the add-on's."""
+    layout is the add-on's. cryptomatte_ids: (instance ids (instances, 2), material ids),
+    needed when a Cryptomatte pass is asked for (RenderScene.render makes them)."""
     x0, y0, w, h = window_rect(window, width, height)
     buffers = {}
+    slots = cryptomatte.slots_of(cryptomatte_levels)
     for name in ("Combined", *passes):
         if name in LIGHT_PASSES and name != "DiffCol":
             continue  # a plane of the light passes' buffer, below
+        if name in cryptomatte.KINDS:
+            buffers[name] = np.zeros((h, w, 2 * slots), np.float32)
+            continue
         c = PASSES[name]
         buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
     local_from_camera, frustum, orthographic = camera.native()
@@ -273,6 +300,8 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   method=method, world=world.radiance(), film_transparent=bool(world.transparent),
                   lens=camera.lens.native() if camera.lens else None,
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
+    if world.environment is not None:  # a uniform world passes nothing more: the call is as before
+        kwargs["world_map"] = world.world_map()
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
     if "AO" in passes:
@@ -287,4 +316,6 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
         for name in light:
             buffers[name] = planes[LIGHT_PASSES.index(name)]
     kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name in PASS_KEYWORDS})
+    if any(kind in buffers for kind in cryptomatte.KINDS):
+        kwargs["cryptomatte"] = (*(buffers.get(kind) for kind in cryptomatte.KINDS), slots, *cryptomatte_ids)
     return kwargs, buffers

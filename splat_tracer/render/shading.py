@@ -11,9 +11,10 @@ Units are Blender's, so that a scene lit for Cycles renders at the same brightne
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -52,6 +53,7 @@ class Material:
         is never sampled.
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
+    name: the material's name in the Cryptomatte Material pass (render/cryptomatte.py).
     """
 
     base_colour: Sequence[float] = (0.8, 0.8, 0.8)
@@ -66,6 +68,7 @@ class Material:
     use_point_alpha: bool = False
     emission_sampling: str = "AUTO"
     pass_index: int = 0
+    name: str = "default_surface"  # cryptomatte.DEFAULT_MATERIAL: Cycles' name for no material
 
     def __post_init__(self):
         if self.emission_sampling not in EMISSION_SAMPLING:
@@ -205,7 +208,13 @@ class World:
     Ray Visibility: 'camera', 'diffuse', 'glossy', 'transmission'); a kind left out meets
     black instead -- camera rays on an opaque film keep alpha 1, as in Cycles.
     mist_start, mist_depth, mist_falloff: the World's Mist Pass settings (MIST_FALLOFFS), which
-    only the Mist pass reads; the defaults are Cycles' for a scene without a world."""
+    only the Mist pass reads; the defaults are Cycles' for a scene without a world.
+    environment: None (the uniform colour x strength), or the world as an equirectangular
+    image (float32, height x width x 3, scene-linear radiance, strength included; row 0 at the
+    nadir, column 0 at u = 0, Cycles' orientation: u = 0.5 - atan2(y, x) / 2 pi,
+    v = 0.5 + asin(z) / pi): seen by rays that leave the scene and sampled as a light.
+    camera_environment: with `environment`, what camera rays see instead (the world's Light
+    Path > Is Camera Ray trick), or None: the same. Compared by identity, not by value."""
 
     colour: Sequence[float] = (0.05, 0.05, 0.05)
     strength: float = 1.0
@@ -217,10 +226,19 @@ class World:
     # World > Light Settings > Distance: how far the AO pass's rays look (Cycles' ao_distance).
     ao_distance: float = 10.0
     light_group: str = ""  # World > Settings > Light Group ("": none)
+    environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
+    camera_environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not (math.isfinite(self.ao_distance) and self.ao_distance >= 0):
             raise ValueError(f"ao_distance must be finite and >= 0, got {self.ao_distance!r}")
+        for name in ("environment", "camera_environment"):
+            image = getattr(self, name)
+            if image is not None and not (isinstance(image, np.ndarray) and image.dtype == np.float32
+                                          and image.ndim == 3 and image.shape[2] == 3):
+                raise ValueError(f"{name} must be a float32 (height, width, 3) array")
+        if self.camera_environment is not None and self.environment is None:
+            raise ValueError("camera_environment needs an environment")
         if self.mist_falloff not in MIST_FALLOFFS:
             raise ValueError(f"mist_falloff must be one of {sorted(MIST_FALLOFFS)}, got {self.mist_falloff!r}")
         if not (math.isfinite(self.mist_start) and math.isfinite(self.mist_depth) and self.mist_depth >= 0):
@@ -230,7 +248,26 @@ class World:
             raise ValueError(f"unknown world ray visibility {sorted(unknown)}; use {list(WORLD_RAYS)}")
 
     def radiance(self) -> tuple:
+        """The uniform radiance; with an environment image, its mean over the sphere."""
+        if self.environment is not None:
+            return self._environment_mean
         return tuple(float(c) * float(self.strength) for c in self.colour)
+
+    @functools.cached_property
+    def _environment_mean(self) -> tuple:
+        """The environment's mean radiance over the sphere (rows weighed by sin(theta)): once
+        per World, which a viewport renders many times."""
+        h = self.environment.shape[0]
+        weights = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+        rows = self.environment.mean(axis=1, dtype=np.float64)
+        return tuple(float(c) for c in weights @ rows / weights.sum())
+
+    def world_map(self):
+        """The core's world_map argument: None, or (light image, camera image or None)."""
+        if self.environment is None:
+            return None
+        return (np.ascontiguousarray(self.environment),
+                None if self.camera_environment is None else np.ascontiguousarray(self.camera_environment))
 
     def mist(self) -> tuple:
         """(start, 1 / depth, falloff exponent), as the core takes them: Cycles' Film values
@@ -262,6 +299,7 @@ class RenderSettings:
         "MIS" (shadow rays aimed at them and the rays that meet them, weighed by multiple
         importance sampling, as Cycles), "LIGHT" (shadow rays only) or "BSDF" (the rays that
         meet them only). The last two are for verifying the first; all three converge alike.
+        The world's environment image (World.environment) is sampled by the same strategy.
 
     Noise control, Cycles' settings with Cycles' meaning (0 turns each off):
     clamp_direct / clamp_indirect: Cycles' Clamp Direct / Indirect. A sample's contribution

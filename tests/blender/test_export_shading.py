@@ -336,14 +336,26 @@ def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, rep
     sky = nodes.new("ShaderNodeTexSky")
     links.new(sky.outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    assert w.colour == approx(es.SKY_RADIANCE) and w.strength == approx(0.5)
-    assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform sky of radiance (1.7, 2.9, 4.8)" \
+    # The Sky Texture is baked: its measured dome x strength and a sun disc (compared with
+    # Cycles in test_world_environment.py), said once.
+    assert w.environment is not None and w.environment[-1, 0] == approx((0.86, 1.425, 2.415), rel=0.01)  # the zenith
+    assert w.environment[0, 0] == approx((0.185, 0.19, 0.2), rel=0.01)  # the ground below
+    assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform dome of radiance (1.72, 2.85, 4.83)" \
         in report.lines[0]
     background.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    # An Environment Texture is baked (tests/blender/test_world_environment.py); without an
+    # image, Cycles renders its missing-image pink (measured: (1.02, 0.0004, 1.04) on 8x8
+    # pixels), a uniform world: the uniform path, x strength, nothing to report.
     links.new(nodes.new("ShaderNodeTexEnvironment").outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    assert w.colour == approx((0.3, 0.3, 0.3))
-    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Environment Texture' node; "
+    assert w.environment is None and w.radiance() == approx((0.5, 0.0, 0.5))
+    assert len(report.lines) == 1
+    # A node the engine does not evaluate falls back to the socket's default value, said once
+    # (the Environment Texture left unconnected: nothing is baked).
+    links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"], background.inputs["Color"])
+    w = es.world_of(empty_scene, report)
+    assert w.environment is None and w.radiance() == approx((0.15, 0.15, 0.15))
+    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Noise Texture' node; "
                                "using its default value (0.3, 0.3, 0.3)")
 
 

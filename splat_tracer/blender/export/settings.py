@@ -10,6 +10,9 @@ the engine's behaviour as the default, so without the add-on there is nothing to
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import Optional
+
 from ...render import shading
 
 # View-layer passes an artist can enable that the engine does not write: (the switch's owner on
@@ -21,11 +24,7 @@ UNWRITTEN_PASSES = (
     ("", "use_pass_subsurface_direct", "Subsurface Direct"),
     ("", "use_pass_subsurface_indirect", "Subsurface Indirect"),
     ("", "use_pass_subsurface_color", "Subsurface Color"),
-    ("", "use_pass_cryptomatte_object", "Cryptomatte Object"),
-    ("", "use_pass_cryptomatte_material", "Cryptomatte Material"),
-    ("", "use_pass_cryptomatte_asset", "Cryptomatte Asset"),
     ("", "use_pass_grease_pencil", "Grease Pencil"),
-    ("cycles", "denoising_store_passes", "Denoising Data"),
     ("cycles", "use_pass_volume_direct", "Volume Direct"),
     ("cycles", "use_pass_volume_indirect", "Volume Indirect"),
     ("cycles", "use_pass_volume_scatter", "Volume Scatter"),
@@ -34,6 +33,26 @@ UNWRITTEN_PASSES = (
     ("cycles", "pass_debug_sample_count", "Debug Sample Count"),
     ("cycles", "pass_render_time", "Render Time"),
 )
+
+
+# Blender's default Alpha Threshold of the data passes (ViewLayer.pass_alpha_threshold).
+_ALPHA_THRESHOLD = 0.5
+
+
+def _report_cycles_scene(scene, cycles, report: shading.Report) -> None:
+    """Cycles' scene settings the engine does not read (the settings audit found them)."""
+    if cycles.film_exposure != 1.0:  # Cycles' brightness scale, 1 by default
+        report.once(f"Cycles' Film > Exposure ({cycles.film_exposure:g}) is not applied: the image is rendered "
+                    "at 1 (Color Management > Exposure, which Blender applies, brightens both engines' images)")
+    if not cycles.caustics_reflective or not cycles.caustics_refractive:
+        report.once("Cycles' Caustics > Reflective/Refractive off is not honoured: caustic paths are not filtered")
+    if cycles.film_transparent_glass and scene.render.film_transparent:
+        report.once("Cycles' Film > Transparent Glass is not honoured: glass is not made transparent in the "
+                    "film's alpha")
+    if cycles.use_fast_gi:
+        report.once("Cycles' Fast GI Approximation is not used: indirect light is traced to the bounce limits")
+    if cycles.use_sample_subset:
+        report.once(f"Cycles' Sample Subset is not used: all {cycles.samples} samples are taken")
 
 
 def _on(owner, prop: str) -> bool:
@@ -49,27 +68,109 @@ def stereo_views(render) -> list:
     return [v.name for v in views]
 
 
+# Cycles' `denoiser` enum by its stored number (properties.py's items: OptiX 2,
+# OpenImageDenoise 4, the default). Read raw, by number: the enum's items are computed, and
+# computing them asks Cycles for its GPU devices, which logs a CUDA warning ("CUEW
+# initialization failed") in every render.
+_DENOISER_OPTIX, _DENOISER_DEFAULT = 2, 4
+
+
+def _stored(owner, prop: str, default):
+    """An add-on property's stored value, without RNA's conversion: the system properties
+    (Blender 5.0+ keeps bpy.props values there) or, before 5.0, the group's own ID
+    properties; `default` when never set."""
+    system = getattr(owner, "bl_system_properties_get", None)
+    store = system() if system is not None else owner
+    return default if store is None else store.get(prop, default)
+
+
+NOISY_IMAGE = "Noisy Image"
+DENOISING_DATA = ("Denoising Normal", "Denoising Albedo", "Denoising Depth")
+
+
+@dataclass(frozen=True)
+class Denoising:
+    """Cycles' Denoise settings (Render > Sampling > Render > Denoise) as the engine applies
+    them with OpenImageDenoise (blender/denoise.py)."""
+    input_passes: str  # RGB, RGB_ALBEDO or RGB_ALBEDO_NORMAL
+    prefilter: str     # NONE, FAST or ACCURATE
+    quality: str       # HIGH, BALANCED or FAST
+
+    @property
+    def albedo(self) -> bool:
+        return self.input_passes in ("RGB_ALBEDO", "RGB_ALBEDO_NORMAL")
+
+    @property
+    def normal(self) -> bool:
+        return self.input_passes == "RGB_ALBEDO_NORMAL"
+
+    def describe(self) -> str:
+        inputs = {"RGB": "the image alone", "RGB_ALBEDO": "the image and Denoising Albedo",
+                  "RGB_ALBEDO_NORMAL": "the image, Denoising Albedo and Denoising Normal"}[self.input_passes]
+        return (f"denoised by OpenImageDenoise (CPU) from {inputs}, prefilter {self.prefilter.title()}, "
+                f"quality {self.quality.title()}")
+
+
+def denoising_of(scene, view_layer, report: Optional[shading.Report] = None,
+                 viewport: bool = False) -> Optional[Denoising]:
+    """The final render's denoising (None: off), read where Cycles keeps it: the scene's
+    Denoise switch and the view layer's own (View Layer > Denoising); viewport: the
+    viewport's (Sampling > Viewport > Denoise, its own passes, prefilter and quality).
+    Without the Cycles add-on there is no switch, and nothing is denoised."""
+    cycles = getattr(scene, "cycles", None)
+    prefix = "preview_" if viewport else ""
+    if not _on(cycles, f"use_{prefix}denoising"):
+        return None
+    if not viewport and not getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
+        return None
+    if report is not None and not viewport and _stored(cycles, "denoiser", _DENOISER_DEFAULT) == _DENOISER_OPTIX:
+        report.once("Denoiser OptiX is Cycles' GPU denoiser: the image is denoised by OpenImageDenoise instead")
+    names = ("input_passes", "prefilter", "quality")
+    return Denoising(*(getattr(cycles, f"{prefix}denoising_{name}") for name in names))
+
+
+def denoising_passes(scene, view_layer) -> tuple:
+    """The denoising passes Cycles writes, by its names: Noisy Image whenever the render is
+    denoised, Denoising Normal/Albedo/Depth with the view layer's Denoising Data switch."""
+    names = ()
+    if denoising_of(scene, view_layer) is not None:
+        names += (NOISY_IMAGE,)
+    if _on(getattr(view_layer, "cycles", None), "denoising_store_passes"):
+        names += DENOISING_DATA
+    return names
+
+
 def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     """Says, once each, the scene's and the view layer's render settings the engine does not
     honour and what it does instead. Called once a frame by the session."""
     render = scene.render
     if render.use_motion_blur:
+        position = render.motion_blur_position.lower().replace("_", " ")
         report.once(f"Motion Blur is not rendered: the frame is rendered sharp at frame {scene.frame_current}'s "
-                    f"time (the shutter of {render.motion_blur_shutter:g} frames is ignored)")
+                    f"time (the shutter of {render.motion_blur_shutter:g} frames, position {position}, is ignored)")
     if render.use_multiview:
-        views = ", ".join(f"'{v}'" for v in stereo_views(render))
-        report.once(f"Stereoscopy is not rendered: every view ({views}) gets the same image, from the scene "
-                    "camera itself (no eye separation, no per-view camera)")
+        camera = scene.camera
+        if camera is not None and camera.type == "CAMERA" and camera.data.type == "PANO" \
+                and render.views_format == "STEREO_3D":
+            # Cycles' spherical stereo moves each ray's origin by the eye offset turned with
+            # the ray's direction (omni-directional stereo); the engine renders each eye as
+            # a whole camera moved sideways, which is right only near the view's centre.
+            report.once(f"camera '{camera.name}': stereo panorama rendered with each eye's camera moved by half "
+                        "the interocular distance, not Cycles' spherical stereo (each ray's own eye offset): "
+                        "the disparity is right ahead of the camera only")
     cycles = getattr(scene, "cycles", None)
-    if _on(cycles, "use_denoising") and getattr(getattr(view_layer, "cycles", None), "use_denoising", True):
-        # The denoiser is not named: reading Cycles' `denoiser` enum (its items are computed)
-        # initialises Cycles' GPU libraries, which logs a CUDA warning in every render.
-        report.once("Cycles' Denoise is not applied: the image keeps its noise. The compositor's "
-                    "Denoise node, "
-                    "fed the Normal and Diffuse Color passes the engine writes, denoises it (turn Denoise off "
-                    "in Splat Tracer > Sampling to silence this line)")
+    if cycles is not None:
+        _report_cycles_scene(scene, cycles, report)
     owners = {"": view_layer, "cycles": getattr(view_layer, "cycles", None)}
     layer = f"view layer '{view_layer.name}'"
+    if cycles is not None and view_layer.samples > 0 and getattr(cycles, "use_layer_samples", "USE") != "IGNORE":
+        report.once(f"{layer}: its Samples override ({view_layer.samples}) is not used: the scene's "
+                    f"{cycles.samples} samples are taken")
+    for prop, label in (("use_solid", "Surfaces"), ("use_sky", "Environment")):
+        if not getattr(view_layer, prop, True):
+            report.once(f"{layer}: Filter > {label} off is not honoured (rendered as on)")
+    if view_layer.pass_alpha_threshold != _ALPHA_THRESHOLD:
+        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is not read")
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")

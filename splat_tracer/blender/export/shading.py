@@ -37,6 +37,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
+from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"
@@ -49,10 +50,6 @@ _BLACK = dict(base_colour=(0.0, 0.0, 0.0), specular_level=0.0)
 _IS_BSDF = "_bsdf"
 # Smallest IOR passed on: the contract needs a positive one (IOR < 1 is valid: a bubble).
 _MIN_IOR = 1e-3
-# The default Sky Texture (Multiple Scattering, sun 15 degrees up) as one uniform radiance:
-# the one giving the same irradiance on an upward-facing surface, measured by rendering the
-# sky with Cycles 5.0.1 (an equirectangular 256x128 image; without the sun disc).
-SKY_RADIANCE = (1.7, 2.9, 4.8)
 # Principled BSDF lobes the engine does not render, by the socket that turns each on.
 _PRINCIPLED_EXTRAS = {"Subsurface Weight": "subsurface", "Coat Weight": "coat", "Sheen Weight": "sheen",
                       "Anisotropic": "anisotropy", "Thin Film Thickness": "thin film"}
@@ -173,10 +170,10 @@ class _Sockets:
 # --------------------------------------------------------------------------------------
 # Materials. Each shader reader returns a dict of shading.Material fields (unset: the
 # contract's defaults), so that Mix and Add can blend them before the Material is made.
-# Emission Sampling is the material's setting, not a shader's: material_of sets it.
+# Emission Sampling and the name are the material's, not a shader's: material_of sets them.
 
 _DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
-             if f.name != "emission_sampling"}
+             if f.name not in ("emission_sampling", "name")}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -324,7 +321,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     if bl_material is None:
         return shading.Material()
     return dataclasses.replace(_surface_material(bl_material, report),
-                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index)
+                               emission_sampling=_emission_sampling(bl_material), pass_index=bl_material.pass_index,
+                               name=bl_material.name)
 
 
 def _emission_sampling(bl_material) -> str:
@@ -373,6 +371,10 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+# Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
+_LIGHT_MAX_BOUNCES = 1024
+
+
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
     if _has_custom_nodes(light):
@@ -382,6 +384,14 @@ def _report_lamp_extras(obj, light, say) -> None:
         say("light linking is ignored")
     if light.type != "SUN" and not getattr(light, "normalize", True):
         say("'Normalize' off is ignored (rendered as if on)")
+    factors = [label for prop, label in (("diffuse_factor", "Diffuse"), ("specular_factor", "Glossy"),
+                                         ("transmission_factor", "Transmission"))
+               if getattr(light, prop, 1.0) != 1.0]
+    if factors:
+        say(f"its {'/'.join(factors)} influence is ignored (rendered as 1)")
+    bounces = getattr(getattr(light, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        say(f"its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
 
 
 def _area_fields(light, matrix: np.ndarray, say) -> dict:
@@ -479,13 +489,7 @@ def _within_limits(kind: str, fields: dict, say) -> bool:
 
 def _background(node, sockets: _Sockets) -> tuple:
     """(colour, strength) of a Background (or Emission) node of the world."""
-    strength = sockets.value(node, "Strength")
-    source = _upstream(node.inputs["Color"])
-    if source is not None and source[0].type == "TEX_SKY":
-        sockets.say(f": the Sky Texture is approximated by a uniform sky of radiance {_fmt(SKY_RADIANCE)} "
-                    f"x strength (the default sky's dome, as an upward-facing surface sees it)")
-        return SKY_RADIANCE, strength
-    return sockets.colour(node, "Color"), strength
+    return sockets.colour(node, "Color"), sockets.value(node, "Strength")
 
 
 def world_visibility(world, report: shading.Report) -> frozenset:
@@ -510,6 +514,9 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
+    bounces = getattr(getattr(world, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        report.once(f"world '{world.name}': its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
                 mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff,
@@ -527,6 +534,16 @@ def world_of(scene, report: shading.Report) -> shading.World:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, **film)
     if sockets.linked_inputs(output, ["Volume"]):
         sockets.say(": Volume is ignored")
+    if source[0].type in ("MIX_SHADER", "ADD_SHADER") or export_world.varying_nodes(output):
+        # A world that varies with the direction or the ray: baked into an image (world.py).
+        # A plain Background keeps the uniform path below, as before.
+        try:
+            fields = export_world.bake(tree, output, sockets, _upstream)
+        except Exception as error:  # noqa: BLE001 -- skip, don't refuse: the frame renders
+            sockets.say(f": its node tree could not be baked ({type(error).__name__}: {error}); "
+                        f"using the world's viewport colour")
+            return viewport
+        return shading.World(strength=1.0, **fields, **film)
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
         return viewport

@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <iterator>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "python/py_util.h"
@@ -249,32 +251,150 @@ bool parse_light_groups(const RenderScene &scene, PyObject *ogroups, PyObject *o
     return true;
 }
 
+// The arrays of the Cryptomatte argument, held while the render runs.
+struct CryptomatteViews {
+    View out[CryptomatteFilm::kKinds], instance_ids, material_ids;
+};
+
+// render()'s `cryptomatte`: None, or (object, material, asset, slots, instance_ids,
+// material_ids) -- each of the first three None or a writable float32 (h, w, 2 slots) buffer,
+// slots in 1..kMaxCryptomatteSlots, instance_ids float32 (instances, 2) (each instance's
+// object and asset id), material_ids float32 (materials,). Ids must be finite and not 0 (0
+// marks a free slot; render/cryptomatte.py's ids never are).
+bool parse_cryptomatte(PyObject *arg, const RenderScene &scene, int w, int h, CryptomatteFilm &film,
+                       CryptomatteViews &views) {
+    if (arg == Py_None) return true;
+    // Blender's Levels go to 16 (pass_cryptomatte_depth's hard maximum).
+    constexpr int kMaxCryptomatteSlots = 16;
+    PyObject *kinds[CryptomatteFilm::kKinds], *oinst, *omat;
+    int slots = 0;
+    if (!PyArg_ParseTuple(arg, "OOOiOO;cryptomatte must be (object, material, asset, slots, instance_ids, "
+                               "material_ids)",
+                          &kinds[0], &kinds[1], &kinds[2], &slots, &oinst, &omat))
+        return false;
+    if (slots < 1 || slots > kMaxCryptomatteSlots)
+        return PyErr_Format(PyExc_ValueError, "cryptomatte slots must be in 1..%d", kMaxCryptomatteSlots), false;
+    const Py_ssize_t n_inst = Py_ssize_t(scene.instance_count()), n_mat = Py_ssize_t(scene.material_count());
+    const Py_ssize_t inst_shape[2] = {n_inst, 2}, mat_shape[1] = {n_mat};
+    if (!get_array(oinst, "cryptomatte instance_ids", 'f', 2, inst_shape, false, views.instance_ids) ||
+        !get_array(omat, "cryptomatte material_ids", 'f', 1, mat_shape, false, views.material_ids))
+        return false;
+    const float *ids[2] = {views.instance_ids.data<float>(), views.material_ids.data<float>()};
+    const size_t counts[2] = {size_t(n_inst) * 2, size_t(n_mat)};
+    for (int a = 0; a < 2; ++a)
+        for (size_t i = 0; i < counts[a]; ++i)
+            if (!std::isfinite(ids[a][i]) || ids[a][i] == 0.f)
+                return PyErr_Format(PyExc_ValueError, "cryptomatte ids must be finite and not 0"), false;
+    static const char *names[CryptomatteFilm::kKinds] = {"cryptomatte object", "cryptomatte material",
+                                                         "cryptomatte asset"};
+    for (int k = 0; k < CryptomatteFilm::kKinds; ++k) {
+        if (kinds[k] == Py_None) continue;
+        const Py_ssize_t shape[3] = {h, w, 2 * Py_ssize_t(slots)};
+        if (!get_array(kinds[k], names[k], 'f', 3, shape, true, views.out[k])) return false;
+        film.out[k] = views.out[k].data<float>();
+    }
+    film.slots = slots, film.instance_ids = ids[0], film.material_ids = ids[1];
+    return true;
+}
+
+// world_map: None, or (light, camera): the environment image lighting the scene and the one
+// camera rays see (None: the same), each a height x width x 3 float32 array of finite values
+// >= 0 (shade/environment.h's layout).
+// The environment maps of the last renders, by content: building one costs ~30 ns a pixel
+// (66 ms for 2048 x 1024), which the viewport would pay on every pass of every redraw; the
+// images' bytes are hashed (~1 ns a byte) and compared in full before one is reused.
+struct CachedMap {
+    uint64_t hash = 0;
+    int width = 0, height = 0;
+    std::vector<float> rgb;
+    std::shared_ptr<const EnvironmentMap> map;
+};
+
+std::shared_ptr<const EnvironmentMap> environment_map_of(const float *data, int w, int h) {
+    static std::mutex mutex;
+    static CachedMap cache[2];  // the world being edited and the one before it
+    static int next = 0;
+    const size_t n = size_t(w) * size_t(h) * 3;
+    uint64_t hash = 1469598103934665603ull;  // FNV-1a over the words: a quick first check
+    for (size_t k = 0; k < n; ++k) {
+        uint32_t bits;
+        std::memcpy(&bits, data + k, 4);
+        hash = (hash ^ bits) * 1099511628211ull;
+    }
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const CachedMap &c : cache)
+            if (c.map && c.hash == hash && c.width == w && c.height == h &&
+                std::memcmp(c.rgb.data(), data, n * sizeof(float)) == 0)
+                return c.map;
+    }
+    auto map = std::make_shared<const EnvironmentMap>(data, w, h);
+    std::lock_guard<std::mutex> lock(mutex);
+    CachedMap &slot = cache[next];
+    next = (next + 1) % 2;
+    slot.hash = hash, slot.width = w, slot.height = h;
+    slot.rgb.assign(data, data + n);
+    slot.map = map;
+    return map;
+}
+
+bool parse_world_map(PyObject *obj, std::shared_ptr<const EnvironmentMap> &light,
+                     std::shared_ptr<const EnvironmentMap> &camera) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj) || PyTuple_Size(obj) != 2)
+        return PyErr_SetString(PyExc_TypeError, "world_map must be None or a (light, camera) tuple"), false;
+    for (int i = 0; i < 2; ++i) {
+        PyObject *item = PyTuple_GetItem(obj, i);
+        if (item == Py_None) {
+            if (i == 0) return PyErr_SetString(PyExc_TypeError, "world_map's light image is required"), false;
+            continue;
+        }
+        const char *name = i == 0 ? "world_map light" : "world_map camera";
+        View view;
+        const Py_ssize_t shape[3] = {-1, -1, 3};
+        if (!get_array(item, name, 'f', 3, shape, false, view)) return false;
+        const Py_ssize_t h = view.buf.shape[0], w = view.buf.shape[1];
+        if (w < 2 || h < 2 || w > 65536 || h > 32768)
+            return PyErr_Format(PyExc_ValueError, "%s must be 2..65536 wide and 2..32768 high", name), false;
+        const float *data = view.data<float>();
+        for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+            if (!(std::isfinite(data[k]) && data[k] >= 0.f))
+                return PyErr_Format(PyExc_ValueError, "%s must be finite, >= 0", name), false;
+        std::string message;
+        std::shared_ptr<const EnvironmentMap> &target = i == 0 ? light : camera;
+        if (PyObject *type = run_native([&] { target = environment_map_of(data, int(w), int(h)); }, message))
+            return PyErr_SetString(type, message.c_str()), false;
+    }
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", "light", "ao", "ao_distance",
-                                   "light_groups", "light_group_lamps", "light_group_instances",
-                                   "light_group_world", "uv", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte", "world_map",
+                                   "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
+                                   "light_group_instances", "light_group_world", "uv", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *olight = Py_None, *oao = Py_None,
-             *ogroups = Py_None, *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *oworldmap = Py_None,
+             *olight = Py_None, *oao = Py_None, *ogroups = Py_None, *ogroup_lamps = Py_None,
+             *ogroup_instances = Py_None, *ouvpass = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOfOOOiO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOOfOOOiO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &olight, &oao,
-                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
-                                     &ouvpass))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &oworldmap,
+                                     &olight, &oao, &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances,
+                                     &group_world, &ouvpass))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -318,6 +438,12 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (world_visibility < 0 || world_visibility > int(kVisAll))
         return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
     cfg.world_visibility = uint32_t(world_visibility);
+    std::shared_ptr<const EnvironmentMap> environment, camera_environment;
+    if (!parse_world_map(oworldmap, environment, camera_environment)) return nullptr;
+    if (environment) {
+        cfg.environment = environment.get(), cfg.camera_environment = camera_environment.get();
+        cfg.world = environment->mean();  // what the uniform world's uses (sky AO, "is the scene lit") see
+    }
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
@@ -362,16 +488,28 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                             ogroup_instances, group_world, cfg.light_groups))
         return nullptr;
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    CryptomatteViews crypto_views;
+    if (!parse_cryptomatte(ocrypto, scene, w, h, film.cryptomatte, crypto_views)) return nullptr;
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
                             {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
             return nullptr;
         for (size_t j = 0; j < i; ++j)
             if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{out, "a cryptomatte buffer"}, {outs[i].view, outs[i].name}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
     }
-
-    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    if (!check_separate({{crypto_views.out[0], "cryptomatte object"}, {crypto_views.out[1], "cryptomatte material"},
+                         {crypto_views.out[2], "cryptomatte asset"}},
+                        {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                         {crypto_views.material_ids, "cryptomatte material ids"},
+                         {cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
     RenderCounters counters;
     std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
     std::string message;
@@ -463,11 +601,15 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), light=None, ao=None, "
-     "ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, light_group_world=-1, uv=None)\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
+     "cryptomatte=None, world_map=None, light=None, ao=None, ao_distance=10, light_groups=None, "
+     "light_group_lamps=None, light_group_instances=None, light_group_world=-1, uv=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
-     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). world_map: None "
+     "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
     {nullptr, nullptr, 0, nullptr},
 };
 

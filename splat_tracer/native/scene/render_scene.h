@@ -112,6 +112,7 @@ class RenderScene {
     const Instance &instance(int i) const { return instances_[i]; }
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
+    size_t material_count() const { return materials_.size(); }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }

@@ -10,6 +10,7 @@
 
 #include "base/ray.h"
 #include "scene/camera.h"
+#include "shade/cryptomatte.h"
 #include "shade/sampling.h"
 #include "splats/visibility.h"
 
@@ -58,6 +59,8 @@ struct Film {
     // 3 floats: Cycles' UV pass -- the mesh's UV map at the pixel-centre sample's first hit
     // (U, V, A = 1 on a mesh), 0 on clouds and where nothing is hit.
     float *uv = nullptr;
+    // Cryptomatte's object, material and asset passes (shade/cryptomatte.h), integrator only.
+    CryptomatteFilm cryptomatte;
 };
 
 // What both renderers take the same way.

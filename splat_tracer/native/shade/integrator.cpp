@@ -56,6 +56,7 @@ struct Integrator::Primary {
     Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
     float ao = 0;      // the AO pass's term (only with that pass)
     Vec3 uv;           // the UV pass's (U, V, 1) on a mesh; 0 on a cloud
+    int instance = -1, material = 0;  // of the first opaque surface (not a holdout): Cryptomatte's names
 };
 
 struct Integrator::Pixel {
@@ -192,10 +193,20 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
                        ? &scene.mesh_lights()
                        : nullptr),
+      environment_light_(settings.environment && settings.environment->sampled() && !settings.sky_ao &&
+                                 settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly
+                             ? settings.environment
+                             : nullptr),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
       filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f) {
+    if (film.cryptomatte.enabled()) {
+        // Its slots are sums until each pixel's finish(), whatever the buffers held (0: free).
+        const size_t floats = size_t(film.w) * size_t(film.h) * 2 * size_t(film.cryptomatte.slots);
+        for (float *buf : film.cryptomatte.out)
+            if (buf) std::fill(buf, buf + floats, 0.f);
+    }
     if (settings.progressive()) {
         const size_t pixels = size_t(film.w) * size_t(film.h);
         half_.assign(pixels, Vec3());
@@ -259,6 +270,7 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.shadow, a.shadow * inv);
         put3(film_.environment, a.environment * inv);
         if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
         write_centre(a.centre, p);
         if (light_split()) write_light(a.light, inv, p);
     }
@@ -272,8 +284,9 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
     const int samples = settings_.samples;
     const bool half = settings_.adaptive;
     const bool catchers = scene_.any_catcher();
-    const Vec3 backdrop = world_seen(kVisCamera);
+    auto backdrop = [&](Vec3 d) { return world_seen(kVisCamera, d); };
     const bool split = light_split();
+    const bool crypto = film_.cryptomatte.enabled();
     // Each pixel's sample 0, by which its pixel points are moved so that it is the centre.
     uint32_t first[2 * kPacketRays];
     if (samples > 1)
@@ -334,11 +347,11 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                     CatcherSums &cs = a.catcher;
                     cs.alone = cs.alone + radiance(rays[k], alone, rng, nullptr, tally);
                     cs.full = cs.full + c, cs.samples += 1.f;
-                    cs.background = cs.background + backdrop;
+                    cs.background = cs.background + backdrop(rays[k].d);
                 } else {
                     CatcherSums &cs = a.catcher;
                     cs.matte = cs.matte + v, cs.matte_alpha += prim.alpha;
-                    if (!prim.hit) cs.background = cs.background + backdrop;
+                    if (!prim.hit) cs.background = cs.background + backdrop(rays[k].d);
                 }
             }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
@@ -346,6 +359,11 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             a.light.ao += prim.ao;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
+            // Each sample counts 1 for the name it meets (Cycles' matte weight: the camera
+            // ray's throughput, 1, times the opacity, 1 where alpha is sampled stochastically).
+            if (crypto && prim.instance >= 0)
+                film_.cryptomatte.add(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]), prim.instance,
+                                      prim.material, 1.f);
             if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.depth(rays[k], prim.t)) : 0.f;
         }
     }
@@ -460,6 +478,7 @@ uint64_t Integrator::finish() {
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
         if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
         if (!light_.empty()) write_light(light_[p], inv, p);
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
     }
     return total;
 }
@@ -566,15 +585,16 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             // Cycles' Environment pass: the world a camera ray leaves into, on a transparent
             // film too (its background pass is evaluated there for that pass alone).
             if (primary && st.camera && film_.environment)
-                primary->environment = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+                primary->environment = clamped(world_seen(st.kind, ray.d), st.weight, st.bounces > 1);
             if (st.camera && cfg.film_transparent) {
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
             // Cycles clamps light that a ray finds with the ray's bounce - 1: light reaching
             // the first surface is direct, whether sampled there or found by its bounce ray.
-            if (st.split) tap(st, clamped(world_seen(st.kind), st.weight, st.bounces > 1), cfg.light_groups.world, true);
-            return clamped(world_seen(st.kind), st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
+            const Vec3 world = clamped(world_missed(st, ray.d), st.weight, st.bounces > 1);
+            if (st.split) tap(st, world, cfg.light_groups.world, true);
+            return world + clamped(lamps, st.weight, st.bounces > 1);
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
@@ -595,7 +615,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
         if (!(ray.tmax > 0.f)) {
-            const Vec3 world = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+            const Vec3 world = clamped(world_missed(st, ray.d), st.weight, st.bounces > 1);
             if (primary && st.camera && film_.environment) primary->environment = world;
             if (st.split) tap(st, world, cfg.light_groups.world, true);
             return world;
@@ -624,7 +644,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
     Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
-    if (st.mis_pdf > 0.f) {
+    if (st.mis_pdf > 0.f && mesh_lights_) {  // (the environment light sets mis_pdf too)
         // Shadow rays could have found this point too: the power heuristic shares it between
         // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
         // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
@@ -647,6 +667,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
         primary->position = sp.p, primary->material_index = mat.pass_index;
+        primary->instance = sp.instance, primary->material = sp.material;
         if (film_.mist) primary->mist = mist_term(sp.p);
         if (film_.uv) {
             if (const TriangleMesh *mesh = scene_.instance(sp.instance).mesh) {
@@ -792,10 +813,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // lights (0 without them: emission the ray meets counts in full).
         float pdf = kInfinity, mis_pdf = 0.f;
         auto densities = [&](Vec3 wi) {
-            if (!(filter_glossy_ > 0.f) && !mesh_lights_) return;
+            if (!(filter_glossy_ > 0.f) && !mesh_lights_ && !environment_light_) return;
             const float p = reflection_pdf(lobes, n, wo, cos_o, wi, picks);
             if (filter_glossy_ > 0.f) pdf = p;
-            if (mesh_lights_) mis_pdf = p;
+            if (mesh_lights_ || environment_light_) mis_pdf = p;
         };
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
@@ -859,7 +880,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                               Primary *primary, Tally &tally, Vec3 weight, bool indirect,
                               const PathState &st) const {
     const std::vector<Light> &lights = scene_.lights();
-    if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
+    if (lights.empty() && !mesh_lights_ && !environment_light_) return Vec3();  // nothing to sample: no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
     const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
@@ -959,6 +980,57 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                 tap_split(lit, diffuse_part, added, settings_.light_groups.of_instance(ls.instance));
             }
         }
+    }
+    if (environment_light_)
+        L = L + environment_light(sp, from, n, ng, wo, cos_o, lobes, picks, rng, tally, weight, indirect);
+    return L;
+}
+
+Vec3 Integrator::world_missed(const PathState &st, Vec3 d) const {
+    const Vec3 world = world_seen(st.kind, d);
+    // A sampled diffuse or glossy bounce (mis_pdf > 0) could have been drawn by the
+    // environment light too: the power heuristic shares the direction between the two ways.
+    if (!environment_light_ || !(st.mis_pdf > 0.f)) return world;
+    if (settings_.mesh_light_strategy == IntegratorSettings::kLightOnly) return Vec3();
+    const float light_pdf = environment_light_->pdf(d) * float(settings_.shadow_samples);
+    return world * power_heuristic(st.mis_pdf, light_pdf);
+}
+
+Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo,
+                                   float cos_o, const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
+                                   Tally &tally, Vec3 weight, bool indirect) const {
+    const uint32_t vis = settings_.world_visibility;
+    // As a world hidden from diffuse (glossy) rays lights no diffuse (glossy) lobe in Cycles.
+    const Vec3 diffuse = vis & kVisDiffuse ? lobes.diffuse(cos_o) * (1.f / kPi) : Vec3();
+    const bool glossy = (vis & kVisGlossy) && !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
+    if (luminance(diffuse) <= 0.f && !glossy) return Vec3();
+    const int k = settings_.shadow_samples;
+    const float share = 1.f / float(k);
+    const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
+    Vec3 L;
+    for (int s = 0; s < k; ++s) {
+        float u[2];
+        rng.get(Sampler::kEnvironment, u, 2, uint32_t(s), uint32_t(k));
+        const EnvironmentSample es = environment_light_->sample(u[0], u[1]);
+        if (!es.valid) continue;
+        const float cos_i = dot(n, es.wi);
+        if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
+        Vec3 f = diffuse;
+        if (glossy) {
+            const Vec3 h = normalize(wo + es.wi);
+            const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+            f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
+                        (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
+        }
+        const float light_pdf = es.pdf * float(k);
+        const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
+                            ? 1.f
+                            : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, es.wi, picks));
+        const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
+        if (!(luminance(c) > 0.f)) continue;
+        ++tally.shadow;
+        const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
+        L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
     }
     return L;
 }

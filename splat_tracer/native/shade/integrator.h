@@ -10,6 +10,7 @@
 
 #include "scene/camera.h"
 #include "scene/render_scene.h"
+#include "shade/environment.h"
 #include "shade/film.h"
 #include "shade/light_passes.h"
 #include "shade/sampling.h"
@@ -30,6 +31,11 @@ struct IntegratorSettings : FrameSettings {
     // film, as in Cycles.
     uint32_t world_visibility = kVisCamera | kVisDiffuse | kVisGlossy | kVisTransmission;
     bool film_transparent = false;
+    // The world as an environment image (null: the uniform `world` above, as before). With it,
+    // `world` is its mean radiance. `camera_environment`: what camera rays see instead (the
+    // world's Light Path > Is Camera Ray trick), null: the same. Owned by the caller.
+    const EnvironmentMap *environment = nullptr;
+    const EnvironmentMap *camera_environment = nullptr;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
     bool headlight = false;
@@ -52,6 +58,7 @@ struct IntegratorSettings : FrameSettings {
     // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
     // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
     // material whose Emission Sampling is None). The last two exist to verify the first.
+    // The environment image as a light follows the same strategy.
     enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
     int mesh_light_strategy = kMis;
     // Cycles' Film mist settings (the World's Mist Pass panel): start, 1 / depth (0: a depth
@@ -178,6 +185,23 @@ class Integrator {
     Vec3 world_seen(uint32_t kind) const {
         return (settings_.world_visibility & kind) ? settings_.world : Vec3();
     }
+    // The same towards direction d: the environment image's radiance there (the camera's own
+    // image for camera rays), else the uniform world.
+    Vec3 world_seen(uint32_t kind, Vec3 d) const {
+        if (!settings_.environment) return world_seen(kind);
+        if (!(settings_.world_visibility & kind)) return Vec3();
+        const EnvironmentMap *map =
+            kind == kVisCamera && settings_.camera_environment ? settings_.camera_environment : settings_.environment;
+        return map->lookup(d);
+    }
+    // The world met by a ray of state `st` leaving the scene along d, weighed against the
+    // chance that environment_light() drew that direction (multiple importance sampling).
+    Vec3 world_missed(const PathState &st, Vec3 d) const;
+    // The environment image as a light at a surface point: shadow rays towards directions
+    // drawn from its distribution, weighed against the path's sampled reflection.
+    Vec3 environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                           const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Tally &tally, Vec3 weight,
+                           bool indirect) const;
 
     const RenderScene &scene_;
     const Camera &camera_;
@@ -188,6 +212,9 @@ class Integrator {
     const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
     const MeshLights *mesh_lights_;  // sampled emissive triangles, or null (none, or not sampled)
+    // The environment sampled as a light, or null (a uniform world, a black image, or sky AO
+    // -- which lights diffuse surfaces by occlusion rays instead).
+    const EnvironmentMap *environment_light_;
     // Cycles' kernel values: the clamps times 3 (they bound a sum of three channels) or
     // infinity; filter glossy as 1 / Filter Glossy, or 0 when off.
     float clamp_direct_, clamp_indirect_, filter_glossy_;

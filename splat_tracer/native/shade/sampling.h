@@ -147,6 +147,7 @@ class Sampler {
         kOcclusion = 6,    // sky AO direction u1, u2
         kTransparent = 7,  // + kDimStride x layer: passing a partly transparent surface
         kAoPass = 8,       // the AO pass's direction u1, u2 (camera vertex only)
+        kEnvironment = 13,  // the environment light's direction u1, u2 (a value no other Dim takes)
     };
     // Added per lamp or layer to a Dim: any constant above the Dims keeps the keys apart.
     static constexpr uint32_t kDimStride = 16;
