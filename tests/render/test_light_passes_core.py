@@ -106,3 +106,30 @@ def test_the_uv_pass_interpolates_the_corner_uvs():
     with pytest.raises(ValueError, match="UV"):
         Mesh(np.zeros((3, 3), np.float32), np.array([[0, 1, 2]], np.int32),
              corner_uvs=np.full((1, 3, 2), np.nan, np.float32))
+
+
+def test_an_environment_world_is_direct_light_in_its_group():
+    """An environment-image world, sampled as a light: its light at the first surface is
+    Diffuse/Glossy Direct (as Cycles counts world light reaching a surface), all of it in the
+    world's group, and the passes still recombine to Combined."""
+    sky = np.full((16, 32, 3), 0.05, np.float32)
+    sky[12:15, 4:8] = 40.0  # a small bright patch high in the sky: the light it samples
+    world = World(colour=(0.1, 0.1, 0.2), light_group="sky", environment=sky)
+    lit = RenderScene(_instances(), [], world)
+    p = lit.render(CAM, W, H, SETTINGS["fixed"], passes=ALL, light_groups=("sky",)).passes
+    combined = p["Combined"][..., :3]
+    assert combined.mean() > 0.05
+    assert np.abs(recombined(p) - combined).max() < 1e-5 * combined.max()
+    np.testing.assert_allclose(p["Combined_sky"], combined, atol=1e-5 * combined.max())
+    # Most of the world's light reaches the surfaces directly: Direct well above Indirect.
+    assert p["DiffDir"].mean() > 2 * p["DiffInd"].mean() > 0
+    assert p["GlossDir"].mean() > 0
+
+
+def _instances() -> list:
+    """stage()'s objects without the emitter: the world alone lights them."""
+    floor = Mesh(np.array([[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], np.float32),
+                 np.array([[0, 1, 2], [0, 2, 3]], np.int32))
+    return [Instance(floor, materials=(Material(base_colour=(0.8, 0.6, 0.4)),)),
+            Instance(box((-1, 0, 0.5), 0.5), materials=(Material(metallic=1, roughness=0.2),)),
+            Instance(box((1, 0, 0.5), 0.5), materials=(Material(transmission=1, roughness=0.0),))]

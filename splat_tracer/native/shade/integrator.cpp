@@ -982,7 +982,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
         }
     }
     if (environment_light_)
-        L = L + environment_light(sp, from, n, ng, wo, cos_o, lobes, picks, rng, tally, weight, indirect);
+        L = L + environment_light(sp, from, n, ng, wo, cos_o, lobes, picks, rng, tally, weight, indirect, st);
     return L;
 }
 
@@ -998,7 +998,7 @@ Vec3 Integrator::world_missed(const PathState &st, Vec3 d) const {
 
 Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo,
                                    float cos_o, const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
-                                   Tally &tally, Vec3 weight, bool indirect) const {
+                                   Tally &tally, Vec3 weight, bool indirect, const PathState &st) const {
     const uint32_t vis = settings_.world_visibility;
     // As a world hidden from diffuse (glossy) rays lights no diffuse (glossy) lobe in Cycles.
     const Vec3 diffuse = vis & kVisDiffuse ? lobes.diffuse(cos_o) * (1.f / kPi) : Vec3();
@@ -1029,8 +1029,19 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
         if (!(luminance(c) > 0.f)) continue;
         ++tally.shadow;
-        const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
-        L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
+        const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
+        const Vec3 lit = c * through;
+        const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
+        L = L + added;
+        const float total = luminance(lit);
+        if (st.split && total > 0.f) {  // (0: shadowed, nothing to split)
+            // The world's light reaching a surface is Direct light in Cycles' passes, as a
+            // lamp's: its diffuse share to Diffuse, the rest to Glossy, all to the world's group.
+            const float scale = luminance(added) / total;  // the clamp scales all channels alike
+            const Vec3 diffuse_part = diffuse * es.radiance * through * (cos_i * w / light_pdf);
+            tap(st, diffuse_part * scale, settings_.light_groups.world, false, kLobeDiffuse);
+            tap(st, (lit - diffuse_part) * scale, settings_.light_groups.world, false, kLobeGlossy);
+        }
     }
     return L;
 }

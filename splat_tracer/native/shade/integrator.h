@@ -201,7 +201,8 @@ class Integrator {
     // drawn from its distribution, weighed against the path's sampled reflection.
     Vec3 environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                            const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Tally &tally, Vec3 weight,
-                           bool indirect) const;
+                           bool indirect,
+                           const PathState &st) const;
 
     const RenderScene &scene_;
     const Camera &camera_;
