@@ -192,14 +192,17 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer, "use_pass_shadow", text="Shadow")
         if hasattr(view_layer, "cycles"):
             col.prop(view_layer.cycles, "use_pass_shadow_catcher", text="Shadow Catcher")
-        _draw_light_passes(layout, view_layer)
+        # (The Properties editor's context has no world outside the World tab: the scene's.)
+        scene = getattr(context, "scene", None)
+        _draw_light_passes(layout, view_layer, scene.world if scene is not None else getattr(context, "world", None))
         col = layout.column(heading="Debug")
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
 
 
-def _draw_light_passes(layout, view_layer):
+def _draw_light_passes(layout, view_layer, world):
     """Cycles' light passes, laid out as Cycles' Light panel: a row of Direct, Indirect and
-    Color per lobe, then AO and Vector."""
+    Color per lobe, then AO (with the world's AO distance, which Cycles shows under Fast GI,
+    a panel the engine does not open) and Vector."""
     col = layout.column(align=True)
     for lobe, label in (("diffuse", "Diffuse"), ("glossy", "Glossy"), ("transmission", "Transmission")):
         row = col.row(heading=label, align=True)
@@ -208,6 +211,10 @@ def _draw_light_passes(layout, view_layer):
         row.prop(view_layer, f"use_pass_{lobe}_color", text="Color", toggle=True)
     col = layout.column(heading="Other")
     col.prop(view_layer, "use_pass_ambient_occlusion", text="Ambient Occlusion")
+    if world is not None:
+        sub = col.column()
+        sub.active = view_layer.use_pass_ambient_occlusion
+        sub.prop(world.light_settings, "distance", text="AO Distance")
     col.prop(view_layer, "use_pass_vector", text="Vector")
 
 

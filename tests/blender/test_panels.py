@@ -214,7 +214,10 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
     assert not unsupported, unsupported
     # The walk saw the engine's settings (a draw recorder that records nothing would pass).
     assert {"cycles.samples", "light.temperature", "light.exposure", "camera.dof.aperture_fstop",
-            "object.is_shadow_catcher", "render.resolution_x", "camera.stereo.interocular_distance"} <= shown_keys, sorted(shown_keys)
+            "object.is_shadow_catcher", "render.resolution_x", "camera.stereo.interocular_distance",
+            "view_layer.use_pass_diffuse_direct", "view_layer.use_pass_ambient_occlusion",
+            "world.light_settings.distance", "object.lightgroup", "world.lightgroup",
+            "view_layer.pass_cryptomatte_depth"} <= shown_keys, sorted(shown_keys)
 
 
 def test_one_light_panel_with_one_type_selector(blender, scene_objects):
