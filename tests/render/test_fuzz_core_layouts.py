@@ -12,7 +12,7 @@ import numpy as np
 from fuzz import fuzz_core
 from splat_tracer.render.shading import SETTINGS_FIELDS, RenderSettings
 
-SEEDS = range(128)  # about one in 20 random inputs renders (the rest are refused, on purpose)
+SEEDS = range(256)  # about one in 30 random inputs renders (the rest are refused, on purpose)
 
 
 def test_fuzz_core_renders_some_scenes():
