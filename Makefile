@@ -121,6 +121,7 @@ docs: build
 	$(VPY) -m tools.switch_images --output-dir docs/switches
 	$(VPY) -m tools.viewport_images --output-dir docs/viewport
 	$(VPY) -m tools.demo --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
+	$(VPY) -m tools.composite_images --output docs/composite.png --cycles docs/composite_cycles.png | grep "^composite:" | tee docs/composite_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
 dist: $(STAMP)

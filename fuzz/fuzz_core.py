@@ -372,7 +372,10 @@ def instance_row(fdp, n_geo, n_mat):
                       to_object=inv[:3].ravel(), material_range=(first, fdp.ConsumeIntInRange(1, max(n_mat - first, 1))),
                       visibility=sum(v for v in RAY_VISIBILITY.values() if fdp.ConsumeIntInRange(0, 5)),
                       holdout=fdp.ConsumeIntInRange(0, 7) == 0, pass_index=fdp.ConsumeIntInRange(0, 9),
-                      shadow_catcher=fdp.ConsumeIntInRange(0, 5) == 0)
+                      shadow_catcher=fdp.ConsumeIntInRange(0, 5) == 0,
+                      # Now and then it moves: the frame's transform, then a shifted one.
+                      motion=(np.stack([m[:3].ravel(), (m[:3] + [[0, 0, 0, fdp.ConsumeFloatInRange(-2, 2)]] * 3).ravel()])
+                              if fdp.ConsumeIntInRange(0, 3) == 0 else None))
     return corrupt(fdp, row)
 
 

@@ -386,6 +386,81 @@ def _draw_slot(layout, settings, name: str) -> None:
     col.prop(settings, "radius_factor")
 
 
+class SPLAT_TRACER_PT_motion_blur(SplatTracerPanel, bpy.types.Panel):
+    """Render > Motion Blur, the settings Cycles' panel shows (Cycles' own hides for other
+    engines), read where Cycles reads them (blender/export/motion.py)."""
+    bl_label = "Motion Blur"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.render, "use_motion_blur", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rd = context.scene.render
+        layout.active = rd.use_motion_blur
+        col = layout.column()
+        col.prop(rd, "motion_blur_position", text="Position")
+        col.prop(rd, "motion_blur_shutter")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "rolling_shutter_type"):
+            col.separator()
+            col.prop(cycles, "rolling_shutter_type", text="Rolling Shutter")
+            sub = col.column()
+            sub.active = cycles.rolling_shutter_type != "NONE"
+            sub.prop(cycles, "rolling_shutter_duration")
+        # The view layer's own switch (Cycles draws it in its View Layer > Filter panel,
+        # which it keeps to itself): Cycles blurs a layer when both are on.
+        col.separator()
+        col.prop(context.view_layer, "use_motion_blur", text="View Layer")
+        layout.label(text="Final renders only: the viewport shows no blur (as Cycles')")
+
+
+class SPLAT_TRACER_PT_motion_blur_curve(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Shutter Curve"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_motion_blur"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        rd = context.scene.render
+        layout.active = rd.use_motion_blur
+        layout.template_curve_mapping(rd, "motion_blur_shutter_curve")
+
+
+class SPLAT_TRACER_PT_object_motion_blur(SplatTracerPanel, bpy.types.Panel):
+    """Object > Motion Blur: Cycles' per-object switch and steps (object.cycles), which the
+    engine reads as Cycles does; Deformation is shown, and said unrendered in the report."""
+    bl_label = "Motion Blur"
+    bl_context = "object"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return (super().poll(context) and obj is not None and hasattr(obj, "cycles")
+                and (obj.type not in {"LIGHT", "EMPTY", "LIGHT_PROBE", "SPEAKER", "ARMATURE", "LATTICE"}
+                     or (obj.instance_type == "COLLECTION" and obj.instance_collection is not None)))
+
+    def draw_header(self, context):
+        self.layout.active = context.scene.render.use_motion_blur
+        self.layout.prop(context.object.cycles, "use_motion_blur", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        obj = context.object
+        layout.active = context.scene.render.use_motion_blur and obj.cycles.use_motion_blur
+        col = layout.column()
+        col.prop(obj.cycles, "motion_steps", text="Steps")
+        if obj.type != "CAMERA":
+            col.prop(obj.cycles, "use_deform_motion", text="Deformation")
+
+
 class SPLAT_TRACER_PT_camera_panorama(SplatTracerPanel, bpy.types.Panel):
     """A panoramic camera's settings (Blender's Lens panel draws them for Cycles only), the
     ones the engine reads (blender/export/scene.py camera_panorama)."""
@@ -520,7 +595,9 @@ classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_vis
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
            SPLAT_TRACER_PT_passes_cryptomatte,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_motion_blur, SPLAT_TRACER_PT_motion_blur_curve,
+           SPLAT_TRACER_PT_object_motion_blur, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material,
+           SPLAT_TRACER_PT_world,
            SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab,
            SPLAT_TRACER_PT_passes_light_groups, SPLAT_TRACER_PT_object_light_group,
            SPLAT_TRACER_PT_world_light_group)

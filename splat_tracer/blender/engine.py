@@ -158,7 +158,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         keep = scene.render.use_persistent_data or self.is_animation
         frame = session.render_frame(depsgraph, scene.splat_tracer.core_method(), ("Combined",) + wanted_passes(
             view_layer, scene), progress=progress, stats=lambda s: self.update_stats("", s), keep=keep,
-            views=self._views(scene))
+            frame_set=self.frame_set, views=self._views(scene))
         for line in frame.report.lines:
             self.report({"WARNING"}, f"Splat Tracer: {line}")
         x0, y0, w, h = frame.window

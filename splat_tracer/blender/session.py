@@ -18,6 +18,7 @@ import numpy as np
 from ..render import cryptomatte, shading
 from ..render.method import Method
 from . import denoise, export
+from .export import motion as export_motion
 from .export import settings as export_settings
 from .export import shading as export_shading
 
@@ -201,7 +202,7 @@ def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: 
 def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None, stats=None,
                  use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
                  settings: Optional[shading.RenderSettings] = None, views: Optional[list] = None,
-                 denoised: bool = True) -> Frame:
+                 denoised: bool = True, frame_set=None) -> Frame:
     """Exports the depsgraph's view layer and renders the frame (or its border) with
     `method`. headlight: None follows the scene's Lighting setting (and falls back to the
     headlight, said in the report, when nothing in the scene gives light); True/False
@@ -209,7 +210,10 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     render's views (export/scene.py View), each rendered with its own camera from the same
     export (Frame.views); None renders the scene camera. The passes Cycles' denoising
     writes ("Noisy Image", "Denoising ...") are made when asked for, and Combined is
-    denoised when the scene's Denoise is on (export/settings.py denoising_of) and `denoised`."""
+    denoised when the scene's Denoise is on (export/settings.py denoising_of) and `denoised`.
+    frame_set(frame, subframe): the render engine's, to sample transforms over the shutter
+    (motion blur; each view's camera over it); None renders the frame's time alone (said in
+    the report when motion blur is on)."""
     scene = depsgraph.scene
     props = scene.splat_tracer
     width, height = image_size(scene.render)
@@ -222,12 +226,19 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     say("Splat Tracer | exporting")
     CACHE.begin_frame()
     try:
+        motion = None
+        if frame_set is not None:
+            motion = export_motion.sample_motion(depsgraph, frame_set, report,
+                                                 [view.camera for view in views] if views else None)
+        elif scene.render.use_motion_blur:
+            report.once("Motion Blur is not rendered here: this render is of the frame's time alone (F12 and "
+                        "animation renders blur)")
         origin = export.camera_origin(depsgraph)
-        cameras = {view.name: export.export_camera(depsgraph, width, height, origin, view) for view in views} \
-            if views else {"": export.export_camera(depsgraph, width, height, origin)}
+        cameras = {view.name: export.export_camera(depsgraph, width, height, origin, view, motion)
+                   for view in views} if views else {"": export.export_camera(depsgraph, width, height, origin, motion=motion)}
         export_settings.report_unhonoured(scene, depsgraph.view_layer, report)
         denoising = export_settings.denoising_of(scene, depsgraph.view_layer, report) if denoised else None
-        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report)
+        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report, motion)
     except BaseException:
         CACHE.end_frame(keep=False)
         raise
@@ -253,10 +264,13 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     # denoiser's cut keeps them.
     kept = wanted + tuple(shading.LIGHT_GROUP_PREFIX + g for g in light_groups)
     for name, camera in cameras.items():
+        moving = exported.render_scene.moving + (camera.motion is not None)
         result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
                                               window=(x0, y0, w, h), threads=threads, progress=progress,
                                               cryptomatte_levels=view_layer.pass_cryptomatte_depth,
-                                              light_groups=light_groups)
+                                              light_groups=light_groups,
+                                              shutter_curve=motion.curve if motion is not None and moving else None,
+                                              rolling_shutter=motion.rolling if motion is not None and moving else None)
         position = result.passes.get("Position")
         if position is not None:
             # The core's positions are in the local frame; the pass is in world space, as
@@ -292,6 +306,8 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
                        view_layer=view_layer.name, samples=settings.samples, report=list(report.lines),
                        completed=completed, sampling=sampling, views=list(cameras) if views else [],
+                       moving=exported.render_scene.moving,
+                       camera_moves=any(c.motion is not None for c in cameras.values()),
                        denoise_seconds=t_denoise, **counters)
     CACHE.end_frame(keep)
     HISTORY.append(frame_stats)

@@ -52,6 +52,7 @@ class InstanceRow(NamedTuple):
     holdout: bool
     pass_index: float
     shadow_catcher: bool
+    motion: Optional[np.ndarray]  # (S, 12): to_world at S evenly spaced times over the shutter; None: still
 
 
 def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: Sequence, lights: Sequence,
@@ -62,6 +63,15 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
     n = len(rows)
     col = lambda name, dtype, width=(): np.ascontiguousarray(
         np.array([getattr(r, name) for r in rows], dtype).reshape((n, *width)))
+    # Motion blur: the moving instances' steps in one table, each instance's (first, count).
+    # Only a scene where something moves passes them: a still one is the core's as before.
+    motion = motion_range = None
+    if any(r.motion is not None for r in rows):
+        steps = [np.asarray(r.motion, np.float64).reshape(-1, 12) if r.motion is not None else np.empty((0, 12))
+                 for r in rows]
+        counts = np.array([len(s) for s in steps], np.int64)
+        motion = np.ascontiguousarray(np.concatenate(steps), np.float64)
+        motion_range = np.ascontiguousarray(np.stack([np.cumsum(counts) - counts, counts], axis=1), np.int32)
     return _core.RenderScene(
         list(geometries), col("geometry_index", np.int32), col("to_world", np.float32, (12,)),
         col("to_object", np.float32, (12,)), col("material_range", np.int32, (2,)), col("visibility", np.int32),
@@ -70,7 +80,8 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
         np.ascontiguousarray(np.array(lights, np.float32).reshape(-1, len(LIGHT_FIELDS))),
         threads,
         # Only a scene with a catcher passes the column: one without is the core's as before.
-        shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None)
+        shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None,
+        motion=motion, motion_range=motion_range)
 
 
 class Mesh:
@@ -109,8 +120,13 @@ class Instance:
     RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
     pass_index: the Object Index pass value. shadow_catcher: it receives the other
     instances' shadows and reflections but is left out of Combined (Cycles' shadow catcher;
-    see RenderScene.render). name, asset: its object's and asset's names in the Cryptomatte
-    passes (render/cryptomatte.py; asset "" : the object's name)."""
+    see RenderScene.render). motion: motion blur -- the 4x4 object-to-local matrix at S >= 2
+    evenly spaced times over the shutter (the first at its opening), interpolated between
+    them as Cycles does (translation and stretch linearly, rotation by slerp) at each camera
+    ray's time; None (default): it does not move, and costs nothing. `matrix` stays the
+    frame's own (mesh lights and the camera's inside test use it). name, asset: its object's
+    and asset's names in the Cryptomatte passes (render/cryptomatte.py; asset "" : the
+    object's name)."""
 
     geometry: object
     matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -119,6 +135,7 @@ class Instance:
     holdout: bool = False
     pass_index: int = 0
     shadow_catcher: bool = False
+    motion: Optional[tuple] = None
     name: str = ""
     asset: str = ""
     light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
@@ -168,6 +185,16 @@ class RenderScene:
             if problem is not None:
                 raise ValueError(f"instance matrix must be finite and invertible: {problem}")
             inv = matrices.inverse(m)
+            motion = None
+            if inst.motion is not None:
+                motion = np.asarray(inst.motion, np.float64)
+                if motion.ndim != 3 or motion.shape[1:] != (4, 4) or len(motion) < 2:
+                    raise ValueError(f"instance motion must be at least two 4x4 matrices, got shape {motion.shape}")
+                for step in motion:
+                    problem = transform_problem(step)
+                    if problem is not None:
+                        raise ValueError(f"instance motion matrices must be finite and invertible: {problem}")
+                motion = motion[:, :3].reshape(-1, 12)
             unknown = set(inst.visibility) - set(RAY_VISIBILITY)
             if unknown:
                 raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")
@@ -179,7 +206,7 @@ class RenderScene:
                                     to_object=inv[:3].ravel(), material_range=(len(materials), len(mats)),
                                     visibility=sum(RAY_VISIBILITY[k] for k in inst.visibility),
                                     holdout=inst.holdout, pass_index=inst.pass_index,
-                                    shadow_catcher=inst.shadow_catcher))
+                                    shadow_catcher=inst.shadow_catcher, motion=motion))
             materials.extend(mats)
             self.instance_names.append((inst.name, inst.asset or inst.name))
             self.material_names.extend(m.name for m in mats)
@@ -190,6 +217,7 @@ class RenderScene:
                                    threads)
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
+        self.moving = sum(r.motion is not None for r in rows)  # instances that move over the shutter
 
     def mesh_lights(self) -> list:
         """The emissive mesh triangles sampled as lights, as (instance index, triangle index,
@@ -202,12 +230,18 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True, cryptomatte_levels: int = 6,
-               light_groups: Sequence[str] = ()) -> FrameResult:
+               packets: bool = True, shutter_curve=None, rolling_shutter: Optional[float] = None,
+               cryptomatte_levels: int = 6, light_groups: Sequence[str] = ()) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
-        ray; the same image).
+        ray; the same image). shutter_curve: motion blur's shutter curve, the shutter's
+        openness at evenly spaced times from its opening to its closing (>= 2 values, >= 0, not
+        all 0; Blender's Shutter Curve); None: a box shutter. Camera rays get a time in the
+        shutter only where something moves (an instance's or the camera's `motion`).
+        rolling_shutter: Cycles' rolling shutter (rows exposed from top to bottom), its
+        duration in [0, 1] (a row's exposure as a share of the shutter; 0: an instant);
+        None: off (a global shutter).
 
         With shadow-catcher instances, Combined is formed as Cycles forms it: the catcher is
         left out, and its shadow (its light with everything / its light with catchers only)
@@ -246,10 +280,15 @@ class RenderScene:
             if isinstance(light_groups, str):
                 raise TypeError("light_groups must be a sequence of group names, not one string")
             kwargs.update(self._light_group_arguments(light_groups, buffers, *buffers["Combined"].shape[:2]))
+        if shutter_curve is not None:
+            kwargs["shutter_table"] = shutter_table(shutter_curve)
+        if rolling_shutter is not None:
+            if not 0.0 <= rolling_shutter <= 1.0:
+                raise ValueError(f"rolling_shutter must be a duration in [0, 1], got {rolling_shutter!r}")
+            kwargs["rolling_shutter_duration"] = float(rolling_shutter)
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)
-
 
     def _light_group_arguments(self, groups: Sequence[str], buffers: dict, h: int, w: int) -> dict:
         """The core's light-group keywords, and each group's pass added to `buffers`."""
@@ -265,6 +304,31 @@ class RenderScene:
                     light_group_lamps=np.array([of(l.light_group) for l in self.lights], np.int32),
                     light_group_instances=np.array([of(g) for g in self.instance_light_groups], np.int32),
                     light_group_world=of(self.world.light_group))
+
+
+# Entries of the shutter curve's inverse CDF the core interpolates (Cycles' shutter table has
+# 256 as well: finer than a curve drawn by hand).
+SHUTTER_TABLE_SIZE = 256
+
+
+def shutter_table(curve) -> np.ndarray:
+    """The shutter time (0 opens, 1 closes) of evenly spaced uniform numbers: the inverse of
+    the CDF of `curve`, the shutter's openness at evenly spaced times (piecewise linear), as
+    Cycles samples its shutter curve."""
+    w = np.asarray(curve, np.float64).ravel()
+    if w.size < 2 or not np.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
+        raise ValueError("shutter_curve must be >= 2 finite values >= 0, not all 0")
+    # CDF of the piecewise linear openness, on a grid 16 times finer than the table (so that
+    # the table's linear steps follow the CDF's curvature inside each of the curve's pieces).
+    x = np.linspace(0.0, 1.0, 16 * SHUTTER_TABLE_SIZE)
+    w = np.interp(x, np.linspace(0.0, 1.0, w.size), w)
+    cdf = np.concatenate([[0.0], np.cumsum((w[1:] + w[:-1]) * 0.5)])
+    cdf /= cdf[-1]
+    u = np.linspace(0.0, 1.0, SHUTTER_TABLE_SIZE)
+    # Flat (closed) stretches of the CDF are never sampled: interp takes the first x of a
+    # repeated CDF value, which is where the openness ends.
+    keep = np.concatenate([[True], np.diff(cdf) > 0])
+    return np.clip(np.interp(u, cdf[keep], x[keep]), 0.0, 1.0).astype(np.float32)
 
 
 # The core's keyword for each pass's buffer (Combined: "combined").
@@ -302,6 +366,8 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
     if world.environment is not None:  # a uniform world passes nothing more: the call is as before
         kwargs["world_map"] = world.world_map()
+    if camera.motion is not None:  # motion blur: the camera over the shutter
+        kwargs["camera_motion"] = np.ascontiguousarray(np.asarray(camera.motion, np.float64)[:, :3].reshape(-1, 12))
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
     if "AO" in passes:

@@ -23,6 +23,19 @@ class Entry:
     names: tuple    # property identifiers, fnmatch patterns allowed
     kind: str       # a key of KINDS
     reason: str
+    # The Blender versions having these settings, where not every version the matrix covers
+    # (tests/release/test_blender_versions.py): since the first version with them, before the
+    # first without them, (major, minor).
+    since: tuple = ()
+    before: tuple = ()
+
+    def versions(self) -> str:
+        """The version note docs/settings.md shows ("" for every version)."""
+        dotted = [".".join(map(str, v)) for v in (self.since, self.before)]
+        if self.since and self.before:
+            only = self.before == (self.since[0], self.since[1] + 1)
+            return f" (Blender {dotted[0]} only)" if only else f" (Blender {dotted[0]} to before {dotted[1]})"
+        return f" (Blender {dotted[0]} and later)" if self.since else f" (before Blender {dotted[1]})" if self.before else ""
 
 
 KINDS = {
@@ -37,9 +50,11 @@ KINDS = {
 B, V, C, U, D = "blender", "viewport", "cycles", "unsupported", "dependent"
 ENTRIES = (
     # -- scene.render --------------------------------------------------------------------
-    Entry("render", ("ppm_factor", "ppm_base", "fps", "fps_base", "frame_map_old", "frame_map_new"), B,
-          "Frame rate, time remapping and print resolution: Blender sets the frame the engine renders "
-          "and writes the file; a still frame is the same"),
+    Entry("render", ("fps", "fps_base", "frame_map_old", "frame_map_new"), B,
+          "Frame rate and time remapping: Blender sets the frame the engine renders; a still frame is the same"),
+    Entry("render", ("ppm_factor", "ppm_base"), B, "Print resolution: Blender writes it into the file", since=(4, 5)),
+    Entry("render", ("use_new_cpu_compositor",), B, "Which compositor Blender runs on the engine's result",
+          since=(4, 3), before=(4, 4)),
     Entry("render", ("dither_intensity", "use_crop_to_border", "use_placeholder", "use_overwrite",
                      "use_file_extension", "filepath", "use_compositing", "use_sequencer",
                      "use_sequencer_override_scene_strip", "use_single_layer", "use_stamp*", "stamp_*",
@@ -56,6 +71,13 @@ ENTRIES = (
                      "use_simplify_normals"), B,
           "Hair display and Simplify: Blender applies them to the evaluated scene (subdivision levels, child "
           "particles) the engine reads"),
+    Entry("render", ("save_output",), B, "Whether Blender writes an animation's frames to disk", since=(5, 2)),
+    Entry("render", ("use_texture_cache", "use_auto_generate_texture_cache", "anisotropic_filter"), C,
+          "Cycles' texture cache and its filtering: how Cycles loads and filters image tiles (memory, "
+          "aliasing); the engine reads each image whole, and a pixel's samples average what it covers",
+          since=(5, 2)),
+    Entry("render", ("bake_*", "use_bake_*"), C,
+          "Blender's older bake settings: the engine never bakes", before=(5, 0)),
     # -- scene.cycles --------------------------------------------------------------------
     Entry("cycles", ("name",), V, "The property group's name, not a setting"),
     Entry("cycles", ("device", "shading_system", "denoising_use_gpu", "preview_denoising_use_gpu", "debug_*",
@@ -78,17 +100,17 @@ ENTRIES = (
     Entry("cycles", ("denoiser",), C,
           "Which denoiser Cycles runs: the engine denoises with OpenImageDenoise on the CPU, and says so when "
           "OptiX is set (test_unhonoured_settings.py); without an NVIDIA GPU OptiX cannot be chosen"),
-    Entry("cycles", ("volume_bounces", "volume_step_rate", "volume_max_steps", "volume_biased"), U,
+    Entry("cycles", ("volume_bounces", "volume_step_rate", "volume_max_steps"), U,
           "Volumes are not rendered (a material's Volume output is said where it is ignored)"),
+    Entry("cycles", ("volume_biased",), U, "Volumes are not rendered", since=(5, 0)),
     Entry("cycles", ("dicing_rate", "max_subdivisions", "offscreen_dicing_scale"), U,
           "Adaptive subdivision (Cycles' experimental feature set) is not used: meshes render as Blender "
           "evaluates them"),
-    Entry("cycles", ("rolling_shutter_type", "rolling_shutter_duration"), U,
-          "Acts with motion blur only, which the engine does not render (said)"),
     Entry("cycles", ("ao_bounces", "ao_bounces_render", "fast_gi_method"), U,
           "Settings of Fast GI, which the engine does not use (said)"),
-    Entry("cycles", ("sample_offset", "sample_subset_length"), U,
-          "Settings of Sample Subset, which the engine does not use (said)"),
+    Entry("cycles", ("sample_offset",), U, "Settings of Sample Subset, which the engine does not use (said)"),
+    Entry("cycles", ("sample_subset_length",), U, "Settings of Sample Subset, which the engine does not use (said)",
+          since=(4, 4)),
     Entry("cycles", ("use_layer_samples",), U,
           "Acts with a view layer's Samples override, which the engine does not use (said)"),
     Entry("cycles", ("filter_width",), C,
@@ -96,6 +118,15 @@ ENTRIES = (
           "reads"),
     Entry("cycles", ("film_transparent_roughness",), U,
           "Acts with Transparent Glass, which the engine does not use (said)"),
+    Entry("cycles", ("feature_set",), U,
+          "Cycles' Experimental feature set: it enables adaptive subdivision, which is not used (meshes render "
+          "as Blender evaluates them)", before=(5, 0)),
+    Entry("cycles", ("texture_resolution",), V, "The viewport's texture resolution", since=(5, 2)),
+    Entry("cycles", ("texture_resolution_render",), U,
+          "Render Texture Resolution: images are read at their full resolution (said when not 1)", since=(5, 2)),
+    Entry("cycles", ("use_pixel_jitter",), C,
+          "How Cycles places samples within a pixel (one jitter per frame, for temporal denoisers); the "
+          "engine's own samples cover each pixel", since=(5, 2)),
     # -- colour management ---------------------------------------------------------------
     Entry("view_settings", ("*",), B,
           "Colour management: Blender applies the view transform, look, exposure, gamma, curves and white "
@@ -112,19 +143,25 @@ ENTRIES = (
     Entry("view_layer", ("use_pass_cryptomatte_accurate",), C,
           "Cycles does not read it (no panel shows it in 5.0); the engine does as Cycles"),
     Entry("view_layer", ("use_volumes",), U, "Volumes are not rendered (said where a material has one)"),
-    Entry("view_layer", ("use_grease_pencil", "use_strand", "use_ao"), U,
-          "Grease Pencil, hair strands as strands, and the legacy AO filter: not rendered by Cycles either "
-          "(Blender draws Grease Pencil over the result)"),
-    Entry("view_layer", ("use_motion_blur",), U, "Acts with motion blur only, which the engine does not render (said)"),
+    Entry("view_layer", ("use_strand", "use_ao"), U,
+          "Hair strands as strands and the legacy AO filter: not rendered by Cycles either"),
+    Entry("view_layer", ("use_grease_pencil",), U,
+          "Grease Pencil: not rendered by Cycles either (Blender draws it over the result)", since=(4, 5)),
     Entry("view_layer.cycles", ("name",), V, "The property group's name, not a setting"),
+    Entry("view_layer.cycles", ("denoising_pass_follow_reflections", "denoising_pass_use_albedo_roughness_weighting"),
+          U, "How Cycles makes its denoising guides: the engine's are the first hit's Diffuse Color and Normal "
+          "(tests/blender/test_denoise.py)", since=(5, 2)),
     # -- objects -------------------------------------------------------------------------
     Entry("object", ("name", "use_fake_user", "use_extra_user", "is_runtime_data", "tag", "active_material_index",
                      "lock_*", "empty_*", "show_*", "use_empty_image_alpha", "hide_viewport", "hide_select",
-                     "hide_probe_*", "hide_surface_pick", "display_type", "display_bounds_type",
+                     "hide_probe_*", "display_type", "display_bounds_type",
                      "use_grease_pencil_lights", "use_shape_key_edit_mode", "use_mesh_mirror_*",
                      "active_shape_key_index", "active_selection_set", "use_camera_lock_parent"), V,
           "Names, data-block flags, viewport display, locks, selection and editing: no engine renders them"),
-    Entry("object", ("parent_type", "parent_vertices", "parent_bone", "use_parent_final_indices", "track_axis",
+    Entry("object", ("hide_surface_pick",), V, "Selection in the viewport", since=(5, 0)),
+    Entry("object", ("use_parent_final_indices",), B,
+          "Vertex parenting to the evaluated mesh: Blender evaluates it into the object's matrix", since=(4, 5)),
+    Entry("object", ("parent_type", "parent_vertices", "parent_bone", "track_axis",
                      "up_axis", "rotation_mode", "rotation_quaternion", "rotation_axis_angle",
                      "delta_rotation_quaternion", "matrix_parent_inverse", "instance_type",
                      "use_instance_vertices_rotation", "use_instance_faces_scale", "instance_faces_scale",
@@ -141,10 +178,15 @@ ENTRIES = (
           "layer has only when it holds the group (none in the audit's scene; tests/blender/test_light_passes.py)"),
     Entry("object", ("shadow_terminator_*",), U,
           "EEVEE's shadow terminator offsets; the engine's shading has none (Cycles' own are "
-          "`object.cycles.shadow_terminator_*`)"),
+          "`object.cycles.shadow_terminator_*`)", since=(4, 5)),
+    Entry("object", ("parent_bone_head_tail_factor",), B,
+          "Where on its parent bone an object hangs: Blender evaluates it into the object's matrix", since=(5, 2)),
+    Entry("object", ("visible_raycast",), U,
+          "Acts only through the Raycast shader node, which the engine does not evaluate (what the engine "
+          "makes of a material's nodes is said where it differs from Cycles)", since=(5, 2)),
     Entry("object.cycles", ("name",), V, "The property group's name, not a setting"),
-    Entry("object.cycles", ("use_motion_blur", "use_deform_motion", "motion_steps"), U,
-          "Act with motion blur only, which the engine does not render (said)"),
+    Entry("object.cycles", ("use_adaptive_subdivision", "dicing_rate"), U,
+          "Adaptive subdivision is not used: meshes render as Blender evaluates them", before=(5, 0)),
     Entry("object.cycles", ("use_camera_cull", "use_distance_cull"), C,
           "Culling, an optimisation the engine does not make (it renders every object)"),
     Entry("object.cycles", ("ao_distance",), U, "Acts with Fast GI only, which the engine does not use (said)"),
@@ -159,6 +201,8 @@ ENTRIES = (
                     "use_shadow_jitter", "shadow_jitter_overblur", "use_absolute_resolution", "use_custom_distance",
                     "cutoff_distance"), C, "EEVEE's shadow maps and light distance: not read by Cycles"),
     Entry("light", ("volume_factor",), U, "Volumes are not rendered"),
+    Entry("light", ("use_contact_shadow", "contact_shadow_*", "shadow_buffer_bias", "shadow_color"), C,
+          "EEVEE Legacy's shadow settings: not read by Cycles", before=(4, 3)),
     Entry("light", ("use_nodes",), U,
           "The lamp's node tree: a tree beyond the default Emission is said as ignored"),
     Entry("light.cycles", ("name",), V, "The property group's name, not a setting"),
@@ -182,6 +226,9 @@ ENTRIES = (
     Entry("world.cycles", ("volume_sampling", "volume_interpolation", "volume_step_size"), U,
           "Volumes are not rendered"),
     Entry("world.cycles", ("is_caustics_light",), U, "Shadow caustics are not rendered"),
+    Entry("world.cycles", ("homogeneous_volume",), U, "Volumes are not rendered", before=(5, 0)),
+    Entry("world.cycles", ("use_shadows",), U,
+          "Shadows off (the world's light unshadowed) is not honoured: said when off", since=(5, 2)),
     Entry("world.light_settings", ("ao_factor",), U,
           "Fast GI's AO factor, which the engine does not use (said); the engine's own AO sky light has its "
           "own settings"),
@@ -210,7 +257,9 @@ ENTRIES = (
     Entry("material", ("displacement_method", "volume_intersection_method"), U,
           "Displacement and volumes are not rendered (a material's Displacement and Volume outputs are said "
           "where ignored)"),
+    Entry("material", ("shadow_method",), C, "EEVEE Legacy's material shadow mode: not read by Cycles", before=(4, 3)),
     Entry("material.cycles", ("name",), V, "The property group's name, not a setting"),
+    Entry("material.cycles", ("homogeneous_volume",), U, "Volumes are not rendered", before=(5, 0)),
     Entry("material.cycles", ("emission_sampling",), C,
           "How Cycles samples emissive meshes: changes noise, not what it converges to"),
     Entry("material.cycles", ("use_bump_map_correction", "volume_sampling", "volume_interpolation",
@@ -218,12 +267,16 @@ ENTRIES = (
           "Displacement-as-bump correction and volumes: not rendered"),
     # -- cameras -------------------------------------------------------------------------
     Entry("camera", ("name", "use_fake_user", "use_extra_user", "is_runtime_data", "tag", "passepartout_alpha",
-                     "display_size", "show_*", "lens_unit", "composition_guide_color"), V,
+                     "display_size", "show_*", "lens_unit"), V,
           "Name, data-block flags, viewport display and the lens's unit (the lens is the same)"),
-    Entry("camera", ("fisheye_polynomial_*", "central_cylindrical_*"), U,
-          "The Fisheye Lens Polynomial and Central Cylindrical panoramas are not rendered: the frame fails "
-          "with a message naming the type"),
-    Entry("camera", ("custom_*",), U, "Custom (OSL script) cameras are not rendered: the frame fails with a message"),
+    Entry("camera", ("composition_guide_color",), V, "Viewport display of the composition guides", since=(5, 0)),
+    Entry("camera", ("fisheye_polynomial_*",), U,
+          "The Fisheye Lens Polynomial panorama is not rendered: the frame fails with a message naming the type"),
+    Entry("camera", ("central_cylindrical_*",), U,
+          "The Central Cylindrical panorama is not rendered: the frame fails with a message naming the type",
+          since=(4, 3)),
+    Entry("camera", ("custom_*",), U, "Custom (OSL script) cameras are not rendered: the frame fails with a message",
+          since=(4, 5)),
     Entry("camera.dof", ("focus_subtarget",), B,
           "A bone of the focus object: Blender's focus distance follows it (no bone in the audit's scene)"),
     Entry("camera.stereo", ("use_spherical_stereo", "use_pole_merge", "pole_merge_angle_*"), U,
@@ -256,6 +309,12 @@ CONTEXT = {
     **{f"render.border_{b}": {"render.use_border": True} for b in ("min_x", "min_y", "max_x", "max_y")},
     "render.motion_blur_shutter": {"render.use_motion_blur": True},
     "render.motion_blur_position": {"render.use_motion_blur": True},
+    # Motion blur: its settings act with it on (the audit's camera and cloud move).
+    "cycles.rolling_shutter_type": {"render.use_motion_blur": True},
+    "cycles.rolling_shutter_duration": {"render.use_motion_blur": True, "cycles.rolling_shutter_type": "TOP"},
+    "view_layer.use_motion_blur": {"render.use_motion_blur": True},
+    **{f"object.cycles.{p}": {"render.use_motion_blur": True}
+       for p in ("use_motion_blur", "motion_steps", "use_deform_motion")},
     "render.filter_size": {"cycles.samples": 4},
     "cycles.pixel_filter_type": {"cycles.samples": 4},
     "cycles.time_limit": {"cycles.samples": 64},
@@ -286,9 +345,22 @@ CONTEXT = {
 }
 
 
-def listed(key: str):
+# The series whose settings the version matrix's walk last checked against this list (bpy
+# versions, PyPI's), said in docs/settings.md.
+CHECKED = "bpy 4.2.23, 4.3.0, 4.4.0, 4.5.15, 5.1.2 and 5.2.3 (2026-11-27)"
+
+
+def applies(entry: Entry, version: tuple) -> bool:
+    """Whether `entry` is for a Blender `version` ((major, minor, ...), as bpy.app.version)."""
+    v = tuple(version)[:2]
+    return (not entry.since or v >= entry.since) and (not entry.before or v < entry.before)
+
+
+def listed(key: str, version: tuple):
+    """The entry listing setting `key` ('owner.prop') in a Blender `version`, or None."""
     owner, _, prop = key.rpartition(".")
-    return next((e for e in ENTRIES if e.owner == owner and any(fnmatch.fnmatchcase(prop, p) for p in e.names)), None)
+    return next((e for e in ENTRIES if e.owner == owner and applies(e, version)
+                 and any(fnmatch.fnmatchcase(prop, p) for p in e.names)), None)
 
 
 def markdown() -> str:
@@ -301,13 +373,18 @@ def markdown() -> str:
            "camera with its depth of field and stereo settings), changes each alone in a tiny render, "
            "and requires that the image or a pass changes, or that the render report says it "
            "([user-guide.md](user-guide.md#settings-the-engine-does-not-honour)). The settings below "
-           "are the exceptions, each with its reason; every other one is honoured or said.", ""]
+           "are the exceptions, each with its reason; every other one is honoured or said.", "",
+           "The audit renders in the Blender the tests run (bpy 5.0.1). The version matrix "
+           "(`tests/release/test_blender_versions.py`) runs the same walk in each Blender series it "
+           "covers and fails on a setting that series has which the audit did not walk and which is "
+           "not listed here for that version; an entry with versions is for those only. "
+           f"Last checked: {CHECKED}.", ""]
     for kind, title in KINDS.items():
         out += [f"## {title}", "", "| Settings | Why |", "|---|---|"]
         for e in ENTRIES:
             if e.kind == kind:
                 names = ", ".join(f"every `{e.owner}` setting" if n == "*" else f"`{e.owner}.{n}`" for n in e.names)
-                out.append(f"| {names} | {e.reason} |")
+                out.append(f"| {names}{e.versions()} | {e.reason} |")
         out.append("")
     return "\n".join(out)
 

@@ -204,7 +204,7 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
     assert not failures, failures
     shown_keys = set(shown)
     unsupported = {key: sorted(panels) for key, panels in shown.items()
-                   if (entry := lists.listed(key)) is not None and entry.kind == "unsupported"}
+                   if (entry := lists.listed(key, bpy.app.version)) is not None and entry.kind == "unsupported"}
     if unsupported:
         # A setting listed as not rendered that a change since made the engine honour or say
         # may be shown: the audit's walk decides, for those alone.
@@ -217,7 +217,10 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
             "object.is_shadow_catcher", "render.resolution_x", "camera.stereo.interocular_distance",
             "view_layer.use_pass_diffuse_direct", "view_layer.use_pass_ambient_occlusion",
             "world.light_settings.distance", "object.lightgroup", "world.lightgroup",
-            "view_layer.pass_cryptomatte_depth"} <= shown_keys, sorted(shown_keys)
+            "view_layer.pass_cryptomatte_depth",
+            # the engine's Motion Blur panels (Render, Object)
+            "render.use_motion_blur", "render.motion_blur_shutter", "cycles.rolling_shutter_type",
+            "object.cycles.use_motion_blur", "object.cycles.motion_steps", "view_layer.use_motion_blur"} <= shown_keys, sorted(shown_keys)
 
 
 def test_one_light_panel_with_one_type_selector(blender, scene_objects):

@@ -47,12 +47,6 @@ def small_scene(blender, empty_scene):
     return scene
 
 
-def _motion_blur(bpy, scene):
-    scene.frame_set(7)
-    scene.render.use_motion_blur = True
-    return ("Motion Blur is not rendered", "rendered sharp at frame 7's time", "shutter of 0.5 frames")
-
-
 def _stereo_panorama(bpy, scene):
     scene.render.use_multiview = True
     scene.camera.data.type = "PANO"
@@ -120,7 +114,7 @@ def _lamp_influence(bpy, scene):
     return ("light 'Lamp': its Diffuse influence is ignored (rendered as 1)",)
 
 
-CASES = {"motion blur": _motion_blur, "stereo panorama": _stereo_panorama, "shader AOV": _aov,
+CASES = {"stereo panorama": _stereo_panorama, "shader AOV": _aov,
          "light groups past the bound": _light_groups_past_the_bound, "vector": _vector,
          "OptiX denoiser": _optix, "film exposure": _film_exposure, "caustics": _caustics,
          "view layer samples": _layer_samples, "view layer filter": _layer_filter, "lamp influence": _lamp_influence}
@@ -205,3 +199,35 @@ def test_every_view_of_a_stereo_render_gets_its_own_image(blender, small_scene, 
     left, right = (np.stack([e[f"ViewLayer.Combined.{c}"].pixels for c in "RGBA"], -1) for e in eyes)
     assert left[..., 3].mean() > 0.1 and right[..., 3].mean() > 0.1  # the cube is in both
     assert not np.array_equal(left, right)
+
+
+class _Newer:
+    """A struct of this bpy with a setting a newer Blender added (the version matrix found
+    it; tests/blender/settings_walk.py): `extra` read first, the rest from the struct."""
+
+    def __init__(self, struct, **extra):
+        self._struct, self._extra = struct, extra
+
+    def __getattr__(self, name):
+        return self._extra[name] if name in self._extra else getattr(self._struct, name)
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.5])
+def test_render_texture_resolution_of_blender_5_2_is_said(blender, small_scene, scale):
+    report = extension_module("render.shading").Report()
+    cycles = _Newer(small_scene.cycles, texture_resolution_render=scale)
+    settings_module()._report_cycles_scene(small_scene, cycles, report)
+    said = lines_with(report.lines, "Render Texture Resolution")
+    assert said == ([] if scale == 1.0 else ["Cycles' Render Texture Resolution (0.5) is not applied: images are read "
+                                              "at their full resolution"]), report.lines
+
+
+@pytest.mark.parametrize("shadows", [True, False])
+def test_world_shadows_off_of_blender_5_2_is_said(blender, small_scene, shadows):
+    small_scene.world = blender.data.worlds.new("Sky")
+    world = _Newer(small_scene.world, cycles=_Newer(small_scene.world.cycles, use_shadows=shadows))
+    report = extension_module("render.shading").Report()
+    extension_module("blender.export.shading").world_of(_Newer(small_scene, world=world), report)
+    said = lines_with(report.lines, "Shadows off")
+    assert said == ([] if shadows else ["world 'Sky': Shadows off is not honoured: the world's light casts "
+                                        "shadows"]), report.lines

@@ -25,7 +25,7 @@ from ...render import shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
-from ...util import resources
+from ...util import matrices, resources
 from ...util.columns import finite_rows, nonzero_rows, rows_within
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
@@ -327,8 +327,9 @@ class _Frame:
 
 
 def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_factor: float = 1.0,
-                 threads: int = 0, report: shading.Report | None = None) -> ExportedScene:
-    """The depsgraph's view layer as a RenderScene in the local frame at `origin`."""
+                 threads: int = 0, report: shading.Report | None = None, motion=None) -> ExportedScene:
+    """The depsgraph's view layer as a RenderScene in the local frame at `origin`. motion:
+    the transforms over the shutter (export/motion.py's Motion), or None (no motion blur)."""
     report = report if report is not None else shading.Report()
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
@@ -374,10 +375,21 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
                         "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "
                         "an emissive mesh is")
+        steps = motion.of(inst) if motion is not None else None
+        if steps is not None:
+            steps = steps.copy()
+            steps[:, :3, 3] -= origin
+            problem = next((p for p in map(transform_problem, steps) if p is not None), None)
+            if problem is not None:
+                report.once(f"object '{obj.name}': within the shutter {problem}; rendered without motion blur")
+                steps = None
+            elif kind == "mesh" and any(any(c > 0 for c in m.emission) for m in materials):
+                report.once(f"object '{obj.name}' emits light and moves: its surface is blurred, but the light it "
+                            "casts comes from where it is at the frame's time")
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
-            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], name=obj.name,
+            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], motion=steps, name=obj.name,
             asset=asset_name(obj), light_group=getattr(_source(obj), "lightgroup", "")))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
@@ -438,10 +450,12 @@ class View:
 
 
 def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin,
-                  view: Optional[View] = None) -> Camera:
+                  view: Optional[View] = None, motion=None) -> Camera:
     """The scene camera (or a stereo/multi-view render's `view`) from its parameters, in
     double (not from calc_matrix_camera's float32 projection, which loses clipping ranges of
-    about 1e8 and more)."""
+    about 1e8 and more). motion: the transforms over the shutter (export/motion.py's
+    Motion), or None; a view's camera moves as its camera object does, the eye keeping its
+    place relative to it (camera_model_matrix's offset at the frame's time)."""
     scene = depsgraph.scene
     if view is not None:
         cam = view.camera.evaluated_get(depsgraph)
@@ -471,8 +485,16 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
     if panorama is None:
         frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y,
                                  None if view is None else view.shift_x)
+    steps = motion.camera_of(cam.original) if motion is not None else None
+    if steps is not None and view is not None:
+        # The eye's offset from its camera object (Stereo 3D's interocular shift and Toe-in
+        # turn) is fixed in the camera's frame: each step is the camera's there, times it.
+        # In double, without BLAS (util/matrices.py; einsum unoptimised is numpy's own loop).
+        offset = np.einsum("ij,jk->ik", matrices.inverse(np.array(cam.matrix_world.normalized(), np.float64)),
+                           np.array(rigid, np.float64))
+        steps = np.einsum("sij,jk->sik", steps, offset)
     return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
-                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama)
+                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama, steps)
 
 
 def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0,

@@ -1,6 +1,8 @@
 """The one place that says which of Blender's and Cycles' render settings the engine does not
 honour: each, when changed from what the engine does, named once in the render report with
-what the engine does instead (the contract: never ignored in silence).
+what the engine does instead (the contract: never ignored in silence). Motion blur's own
+approximations (deformation, a moving emitter's light) are said where it is read,
+export/motion.py and export/scene.py.
 
 Settings of one object, material, lamp or world are said where they are read (scene.py,
 shading.py); this module checks the scene, the view layer and the camera, once a frame. It
@@ -53,6 +55,11 @@ def _report_cycles_scene(scene, cycles, report: shading.Report) -> None:
         report.once("Cycles' Fast GI Approximation is not used: indirect light is traced to the bounce limits")
     if cycles.use_sample_subset:
         report.once(f"Cycles' Sample Subset is not used: all {cycles.samples} samples are taken")
+    # Blender 5.2's texture cache scales the images Cycles reads (1: full resolution).
+    scale = getattr(cycles, "texture_resolution_render", 1.0)
+    if scale != 1.0:
+        report.once(f"Cycles' Render Texture Resolution ({scale:g}) is not applied: images are read at their full "
+                    "resolution")
 
 
 def _on(owner, prop: str) -> bool:
@@ -144,10 +151,6 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     """Says, once each, the scene's and the view layer's render settings the engine does not
     honour and what it does instead. Called once a frame by the session."""
     render = scene.render
-    if render.use_motion_blur:
-        position = render.motion_blur_position.lower().replace("_", " ")
-        report.once(f"Motion Blur is not rendered: the frame is rendered sharp at frame {scene.frame_current}'s "
-                    f"time (the shutter of {render.motion_blur_shutter:g} frames, position {position}, is ignored)")
     if render.use_multiview:
         camera = scene.camera
         if camera is not None and camera.type == "CAMERA" and camera.data.type == "PANO" \

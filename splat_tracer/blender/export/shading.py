@@ -517,6 +517,8 @@ def world_of(scene, report: shading.Report) -> shading.World:
     bounces = getattr(getattr(world, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
     if bounces < _LIGHT_MAX_BOUNCES:
         report.once(f"world '{world.name}': its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
+    if not getattr(getattr(world, "cycles", None), "use_shadows", True):  # Blender 5.2's World > Shadows
+        report.once(f"world '{world.name}': Shadows off is not honoured: the world's light casts shadows")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
                 mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff,

@@ -114,21 +114,50 @@ Affine affine_of(const float *row) {
     return a;
 }
 
+// The most motion steps a transform may have: Cycles' 2^(7-1) x 2 + 1 for its largest
+// Motion Steps (7), with room to spare.
+constexpr Py_ssize_t kMaxMotionSteps = 1025;
+
+// Motion steps (motion.h) from `count` rows of 12 doubles (row-major 3x4 transforms at
+// evenly spaced times over the shutter), each finite, within the coordinate limit and
+// invertible. Sets an exception and returns false otherwise.
+bool motion_keys(const double *rows, Py_ssize_t count, const char *what, Py_ssize_t which,
+                 std::vector<MotionKey> &keys) {
+    if (count < 2 || count > kMaxMotionSteps)
+        return PyErr_Format(PyExc_ValueError, "%s %zd: %zd motion steps (2..%zd)", what, which, count, kMaxMotionSteps),
+               false;
+    keys.resize(size_t(count));
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const double *m = rows + 12 * i;
+        for (int k = 0; k < 12; ++k)
+            if (!within_range(float(m[k])) || !std::isfinite(m[k]))
+                return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is not finite or beyond 1e18", what,
+                                    which, i),
+                       false;
+        if (!motion::decompose(m, keys[size_t(i)]))
+            return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is singular", what, which, i), false;
+    }
+    motion::align_quaternions(keys.data(), int(count));
+    return true;
+}
+
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", nullptr};
-    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None;
+                                   "shadow_catcher", "motion", "motion_range", nullptr};
+    PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
+             *omotion = Py_None, *omrange = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &omotion,
+                                     &omrange))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
     const Py_ssize_t n_geo = PyTuple_Size(geometries);
-    View idx, w, o, range, vis, holdout, pass, mat, light, catcher;
+    View idx, w, o, range, vis, holdout, pass, mat, light, catcher, motion, mrange;
     Py_ssize_t s1[1] = {-1};
     if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
     const Py_ssize_t n = idx.dim(0);
@@ -141,6 +170,14 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
         !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light) ||
         (ocatch != Py_None && !get_array(ocatch, "shadow_catcher", 'B', 1, sn, false, catcher)))
+        return nullptr;
+    // Motion blur: instance i's steps are rows [first, first + count) of `motion` (count 0:
+    // it does not move). Both or neither.
+    if ((omotion == Py_None) != (omrange == Py_None))
+        return PyErr_Format(PyExc_TypeError, "motion and motion_range go together");
+    Py_ssize_t sm12[2] = {-1, 12};
+    if (omotion != Py_None && (!get_array(omotion, "motion", 'd', 2, sm12, false, motion) ||
+                               !get_array(omrange, "motion_range", 'i', 2, s2, false, mrange)))
         return nullptr;
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
@@ -168,6 +205,15 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
         inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
+        if (mrange.held) {
+            const int32_t mfirst = mrange.data<int32_t>()[2 * i], mcount = mrange.data<int32_t>()[2 * i + 1];
+            if (mcount == 0) continue;
+            if (mfirst < 0 || mcount < 0 || int64_t(mfirst) + mcount > int64_t(motion.dim(0)))
+                return PyErr_Format(PyExc_ValueError, "instance %zd: motion range (%d, %d) is not inside the %zd steps",
+                                    i, mfirst, mcount, motion.dim(0));
+            if (!motion_keys(motion.data<double>() + 12 * size_t(mfirst), mcount, "instance", i, inst.motion))
+                return nullptr;
+        }
     }
     std::vector<Material> materials(static_cast<size_t>(n_mat));
     for (Py_ssize_t i = 0; i < n_mat; ++i) {
@@ -373,28 +419,30 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte", "world_map",
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte",
+                                   "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
                                    "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
                                    "light_group_instances", "light_group_world", "uv", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *oworldmap = Py_None,
-             *olight = Py_None, *oao = Py_None, *ogroups = Py_None, *ogroup_lamps = Py_None,
-             *ogroup_instances = Py_None, *ouvpass = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
+             *oshutter = Py_None, *oworldmap = Py_None, *olight = Py_None, *oao = Py_None, *ogroups = Py_None,
+             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOOfOOOiO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &oworldmap,
-                                     &olight, &oao, &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances,
-                                     &group_world, &ouvpass))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
+                                     &oshutter, &cfg.rolling_shutter_duration, &oworldmap, &olight, &oao,
+                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
+                                     &ouvpass))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -450,6 +498,30 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     Camera cam;
     CameraViews cam_views;
     if (!parse_camera(om, ofrustum, orthographic, cam, cam_views) || !parse_lens(olens, cam)) return nullptr;
+    // Motion blur: the camera's local_from_camera rows (S, 12) over the shutter, and the
+    // shutter curve's table (K,) of times in [0, 1], non-decreasing.
+    View cam_motion_view, shutter_view;
+    std::vector<MotionKey> cam_motion;
+    if (ocammotion != Py_None) {
+        Py_ssize_t sm12[2] = {-1, 12};
+        if (!get_array(ocammotion, "camera_motion", 'd', 2, sm12, false, cam_motion_view) ||
+            !motion_keys(cam_motion_view.data<double>(), cam_motion_view.dim(0), "camera", 0, cam_motion))
+            return nullptr;
+        cam.motion = cam_motion.data(), cam.motion_steps = int(cam_motion.size());
+    }
+    if (oshutter != Py_None) {
+        Py_ssize_t sk[1] = {-1};
+        if (!get_array(oshutter, "shutter_table", 'f', 1, sk, false, shutter_view)) return nullptr;
+        const Py_ssize_t k = shutter_view.dim(0);
+        const float *t = shutter_view.data<float>();
+        if (k < 2 || k > 65536) return PyErr_Format(PyExc_ValueError, "shutter_table must have 2..65536 entries");
+        for (Py_ssize_t i = 0; i < k; ++i)
+            if (!(t[i] >= 0.f && t[i] <= 1.f) || (i > 0 && t[i] < t[i - 1]))
+                return PyErr_Format(PyExc_ValueError, "shutter_table must be non-decreasing times in [0, 1]");
+        cfg.shutter_table = t, cfg.shutter_table_size = int(k);
+    }
+    if (!(cfg.rolling_shutter_duration <= 1.f))  // negative: off; NaN refused
+        return PyErr_Format(PyExc_ValueError, "rolling_shutter_duration must be <= 1 (negative: off)");
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -602,12 +674,17 @@ PyMethodDef RenderScene_methods[] = {
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
-     "cryptomatte=None, world_map=None, light=None, ao=None, ao_distance=10, light_groups=None, "
-     "light_group_lamps=None, light_group_instances=None, light_group_world=-1, uv=None)\n--\n\n"
+     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None, "
+     "light=None, ao=None, ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, "
+     "light_group_world=-1, uv=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
-     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). world_map: None "
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). camera_motion: "
+     "None or (S, 12) float64, local_from_camera's first three rows at S evenly spaced times over the shutter "
+     "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF; "
+     "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "
+     "negative (default): off. world_map: None "
      "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
      "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
     {nullptr, nullptr, 0, nullptr},
@@ -624,7 +701,10 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, "
+                                   "motion=None, motion_range=None)\n\nmotion: (M, 12) float64 to_world rows of "
+                                   "the moving instances at evenly spaced times over the shutter; motion_range: "
+                                   "(n, 2) int32 each instance's (first row, count), count 0 when it does not move.")},
     {0, nullptr},
 };
 

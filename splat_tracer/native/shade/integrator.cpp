@@ -200,7 +200,8 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
-      filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f) {
+      filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f),
+      timed_(scene.any_motion() || camera.moves()) {
     if (film.cryptomatte.enabled()) {
         // Its slots are sums until each pixel's finish(), whatever the buffers held (0: free).
         const size_t floats = size_t(film.w) * size_t(film.h) * 2 * size_t(film.cryptomatte.slots);
@@ -222,6 +223,17 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
         zero(film.combined, 4), zero(film.diffcol, 3), zero(film.emit, 3), zero(film.shadow, 3);
         zero(film.environment, 3), zero(film.mist, 1);
     }
+}
+
+// The time in the shutter of a uniform number u: the shutter table's inverse CDF, linearly
+// interpolated between its entries, or u itself for a box shutter.
+float Integrator::shutter_time(float u) const {
+    const int n = settings_.shutter_table_size;
+    if (!settings_.shutter_table || n < 2) return u;
+    const float x = u * float(n - 1);
+    const int i = std::min(int(x), n - 2);
+    const float f = x - float(i);
+    return settings_.shutter_table[i] + (settings_.shutter_table[i + 1] - settings_.shutter_table[i]) * f;
 }
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
@@ -314,12 +326,38 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             }
             if (lens) lens_point(camera_, Sampler::to_unit(u[2]), Sampler::to_unit(u[3]), &lens_xy[2 * k], &lens_xy[2 * k + 1]);
         }
+        // Motion blur: each ray's time in the shutter, its own stratified dimension (the
+        // others' numbers unchanged), and the camera where it is then.
+        float times[kPacketRays];
+        if (timed_)
+            for (int k = 0; k < n; ++k) {
+                float t = shutter_time(Sampler(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed).get1(Sampler::kTime));
+                const float duration = settings_.rolling_shutter_duration;
+                if (duration >= 0.f) {
+                    // Cycles' rolling shutter: the row's own instant, (row + 1) / height from
+                    // the top (Cycles' 1 - y / height, its y counted from the bottom), blended
+                    // with the sampled time by the duration.
+                    const float row = float(film_.y0 + rows[k] + 1) / float(film_.height);
+                    t = (t - 0.5f) * duration + (row - 0.5f) * (1.f - duration) + 0.5f;
+                }
+                times[k] = t;
+            }
         Ray rays[kPacketRays];
-        if (lens) block_lens_rays(camera_, film_, cols, rows, n, offsets, lens_xy, rays);
-        else block_rays(camera_, film_, cols, rows, n, offsets, rays);
+        if (camera_.moves()) {
+            for (int k = 0; k < n; ++k) {
+                const Camera now = camera_.at(times[k]);
+                if (lens) block_lens_rays(now, film_, cols + k, rows + k, 1, offsets + 2 * k, lens_xy + 2 * k, rays + k);
+                else block_rays(now, film_, cols + k, rows + k, 1, offsets + 2 * k, rays + k);
+            }
+        } else if (lens) {
+            block_lens_rays(camera_, film_, cols, rows, n, offsets, lens_xy, rays);
+        } else {
+            block_rays(camera_, film_, cols, rows, n, offsets, rays);
+        }
         SurfacePoint hits[kPacketRays];
         if (settings_.packets)
-            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
+            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats,
+                                    timed_ ? times : nullptr);
         for (int k = 0; k < n; ++k) {
             // A pixel the panorama does not see: nothing is traced or added (Cycles': black,
             // alpha 0, no pass written).
@@ -329,6 +367,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             ++tally.camera;
             Pixel &a = acc[k];
             PathState path;
+            path.from.time = timed_ ? times[k] : 0.f;
             if (split) path.split = &a.light;
             const Vec3 c = radiance(rays[k], path, rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
             const Vec3 v = c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
@@ -343,6 +382,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                     // exactly 1: no noise outside the shadows).
                     PathState alone;
                     alone.from.catcher_only = true;
+                    alone.from.time = path.from.time;
                     ++tally.camera;
                     CatcherSums &cs = a.catcher;
                     cs.alone = cs.alone + radiance(rays[k], alone, rng, nullptr, tally);
@@ -364,7 +404,8 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             if (crypto && prim.instance >= 0)
                 film_.cryptomatte.add(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]), prim.instance,
                                       prim.material, 1.f);
-            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.depth(rays[k], prim.t)) : 0.f;
+            if (s == 0)
+                a.centre = prim, a.centre.t = prim.hit ? float(camera_.at(timed_ ? times[k] : 0.f).depth(rays[k], prim.t)) : 0.f;
         }
     }
     return true;
@@ -609,7 +650,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
-                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only};
+                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only,
+                         st.from.time};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
@@ -694,7 +736,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only};
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only,
+                st.from.time};
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
@@ -1081,7 +1124,8 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
         t = t * (1.f - a);
         previous = sp;
         from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
-                      inside_after_crossing(previous, from.inside), false, from.catcher_only};
+                      inside_after_crossing(previous, from.inside), false, from.catcher_only,
+                      from.time};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;

@@ -68,6 +68,15 @@ struct IntegratorSettings : FrameSettings {
     float ao_distance = 10.f;
     // Film::light_groups: which group each lamp, emissive instance and the world lights.
     LightGroupMap light_groups;
+    // Motion blur's shutter curve (Cycles' shutter table): the time in the shutter (0..1) of
+    // evenly spaced values of a uniform number, its inverse CDF, held by the caller for the
+    // render; null: a box shutter (the time is the number). Used only when something moves.
+    const float *shutter_table = nullptr;
+    int shutter_table_size = 0;
+    // Cycles' rolling shutter (Top: the image's rows are exposed from top to bottom): the
+    // duration of a row's exposure as a share of the shutter (0: each row at one instant);
+    // negative: off, every row sees the whole shutter.
+    float rolling_shutter_duration = -1.f;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -219,6 +228,10 @@ class Integrator {
     // Cycles' kernel values: the clamps times 3 (they bound a sum of three channels) or
     // infinity; filter glossy as 1 / Filter Glossy, or 0 when off.
     float clamp_direct_, clamp_indirect_, filter_glossy_;
+    // Motion blur: camera rays get a time in the shutter (an instance or the camera moves);
+    // false leaves the time dimension out entirely, so a still scene renders as before.
+    const bool timed_;
+    float shutter_time(float u) const;
     // Progressive rendering only: per pixel of the window, the class-A half of the combined
     // sum (times 2, Cycles' adaptive aux buffer), the samples taken, and whether it converged.
     std::vector<Vec3> half_;
