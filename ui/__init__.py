@@ -192,8 +192,77 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer, "use_pass_shadow", text="Shadow")
         if hasattr(view_layer, "cycles"):
             col.prop(view_layer.cycles, "use_pass_shadow_catcher", text="Shadow Catcher")
+        # (The Properties editor's context has no world outside the World tab: the scene's.)
+        scene = getattr(context, "scene", None)
+        _draw_light_passes(layout, view_layer, scene.world if scene is not None else getattr(context, "world", None))
         col = layout.column(heading="Debug")
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
+
+
+def _draw_light_passes(layout, view_layer, world):
+    """Cycles' light passes, laid out as Cycles' Light panel: a row of Direct, Indirect and
+    Color per lobe, then AO (with the world's AO distance, which Cycles shows under Fast GI,
+    a panel the engine does not open) and Vector."""
+    col = layout.column(align=True)
+    for lobe, label in (("diffuse", "Diffuse"), ("glossy", "Glossy"), ("transmission", "Transmission")):
+        row = col.row(heading=label, align=True)
+        row.prop(view_layer, f"use_pass_{lobe}_direct", text="Direct", toggle=True)
+        row.prop(view_layer, f"use_pass_{lobe}_indirect", text="Indirect", toggle=True)
+        row.prop(view_layer, f"use_pass_{lobe}_color", text="Color", toggle=True)
+    col = layout.column(heading="Other")
+    col.prop(view_layer, "use_pass_ambient_occlusion", text="Ambient Occlusion")
+    if world is not None:
+        sub = col.column()
+        sub.active = view_layer.use_pass_ambient_occlusion
+        sub.prop(world.light_settings, "distance", text="AO Distance")
+    col.prop(view_layer, "use_pass_vector", text="Vector")
+
+
+class SPLAT_TRACER_PT_passes_light_groups(SplatTracerPanel, bpy.types.Panel):
+    """The view layer's light groups (Blender's own list and operators, as Cycles' panel):
+    each gets a Combined_<group> pass."""
+    bl_label = "Light Groups"
+    bl_context = "view_layer"
+    bl_parent_id = "SPLAT_TRACER_PT_passes"
+
+    def draw(self, context):
+        view_layer = context.view_layer
+        row = self.layout.row()
+        row.template_list("UI_UL_list", "lightgroups", view_layer, "lightgroups", view_layer,
+                          "active_lightgroup_index", rows=2)
+        col = row.column(align=True)
+        col.operator("scene.view_layer_add_lightgroup", icon="ADD", text="")
+        col.operator("scene.view_layer_remove_lightgroup", icon="REMOVE", text="")
+
+
+def _draw_light_group(layout, owner, view_layer):
+    layout.use_property_split = True
+    layout.prop_search(owner, "lightgroup", view_layer, "lightgroups", text="Light Group")
+
+
+class SPLAT_TRACER_PT_object_light_group(SplatTracerPanel, bpy.types.Panel):
+    """The light group of an object's emission or of a lamp (Cycles' Object > Shading)."""
+    bl_label = "Light Group"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.object is not None and hasattr(context.object, "lightgroup")
+
+    def draw(self, context):
+        _draw_light_group(self.layout, context.object, context.view_layer)
+
+
+class SPLAT_TRACER_PT_world_light_group(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Light Group"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None
+
+    def draw(self, context):
+        _draw_light_group(self.layout, context.world, context.view_layer)
 
 
 class SPLAT_TRACER_PT_passes_cryptomatte(SplatTracerPanel, bpy.types.Panel):
@@ -529,7 +598,9 @@ classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_vis
            SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_motion_blur, SPLAT_TRACER_PT_motion_blur_curve,
            SPLAT_TRACER_PT_object_motion_blur, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material,
            SPLAT_TRACER_PT_world,
-           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
+           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab,
+           SPLAT_TRACER_PT_passes_light_groups, SPLAT_TRACER_PT_object_light_group,
+           SPLAT_TRACER_PT_world_light_group)
 
 # Blender's engine-agnostic panels opened for this engine: the ones whose settings apply to it
 # (honoured, said in the render report, or applied by Blender: output, colour management,

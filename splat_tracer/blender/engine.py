@@ -11,7 +11,7 @@ import traceback
 import bpy
 import numpy as np
 
-from ..render import ab, cryptomatte
+from ..render import ab, cryptomatte, shading
 from . import session, viewport
 from .export import settings as export_settings
 from .export.scene import View
@@ -39,6 +39,23 @@ _PASSES = (
     ("use_pass_position", "Position", "Position", 3, "XYZ", "VECTOR"),
     ("use_pass_mist", "Mist", "Mist", 1, "Z", "VALUE"),
     ("use_pass_environment", "Env", "Environment" if _NEW_PASS_NAMES else "Env", 3, "RGB", "COLOR"),
+    # Cycles' light passes (Blender 5.0 spells them out too).
+    ("use_pass_diffuse_direct", "DiffDir", "Diffuse Direct" if _NEW_PASS_NAMES else "DiffDir", 3, "RGB", "COLOR"),
+    ("use_pass_diffuse_indirect", "DiffInd", "Diffuse Indirect" if _NEW_PASS_NAMES else "DiffInd", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_direct", "GlossDir", "Glossy Direct" if _NEW_PASS_NAMES else "GlossDir", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_indirect", "GlossInd", "Glossy Indirect" if _NEW_PASS_NAMES else "GlossInd", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_color", "GlossCol", "Glossy Color" if _NEW_PASS_NAMES else "GlossCol", 3, "RGB", "COLOR"),
+    ("use_pass_transmission_direct", "TransDir", "Transmission Direct" if _NEW_PASS_NAMES else "TransDir", 3, "RGB",
+     "COLOR"),
+    ("use_pass_transmission_indirect", "TransInd", "Transmission Indirect" if _NEW_PASS_NAMES else "TransInd", 3,
+     "RGB", "COLOR"),
+    ("use_pass_transmission_color", "TransCol", "Transmission Color" if _NEW_PASS_NAMES else "TransCol", 3, "RGB",
+     "COLOR"),
+    ("use_pass_ambient_occlusion", "AO", "Ambient Occlusion" if _NEW_PASS_NAMES else "AO", 3, "RGB", "COLOR"),
+    # Zero: no motion is computed (said in the render report, export/settings.py).
+    ("use_pass_vector", "Vector", "Vector", 4, "XYZW", "VECTOR"),
+    # The mesh's UV map at the first hit (0 on clouds, said in the report).
+    ("use_pass_uv", "UV", "UV", 3, "UVA", "VECTOR"),
     # Cycles' own switch (view_layer.cycles, the Cycles add-on's), name and channels.
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )
@@ -89,6 +106,8 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         for prop, _, name, channels, ids, kind in _PASSES:
             if _switch(renderlayer, prop):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
+        for name in export_settings.light_groups(renderlayer):  # Cycles' "Combined_<group>"
+            self.register_pass(scene, renderlayer, shading.LIGHT_GROUP_PREFIX + name, 3, "RGB", "COLOR")
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
         for name in export_settings.denoising_passes(scene, renderlayer):

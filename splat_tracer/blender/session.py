@@ -259,11 +259,16 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     view_layer = depsgraph.view_layer
     view_passes, completed, counters, t_denoise, denoised_views = {}, True, {}, 0.0, 0
     metadata = {}
+    light_groups = export_settings.light_groups(view_layer)
+    # Light groups' passes ("Combined_<group>") come with the render, not from `passes`: the
+    # denoiser's cut keeps them.
+    kept = wanted + tuple(shading.LIGHT_GROUP_PREFIX + g for g in light_groups)
     for name, camera in cameras.items():
         moving = exported.render_scene.moving + (camera.motion is not None)
         result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
                                               window=(x0, y0, w, h), threads=threads, progress=progress,
                                               cryptomatte_levels=view_layer.pass_cryptomatte_depth,
+                                              light_groups=light_groups,
                                               shutter_curve=motion.curve if motion is not None and moving else None,
                                               rolling_shutter=motion.rolling if motion is not None and moving else None)
         position = result.passes.get("Position")
@@ -277,7 +282,7 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
         if denoising is not None or set(core_passes) != set(wanted):
             # A stopped render is not denoised, but loses the passes only the denoiser wanted.
             t2 = time.perf_counter()
-            frame_passes = denoise_passes(frame_passes, wanted, denoising if result.completed else None,
+            frame_passes = denoise_passes(frame_passes, kept, denoising if result.completed else None,
                                           camera.local_from_camera, threads, report)
             t_denoise += time.perf_counter() - t2
             denoised_views += frame_passes.get("Combined") is not result.passes.get("Combined")

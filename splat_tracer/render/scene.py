@@ -13,7 +13,8 @@ from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
-from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
+from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
+                      Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
 
 RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
@@ -90,7 +91,7 @@ class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
     normals express them; None: flat), material_index (T,) slots and corner_uv (T,3,2), the
-    UV map node programs read (None: 0). Immutable; share one Mesh between any number of
+    UV map node programs and the UV pass read (None: 0). Immutable; share one Mesh between any number of
     instances."""
 
     def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0,
@@ -139,6 +140,7 @@ class Instance:
     motion: Optional[tuple] = None
     name: str = ""
     asset: str = ""
+    light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
 
 
 class FrameResult(NamedTuple):
@@ -212,6 +214,7 @@ class RenderScene:
             self.material_names.extend(m.name for m in mats)
         self.world = world
         self.lights = tuple(lights)
+        self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
                                    threads, [m.program.native() if m.program is not None else None for m in materials])
         self.geometry_count = len(geometries)
@@ -230,7 +233,7 @@ class RenderScene:
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
                packets: bool = True, shutter_curve=None, rolling_shutter: Optional[float] = None,
-               cryptomatte_levels: int = 6) -> FrameResult:
+               cryptomatte_levels: int = 6, light_groups: Sequence[str] = ()) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -251,7 +254,13 @@ class RenderScene:
 
         The Cryptomatte passes (cryptomatte.KINDS) are (h, w, 2 slots) arrays of (id,
         coverage) pairs, cryptomatte.slots_of(cryptomatte_levels) of them, sorted by coverage;
-        the ids are those of the instances' name and asset and the materials' name."""
+        the ids are those of the instances' name and asset and the materials' name.
+
+
+        light_groups: group names (at most shading.MAX_LIGHT_GROUPS); each gets a pass
+        "Combined_<name>" holding the light of the lamps, emissive instances and world whose
+        light_group is that name (Cycles' light groups: the groups sum to Combined less what
+        belongs to none)."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -269,6 +278,10 @@ class RenderScene:
                    np.array([cryptomatte.name_id(n) for n in self.material_names or [Material().name]], np.float32))
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
                                            cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels)
+        if light_groups:
+            if isinstance(light_groups, str):
+                raise TypeError("light_groups must be a sequence of group names, not one string")
+            kwargs.update(self._light_group_arguments(light_groups, buffers, *buffers["Combined"].shape[:2]))
         if shutter_curve is not None:
             kwargs["shutter_table"] = shutter_table(shutter_curve)
         if rolling_shutter is not None:
@@ -278,6 +291,21 @@ class RenderScene:
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)
+
+    def _light_group_arguments(self, groups: Sequence[str], buffers: dict, h: int, w: int) -> dict:
+        """The core's light-group keywords, and each group's pass added to `buffers`."""
+        groups = list(dict.fromkeys(groups))
+        if len(groups) > MAX_LIGHT_GROUPS:
+            raise ValueError(f"at most {MAX_LIGHT_GROUPS} light groups, got {len(groups)}")
+        planes = np.zeros((len(groups), h, w, 3), np.float32)
+        for i, name in enumerate(groups):
+            buffers[LIGHT_GROUP_PREFIX + name] = planes[i]
+        index = {name: i for i, name in enumerate(groups)}
+        of = lambda name: index.get(name, -1) if name else -1  # noqa: E731
+        return dict(light_groups=planes,
+                    light_group_lamps=np.array([of(l.light_group) for l in self.lights], np.int32),
+                    light_group_instances=np.array([of(g) for g in self.instance_light_groups], np.int32),
+                    light_group_world=of(self.world.light_group))
 
 
 # Entries of the shutter curve's inverse CDF the core interpolates (Cycles' shutter table has
@@ -309,7 +337,7 @@ def shutter_table(curve) -> np.ndarray:
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
@@ -325,6 +353,8 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
     buffers = {}
     slots = cryptomatte.slots_of(cryptomatte_levels)
     for name in ("Combined", *passes):
+        if name in LIGHT_PASSES and name != "DiffCol":
+            continue  # a plane of the light passes' buffer, below
         if name in cryptomatte.KINDS:
             buffers[name] = np.zeros((h, w, 2 * slots), np.float32)
             continue
@@ -342,7 +372,18 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
         kwargs["camera_motion"] = np.ascontiguousarray(np.asarray(camera.motion, np.float64)[:, :3].reshape(-1, 12))
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
-    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name not in cryptomatte.KINDS})
+    if "AO" in passes:
+        kwargs["ao_distance"] = float(world.ao_distance)
+    light = [name for name in LIGHT_PASSES if name in passes and name != "DiffCol"]
+    if light:
+        # All nine planes or none (the direct and indirect passes are divided by the colours'
+        # sums); the passes asked for are views of it. DiffCol keeps its own buffer (the
+        # integrator's colour there is the same).
+        planes = np.zeros((len(LIGHT_PASSES), h, w, 3), np.float32)
+        kwargs["light"] = planes
+        for name in light:
+            buffers[name] = planes[LIGHT_PASSES.index(name)]
+    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name in PASS_KEYWORDS})
     if any(kind in buffers for kind in cryptomatte.KINDS):
         kwargs["cryptomatte"] = (*(buffers.get(kind) for kind in cryptomatte.KINDS), slots, *cryptomatte_ids)
     return kwargs, buffers

@@ -158,6 +158,9 @@ class Light:
     visible_camera: bool = True
     visible_glossy: bool = True
     visible_transmission: bool = True
+    # The light group it belongs to (Object > Shading > Light Group; "": none), for the light
+    # groups' passes (RenderScene.render's light_groups). Not packed: a render-time map.
+    light_group: str = ""
 
     def __post_init__(self):
         if self.type not in LIGHT_TYPES:
@@ -224,10 +227,15 @@ class World:
     mist_start: float = 0.0
     mist_depth: float = 100.0
     mist_falloff: str = "LINEAR"
+    # World > Light Settings > Distance: how far the AO pass's rays look (Cycles' ao_distance).
+    ao_distance: float = 10.0
+    light_group: str = ""  # World > Settings > Light Group ("": none)
     environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
     camera_environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if not (math.isfinite(self.ao_distance) and self.ao_distance >= 0):
+            raise ValueError(f"ao_distance must be finite and >= 0, got {self.ao_distance!r}")
         for name in ("environment", "camera_environment"):
             image = getattr(self, name)
             if image is not None and not (isinstance(image, np.ndarray) and image.dtype == np.float32
@@ -420,7 +428,23 @@ PASSES = {
     "IndexMA": 1,      # the material's pass index, pixel-centre sample
     "Mist": 1,         # Cycles' mist (World.mist_*): 0 at the start, 1 at start + depth and on a miss; averaged
     "Env": 3,          # the world seen by camera rays that leave the scene (black on surfaces), averaged
+    # Cycles' light passes, averaged: by the lobe of the path's first bounce, the light that
+    # reached the first surface straight from its source (Direct) or by more bounces (Indirect),
+    # divided by the lobe's colour as Cycles' film does, so (Dir + Ind) x Col is its light.
+    "DiffDir": 3, "DiffInd": 3, "GlossDir": 3, "GlossInd": 3, "GlossCol": 3,
+    "TransDir": 3, "TransInd": 3, "TransCol": 3,
+    "AO": 3,           # Cycles' AO pass: 1 where a cosine ray from the first hit meets nothing within World.ao_distance
+    "Vector": 4,       # Cycles' screen-space motion: 0 (no motion is rendered: the frame is sharp)
+    "UV": 3,           # the mesh's UV map (U, V, 1) at the pixel-centre sample's first hit; 0 on clouds and misses
 }
+# The light passes in the core's order (its `light` buffer's planes: PassLobe order, Direct,
+# Indirect, Color).
+LIGHT_PASSES = ("DiffDir", "GlossDir", "TransDir", "DiffInd", "GlossInd", "TransInd", "DiffCol", "GlossCol",
+                "TransCol")
+# Each light group's Combined, as Cycles names it (RenderScene.render's light_groups).
+LIGHT_GROUP_PREFIX = "Combined_"
+# The most light groups a render writes (native/shade/light_passes.h, kMaxLightGroups).
+MAX_LIGHT_GROUPS = 16
 
 
 @dataclass

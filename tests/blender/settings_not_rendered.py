@@ -173,8 +173,9 @@ ENTRIES = (
           "Acts only through a material's Object Info node (what the engine makes of a material's nodes is "
           "said where it differs from Cycles)"),
     Entry("object", ("visible_volume_scatter",), U, "Volumes are not rendered"),
-    Entry("object", ("lightgroup",), U,
-          "The object's light group: the view layer's light groups are said (their passes are not written)"),
+    Entry("object", ("lightgroup",), D,
+          "The object's light group: its emission goes to that group's Combined_<group> pass, which the view "
+          "layer has only when it holds the group (none in the audit's scene; tests/blender/test_light_passes.py)"),
     Entry("object", ("shadow_terminator_*",), U,
           "EEVEE's shadow terminator offsets; the engine's shading has none (Cycles' own are "
           "`object.cycles.shadow_terminator_*`)", since=(4, 5)),
@@ -216,8 +217,9 @@ ENTRIES = (
           "Name, data-block flags, and the world's viewport colour (the render reads the world's node tree)"),
     Entry("world", ("use_eevee_finite_volume", "probe_resolution", "sun_threshold", "sun_angle", "use_sun_shadow",
                     "sun_shadow_*", "use_sun_shadow_jitter"), C, "EEVEE's world lighting settings"),
-    Entry("world", ("lightgroup",), U,
-          "The world's light group: the view layer's light groups are said (their passes are not written)"),
+    Entry("world", ("lightgroup",), D,
+          "The world's light group: its light goes to that group's Combined_<group> pass, which the view layer "
+          "has only when it holds the group (none in the audit's scene; tests/blender/test_light_passes.py)"),
     Entry("world.cycles", ("name",), V, "The property group's name, not a setting"),
     Entry("world.cycles", ("sampling_method", "sample_map_resolution"), C,
           "How Cycles importance-samples the world: changes noise, not what it converges to"),
@@ -227,9 +229,12 @@ ENTRIES = (
     Entry("world.cycles", ("homogeneous_volume",), U, "Volumes are not rendered", before=(5, 0)),
     Entry("world.cycles", ("use_shadows",), U,
           "Shadows off (the world's light unshadowed) is not honoured: said when off", since=(5, 2)),
-    Entry("world.light_settings", ("ao_factor", "distance"), U,
-          "Settings of the AO pass and Fast GI, which the engine does not write or use (said); the engine's "
-          "own AO sky light has its own settings"),
+    Entry("world.light_settings", ("ao_factor",), U,
+          "Fast GI's AO factor, which the engine does not use (said); the engine's own AO sky light has its "
+          "own settings"),
+    Entry("world.light_settings", ("distance",), D,
+          "The Ambient Occlusion pass's distance: read when that pass is on (off in the audit's scene; "
+          "tests/blender/test_light_passes.py)"),
     Entry("world.mist_settings", ("use_mist", "intensity", "height"), C,
           "Not read by Cycles either: its Mist pass takes Start, Depth and Falloff"),
     Entry("world.cycles_visibility", ("name",), V, "The property group's name, not a setting"),

@@ -215,6 +215,9 @@ def test_no_panel_shows_a_setting_the_engine_does_not_render(blender, scene_obje
     # The walk saw the engine's settings (a draw recorder that records nothing would pass).
     assert {"cycles.samples", "light.temperature", "light.exposure", "camera.dof.aperture_fstop",
             "object.is_shadow_catcher", "render.resolution_x", "camera.stereo.interocular_distance",
+            "view_layer.use_pass_diffuse_direct", "view_layer.use_pass_ambient_occlusion",
+            "world.light_settings.distance", "object.lightgroup", "world.lightgroup",
+            "view_layer.pass_cryptomatte_depth",
             # the engine's Motion Blur panels (Render, Object)
             "render.use_motion_blur", "render.motion_blur_shutter", "cycles.rolling_shutter_type",
             "object.cycles.use_motion_blur", "object.cycles.motion_steps", "view_layer.use_motion_blur"} <= shown_keys, sorted(shown_keys)

@@ -205,6 +205,7 @@ class _Frame:
         self.closed = set()    # id() of the closed clouds' geometry
         self.materials = {}
         self.splats = self.triangles = 0
+        self.want_uv = False   # the UV pass is on (meshes always carry their UV map: node programs read it)
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -326,6 +327,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
+    frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights = [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
     for inst in depsgraph.object_instances:
@@ -359,6 +361,9 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
+        if kind == "cloud" and frame.want_uv:
+            report.once(f"view layer '{view_layer.name}': the UV pass is 0 on point clouds (a scan has no UV map; "
+                        "meshes show theirs)")
         if kind == "cloud" and materials[0].emission_sides:
             report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
                         "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "
@@ -378,7 +383,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
             pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], motion=steps, name=obj.name,
-            asset=asset_name(obj)))
+            asset=asset_name(obj), light_group=getattr(_source(obj), "lightgroup", "")))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),

@@ -23,17 +23,6 @@ from ...render import shading
 # tests/blender/test_unhonoured_settings.py checks that the two tables cover every pass switch
 # of Blender's RNA, so a pass a new Blender adds fails that test instead of going unsaid.
 UNWRITTEN_PASSES = (
-    ("", "use_pass_vector", "Vector"),
-    ("", "use_pass_uv", "UV"),  # meshes' UV maps are not exported
-    ("", "use_pass_ambient_occlusion", "Ambient Occlusion"),
-    ("", "use_pass_diffuse_direct", "Diffuse Direct"),
-    ("", "use_pass_diffuse_indirect", "Diffuse Indirect"),
-    ("", "use_pass_glossy_direct", "Glossy Direct"),
-    ("", "use_pass_glossy_indirect", "Glossy Indirect"),
-    ("", "use_pass_glossy_color", "Glossy Color"),
-    ("", "use_pass_transmission_direct", "Transmission Direct"),
-    ("", "use_pass_transmission_indirect", "Transmission Indirect"),
-    ("", "use_pass_transmission_color", "Transmission Color"),
     ("", "use_pass_subsurface_direct", "Subsurface Direct"),
     ("", "use_pass_subsurface_indirect", "Subsurface Indirect"),
     ("", "use_pass_subsurface_color", "Subsurface Color"),
@@ -191,8 +180,18 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     for aov in view_layer.aovs:
         report.once(f"{layer}: the Shader AOV '{aov.name}' pass is not written (AOV Output nodes are not "
                     "evaluated)")
-    for group in view_layer.lightgroups:
-        # One place for light groups: the lamps, objects and world a group holds light the
-        # image as any other, so only the missing pass is worth saying.
-        report.once(f"{layer}: the light group '{group.name}' pass is not written (what the group holds "
-                    "lights Combined as usual)")
+    if _on(view_layer, "use_pass_vector") and not render.use_motion_blur:
+        # Cycles writes Vector only with motion blur off (its Data panel greys the switch out
+        # when on, and the pass stays zero): the engine's zero is Cycles' own then.
+        report.once(f"{layer}: the Vector pass is written as zero: no motion between frames is computed "
+                    "(right for a still camera and scene)")
+    for group in list(view_layer.lightgroups)[shading.MAX_LIGHT_GROUPS:]:
+        # Past the core's bound: what the group holds lights Combined as usual.
+        report.once(f"{layer}: the light group '{group.name}' pass is not written (only the first "
+                    f"{shading.MAX_LIGHT_GROUPS} light groups are; what the group holds lights Combined as usual)")
+
+
+def light_groups(view_layer) -> tuple:
+    """The names of the view layer's light groups the engine writes a Combined_<name> pass
+    for (the first shading.MAX_LIGHT_GROUPS; report_unhonoured says the rest)."""
+    return tuple(g.name for g in view_layer.lightgroups)[:shading.MAX_LIGHT_GROUPS]

@@ -474,7 +474,8 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
         fields.update(_area_fields(light, m, say))
     fields.update(visible_camera=bool(getattr(obj_eval, "visible_camera", True)),
                   visible_glossy=bool(getattr(obj_eval, "visible_glossy", True)),
-                  visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)))
+                  visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)),
+                  light_group=getattr(obj_eval, "lightgroup", ""))
     if not _within_limits(light.type, fields, say):
         return None
     return shading.Light(**fields)
@@ -549,7 +550,10 @@ def world_of(scene, report: shading.Report) -> shading.World:
         report.once(f"world '{world.name}': Shadows off is not honoured: the world's light casts shadows")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
-                mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff)
+                mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff,
+                # Read by the AO pass and the light groups' passes only.
+                ao_distance=max(float(world.light_settings.distance), 0.0),
+                light_group=getattr(world, "lightgroup", ""))
     viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, **film)
     tree = _node_tree(world)
     if tree is None:

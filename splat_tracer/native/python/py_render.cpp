@@ -49,8 +49,10 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
                                     threads, uv.held ? uv.data<float>() : nullptr);
-        }))
+        })) {
+        delete mesh;  // null: the constructor refused an input
         return nullptr;
+    }
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
     if (!self) {
@@ -397,6 +399,46 @@ void RenderScene_dealloc(PyObject *self) {
     Py_DECREF(type);
 }
 
+// The light groups' map (IntegratorSettings::light_groups): the count is the light_groups
+// buffer's planes; each lamp's and each instance's group (int32, -1: none) and the world's.
+bool parse_light_groups(const RenderScene &scene, PyObject *ogroups, PyObject *olamps, PyObject *oinstances,
+                        int world, LightGroupMap &map) {
+    if (ogroups == Py_None) {
+        if (olamps != Py_None || oinstances != Py_None || world != -1)
+            return PyErr_Format(PyExc_TypeError, "light group assignments need the light_groups buffer"), false;
+        return true;
+    }
+    View groups_view;  // only its shape is read here
+    const Py_ssize_t any[4] = {-1, -1, -1, -1};
+    if (!get_array(ogroups, "light_groups", 'f', 4, any, true, groups_view)) return false;
+    const Py_ssize_t count = groups_view.buf.shape[0];
+    if (count < 1 || count > kMaxLightGroups)
+        return PyErr_Format(PyExc_ValueError, "light_groups must have 1..%d planes", kMaxLightGroups), false;
+    map.count = int(count);
+    struct {
+        PyObject *obj;
+        const char *name;
+        size_t size;
+        std::vector<int> *out;
+    } lists[] = {{olamps, "light_group_lamps", scene.lights().size(), &map.lamp},
+                 {oinstances, "light_group_instances", scene.instance_count(), &map.instance}};
+    for (auto &l : lists) {
+        if (l.obj == Py_None) continue;
+        View v;
+        const Py_ssize_t shape[1] = {Py_ssize_t(l.size)};
+        if (!get_array(l.obj, l.name, 'i', 1, shape, false, v)) return false;
+        const int32_t *g = v.data<int32_t>();
+        l.out->assign(g, g + l.size);
+        for (int x : *l.out)
+            if (x < -1 || x >= map.count)
+                return PyErr_Format(PyExc_ValueError, "%s: group %d outside -1..%d", l.name, x, map.count - 1), false;
+    }
+    if (world < -1 || world >= map.count)
+        return PyErr_Format(PyExc_ValueError, "light_group_world %d outside -1..%d", world, map.count - 1), false;
+    map.world = world;
+    return true;
+}
+
 // The arrays of the Cryptomatte argument, held while the render runs.
 struct CryptomatteViews {
     View out[CryptomatteFilm::kKinds], instance_ids, material_ids;
@@ -521,24 +563,28 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
                                    "material_index", "mist", "environment", "mist_settings", "cryptomatte",
                                    "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
-                                   nullptr};
+                                   "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
+                                   "light_group_instances", "light_group_world", "uv", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
              *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
-             *oshutter = Py_None, *oworldmap = Py_None;
+             *oshutter = Py_None, *oworldmap = Py_None, *olight = Py_None, *oao = Py_None, *ogroups = Py_None,
+             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
-        packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
+        packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
                                      &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
-                                     &oshutter, &cfg.rolling_shutter_duration, &oworldmap))
+                                     &oshutter, &cfg.rolling_shutter_duration, &oworldmap, &olight, &oao,
+                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
+                                     &ouvpass))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -565,6 +611,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         return PyErr_Format(PyExc_ValueError, "the time limit and minimum samples must be >= 0");
     if (cfg.mesh_light_strategy < 0 || cfg.mesh_light_strategy > 2)
         return PyErr_Format(PyExc_ValueError, "mesh_light_strategy must be 0..2 (see shading.RenderSettings)");
+    if (!(std::isfinite(cfg.ao_distance) && cfg.ao_distance >= 0.f))
+        return PyErr_Format(PyExc_ValueError, "ao_distance must be finite, >= 0");
     if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
     cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
@@ -625,6 +673,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         int channels;
         float **target;
         View view;
+        Py_ssize_t planes = 0;  // > 0: that many w x h x channels planes (-1: any number)
     } outs[] = {{ocomb, "combined", 4, &film.combined, {}},   {odepth, "depth", 1, &film.depth, {}},
                 {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
                 {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
@@ -633,13 +682,25 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 {oposition, "position", 3, &film.position, {}},
                 {omatindex, "material_index", 1, &film.material_index, {}},
                 {omist, "mist", 1, &film.mist, {}},
-                {oenv, "environment", 3, &film.environment, {}}};
+                {oenv, "environment", 3, &film.environment, {}},
+                {oao, "ao", 3, &film.ao, {}},
+                {ouvpass, "uv", 3, &film.uv, {}},
+                {olight, "light", 3, &film.light, {}, 3 * kLobes},
+                {ogroups, "light_groups", 3, &film.light_groups, {}, -1}};
     for (Out &out : outs) {
         if (out.obj == Py_None) continue;
-        Py_ssize_t shape[3] = {h, w, out.channels};
-        if (!get_array(out.obj, out.name, 'f', out.channels == 1 ? 2 : 3, shape, true, out.view)) return nullptr;
+        if (out.planes != 0) {
+            Py_ssize_t shape[4] = {out.planes, h, w, out.channels};
+            if (!get_array(out.obj, out.name, 'f', 4, shape, true, out.view)) return nullptr;
+        } else {
+            Py_ssize_t shape[3] = {h, w, out.channels};
+            if (!get_array(out.obj, out.name, 'f', out.channels == 1 ? 2 : 3, shape, true, out.view)) return nullptr;
+        }
         *out.target = out.view.data<float>();
     }
+    if (!parse_light_groups(*reinterpret_cast<RenderSceneObject *>(self)->scene, ogroups, ogroup_lamps,
+                            ogroup_instances, group_world, cfg.light_groups))
+        return nullptr;
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
     auto *obj = reinterpret_cast<RenderSceneObject *>(self);
     const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
@@ -755,7 +816,9 @@ PyMethodDef RenderScene_methods[] = {
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
-     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None)\n--\n\n"
+     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None, "
+     "light=None, ao=None, ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, "
+     "light_group_world=-1, uv=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "

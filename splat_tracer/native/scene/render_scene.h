@@ -128,7 +128,9 @@ struct SurfacePoint {
     float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
     int material = 0;    // index in the material table
-    float b1 = 0, b2 = 0;  // meshes: barycentric coordinates of the triangle's vertices 1 and 2
+    // Meshes: barycentric coordinates of the triangle's vertices 1 and 2 (where node programs
+    // and the UV pass read the UV map).
+    float b1 = 0, b2 = 0;
     int n_members = 0;   // splats that formed the point
     int32_t members[kMaxLayerHits];
 

@@ -12,6 +12,7 @@
 #include "scene/render_scene.h"
 #include "shade/environment.h"
 #include "shade/film.h"
+#include "shade/light_passes.h"
 #include "shade/sampling.h"
 
 namespace splat {
@@ -63,6 +64,10 @@ struct IntegratorSettings : FrameSettings {
     // Cycles' Film mist settings (the World's Mist Pass panel): start, 1 / depth (0: a depth
     // of 0) and the falloff's exponent (Quadratic 2, Linear 1, Inverse Quadratic 0.5).
     float mist_start = 0.f, mist_inv_depth = 0.01f, mist_falloff = 1.f;
+    // The AO pass's reach (World > Light Settings > Distance, Cycles' ao_distance).
+    float ao_distance = 10.f;
+    // Film::light_groups: which group each lamp, emissive instance and the world lights.
+    LightGroupMap light_groups;
     // Motion blur's shutter curve (Cycles' shutter table): the time in the shutter (0..1) of
     // evenly spaced values of a uniform number, its inverse CDF, held by the caller for the
     // render; null: a box shutter (the time is the number). Used only when something moves.
@@ -139,7 +144,7 @@ class Integrator {
     // the clamp.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                       const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Primary *primary, Tally &tally,
-                      Vec3 weight, bool indirect) const;
+                      Vec3 weight, bool indirect, const PathState &st) const;
     // The density with which the path's sampled reflection at a point goes in direction wi
     // (solid angle): the lobe picks times their densities; 0 when the path ends there.
     static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks);
@@ -151,6 +156,19 @@ class Integrator {
     // 1 - Cycles' mist at local point p (what Cycles accumulates: the pass is 1 - the mean).
     float mist_term(Vec3 p) const;
     void write_centre(const Primary &centre, size_t p) const;
+    // Light passes and groups (light_passes.h). tap: light `c` met at a vertex of path `st`
+    // (`found`: by the ray that reached it -- emission, a lamp, the world -- rather than
+    // sampled there), of light group `group` (-1: none); `lobe`: at the camera's own vertex,
+    // the lobe that light sampled there lit.
+    void tap(const PathState &st, Vec3 c, int group, bool found, int lobe = kLobeNone) const;
+    // Cycles' AO pass at the camera ray's first hit: 1 if a cosine-distributed ray from it
+    // meets nothing within ao_distance, else 0.
+    float ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
+                  Tally &tally) const;
+    // A pixel's light-pass sums written to the film; `inv` one over the samples.
+    void write_light(const LightSums &sums, float inv, size_t p) const;
+    // The film's light passes or groups are asked for: paths tap their light.
+    bool light_split() const { return film_.light || film_.ao || film_.light_groups; }
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // Samples [s0, s1) of n pixels added to acc; false when stopped.
     bool shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
@@ -192,7 +210,8 @@ class Integrator {
     // drawn from its distribution, weighed against the path's sampled reflection.
     Vec3 environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                            const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Tally &tally, Vec3 weight,
-                           bool indirect) const;
+                           bool indirect,
+                           const PathState &st) const;
 
     const RenderScene &scene_;
     const Camera &camera_;
@@ -220,6 +239,8 @@ class Integrator {
     std::vector<uint8_t> converged_;
     // Progressive rendering of a scene with shadow catchers: each pixel's catcher sums.
     std::vector<CatcherSums> catcher_;
+    // Progressive rendering with light passes or groups: each pixel's light sums.
+    std::vector<LightSums> light_;
 };
 
 }  // namespace splat

@@ -147,6 +147,7 @@ class Sampler {
         kOcclusion = 6,    // sky AO direction u1, u2
         kTransparent = 7,  // + kDimStride x layer: passing a partly transparent surface
         kTime = 8,         // the camera ray's time in the shutter (motion blur)
+        kAoPass = 9,       // the AO pass's direction u1, u2 (camera vertex only)
         kEnvironment = 13,  // the environment light's direction u1, u2 (a value no other Dim takes)
     };
     // Added per lamp or layer to a Dim: any constant above the Dims keeps the keys apart.
