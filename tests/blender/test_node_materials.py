@@ -587,3 +587,44 @@ def test_camera_coordinates_match_cycles(blender, empty_scene, tmp_path):
     np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL, atol=0.005)
     assert theirs[..., 0].mean() > 0.05  # the depth shows: negated, it would be all 0
     assert not [line for line in report if "CameraSpace" in line], report
+
+
+# A lamp's colour from its node tree against Cycles': the Blackbody node's stated accuracy
+# (1 % per channel from 3000 K) plus the renders' noise.
+LAMP_COLOUR_RTOL = 0.03
+
+
+@pytest.mark.parametrize("panel", [False, True])
+def test_a_lamp_with_a_blackbody_node_lights_as_in_cycles(blender, empty_scene, tmp_path, panel):
+    """A sun whose tree is Blackbody (3000 K) -> Emission (strength from Value x Math) lights
+    a grey floor: the floor's mean colour as Cycles' within 3 %; `panel`: with the light
+    panel's Temperature (8000 K) and Exposure (-0.5) as well, which multiply in. The same sun
+    without its tree (white) is far outside (fails)."""
+    bpy, scene = blender, empty_scene
+    m, _, _, _ = _material(bpy, "Grey")
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    sun = scene.objects["Sun"]
+    sun.data.use_nodes = True
+    tree = sun.data.node_tree
+    emission = next(n for n in tree.nodes if n.type == "EMISSION")
+    blackbody, value, multiply = (tree.nodes.new(t) for t in ("ShaderNodeBlackbody", "ShaderNodeValue",
+                                                              "ShaderNodeMath"))
+    blackbody.inputs["Temperature"].default_value = 3000.0
+    value.outputs[0].default_value = 0.5
+    multiply.operation, multiply.inputs[1].default_value = "MULTIPLY", 1.5
+    tree.links.new(blackbody.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(value.outputs[0], multiply.inputs[0])
+    tree.links.new(multiply.outputs[0], emission.inputs["Strength"])
+    if panel:
+        sun.data.use_temperature, sun.data.temperature, sun.data.exposure = True, 8000.0, -0.5
+    ours, theirs, report = _both(bpy, scene, tmp_path, "blackbody_lamp")
+    mean_ours, mean_theirs = ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0)
+    print(f"blackbody lamp: ours {mean_ours}, Cycles {mean_theirs}, "
+          f"{np.abs(mean_ours / mean_theirs - 1).max():.4f} off")
+    np.testing.assert_allclose(mean_ours, mean_theirs, rtol=LAMP_COLOUR_RTOL)
+    assert mean_theirs[0] > 1.5 * mean_theirs[2], "warm light"
+    assert not [line for line in report if "Sun" in line], report
+    sun.data.use_nodes = False
+    white = render(bpy, scene, tmp_path / "white_lamp.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert np.abs(white.reshape(-1, 3).mean(0) / mean_theirs - 1).max() > 3 * LAMP_COLOUR_RTOL

@@ -402,10 +402,45 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+def _lamp_emission(light, position, direction, say):
+    """The colour x strength of a lamp's node tree, as Cycles multiplies it into the lamp's
+    colour and power: the Emission shader feeding the Light Output, its Color and Strength
+    evaluated once by the node evaluator (constant nodes, Blackbody, RGB, Value, Math, ...
+    fold to one colour). A texture or geometry input (varying over the lamp) is read at the
+    lamp's centre, said once. None where the tree is the default one or is not read (said)."""
+    if not _has_custom_nodes(light):
+        return None
+    output = _output_node(light.node_tree, "OUTPUT_LIGHT")
+    source = _upstream(output.inputs["Surface"]) if output is not None else None
+    if source is None or source[0].type != "EMISSION":
+        say("its node tree is ignored (only an Emission shader into the Light Output is read)")
+        return None
+    emission = source[0]
+    colour = np.array(emission.inputs["Color"].default_value[:3], np.float64)
+    colour = colour * float(emission.inputs["Strength"].default_value)
+    try:
+        program, _ = nodes.compile_shader(emission, lambda text: say("node tree" + text))
+    except nodes.ProgramTooLarge as e:
+        say(f"its node tree is too large to evaluate ({e}); the Emission's unlinked values are used")
+        program = None
+    if program is None:
+        return colour
+    from ...render import nodes as programs
+
+    reads = {programs.GLOBALS[row[2]] for row in np.array(program.code).reshape(-1, programs.WIDTH)
+             if row[0] == programs.OPS.index("GLOBAL")}
+    if reads:
+        say(f"its node tree varies over the lamp ({', '.join(sorted(g.lower() for g in reads))}); "
+            f"its colour at the lamp's centre is used")
+    regs = programs.run(program, P=position, N=direction, Ng=direction, I=direction, object_normal=(0, 0, 1),
+                        generated=(0.5, 0.5, 0.5), surface_normal=direction)
+    out = program.outputs[list(programs.OUTPUTS).index("emission")]
+    value = np.asarray(regs[0, out:out + 3], np.float64)
+    return np.where(np.isfinite(value), np.maximum(value, 0.0), 0.0)
+
+
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
-    if _has_custom_nodes(light):
-        say("light node trees are ignored")
     linking = getattr(obj, "light_linking", None)
     if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
         say("light linking is ignored")
@@ -433,7 +468,7 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
 
     `matrix_world`: the lamp's 4x4 world matrix in the scene's local frame (float64).
     Power: energy x 2^exposure (W; W/m^2 for a sun), colour x the blackbody colour when
-    'Temperature' is on, as in Cycles. Position: the matrix translation; direction: its -Z
+    'Temperature' is on x its node tree's emission (_lamp_emission), as in Cycles. Position: the matrix translation; direction: its -Z
     column; u_axis: its X column; area sizes scale with the X and Y columns' lengths.
     Portals emit nothing and give None."""
     if obj_eval.type != "LIGHT":
@@ -448,6 +483,9 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
     colour = np.array(light.color[:3], np.float64)
     if getattr(light, "use_temperature", False):
         colour = colour * np.array(light.temperature_color[:3], np.float64)
+    emission = _lamp_emission(light, m[:3, 3], _unit(-m[:3, 2]), say)
+    if emission is not None:
+        colour = colour * emission
     fields = dict(type=light.type, colour=tuple(float(c) for c in colour),
                   power=max(float(light.energy) * 2.0 ** getattr(light, "exposure", 0.0), 0.0),
                   position=tuple(float(c) for c in m[:3, 3]), direction=_unit(-m[:3, 2]), u_axis=_unit(m[:3, 0]),
