@@ -229,6 +229,20 @@ def test_no_material_no_output_and_ignored_outputs(blender, empty_scene, es, rep
     assert report.lines[-1] == "material 'Foggy': Volume, Displacement are ignored"
 
 
+def test_a_volume_only_material_is_transparent_and_said(blender, empty_scene, es, report):
+    """Only a Volume into the Material Output: the volume is not rendered, so the surface is
+    absent (alpha 0), said once -- not a black box, and no claim that Cycles renders it so."""
+    material, _ = new_material(blender, "Fog", "ShaderNodeBsdfDiffuse")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    links.remove(output.inputs["Surface"].links[0])
+    links.new(nodes.new("ShaderNodeVolumePrincipled").outputs[0], output.inputs["Volume"])
+    m = es.material_of(material, report)
+    assert m.alpha == 0.0 and m.emission == (0, 0, 0)
+    assert report.lines == ["material 'Fog': only a Volume shader is connected; the volume is not rendered, "
+                            "the object is transparent"]
+
+
 # --------------------------------------------------------------------------------------
 # Lamps.
 

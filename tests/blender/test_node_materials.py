@@ -628,3 +628,26 @@ def test_a_lamp_with_a_blackbody_node_lights_as_in_cycles(blender, empty_scene, 
     sun.data.use_nodes = False
     white = render(bpy, scene, tmp_path / "white_lamp.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     assert np.abs(white.reshape(-1, 3).mean(0) / mean_theirs - 1).max() > 3 * LAMP_COLOUR_RTOL
+
+
+def test_a_volume_only_card_is_transparent(blender, empty_scene, tmp_path):
+    """A card whose material has only a Volume shader, above a grey floor: the floor is seen
+    through it and lit through it (no shadow), as with no card at all -- not a black box. Its
+    volume is not rendered (Cycles would fog it): the report says so."""
+    bpy, scene = blender, empty_scene
+    grey, _, _, _ = _material(bpy, "Grey")
+    plane(bpy, "Floor", 2.0, (0, 0, 0), grey)
+    _setup(bpy, scene)
+    scene.cycles.transparent_max_bounces = 8  # the card is passed through as a transparent surface
+    bare = render(bpy, scene, tmp_path / "bare.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    fog = bpy.data.materials.new("Fog")
+    output = next(n for n in fog.node_tree.nodes if n.type == "OUTPUT_MATERIAL")
+    fog.node_tree.links.remove(output.inputs["Surface"].links[0])
+    fog.node_tree.links.new(fog.node_tree.nodes.new("ShaderNodeVolumePrincipled").outputs[0], output.inputs["Volume"])
+    plane(bpy, "Card", 1.0, (0, 0, 0.5), fog)
+    carded = render(bpy, scene, tmp_path / "card.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    np.testing.assert_allclose(carded.mean((0, 1)), bare.mean((0, 1)), rtol=0.02)
+    middle = carded[SIZE // 3: 2 * SIZE // 3, SIZE // 3: 2 * SIZE // 3]
+    assert middle.mean() > 0.8 * bare.mean(), "not black, no shadow"
+    assert [line for line in stats()["report"] if "Fog" in line] == [
+        "material 'Fog': only a Volume shader is connected; the volume is not rendered, the object is transparent"]

@@ -323,7 +323,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
 
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
-    black, as in Cycles; Volume and Displacement are ignored. Every approximation is said
+    black, as in Cycles; Volume and Displacement are ignored (a material with only a Volume
+    is fully transparent: its volume is not rendered). Every approximation is said
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
@@ -354,10 +355,17 @@ def _surface_material(bl_material, report: shading.Report) -> shading.Material:
     if output is None:
         sockets.say(" has no Material Output; rendered black, as Cycles does")
         return _clamped(_BLACK, sockets)
-    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
+    source = _upstream(output.inputs["Surface"])
+    volume_only = source is None and "Volume" in output.inputs and _upstream(output.inputs["Volume"]) is not None
+    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs
+                                            if s.name != "Surface" and not (volume_only and s.name == "Volume")])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
-    source = _upstream(output.inputs["Surface"])
+    if volume_only:
+        # Cycles renders the volume inside a surface that is not there. Volumes are not
+        # rendered here: the surface stays absent (fully transparent), never a black box.
+        sockets.say(": only a Volume shader is connected; the volume is not rendered, the object is transparent")
+        return _clamped(dict(_BLACK, alpha=0.0), sockets)
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0], sockets) if source is not None else None
