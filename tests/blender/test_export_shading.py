@@ -343,6 +343,22 @@ def test_lamp_node_trees_are_evaluated_once(blender, empty_scene, es, report):
     assert report.lines == [f"light '{linked.name}': light linking is ignored"]
 
 
+def test_blackbody_node_beside_blenders_own(blender, empty_scene):
+    """The Blackbody node's colour against Blender's own blackbody (a lamp's
+    temperature_color with Temperature on: the colour Cycles' Blackbody node gives), read
+    live: within 1 % per channel from 3000 K up, 2 % (0.002 absolute) at 2000 K."""
+    from splat_tracer.render import nodes as programs
+    light = add_lamp(blender, empty_scene, "POINT", use_temperature=True).data
+    for kelvin, rtol, atol in ((2000, 0.021, 0.002), (3000, 0.01, 1e-3), (4500, 0.01, 1e-3), (6500, 0.01, 1e-3),
+                               (9000, 0.01, 1e-3), (12000, 0.01, 1e-3), (16000, 0.01, 1e-3)):
+        light.temperature = kelvin
+        b = programs.Builder()
+        out = b.register(width=3)
+        b.emit("BLACKBODY", out, b.register(float(kelvin)))
+        got = programs.run(b.program())[0, out:out + 3]
+        np.testing.assert_allclose(got, light.temperature_color[:3], rtol=rtol, atol=atol, err_msg=str(kelvin))
+
+
 def test_lamp_node_trees_that_vary_or_are_not_emission_are_said(blender, empty_scene, es, report):
     """A texture in the lamp's tree is read once, at the lamp's centre (said); a tree whose
     output is not an Emission shader is ignored (said)."""
