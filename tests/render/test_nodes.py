@@ -958,3 +958,25 @@ def test_bump_rows_are_validated():
     too_deep, _, _ = _bump_program(nested(nodes.MAX_BUMP_DEPTH))
     with pytest.raises(ValueError, match="too deep"):
         nodes.run(too_deep)
+
+
+@pytest.mark.parametrize("source, slope", [("UV", 0.5), ("OBJECT", 1.0), ("GENERATED", 0.5)])
+def test_bump_in_a_render_follows_the_height_along_the_surface(source, slope):
+    """In a render the core finds the Bump's two nearby points itself: the height u (the UV
+    map spans the 2-unit floor: slope 0.5 per unit along x), the object's x (slope 1) or the
+    generated x (0..1 over the floor: 0.5). The bumped normal, written as emission
+    (n x 0.5 + 0.5), is normalize(-distance x slope, 0, 1) everywhere on the floor."""
+    distance = 0.8
+    b = nodes.Builder()
+    out = b.register(width=3)
+    s, d, n = b.register(1.0), b.register(distance), b.global_("NORMAL")
+    first = len(b.code)
+    h = b.global_(source)  # its first component is the height (x, or u)
+    b.emit("BUMP", out, h, s, d, n, first, 0)
+    shown, unused = b.register(width=3), b.register()
+    half = b.register((0.5, 0.5, 0.5), 3)
+    b.emit("VECTOR_MATH", shown, unused, out, half, half, b.register(1.0), nodes.VECTOR_OPS.index("MULTIPLY_ADD"))
+    b.output("emission", shown)
+    img = _render(shading.Material(base_colour=(0, 0, 0), program=b.program()))
+    want = _unit((-distance * slope, 0.0, 1.0)) * 0.5 + 0.5
+    np.testing.assert_allclose(img[4:-4, 4:-4].reshape(-1, 3), np.broadcast_to(want, (24 * 24, 3)), atol=2e-3)
