@@ -651,3 +651,38 @@ def test_a_volume_only_card_is_transparent(blender, empty_scene, tmp_path):
     assert middle.mean() > 0.8 * bare.mean(), "not black, no shadow"
     assert [line for line in stats()["report"] if "Fog" in line] == [
         "material 'Fog': only a Volume shader is connected; the volume is not rendered, the object is transparent"]
+
+
+def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
+    """An Emission floor whose colour is a Blackbody of a temperature varying across it (a
+    Gradient through Map Range: 3000-9000 K): per-pixel red/blue correlation >= 0.95 and the
+    mean colour within 3 % of Cycles' (the node's stated 1 % plus noise). A constant 6500 K
+    (no gradient) fails the colour."""
+    bpy, scene = blender, empty_scene
+    m = bpy.data.materials.new("Glow")
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    coords, gradient, to_kelvin, blackbody, emission = (nodes.new(t) for t in (
+        "ShaderNodeTexCoord", "ShaderNodeTexGradient", "ShaderNodeMapRange", "ShaderNodeBlackbody",
+        "ShaderNodeEmission"))
+    to_kelvin.inputs["To Min"].default_value, to_kelvin.inputs["To Max"].default_value = 3000.0, 9000.0
+    links.new(coords.outputs["UV"], gradient.inputs["Vector"])
+    links.new(gradient.outputs["Fac"], to_kelvin.inputs["Value"])
+    links.new(to_kelvin.outputs["Result"], blackbody.inputs["Temperature"])
+    links.new(blackbody.outputs["Color"], emission.inputs["Color"])
+    links.new(emission.outputs[0], output.inputs["Surface"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "blackbody_floor")
+    ratio = lambda img: (img[..., 0] / np.maximum(img[..., 2], 1e-6)).ravel()  # noqa: E731
+    r = float(np.corrcoef(ratio(ours), ratio(theirs))[0, 1])
+    off = np.abs(ours.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max()
+    print(f"blackbody floor: red/blue correlation {r:.4f}, mean colour {off:.4f} off")
+    assert r >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=LAMP_COLOUR_RTOL)
+    assert [line for line in report if "Glow" in line] == [  # the one line about node-driven emission
+        "material 'Glow': emission driven by nodes is not sampled as a light (found by rays only)"]
+    links.remove(to_kelvin.outputs["Result"].links[0])
+    blackbody.inputs["Temperature"].default_value = 6500.0
+    flat = render(bpy, scene, tmp_path / "flat.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert np.abs(flat.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max() > 3 * LAMP_COLOUR_RTOL
