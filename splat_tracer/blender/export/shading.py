@@ -320,7 +320,8 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
 
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
-    black, as in Cycles; Volume and Displacement are ignored. Every approximation is said
+    black, as in Cycles; Volume and Displacement are ignored (a material with only a Volume
+    is fully transparent: its volume is not rendered). Every approximation is said
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
@@ -352,10 +353,17 @@ def _surface_material(bl_material, report: shading.Report) -> shading.Material:
     if output is None:
         sockets.say(" has no Material Output; rendered black, as Cycles does")
         return _clamped(_BLACK, sockets)
-    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
+    source = _upstream(output.inputs["Surface"])
+    volume_only = source is None and "Volume" in output.inputs and _upstream(output.inputs["Volume"]) is not None
+    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs
+                                            if s.name != "Surface" and not (volume_only and s.name == "Volume")])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
-    source = _upstream(output.inputs["Surface"])
+    if volume_only:
+        # Cycles renders the volume inside a surface that is not there. Volumes are not
+        # rendered here: the surface stays absent (fully transparent), never a black box.
+        sockets.say(": only a Volume shader is connected; the volume is not rendered, the object is transparent")
+        return _clamped(dict(_BLACK, alpha=0.0), sockets)
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0], sockets) if source is not None else None
@@ -400,14 +408,49 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+def _lamp_emission(light, position, direction, say):
+    """The colour x strength of a lamp's node tree, as Cycles multiplies it into the lamp's
+    colour and power: the Emission shader feeding the Light Output, its Color and Strength
+    evaluated once by the node evaluator (constant nodes, Blackbody, RGB, Value, Math, ...
+    fold to one colour). A texture or geometry input (varying over the lamp) is read at the
+    lamp's centre, said once. None where the tree is the default one or is not read (said)."""
+    if not _has_custom_nodes(light):
+        return None
+    output = _output_node(light.node_tree, "OUTPUT_LIGHT")
+    source = _upstream(output.inputs["Surface"]) if output is not None else None
+    if source is None or source[0].type != "EMISSION":
+        say("its node tree is ignored (only an Emission shader into the Light Output is read)")
+        return None
+    emission = source[0]
+    colour = np.array(emission.inputs["Color"].default_value[:3], np.float64)
+    colour = colour * float(emission.inputs["Strength"].default_value)
+    try:
+        program, _ = nodes.compile_shader(emission, lambda text: say("node tree" + text))
+    except nodes.ProgramTooLarge as e:
+        say(f"its node tree is too large to evaluate ({e}); the Emission's unlinked values are used")
+        program = None
+    if program is None:
+        return colour
+    from ...render import nodes as programs
+
+    reads = {programs.GLOBALS[row[2]] for row in np.array(program.code).reshape(-1, programs.WIDTH)
+             if row[0] == programs.OPS.index("GLOBAL")}
+    if reads:
+        say(f"its node tree varies over the lamp ({', '.join(sorted(g.lower() for g in reads))}); "
+            f"its colour at the lamp's centre is used")
+    regs = programs.run(program, P=position, N=direction, Ng=direction, I=direction, object_normal=(0, 0, 1),
+                        generated=(0.5, 0.5, 0.5), surface_normal=direction)
+    out = program.outputs[list(programs.OUTPUTS).index("emission")]
+    value = np.asarray(regs[0, out:out + 3], np.float64)
+    return np.where(np.isfinite(value), np.maximum(value, 0.0), 0.0)
+
+
 # Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
 _LIGHT_MAX_BOUNCES = 1024
 
 
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
-    if _has_custom_nodes(light):
-        say("light node trees are ignored")
     linking = getattr(obj, "light_linking", None)
     if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
         say("light linking is ignored")
@@ -443,7 +486,7 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
 
     `matrix_world`: the lamp's 4x4 world matrix in the scene's local frame (float64).
     Power: energy x 2^exposure (W; W/m^2 for a sun), colour x the blackbody colour when
-    'Temperature' is on, as in Cycles. Position: the matrix translation; direction: its -Z
+    'Temperature' is on x its node tree's emission (_lamp_emission), as in Cycles. Position: the matrix translation; direction: its -Z
     column; u_axis: its X column; area sizes scale with the X and Y columns' lengths.
     Portals emit nothing and give None."""
     if obj_eval.type != "LIGHT":
@@ -458,6 +501,9 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
     colour = np.array(light.color[:3], np.float64)
     if getattr(light, "use_temperature", False):
         colour = colour * np.array(light.temperature_color[:3], np.float64)
+    emission = _lamp_emission(light, m[:3, 3], _unit(-m[:3, 2]), say)
+    if emission is not None:
+        colour = colour * emission
     fields = dict(type=light.type, colour=tuple(float(c) for c in colour),
                   power=max(float(light.energy) * 2.0 ** getattr(light, "exposure", 0.0), 0.0),
                   position=tuple(float(c) for c in m[:3, 3]), direction=_unit(-m[:3, 2]), u_axis=_unit(m[:3, 0]),

@@ -214,7 +214,7 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
     const bool ok = parse_program(triple, "program", prog, images);
     Py_DECREF(triple);
     if (!ok) return nullptr;
-    constexpr int kGlobalFloats = 36;
+    constexpr int kGlobalFloats = 42;
     View g, regs, code, data, outs;
     Py_ssize_t sg[2] = {-1, kGlobalFloats}, sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
     if (!get_array(oglobals, "globals", 'f', 2, sg, false, g)) return nullptr;
@@ -230,7 +230,13 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
         Vec3 *vecs[11] = {&s.P,  &s.N,  &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour,
                           &s.tangent, &s.surface_normal};
         for (int k = 0; k < 11; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
-        s.point_alpha = x[33], s.backfacing = x[34], s.tangent_sign = x[35];
+        // The Bump node's offsets: the test's shading point is its own object space, texture
+        // space and UV map, so every position-dependent global moves alike.
+        for (int k = 0; k < 2; ++k) {
+            const Vec3 d(x[33 + 3 * k], x[34 + 3 * k], x[35 + 3 * k]);
+            s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d};
+        }
+        s.point_alpha = x[39], s.backfacing = x[40], s.tangent_sign = x[41];
         prog.run(s, r);
         std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
     }

@@ -111,20 +111,27 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
         }
     sg.surface_normal = sp.ns;
+    // Into the camera's frame by the transpose of its rotation (its axes are unit and
+    // orthogonal), with Z negated: Cycles' camera space looks along +Z. A moving camera
+    // is where it is at the ray's time.
+    double moved[12];
+    const double *c = nullptr;
     if (camera && prog.uses_camera) {
-        // Into the camera's frame by the transpose of its rotation (its axes are unit and
-        // orthogonal), with Z negated: Cycles' camera space looks along +Z. A moving camera
-        // is where it is at the ray's time.
-        double moved[12];
         if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
-        const double *c = camera->moves() ? moved : camera->local_from_camera;
-        const double d[3] = {double(sp.p.x) - c[3], double(sp.p.y) - c[7], double(sp.p.z) - c[11]};
+        c = camera->moves() ? moved : camera->local_from_camera;
+    }
+    auto camera_space = [c](Vec3 p, bool direction) {
+        const double d[3] = {double(p.x) - (direction ? 0.0 : c[3]), double(p.y) - (direction ? 0.0 : c[7]),
+                             double(p.z) - (direction ? 0.0 : c[11])};
+        Vec3 out;
         for (int k = 0; k < 3; ++k) {
             const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
             const double v = (c[k] * d[0] + c[4 + k] * d[1] + c[8 + k] * d[2]) / (len > 0 ? len : 1.0);
-            sg.camera[k] = float(k == 2 ? -v : v);
+            out[k] = float(k == 2 ? -v : v);
         }
-    }
+        return out;
+    };
+    if (camera && prog.uses_camera) sg.camera = camera_space(sp.p, false);
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
         for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
@@ -141,6 +148,46 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
+    if (prog.uses_bump) {
+        // The Bump node's two nearby points: along two perpendicular directions in the plane of
+        // the surface, a fixed fraction of the object's size away. Cycles offsets by a tenth of
+        // the pixel's footprint; for a height that varies smoothly at that scale both give its
+        // gradient. A fraction of the object's size (the frame its textures are laid out in)
+        // keeps the offset far below a texture's features whatever the scene's units, and the
+        // floor of a few float ulps of the position keeps it resolvable far from the origin.
+        constexpr float kBumpOffset = 1e-4f, kPositionUlps = 1.5e-5f;  // 1.5e-5: ~128 ulps of |P|
+        const float size = inst.bounds.empty() ? 0.f : length(inst.bounds.hi - inst.bounds.lo);
+        const float eps = std::fmax(kBumpOffset * size, kPositionUlps * max_component(vabs(sp.p)));
+        // An orthonormal pair about the geometric normal (Duff et al., "Building an
+        // Orthonormal Basis, Revisited", 2017).
+        const Vec3 n = sg.Ng;
+        const float sign = std::copysign(1.f, n.z), a = -1.f / (sign + n.z), b = n.x * n.y * a;
+        const Vec3 tangents[2] = {{1.f + sign * n.x * n.x * a, sign * b, -sign * n.x},
+                                  {b, sign + n.y * n.y * a, -n.y}};
+        for (int k = 0; k < 2; ++k) {
+            ShaderGlobals::Offset &d = sg.bump[k];
+            d.P = tangents[k] * (eps > 0.f ? eps : 1e-6f);
+            d.object = inst.to_object.vector(d.P);
+            if (!box.empty())
+                for (int i = 0; i < 3; ++i) {
+                    const float extent = box.hi[i] - box.lo[i];
+                    d.generated[i] = extent > 0.f ? d.object[i] / extent : 0.f;
+                }
+            if (inst.mesh) {  // the UV map's change across the triangle for that step
+                Vec3 v0, v1, v2;
+                inst.mesh->vertices(sp.prim, &v0, &v1, &v2);
+                const Vec3 e1 = v1 - v0, e2 = v2 - v0;
+                const float a11 = dot(e1, e1), a12 = dot(e1, e2), a22 = dot(e2, e2);
+                const float det = a11 * a22 - a12 * a12;
+                if (det > 0.f) {
+                    const float r1 = dot(e1, d.object), r2 = dot(e2, d.object);
+                    const float db1 = (a22 * r1 - a12 * r2) / det, db2 = (a11 * r2 - a12 * r1) / det;
+                    d.uv = inst.mesh->uv(sp.prim, sp.b1 + db1, sp.b2 + db2) - sg.uv;
+                }
+            }
+            if (camera && prog.uses_camera) d.camera = camera_space(d.P, true);
+        }
+    }
     float r[kMaxNodeRegisters];
     prog.run(sg, r);
     Material out = m;
