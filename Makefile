@@ -138,6 +138,7 @@ bench-quick: build
 	$(VPY) -m benchmarks.scale --quick
 	$(VPY) -m benchmarks.accuracy --quick --output build/bench-quick
 	$(VPY) -m benchmarks.frame_time --quick --output build/bench-quick
+	$(VPY) -m benchmarks.before_after --quick --output build/bench-quick
 	$(VPY) -m benchmarks.viewport_latency --quick
 	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 	$(VPY) -m benchmarks.real_scans --quick --output build/bench-quick
@@ -158,6 +159,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) -m benchmarks.scale
 	$(VPY) -m benchmarks.accuracy --output benchmarks/results
 	$(VPY) -m benchmarks.frame_time --output benchmarks/results
+	$(VPY) -m benchmarks.before_after --output benchmarks/results
 	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
 	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 	$(VPY) -m benchmarks.real_scans --output benchmarks/results
