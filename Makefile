@@ -11,7 +11,7 @@ STAMP  := $(VENV)/.installed-stamp
 CORE   := splat_tracer/_core.abi3.so
 NATIVE := $(shell find splat_tracer/native -name '*.cpp' -o -name '*.h')
 
-.PHONY: all venv build native demo test test-release test-matrix test-windows test-sanitize sanitize-tree fuzz \
+.PHONY: all venv build native demo demo-hdri test test-release test-matrix test-windows test-sanitize sanitize-tree fuzz \
         dist docs bench bench-quick clean
 
 all: build
@@ -37,6 +37,11 @@ native: $(STAMP)
 
 demo: build
 	$(VPY) -m tools.demo --output demo.png
+
+# The second demo: a scan lit by one of Blender's HDRIs on an image-textured floor, with
+# Splat Tracer and beside it with Cycles (equal samples), the times printed.
+demo-hdri: build
+	$(VPY) -m tools.demo_hdri --output demo_hdri.png --cycles demo_hdri_cycles.png
 
 # The everyday loop: every test that needs no cross build and no other Blender release, that
 # is all but tests/release/: the Blender-free tests (pipeline/, render/; `-m "not blender"`
@@ -122,6 +127,7 @@ docs: build
 	$(VPY) -m tools.viewport_images --output-dir docs/viewport
 	$(VPY) -m tools.demo --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
 	$(VPY) -m tools.composite_images --output docs/composite.png --cycles docs/composite_cycles.png | grep "^composite:" | tee docs/composite_times.txt
+	$(VPY) -m tools.demo_hdri --output docs/demo_hdri.png --cycles docs/demo_hdri_cycles.png | grep "^demo-hdri:" | tee docs/demo_hdri_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
 dist: $(STAMP)
@@ -132,6 +138,7 @@ bench-quick: build
 	$(VPY) -m benchmarks.scale --quick
 	$(VPY) -m benchmarks.accuracy --quick --output build/bench-quick
 	$(VPY) -m benchmarks.frame_time --quick --output build/bench-quick
+	$(VPY) -m benchmarks.before_after --quick --output build/bench-quick
 	$(VPY) -m benchmarks.viewport_latency --quick
 	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 	$(VPY) -m benchmarks.real_scans --quick --output build/bench-quick
@@ -152,6 +159,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) -m benchmarks.scale
 	$(VPY) -m benchmarks.accuracy --output benchmarks/results
 	$(VPY) -m benchmarks.frame_time --output benchmarks/results
+	$(VPY) -m benchmarks.before_after --output benchmarks/results
 	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
 	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 	$(VPY) -m benchmarks.real_scans --output benchmarks/results

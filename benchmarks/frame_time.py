@@ -1,6 +1,6 @@
 """Frame time of a lit scene, beside Cycles in the same run, and what each skip saves.
 
-    python -m benchmarks.frame_time [--quick] [--output DIR]
+    python -m benchmarks.frame_time [--quick] [--output DIR] [--textured-only]
 
 The scene: the bunny's 35,947-point vertex cloud (the paper's cloud; a 36k-point sphere when
 ../shared is absent) standing on a mesh floor, one sun lamp with shadows, a grey sky. Both
@@ -12,6 +12,13 @@ Then the skips (issue #7): the same frame with the features a scene does not use
 with the core's own counters beside the time, to show that a scene pays only for what it
 uses: no lamp (no shadow rays), an open cloud (no far phase), flat splats (no
 interpolation), and with every pass enabled (pass work only when asked for).
+
+Then a textured, HDRI-lit scene (issue #24): the second demo's scene (tools/demo_hdri.py: a
+scan under one of Blender's HDRIs on an image-textured floor) beside Cycles at 16 samples,
+and what a texture costs: the same frame with the floor's Base Color a constant, a UV
+Checker, the 256 x 256 tile image, or Noise (detail 4) -> Color Ramp; written to
+frame_time_textured.md (and .json); --textured-only runs this part alone. The untextured
+scene's time before and after the node evaluator is benchmarks/before_after.py's.
 """
 from __future__ import annotations
 
@@ -81,11 +88,13 @@ def frame(bpy, scene, engine: str, samples: int, path: Path, session) -> dict:
 
     scene.render.engine = engine
     scene.cycles.samples = samples
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     render_to_exr(bpy, scene, path, *scene_size(scene), passes=False)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     stats = dict(session.HISTORY[-1]) if engine == "SPLAT_TRACER" else {}
-    return {"engine": engine, "samples": samples, "seconds": seconds, "stats": stats}
+    # CPU time (all of the process's threads) beside the wall time: on the shared machine the
+    # load stretches wall times by up to 3x, CPU time far less.
+    return {"engine": engine, "samples": samples, "seconds": seconds, "cpu_seconds": cpu, "stats": stats}
 
 
 def read_rgb(path: Path) -> np.ndarray:
@@ -104,10 +113,92 @@ def scene_size(scene):
     return scene.render.resolution_x, scene.render.resolution_y
 
 
+def textured_scene(bpy, work: Path, session, quick: bool) -> dict:
+    """The second demo's scene (tools/demo_hdri.py) beside Cycles, then the same frame with
+    each floor texture (Splat Tracer): medians of interleaved rounds."""
+    from tools import composite_images, demo_hdri
+
+    demo_hdri.BUILD.mkdir(parents=True, exist_ok=True)
+    width, height = (200, 150) if quick else (400, 300)
+    samples, rounds, texture_rounds = 16, 1 if quick else 3, 1 if quick else 7
+    scene, scan, floor = demo_hdri.build_scene(bpy, composite_images.hdri_path(bpy, "city"), 3, width, height)
+    scene.cycles.device, scene.cycles.use_denoising, scene.cycles.use_adaptive_sampling = "CPU", False, False
+
+    def median(got: list) -> dict:
+        return sorted(got, key=lambda f: f["seconds"])[len(got) // 2]
+
+    runs = {"SPLAT_TRACER": [], "CYCLES": []}
+    for _ in range(rounds):
+        for engine, got in runs.items():
+            got.append(frame(bpy, scene, engine, samples, work / f"textured_{engine}.exr", session))
+    engines = {}
+    for engine, got in runs.items():
+        r = median(got)
+        engines[engine] = {"seconds": r["seconds"], "render_seconds": r["stats"].get("render_seconds"),
+                           "runs": [g["seconds"] for g in got],
+                           "cpu_seconds": sorted(g["cpu_seconds"] for g in got)[len(got) // 2]}
+        print(f"textured HDRI scene: {engine:13s} {samples} spp: {r['seconds']:.2f} s (median of {rounds})", flush=True)
+
+    # The image material is the floor's own (one tile image, loaded and packed once).
+    materials = {kind: floor.data.materials[0] if kind == "image" else demo_hdri.floor_material(bpy, kind)
+                 for kind in demo_hdri.FLOOR_TEXTURES}
+    cost = {kind: [] for kind in materials}
+    for _ in range(texture_rounds):
+        for kind, material in materials.items():  # interleaved: the machine's load falls on all
+            floor.data.materials[0] = material
+            cost[kind].append(frame(bpy, scene, "SPLAT_TRACER", samples, work / "texture.exr", session))
+    textures = []
+    for kind, got in cost.items():
+        # The best wall time of the rounds (the work is the same each time and the shared
+        # machine's load only ever adds to it; medians moved by +-40 % from run to run) and the
+        # median CPU time of the frame, which the load stretches far less.
+        times = sorted(g["stats"]["render_seconds"] for g in got)
+        cpu = sorted(g["cpu_seconds"] for g in got)
+        textures.append({"texture": kind, "best": times[0], "median": times[len(times) // 2], "runs": times,
+                         "cpu": cpu[len(cpu) // 2], "cpu_runs": cpu})
+        print(f"texture cost: {kind:12s} best {times[0]:.3f} s, median {times[len(times) // 2]:.3f} s rendering, "
+              f"CPU {cpu[len(cpu) // 2]:.2f} s", flush=True)
+    return {"size": [width, height], "samples": samples, "rounds": rounds, "splats": len(scan.data.vertices),
+            "engines": engines, "textures": textures,
+            "texture_rounds": texture_rounds}
+
+
+TEXTURE_NAMES = {"constant": "constant Base Color", "checker": "UV Checker",
+                 "image": "Image Texture (256 x 256 PNG, packed, Linear)", "noise_ramp": "Noise (detail 4) -> Color Ramp"}
+
+
+def textured_lines(t: dict) -> list:
+    w, h = t["size"]
+    st, cy = t["engines"]["SPLAT_TRACER"], t["engines"]["CYCLES"]
+    lines = [f"# Frame time: a textured, HDRI-lit scene ({t['samples']} samples, {w}x{h})", "",
+             f"The second demo's scene (tools/demo_hdri.py): a {t['splats']:,}-splat scan under Blender's 'city' "
+             f"HDRI (importance-sampled) on an image-textured floor; the median of {t['rounds']} round(s), the "
+             "engines interleaved.", "",
+             "| engine | frame (s) | lowest to highest (s) | of which rendering (s) | CPU time (s) |",
+             "|---|---:|---:|---:|---:|",
+             f"| Splat Tracer | {st['seconds']:.2f} | {min(st['runs']):.2f}–{max(st['runs']):.2f} | "
+             f"{st['render_seconds']:.3f} | {st['cpu_seconds']:.2f} |",
+             f"| Cycles (points as spheres) | {cy['seconds']:.2f} | {min(cy['runs']):.2f}–{max(cy['runs']):.2f} | | "
+             f"{cy['cpu_seconds']:.2f} |",
+             "", "## What a texture costs (the same frame, Splat Tracer)", "",
+             "The floor's Base Color from each texture in turn (all through UV -> Mapping, repeated 6 times), "
+             f"{t['texture_rounds']} round(s), the textures interleaved: the frame's CPU time (median; the "
+             "load stretches it least), and the core's wall rendering time (without export and EXR), best and "
+             "median of the rounds.", "",
+             "| floor | CPU (s) | against constant | rendering, best (s) | against constant | median (s) |",
+             "|---|---:|---:|---:|---:|---:|"]
+    base = t["textures"][0]
+    for r in t["textures"]:
+        lines.append(f"| {TEXTURE_NAMES[r['texture']]} | {r['cpu']:.2f} | {100 * (r['cpu'] / base['cpu'] - 1):+.0f} % | "
+                     f"{r['best']:.3f} | {100 * (r['best'] / base['best'] - 1):+.0f} % | {r['median']:.3f} |")
+    return lines
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="320x240, one round (CI)")
     ap.add_argument("--output", default=str(HERE / "results"))
+    ap.add_argument("--textured-only", action="store_true", help="only the textured, HDRI-lit scene")
     args = ap.parse_args(argv)
     out_dir = Path(args.output)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -124,6 +215,9 @@ def main(argv=None) -> int:
     from splat_tracer.pointcloud.readers import ply
 
     session = extension_module("blender.session")
+    if args.textured_only:
+        write_textured(bpy, work, session, args.quick, out_dir)
+        return 0
     name, centres, normals = bunny_cloud()
     ply_path = work / "cloud.ply"
     ply.write_ply(str(ply_path), centres, normals)
@@ -243,7 +337,16 @@ def main(argv=None) -> int:
                      f"{100 * s['mean_abs_error']:.1f} % | {100 * s['brightness_bias']:+.1f} % |")
     (out_dir / "frame_time.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    write_textured(bpy, work, session, args.quick, out_dir)
     return 0
+
+
+def write_textured(bpy, work: Path, session, quick: bool, out_dir: Path) -> None:
+    textured = textured_scene(bpy, work, session, quick)
+    (out_dir / "frame_time_textured.json").write_text(json.dumps(textured, indent=1))
+    lines = textured_lines(textured)
+    (out_dir / "frame_time_textured.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 if __name__ == "__main__":
