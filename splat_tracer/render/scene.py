@@ -177,8 +177,13 @@ class RenderScene:
             materials.extend(mats)
         self.world = world
         self.lights = tuple(lights)
+        # The shader AOVs the materials' AOV Output nodes write, numbered for the core.
+        self.aov_names = tuple(sorted({name for m in materials if m.program is not None
+                                       for name, _, _ in m.program.aovs}))
+        keys = {name: i for i, name in enumerate(self.aov_names)}
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads, [m.program.native() if m.program is not None else None for m in materials])
+                                   threads, [m.program.native(keys) if m.program is not None else None
+                                             for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
 
@@ -193,7 +198,7 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True) -> FrameResult:
+               packets: bool = True, aovs: Sequence[tuple] = (), aov_alpha_threshold: float = 0.5) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -204,7 +209,13 @@ class RenderScene:
         becomes alpha on a transparent film (1 - the shadow's average, so that Alpha Over
         onto a photograph darkens it), or darkens the world behind it on an opaque film. With
         the "Shadow Catcher" pass asked for, Combined leaves the shadow out entirely (the
-        catcher is a hole) and the pass holds it, to multiply the photograph by."""
+        catcher is a hole) and the pass holds it, to multiply the photograph by.
+
+        aovs: the view layer's shader AOVs, (name, "COLOR" or "VALUE") each, returned among
+        the passes under their names ((h, w, 4) RGBA or (h, w)): what the materials' AOV Output
+        nodes of that name write on the camera ray's surfaces up to the first whose alpha
+        reaches aov_alpha_threshold (Cycles' view-layer Alpha Threshold), averaged over the
+        samples; 0 where nothing writes it. Costs nothing unless a material writes one."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -214,7 +225,14 @@ class RenderScene:
         unknown = set(passes) - set(PASSES)
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
-        kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window)
+        aovs = tuple((str(name), str(kind)) for name, kind in aovs)
+        for name, kind in aovs:
+            if kind not in AOV_CHANNELS or name in PASSES or name in ("Combined", *passes):
+                raise ValueError(f"AOV {name!r}: a type in {sorted(AOV_CHANNELS)} and a name no other pass has")
+        if len({name for name, _ in aovs}) != len(aovs):
+            raise ValueError("AOV names must differ")
+        kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
+                                           aovs, self.aov_names, aov_alpha_threshold)
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)
@@ -227,10 +245,17 @@ PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "
                  "Mist": "mist", "Env": "environment"}
 
 
+# A shader AOV's channels by its type (Blender's AOV.type): RGBA as Cycles registers a colour AOV.
+AOV_CHANNELS = {"COLOR": 4, "VALUE": 1}
+
+
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
-                     passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None) -> tuple[dict, dict]:
+                     passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None,
+                     aovs: Sequence[tuple] = (), aov_names: Sequence[str] = (),
+                     aov_alpha_threshold: float = 0.5) -> tuple[dict, dict]:
     """The keyword arguments of the core's RenderScene.render for a frame (all but threads,
-    progress, tile_size and packets), and the zeroed buffers they write, by pass name. It
+    progress, tile_size and packets), and the zeroed buffers they write, by pass name (the
+    AOVs' by theirs; aov_names: the scene's, RenderScene.aov_names). It
     checks only the window (before allocating): RenderScene.render checks its arguments
     first, and fuzz/fuzz_core.py passes unchecked ones on purpose, so that the fuzzed
     layout is the add-on's."""
@@ -248,4 +273,20 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
     kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items()})
+    # The AOVs some material writes share one buffer, each a view of its channels; the others
+    # stay zeros the core never sees (nothing to write: no cost).
+    written = [(name, AOV_CHANNELS[kind]) for name, kind in aovs if name in aov_names]
+    channels = sum(c for _, c in written)
+    block = np.zeros((h, w, channels), np.float32) if written else None
+    layout, first = np.full((len(aov_names), 2), -1, np.int32), 0
+    for name, kind in aovs:
+        c = AOV_CHANNELS[kind]
+        if block is not None and name in aov_names:
+            layout[list(aov_names).index(name)] = (first, c)
+            buffers[name] = block[..., first] if c == 1 else block[..., first:first + c]
+            first += c
+        else:
+            buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
+    if block is not None:
+        kwargs["aov"] = (block, layout, float(aov_alpha_threshold))
     return kwargs, buffers

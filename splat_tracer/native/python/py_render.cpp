@@ -152,11 +152,11 @@ std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table
 }
 
 // A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
-// (Output::Count,)[, images: a sequence of parse_image tuples]) -- render/nodes.py
-// Program.native(). Checked by NodeProgram::validate.
+// (Output::Count,)[, images: a sequence of parse_image tuples[, aovs: int32 (k, 3) rows of
+// AovWrite]]) -- render/nodes.py Program.native(). Checked by NodeProgram::validate.
 bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, ImageTable &images) {
-    PyObject *ocode, *odata, *oout, *oimages = nullptr;
-    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|O", &ocode, &odata, &oout, &oimages)) {
+    PyObject *ocode, *odata, *oout, *oimages = nullptr, *oaovs = nullptr;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|OO", &ocode, &odata, &oout, &oimages, &oaovs)) {
         PyErr_Clear();
         PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs[, images]) tuple", name.c_str());
         return false;
@@ -179,6 +179,13 @@ bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, Im
     if (!get_array(ocode, "node code", 'i', 2, sc, false, code) || !get_array(odata, "node data", 'f', 1, sd, false, data) ||
         !get_array(oout, "node outputs", 'i', 1, so, false, out))
         return false;
+    if (oaovs && oaovs != Py_None) {
+        View aovs;
+        Py_ssize_t sa[2] = {-1, 3};
+        if (!get_array(oaovs, "node AOVs", 'i', 2, sa, false, aovs)) return false;
+        const int32_t *a = aovs.data<int32_t>();
+        for (Py_ssize_t i = 0; i < aovs.dim(0); ++i) prog.aovs.push_back({a[3 * i], a[3 * i + 1], a[3 * i + 2]});
+    }
     prog.name = name;
     prog.code.assign(code.data<int32_t>(), code.data<int32_t>() + code.dim(0) * kNodeWidth);
     prog.data.assign(data.data<float>(), data.data<float>() + data.dim(0));
@@ -355,22 +362,22 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "aov", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *oaov = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)O",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &oaov))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -443,6 +450,38 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         *out.target = out.view.data<float>();
     }
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    // Shader AOVs: (buffer float32 (h, w, channels), layout int32 (keys, 2) of [first channel or
+    // -1, width 1 or 4], alpha threshold) -- render/scene.py render_arguments.
+    View aov_view;
+    if (oaov != Py_None) {
+        PyObject *obuf, *olayout;
+        float threshold;
+        if (!PyTuple_Check(oaov) || !PyArg_ParseTuple(oaov, "OOf", &obuf, &olayout, &threshold)) {
+            PyErr_Clear();
+            return PyErr_Format(PyExc_TypeError, "aov must be a (buffer, layout, alpha_threshold) tuple");
+        }
+        if (!(std::isfinite(threshold) && threshold >= 0.f && threshold <= 1.f))
+            return PyErr_Format(PyExc_ValueError, "the AOV alpha threshold must be in 0..1");
+        View layout;
+        Py_ssize_t sl[2] = {-1, 2};
+        if (!get_array(olayout, "aov layout", 'i', 2, sl, false, layout)) return nullptr;
+        Py_ssize_t sb[3] = {h, w, -1};
+        if (!get_array(obuf, "aov", 'f', 3, sb, true, aov_view)) return nullptr;
+        const int channels = int(aov_view.dim(2));
+        const int32_t *l = layout.data<int32_t>();
+        for (Py_ssize_t i = 0; i < layout.dim(0); ++i) {
+            const int32_t first = l[2 * i], width = l[2 * i + 1];
+            if (first >= 0 && !((width == 1 || width == 4) && int64_t(first) + width <= channels))
+                return PyErr_Format(PyExc_ValueError, "aov layout row %zd: a pass of 1 or 4 channels within the buffer", i);
+            film.aov.offset.push_back(first < 0 ? -1 : first), film.aov.width.push_back(width);
+        }
+        film.aov.alpha_threshold = threshold;
+        if (channels > 0) film.aov.buffer = aov_view.data<float>(), film.aov.channels = channels;
+        if (!check_separate({{aov_view, "aov"}}, {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+            return nullptr;
+        for (Out &out : outs)
+            if (!check_separate({{aov_view, "aov"}, {out.view, out.name}}, {})) return nullptr;
+    }
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
                             {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
@@ -544,7 +583,7 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1))\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), aov=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},

@@ -41,7 +41,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera) const {
+                                       const Camera *camera, const AovSink *aov) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     ShaderGlobals sg;
@@ -91,6 +91,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     sg.point_alpha = sp.point_alpha;
     float r[kMaxNodeRegisters];
     prog.run(sg, r);
+    if (aov && !prog.aovs.empty()) aov->write(prog, r);
     Material out = m;
     auto scalar = [&](Output o, float lo, float hi, float &field) {
         const int32_t i = prog.outputs[int(o)];

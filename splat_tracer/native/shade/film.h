@@ -10,6 +10,7 @@
 
 #include "base/ray.h"
 #include "scene/camera.h"
+#include "shade/aov.h"
 #include "shade/sampling.h"
 #include "splats/visibility.h"
 
@@ -46,6 +47,8 @@ struct Film {
     // 3 floats: Cycles' Environment -- the world as camera rays that leave the scene see it
     // (black where they meet a surface, as Cycles' background pass), averaged over samples.
     float *environment = nullptr;
+    // The view layer's shader AOVs (shade/aov.h); off unless a material writes one asked for.
+    AovFilm aov;
 };
 
 // What both renderers take the same way.
