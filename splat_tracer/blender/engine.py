@@ -81,6 +81,13 @@ class SplatTracerEngine(bpy.types.RenderEngine):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
+        # Shader AOVs, as Cycles registers them: RGBA for a colour AOV, X for a value one.
+        for aov in renderlayer.aovs:
+            if aov.is_valid:
+                if aov.type == "COLOR":
+                    self.register_pass(scene, renderlayer, aov.name, 4, "RGBA", "COLOR")
+                else:
+                    self.register_pass(scene, renderlayer, aov.name, 1, "X", "VALUE")
 
     def render(self, depsgraph):
         # Blender does not fail bpy.ops.render.render() for an exception raised here: it

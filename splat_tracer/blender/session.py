@@ -182,8 +182,16 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
     say(summary + " | rendering")
     t1 = time.perf_counter()
+    aovs = []
+    for name, kind in export_shading.view_layer_aovs(depsgraph.view_layer).items():
+        if name in shading.PASSES or name in passes:
+            report.once(f"view layer '{depsgraph.view_layer.name}': the Shader AOV '{name}' has the name of a pass "
+                        "the engine writes; it is not written")
+        else:
+            aovs.append((name, kind))
     result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
-                                          threads=threads, progress=progress)
+                                          threads=threads, progress=progress, aovs=aovs,
+                                          aov_alpha_threshold=depsgraph.view_layer.pass_alpha_threshold)
     t_render = time.perf_counter() - t1
     position = result.passes.get("Position")
     if position is not None:

@@ -84,9 +84,6 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")
-    for aov in view_layer.aovs:
-        report.once(f"{layer}: the Shader AOV '{aov.name}' pass is not written (AOV Output nodes are not "
-                    "evaluated)")
     for group in view_layer.lightgroups:
         # One place for light groups: the lamps, objects and world a group holds light the
         # image as any other, so only the missing pass is worth saying.

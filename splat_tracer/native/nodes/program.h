@@ -118,6 +118,7 @@ struct NodeProgram {
     std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
     bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
     bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
+    bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),

@@ -125,7 +125,9 @@ class RenderScene {
     Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr,
                          const AovSink *aov = nullptr) const {
         const Material &m = materials_[sp.material];
-        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera, aov);
+        // A program written for its AOVs alone runs only where they are written.
+        if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
+        return evaluate_program(m, sp, wo, &sp.ns, camera, aov);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
