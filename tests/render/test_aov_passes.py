@@ -116,3 +116,15 @@ def test_hostile_aov_programs_are_refused():
     b.aov("x", 5, 0)  # a colour past the registers
     with pytest.raises(ValueError, match="AOV output out of range"):
         scene.RenderScene([scene.Instance(scene.Mesh(V, T), materials=(shading.Material(program=b.program()),))])
+
+
+def test_adaptive_sampling_averages_aovs_over_each_pixels_own_samples():
+    """Progressive rendering (adaptive sampling) divides each pixel's AOV sums by the samples
+    it took: the same AOV as the fixed-sample render where every sample writes the same."""
+    floor = scene.Instance(scene.Mesh(V * 2, T, corner_uv=UV), materials=(shading.Material(program=checker_aov()),))
+    fixed = render([floor], (("mask", "COLOR"),), settings=shading.RenderSettings(samples=32, max_bounces=0))["mask"]
+    adaptive = render([floor], (("mask", "COLOR"),),
+                      settings=shading.RenderSettings(samples=32, max_bounces=0, adaptive=True))["mask"]
+    inner = (slice(2, -2), slice(2, -2))
+    np.testing.assert_allclose(adaptive[inner][..., 3], 1.0, atol=1e-6)
+    np.testing.assert_allclose(adaptive[inner], fixed[inner], atol=1e-5)
