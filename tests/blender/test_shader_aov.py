@@ -133,3 +133,44 @@ def test_a_value_aov_of_the_point_colours_luminance_matches_cycles(blender, empt
     # The two halves' luminances differ by more than the tolerance: swapping them would fail.
     assert abs(np.dot(HALVES[0], LUMINANCE) - np.dot(HALVES[1], LUMINANCE)) > 2 * AOV_ATOL
     assert not [line for line in report if "AOV" in line], report
+
+
+def test_transparent_surfaces_add_their_aovs_until_the_alpha_threshold_as_in_cycles(blender, empty_scene,
+                                                                                   tmp_path):
+    """Cycles writes AOVs on every surface the camera ray passes through until one whose alpha
+    reaches the view layer's Alpha Threshold (0.5), each adding its value. A card writing 0.25
+    over a floor writing 1: fully transparent, 1.25 in every sample; of alpha 0.3 at the
+    threshold 0.2, the card stops it (0.25); of alpha 0.3 at 0.5, the floor adds its 1 in the
+    samples that pass the card -- 70 % here, 74 % in Cycles, which passes a partly transparent
+    surface with probability (1 - alpha) / ((1 - alpha) + alpha x its BSDF's sampling weight)
+    (docs/user-guide.md, Passes)."""
+    bpy, scene = blender, empty_scene
+
+    def writer(name, value, alpha):
+        m = bpy.data.materials.new(name)
+        nodes = m.node_tree.nodes
+        nodes["Principled BSDF"].inputs["Alpha"].default_value = alpha
+        out = nodes.new("ShaderNodeOutputAOV")
+        out.aov_name = "Level"
+        out.inputs["Value"].default_value = value
+        return m
+
+    plane(bpy, "Floor", 2.0, (0, 0, 0), writer("Ground", 1.0, 1.0))
+    veil = writer("Veil", 0.25, 0.0)
+    plane(bpy, "Card", 2.0, (0, 0, 0.5), veil)
+    _aov(scene, "Level", "VALUE")
+    _setup(bpy, scene)
+    scene.cycles.samples, scene.cycles.transparent_max_bounces = 64, 8
+    inner = (slice(4, -4), slice(4, -4))
+
+    def means(name):
+        ours, theirs, _ = _both(bpy, scene, tmp_path, name)
+        return float(ours["Level"][inner].mean()), float(theirs["Level"][inner].mean())
+
+    assert means("clear") == pytest.approx((1.25, 1.25), abs=1e-4)  # both surfaces add
+    veil.node_tree.nodes["Principled BSDF"].inputs["Alpha"].default_value = 0.3
+    scene.view_layers[0].pass_alpha_threshold = 0.2
+    assert means("stops") == pytest.approx((0.25, 0.25), abs=1e-4)  # the card stops the writes
+    scene.view_layers[0].pass_alpha_threshold = 0.5
+    mine, cycles = means("veil")
+    assert mine == pytest.approx(0.25 + 0.7, abs=0.02) and cycles == pytest.approx(0.25 + 0.743, abs=0.02)
