@@ -128,3 +128,22 @@ def test_adaptive_sampling_averages_aovs_over_each_pixels_own_samples():
     inner = (slice(2, -2), slice(2, -2))
     np.testing.assert_allclose(adaptive[inner][..., 3], 1.0, atol=1e-6)
     np.testing.assert_allclose(adaptive[inner], fixed[inner], atol=1e-5)
+
+
+def test_bad_aov_buffers_and_layouts_are_refused():
+    """The core checks the AOV buffer and layout (render_arguments makes good ones): a pass
+    past the buffer's channels, a width other than 1 or 4, a buffer of the wrong size."""
+    floor = scene.Instance(scene.Mesh(V, T, corner_uv=UV), materials=(shading.Material(program=checker_aov()),))
+    rs = scene.RenderScene([floor])
+    kwargs, _ = scene.render_arguments(CAM, 8, 8, SETTINGS, scene.Method(), rs.world, aovs=(("mask", "COLOR"),),
+                                       aov_names=rs.aov_names)
+    block, layout, threshold = kwargs["aov"]
+    for bad in ((1, 4), (0, 3)):
+        with pytest.raises(ValueError, match="aov layout"):
+            rs._scene.render(**dict(kwargs, aov=(block, np.array([bad], np.int32), threshold)))
+    with pytest.raises(ValueError, match="aov"):
+        rs._scene.render(**dict(kwargs, aov=(np.zeros((4, 8, 4), np.float32), layout, threshold)))
+    with pytest.raises(ValueError, match="threshold"):
+        rs._scene.render(**dict(kwargs, aov=(block, layout, 2.0)))
+    rs._scene.render(**kwargs)  # the good arguments render
+    assert block[..., 3].max() == 1.0
