@@ -121,6 +121,7 @@ docs: build
 	$(VPY) -m tools.switch_images --output-dir docs/switches
 	$(VPY) -m tools.viewport_images --output-dir docs/viewport
 	$(VPY) -m tools.demo --output docs/demo.png --cycles docs/demo_cycles.png | grep "^demo:" | tee docs/demo_times.txt
+	$(VPY) -m tools.composite_images --output docs/composite.png --cycles docs/composite_cycles.png | grep "^composite:" | tee docs/composite_times.txt
 
 # One zip per platform (tools/build_dist.py says why), each with its own core and wheels.
 dist: $(STAMP)
@@ -134,6 +135,7 @@ bench-quick: build
 	$(VPY) -m benchmarks.viewport_latency --quick
 	$(VPY) -m benchmarks.import_speed --quick --output build/bench-quick
 	$(VPY) -m benchmarks.real_scans --quick --output build/bench-quick
+	$(VPY) -m benchmarks.time_to_clean --quick --output build/bench-quick
 
 # Open3D for the import benchmark's comparison rows, in its own environment (its wheel
 # brings dependencies the add-on's environment must not get); it needs libusb at load
@@ -153,6 +155,7 @@ bench: build $(O3D)/.installed-stamp
 	$(VPY) -m benchmarks.viewport_latency --output benchmarks/results/viewport_latency.md
 	$(VPY) -m benchmarks.import_speed --repeat 3 --output benchmarks/results
 	$(VPY) -m benchmarks.real_scans --output benchmarks/results
+	$(VPY) -m benchmarks.time_to_clean --output benchmarks/results
 
 clean:
 	rm -rf build dist wheels $(CORE) .pytest_cache

@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from splat_tracer import _core  # noqa: E402
-from splat_tracer.render import shading  # noqa: E402
+from splat_tracer.render import cryptomatte, shading  # noqa: E402
 from splat_tracer.render.camera import PROJECTIONS, Camera, Lens, Panorama  # noqa: E402
 from splat_tracer.render.scene import RAY_VISIBILITY, InstanceRow, native_scene, render_arguments  # noqa: E402
 from splat_tracer.render.shading import (PASSES, SETTINGS_FIELDS, Light, Material, RenderSettings,  # noqa: E402
@@ -372,7 +372,10 @@ def instance_row(fdp, n_geo, n_mat):
                       to_object=inv[:3].ravel(), material_range=(first, fdp.ConsumeIntInRange(1, max(n_mat - first, 1))),
                       visibility=sum(v for v in RAY_VISIBILITY.values() if fdp.ConsumeIntInRange(0, 5)),
                       holdout=fdp.ConsumeIntInRange(0, 7) == 0, pass_index=fdp.ConsumeIntInRange(0, 9),
-                      shadow_catcher=fdp.ConsumeIntInRange(0, 5) == 0)
+                      shadow_catcher=fdp.ConsumeIntInRange(0, 5) == 0,
+                      # Now and then it moves: the frame's transform, then a shifted one.
+                      motion=(np.stack([m[:3].ravel(), (m[:3] + [[0, 0, 0, fdp.ConsumeFloatInRange(-2, 2)]] * 3).ravel()])
+                              if fdp.ConsumeIntInRange(0, 3) == 0 else None))
     return corrupt(fdp, row)
 
 
@@ -411,8 +414,16 @@ def fuzz_render_scene(fdp, splats):
     call(scene.mesh_lights)
     w, h = fdp.ConsumeIntInRange(1, 12), fdp.ConsumeIntInRange(1, 12)
     passes = [name for name in PASSES if fdp.ConsumeBool()]
+    ids = None
+    if fdp.ConsumeIntInRange(0, 3) == 0:  # Cryptomatte: ids from sane names, or fuzzed values and layouts
+        passes += [kind for kind in cryptomatte.KINDS if fdp.ConsumeBool()] or ["CryptoObject"]
+        sane = fdp.ConsumeIntInRange(0, 3) > 0
+        make = (lambda shape: np.array([cryptomatte.name_id(str(fdp.ConsumeIntInRange(0, 9)))
+                                        for _ in range(int(np.prod(shape)))], np.float32).reshape(shape)) \
+            if sane else (lambda shape: array(fdp, shape))
+        ids = (make((scene.instances, 2)), make((max(n_mat, 1),)))
     kwargs, _ = render_arguments(scene_camera(fdp), w, h, RenderSettings(), method(fdp), unchecked(fdp, World),
-                                 passes)
+                                 passes, cryptomatte_ids=ids, cryptomatte_levels=fdp.ConsumeIntInRange(0, 17))
     kwargs["settings"] = fuzz_settings(fdp)
     for name in ("world", "film_transparent", "world_visibility", "lens", "frustum"):
         if kwargs[name] is not None and fdp.ConsumeIntInRange(0, 7) == 0:

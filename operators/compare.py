@@ -141,7 +141,9 @@ class SPLAT_TRACER_OT_compare(bpy.types.Operator):
             names = (f"{self.toggle} off", "on")
         try:
             headlight = True if self.shading == "HEADLIGHT" else None
-            frames = [render_frame(depsgraph, m, headlight=headlight) for m in methods]
+            # Not denoised: the comparison is of the two methods' surfaces, which a denoiser
+            # would smooth alike.
+            frames = [render_frame(depsgraph, m, headlight=headlight, denoised=False) for m in methods]
         except Exception as e:  # noqa: BLE001 - every failure is reported to the user
             self.report({"ERROR"}, f"Splat Tracer compare: {e}")
             return {"CANCELLED"}

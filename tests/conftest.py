@@ -33,6 +33,9 @@ def empty_scene(blender):
     # Samples are Cycles' settings (4096 and 1024 by default); the tests' scenes keep the 16
     # the engine's own setting gave them before, unless a test sets its own.
     scene.cycles.samples = scene.cycles.preview_samples = 16
+    # Cycles' Denoise (on by default) is applied by the engine; the tests measure the engine's
+    # own image unless they test denoising (test_denoise.py, a default scene's report).
+    scene.cycles.use_denoising = False
     return scene
 
 

@@ -1,4 +1,6 @@
 """Panels, shown only when Splat Tracer is the render engine."""
+import fnmatch
+
 import bpy
 
 ENGINE = "SPLAT_TRACER"
@@ -83,9 +85,16 @@ class SPLAT_TRACER_PT_sampling(SplatTracerPanel, bpy.types.Panel):
                 sub.prop(cycles, f"{prefix}adaptive_min_samples", text="Min Samples")
                 if not prefix:
                     col.prop(cycles, "time_limit")
-                    # Cycles' Denoise is on by default and the engine does not denoise: the
-                    # render report says so, and this is where it is switched off.
-                    col.prop(cycles, "use_denoising", text="Cycles' Denoise (not applied)")
+                # Cycles' Denoise, applied with OpenImageDenoise (blender/denoise.py; the
+                # viewport's to its last pass). Not `denoiser`/`preview_denoiser`: drawing
+                # those enums computes their items, which enumerates GPU devices (a CUDA
+                # warning in every session).
+                col.prop(cycles, f"use_{prefix}denoising", text="Denoise")
+                sub = col.column()
+                sub.active = getattr(cycles, f"use_{prefix}denoising")
+                sub.prop(cycles, f"{prefix}denoising_input_passes", text="Passes")
+                sub.prop(cycles, f"{prefix}denoising_prefilter", text="Prefilter")
+                sub.prop(cycles, f"{prefix}denoising_quality", text="Quality")
         col = layout.column()
         col.prop(scene.splat_tracer, "shadow_samples")
         col.prop(scene.splat_tracer, "sky_light")
@@ -183,8 +192,98 @@ class SPLAT_TRACER_PT_passes(SplatTracerPanel, bpy.types.Panel):
         col.prop(view_layer, "use_pass_shadow", text="Shadow")
         if hasattr(view_layer, "cycles"):
             col.prop(view_layer.cycles, "use_pass_shadow_catcher", text="Shadow Catcher")
+        # (The Properties editor's context has no world outside the World tab: the scene's.)
+        scene = getattr(context, "scene", None)
+        _draw_light_passes(layout, view_layer, scene.world if scene is not None else getattr(context, "world", None))
         col = layout.column(heading="Debug")
         col.prop(view_layer.splat_tracer, "use_pass_splat_count")
+
+
+def _draw_light_passes(layout, view_layer, world):
+    """Cycles' light passes, laid out as Cycles' Light panel: a row of Direct, Indirect and
+    Color per lobe, then AO (with the world's AO distance, which Cycles shows under Fast GI,
+    a panel the engine does not open) and Vector."""
+    col = layout.column(align=True)
+    for lobe, label in (("diffuse", "Diffuse"), ("glossy", "Glossy"), ("transmission", "Transmission")):
+        row = col.row(heading=label, align=True)
+        row.prop(view_layer, f"use_pass_{lobe}_direct", text="Direct", toggle=True)
+        row.prop(view_layer, f"use_pass_{lobe}_indirect", text="Indirect", toggle=True)
+        row.prop(view_layer, f"use_pass_{lobe}_color", text="Color", toggle=True)
+    col = layout.column(heading="Other")
+    col.prop(view_layer, "use_pass_ambient_occlusion", text="Ambient Occlusion")
+    if world is not None:
+        sub = col.column()
+        sub.active = view_layer.use_pass_ambient_occlusion
+        sub.prop(world.light_settings, "distance", text="AO Distance")
+    col.prop(view_layer, "use_pass_vector", text="Vector")
+
+
+class SPLAT_TRACER_PT_passes_light_groups(SplatTracerPanel, bpy.types.Panel):
+    """The view layer's light groups (Blender's own list and operators, as Cycles' panel):
+    each gets a Combined_<group> pass."""
+    bl_label = "Light Groups"
+    bl_context = "view_layer"
+    bl_parent_id = "SPLAT_TRACER_PT_passes"
+
+    def draw(self, context):
+        view_layer = context.view_layer
+        row = self.layout.row()
+        row.template_list("UI_UL_list", "lightgroups", view_layer, "lightgroups", view_layer,
+                          "active_lightgroup_index", rows=2)
+        col = row.column(align=True)
+        col.operator("scene.view_layer_add_lightgroup", icon="ADD", text="")
+        col.operator("scene.view_layer_remove_lightgroup", icon="REMOVE", text="")
+
+
+def _draw_light_group(layout, owner, view_layer):
+    layout.use_property_split = True
+    layout.prop_search(owner, "lightgroup", view_layer, "lightgroups", text="Light Group")
+
+
+class SPLAT_TRACER_PT_object_light_group(SplatTracerPanel, bpy.types.Panel):
+    """The light group of an object's emission or of a lamp (Cycles' Object > Shading)."""
+    bl_label = "Light Group"
+    bl_context = "object"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.object is not None and hasattr(context.object, "lightgroup")
+
+    def draw(self, context):
+        _draw_light_group(self.layout, context.object, context.view_layer)
+
+
+class SPLAT_TRACER_PT_world_light_group(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Light Group"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return super().poll(context) and context.world is not None
+
+    def draw(self, context):
+        _draw_light_group(self.layout, context.world, context.view_layer)
+
+
+class SPLAT_TRACER_PT_passes_cryptomatte(SplatTracerPanel, bpy.types.Panel):
+    """Blender's Cryptomatte settings of the view layer, as Cycles' panel shows them (Accurate
+    Mode left out, as there: neither Cycles nor the engine reads it)."""
+    bl_label = "Cryptomatte"
+    bl_context = "view_layer"
+    bl_parent_id = "SPLAT_TRACER_PT_passes"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        view_layer = context.view_layer
+        col = layout.column()
+        col.prop(view_layer, "use_pass_cryptomatte_object", text="Object")
+        col.prop(view_layer, "use_pass_cryptomatte_material", text="Material")
+        col.prop(view_layer, "use_pass_cryptomatte_asset", text="Asset")
+        col = layout.column()
+        col.active = any((view_layer.use_pass_cryptomatte_object, view_layer.use_pass_cryptomatte_material,
+                          view_layer.use_pass_cryptomatte_asset))
+        col.prop(view_layer, "pass_cryptomatte_depth", text="Levels")
 
 
 class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
@@ -214,7 +313,9 @@ class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
 
 
 class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
-    """The lamp settings the engine reads (Cycles' light panel hides for other engines)."""
+    """The lamp's settings, the one Light panel (Blender's own, DATA_PT_light, is not opened:
+    it holds only a second type selector). Drawn as Cycles' Light panel draws them, less what
+    the engine does not render."""
     bl_label = "Light"
     bl_context = "data"
 
@@ -228,8 +329,22 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
         layout.row().prop(light, "type", expand=True)
         layout.use_property_split = True
         col = layout.column()
-        col.prop(light, "color")
+        row = col.column(align=True, heading="Temperature").row(align=True)
+        row.use_property_decorate = False
+        row.prop(light, "use_temperature", text="")
+        sub = row.row()
+        sub.active = light.use_temperature
+        sub.prop(light, "temperature", text="")
+        row.prop_decorator(light, "temperature")
+        col.prop(light, "color", text="Tint" if light.use_temperature else "Color")
+        layout.separator()
+        col = layout.column()
         col.prop(light, "energy", text="Strength" if light.type == "SUN" else "Power")
+        col.prop(light, "exposure")
+        if light.type != "SUN":
+            col.prop(light, "normalize")  # off is said in the render report (rendered as on)
+        layout.separator()
+        col = layout.column()
         if light.type in {"POINT", "SPOT"}:
             col.prop(light, "shadow_soft_size", text="Radius")
             col.prop(light, "use_soft_falloff")
@@ -245,6 +360,7 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
         if light.type == "SPOT":
             col.prop(light, "spot_size", text="Spot Size")
             col.prop(light, "spot_blend", text="Blend")
+            col.prop(light, "show_cone")
         col.prop(light, "use_shadow", text="Cast Shadow")
 
 
@@ -268,6 +384,81 @@ def _draw_slot(layout, settings, name: str) -> None:
     col.prop(settings, "crease_angle")
     col.prop(settings, "epsilon")
     col.prop(settings, "radius_factor")
+
+
+class SPLAT_TRACER_PT_motion_blur(SplatTracerPanel, bpy.types.Panel):
+    """Render > Motion Blur, the settings Cycles' panel shows (Cycles' own hides for other
+    engines), read where Cycles reads them (blender/export/motion.py)."""
+    bl_label = "Motion Blur"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw_header(self, context):
+        self.layout.prop(context.scene.render, "use_motion_blur", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        rd = context.scene.render
+        layout.active = rd.use_motion_blur
+        col = layout.column()
+        col.prop(rd, "motion_blur_position", text="Position")
+        col.prop(rd, "motion_blur_shutter")
+        cycles = getattr(context.scene, "cycles", None)
+        if cycles is not None and hasattr(cycles, "rolling_shutter_type"):
+            col.separator()
+            col.prop(cycles, "rolling_shutter_type", text="Rolling Shutter")
+            sub = col.column()
+            sub.active = cycles.rolling_shutter_type != "NONE"
+            sub.prop(cycles, "rolling_shutter_duration")
+        # The view layer's own switch (Cycles draws it in its View Layer > Filter panel,
+        # which it keeps to itself): Cycles blurs a layer when both are on.
+        col.separator()
+        col.prop(context.view_layer, "use_motion_blur", text="View Layer")
+        layout.label(text="Final renders only: the viewport shows no blur (as Cycles')")
+
+
+class SPLAT_TRACER_PT_motion_blur_curve(SplatTracerPanel, bpy.types.Panel):
+    bl_label = "Shutter Curve"
+    bl_context = "render"
+    bl_parent_id = "SPLAT_TRACER_PT_motion_blur"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layout = self.layout
+        rd = context.scene.render
+        layout.active = rd.use_motion_blur
+        layout.template_curve_mapping(rd, "motion_blur_shutter_curve")
+
+
+class SPLAT_TRACER_PT_object_motion_blur(SplatTracerPanel, bpy.types.Panel):
+    """Object > Motion Blur: Cycles' per-object switch and steps (object.cycles), which the
+    engine reads as Cycles does; Deformation is shown, and said unrendered in the report."""
+    bl_label = "Motion Blur"
+    bl_context = "object"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return (super().poll(context) and obj is not None and hasattr(obj, "cycles")
+                and (obj.type not in {"LIGHT", "EMPTY", "LIGHT_PROBE", "SPEAKER", "ARMATURE", "LATTICE"}
+                     or (obj.instance_type == "COLLECTION" and obj.instance_collection is not None)))
+
+    def draw_header(self, context):
+        self.layout.active = context.scene.render.use_motion_blur
+        self.layout.prop(context.object.cycles, "use_motion_blur", text="")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        obj = context.object
+        layout.active = context.scene.render.use_motion_blur and obj.cycles.use_motion_blur
+        col = layout.column()
+        col.prop(obj.cycles, "motion_steps", text="Steps")
+        if obj.type != "CAMERA":
+            col.prop(obj.cycles, "use_deform_motion", text="Deformation")
 
 
 class SPLAT_TRACER_PT_camera_panorama(SplatTracerPanel, bpy.types.Panel):
@@ -403,22 +594,71 @@ class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
 classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_visibility,
            SPLAT_TRACER_PT_light_paths, SPLAT_TRACER_PT_performance,
            SPLAT_TRACER_PT_object, SPLAT_TRACER_PT_object_visibility, SPLAT_TRACER_PT_passes,
-           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material, SPLAT_TRACER_PT_world,
-           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab)
+           SPLAT_TRACER_PT_passes_cryptomatte,
+           SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_motion_blur, SPLAT_TRACER_PT_motion_blur_curve,
+           SPLAT_TRACER_PT_object_motion_blur, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material,
+           SPLAT_TRACER_PT_world,
+           SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab,
+           SPLAT_TRACER_PT_passes_light_groups, SPLAT_TRACER_PT_object_light_group,
+           SPLAT_TRACER_PT_world_light_group)
 
-# Blender's engine-agnostic panels (output format, camera, object, ...) list the engines they
-# show for; the ones that show for the built-in BLENDER_RENDER also make sense here, and so
-# do these, whose settings the engine honours as Cycles does (Cycles shows its own copies).
-_HONOURED_PANELS = ("DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture")  # the camera's Depth of Field
+# Blender's engine-agnostic panels opened for this engine: the ones whose settings apply to it
+# (honoured, said in the render report, or applied by Blender: output, colour management,
+# object data, physics), as Cycles' add-on keeps its list (cycles/ui.py get_panels). Names, or
+# fnmatch patterns for whole families. Left out on purpose: DATA_PT_light (a second light-type
+# selector; SPLAT_TRACER_PT_light is the one Light panel), DATA_PT_spot (in that panel),
+# DATA_PT_preview and MATERIAL_PT_preview (no preview renders: bl_use_preview), the volume and
+# light-probe render settings, Freestyle and Grease Pencil render settings (not offered by this engine),
+# EEVEE_MATERIAL_PT_viewport_settings (EEVEE's material settings) and OBJECT_PT_shading (an
+# empty parent for engines' shading settings). tests/blender/test_panels.py checks that every
+# panel opened is here and that none shows a setting the settings audit lists as not rendered.
+GENERIC_PANELS = (
+    # Render and Output properties
+    "RENDER_PT_color_management", "RENDER_PT_color_management_*", "RENDER_PT_simplify",
+    "RENDER_PT_simplify_render", "RENDER_PT_simplify_viewport", "RENDER_PT_format", "RENDER_PT_frame_range",
+    "RENDER_PT_time_stretching", "RENDER_PT_stereoscopy", "RENDER_PT_output", "RENDER_PT_output_*",
+    "RENDER_PT_encoding", "RENDER_PT_encoding_*", "RENDER_PT_stamp", "RENDER_PT_stamp_*",
+    "RENDER_PT_post_processing",
+    # View layer, object, world, material
+    "VIEWLAYER_PT_layer", "VIEWLAYER_PT_context_layer", "OBJECT_PT_visibility", "OBJECT_PT_custom_props",
+    "WORLD_PT_context_world", "WORLD_PT_animation", "WORLD_PT_custom_props", "MATERIAL_PT_animation",
+    "MATERIAL_PT_custom_props", "MATERIAL_PT_freestyle_line",
+    # Camera: Depth of Field is honoured as Cycles does (Cycles opens its own copy); the stereo
+    # eyes' cameras are rendered (Blender gives each view's to the engine)
+    "CAMERA_PT_presets", "CAMERA_PT_safe_areas_presets", "DATA_PT_context_camera", "DATA_PT_camera",
+    "DATA_PT_lens", "DATA_PT_camera_dof", "DATA_PT_camera_dof_aperture", "DATA_PT_camera_stereoscopy",
+    "DATA_PT_camera_display",
+    "DATA_PT_camera_display_composition_guides", "DATA_PT_camera_safe_areas",
+    "DATA_PT_camera_safe_areas_center_cut", "DATA_PT_camera_background_image", "DATA_PT_camera_animation",
+    "DATA_PT_custom_props_camera",
+    # Lamps: the ID, animation and custom properties (the settings: SPLAT_TRACER_PT_light)
+    "DATA_PT_context_light", "DATA_PT_light_animation", "DATA_PT_custom_props_light",
+    # Object data the engine renders or Blender evaluates into it: meshes, point clouds,
+    # curves, their attributes; speakers (sound); a volume's grids (the object is said as
+    # not rendered)
+    "DATA_PT_context_mesh", "DATA_PT_context_pointcloud", "DATA_PT_context_curves", "DATA_PT_context_speaker",
+    "DATA_PT_context_volume", "DATA_PT_context_lightprobe", "DATA_PT_vertex_groups", "DATA_PT_shape_keys",
+    "DATA_PT_uv_texture", "DATA_PT_vertex_colors", "DATA_PT_customdata", "DATA_PT_mesh_attributes",
+    "DATA_PT_pointcloud_attributes", "DATA_PT_CURVES_attributes", "DATA_PT_curves_surface",
+    "DATA_PT_texture_space", "DATA_PT_remesh", "DATA_PT_mesh_animation", "DATA_PT_curves_animation",
+    "DATA_PT_volume_animation", "DATA_PT_volume_file", "DATA_PT_volume_grids", "DATA_PT_speaker",
+    "DATA_PT_distance", "DATA_PT_cone", "DATA_PT_speaker_animation", "DATA_PT_custom_props_*",
+    # Particles, physics and textures: Blender simulates and evaluates them into the scene
+    "PARTICLE_PT_*", "PHYSICS_PT_*", "TEXTURE_PT_*", "NODE_PT_texture_mapping",
+    # Custom properties elsewhere
+    "STRIP_PT_custom_props", "SEQUENCER_PT_custom_props",
+)
 _extended_panels = []
+
+
+def generic_panel_included(name: str) -> bool:
+    return any(fnmatch.fnmatchcase(name, pattern) for pattern in GENERIC_PANELS)
 
 
 def _extend_builtin_panels():
     for panel in bpy.types.Panel.__subclasses__():
         engines = getattr(panel, "COMPAT_ENGINES", None)
-        if not isinstance(engines, set) or ENGINE in engines:
-            continue
-        if "BLENDER_RENDER" in engines or panel.__name__ in _HONOURED_PANELS:
+        if isinstance(engines, set) and ENGINE not in engines and generic_panel_included(panel.__name__):
             engines.add(ENGINE)
             _extended_panels.append(panel)
 

@@ -11,8 +11,10 @@ import traceback
 import bpy
 import numpy as np
 
-from ..render import ab
+from ..render import ab, cryptomatte, shading
 from . import session, viewport
+from .export import settings as export_settings
+from .export.scene import View
 
 # Blender 5.0 renamed five passes (Cycles and EEVEE write "Diffuse Color", "Emission",
 # "Object Index", "Material Index" and "Environment" there, "DiffCol", "Emit", "IndexOB",
@@ -20,6 +22,10 @@ from . import session, viewport
 # Blender's own engines give it, or the compositor's Render Layers node shows it as a
 # different socket and links made for Cycles (an ID Mask on Object Index) are lost.
 _NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
+# Cycles' denoising passes (export/settings.py names them and says when each is written):
+# Blender's name -> (channels, channel ids, type), as Cycles' add-on registers them.
+_DENOISING_PASSES = {"Noisy Image": (4, "RGBA", "COLOR"), "Denoising Normal": (3, "XYZ", "VECTOR"),
+                     "Denoising Albedo": (3, "RGB", "COLOR"), "Denoising Depth": (1, "Z", "VALUE")}
 # Blender's passes this engine writes: (view-layer switch -- dotted for an add-on's
 # property group -- the core's pass name, Blender's pass name, channels, channel ids, type).
 _PASSES = (
@@ -33,10 +39,31 @@ _PASSES = (
     ("use_pass_position", "Position", "Position", 3, "XYZ", "VECTOR"),
     ("use_pass_mist", "Mist", "Mist", 1, "Z", "VALUE"),
     ("use_pass_environment", "Env", "Environment" if _NEW_PASS_NAMES else "Env", 3, "RGB", "COLOR"),
+    # Cycles' light passes (Blender 5.0 spells them out too).
+    ("use_pass_diffuse_direct", "DiffDir", "Diffuse Direct" if _NEW_PASS_NAMES else "DiffDir", 3, "RGB", "COLOR"),
+    ("use_pass_diffuse_indirect", "DiffInd", "Diffuse Indirect" if _NEW_PASS_NAMES else "DiffInd", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_direct", "GlossDir", "Glossy Direct" if _NEW_PASS_NAMES else "GlossDir", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_indirect", "GlossInd", "Glossy Indirect" if _NEW_PASS_NAMES else "GlossInd", 3, "RGB", "COLOR"),
+    ("use_pass_glossy_color", "GlossCol", "Glossy Color" if _NEW_PASS_NAMES else "GlossCol", 3, "RGB", "COLOR"),
+    ("use_pass_transmission_direct", "TransDir", "Transmission Direct" if _NEW_PASS_NAMES else "TransDir", 3, "RGB",
+     "COLOR"),
+    ("use_pass_transmission_indirect", "TransInd", "Transmission Indirect" if _NEW_PASS_NAMES else "TransInd", 3,
+     "RGB", "COLOR"),
+    ("use_pass_transmission_color", "TransCol", "Transmission Color" if _NEW_PASS_NAMES else "TransCol", 3, "RGB",
+     "COLOR"),
+    ("use_pass_ambient_occlusion", "AO", "Ambient Occlusion" if _NEW_PASS_NAMES else "AO", 3, "RGB", "COLOR"),
+    # Zero: no motion is computed (said in the render report, export/settings.py).
+    ("use_pass_vector", "Vector", "Vector", 4, "XYZW", "VECTOR"),
+    # The mesh's UV map at the first hit (0 on clouds, said in the report).
+    ("use_pass_uv", "UV", "UV", 3, "UVA", "VECTOR"),
     # Cycles' own switch (view_layer.cycles, the Cycles add-on's), name and channels.
     ("cycles.use_pass_shadow_catcher", "Shadow Catcher", "Shadow Catcher", 3, "RGB", "COLOR"),
 )
 SPLAT_COUNT = "Splat Count"  # debug pass: the splats that formed each surface point
+# Cryptomatte: the view layer's switch of each kind (render/cryptomatte.py KINDS), whose
+# passes are <kind>00, <kind>01, ... (4 channels, two (id, coverage) pairs each), as Cycles names them.
+_CRYPTOMATTE = dict(zip(cryptomatte.KINDS, ("use_pass_cryptomatte_object", "use_pass_cryptomatte_material",
+                                            "use_pass_cryptomatte_asset")))
 _BLENDER_NAME = {core_name: blender_name for _, core_name, blender_name, *_ in _PASSES}
 
 
@@ -48,24 +75,24 @@ def _switch(view_layer, prop: str) -> bool:
     return bool(getattr(group, name, False))
 
 
-def wanted_passes(view_layer) -> tuple:
-    """The core's names of the passes the view layer asks for."""
+def wanted_passes(view_layer, scene=None) -> tuple:
+    """The core's names of the passes the view layer asks for (with the scene: and Cycles'
+    denoising passes, by Cycles' names)."""
     names = [name for prop, name, *_ in _PASSES if _switch(view_layer, prop)]
+    names += [kind for kind, prop in _CRYPTOMATTE.items() if _switch(view_layer, prop)]
     if view_layer.splat_tracer.use_pass_splat_count:
         names.append(SPLAT_COUNT)
+    if scene is not None:
+        names += export_settings.denoising_passes(scene, view_layer)
     return tuple(names)
 
 
-def _set_pass(layer, views: list, name: str, pixels: np.ndarray) -> None:
+def _set_pass(layer, view: str, name: str, pixels: np.ndarray) -> None:
     """Writes (h, w[, c]) top-row-first pixels into the pass the core calls `name` (whose
-    rows run bottom to top), in each of the result's views. A stereo or multi-view render
-    has one pass per view; the engine renders the scene camera's image once and every view
-    gets it (said in the render report, export/settings.py) -- before, only the first view
-    was written and the others stayed black."""
+    rows run bottom to top), in the result's view `view` (a stereo or multi-view render has
+    one pass per view)."""
     flat = np.ascontiguousarray(pixels[::-1], dtype=np.float32).ravel()
-    blender_name = _BLENDER_NAME.get(name, name)
-    for view in views:
-        layer.passes.find_by_name(blender_name, view).rect.foreach_set(flat)
+    layer.passes.find_by_name(_BLENDER_NAME.get(name, name), view).rect.foreach_set(flat)
 
 
 class SplatTracerEngine(bpy.types.RenderEngine):
@@ -79,6 +106,8 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         for prop, _, name, channels, ids, kind in _PASSES:
             if _switch(renderlayer, prop):
                 self.register_pass(scene, renderlayer, name, channels, ids, kind)
+        for name in export_settings.light_groups(renderlayer):  # Cycles' "Combined_<group>"
+            self.register_pass(scene, renderlayer, shading.LIGHT_GROUP_PREFIX + name, 3, "RGB", "COLOR")
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
         # Shader AOVs, as Cycles registers them: RGBA for a colour AOV, X for a value one.
@@ -88,6 +117,31 @@ class SplatTracerEngine(bpy.types.RenderEngine):
                     self.register_pass(scene, renderlayer, aov.name, 4, "RGBA", "COLOR")
                 else:
                     self.register_pass(scene, renderlayer, aov.name, 1, "X", "VALUE")
+        for name in export_settings.denoising_passes(scene, renderlayer):
+            self.register_pass(scene, renderlayer, name, *_DENOISING_PASSES[name])
+        layers = cryptomatte.slots_of(renderlayer.pass_cryptomatte_depth) // 2
+        for kind, prop in _CRYPTOMATTE.items():
+            if _switch(renderlayer, prop):
+                for i in range(layers):
+                    # Lower-case channel ids, as Cycles registers them (the EXR's '.r', '.g', ...).
+                    self.register_pass(scene, renderlayer, f"{kind}{i:02d}", 4, "rgba", "COLOR")
+
+    def _views(self, scene) -> list:
+        """A stereo or multi-view render's views, each with its camera as Blender gives it
+        for that view (export/scene.py View); [] for a render of the scene camera alone."""
+        if not scene.render.use_multiview:
+            return []
+        views = []
+        for name in export_settings.stereo_views(scene.render):
+            self.active_view_set(name)
+            camera = self.camera_override or scene.camera
+            if camera is None:
+                continue
+            # use_spherical_stereo=False: the eye's camera moved (and for Toe-in turned) as a
+            # whole, also for a panorama (export/settings.py says it for one).
+            views.append(View(name, camera, self.camera_model_matrix(camera, use_spherical_stereo=False),
+                              self.camera_shift_x(camera, use_spherical_stereo=False)))
+        return views
 
     def render(self, depsgraph):
         # Blender does not fail bpy.ops.render.render() for an exception raised here: it
@@ -110,16 +164,26 @@ class SplatTracerEngine(bpy.types.RenderEngine):
 
         keep = scene.render.use_persistent_data or self.is_animation
         frame = session.render_frame(depsgraph, scene.splat_tracer.core_method(), ("Combined",) + wanted_passes(
-            view_layer), progress=progress, stats=lambda s: self.update_stats("", s), keep=keep)
+            view_layer, scene), progress=progress, stats=lambda s: self.update_stats("", s), keep=keep,
+            frame_set=self.frame_set, views=self._views(scene))
         for line in frame.report.lines:
             self.report({"WARNING"}, f"Splat Tracer: {line}")
         x0, y0, w, h = frame.window
         # Each view layer's render goes into its own layer of the result.
         result = self.begin_result(0, 0, w, h, layer=view_layer.name)
         layer = result.layers[0]
-        views = [view.name for view in result.views]
-        for name, pixels in frame.passes.items():
-            _set_pass(layer, views, name, pixels)
+        for view in result.views:
+            # Each view its own render; a view Blender adds that the engine did not pick
+            # (none known) would get the first view's image rather than stay black.
+            for name, pixels in frame.views.get(view.name, frame.passes).items():
+                _set_pass(layer, view.name, name, pixels)
+        if frame.metadata:
+            # Cryptomatte's manifests, saved in the EXR's header: on the engine's whole result
+            # (get_result), as Cycles writes them -- a tile's begin_result() result is merged
+            # into it without its metadata.
+            whole = self.get_result()
+            for key, value in frame.metadata.items():
+                whole.stamp_data_add_field(key, value)
         if frame.completed:
             self.end_result(result)
         else:

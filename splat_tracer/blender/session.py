@@ -15,9 +15,10 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..render import shading
+from ..render import cryptomatte, shading
 from ..render.method import Method
-from . import export
+from . import denoise, export
+from .export import motion as export_motion
 from .export import settings as export_settings
 from .export import shading as export_shading
 
@@ -86,6 +87,8 @@ class Frame:
     height: int
     stats: dict
     report: shading.Report = field(default_factory=shading.Report)
+    views: dict = field(default_factory=dict)  # a multi-view render's passes by view name ('passes': the first's)
+    metadata: dict = field(default_factory=dict)  # the render result's (Cryptomatte's manifests): field -> text
 
 
 def image_size(render) -> tuple[int, int]:
@@ -149,13 +152,68 @@ def sampling_summary(settings: shading.RenderSettings, counters: dict, pixels: i
     return "; ".join(parts)
 
 
+# The core's passes the denoiser's guides are made from (Cycles' Denoising Albedo, Normal, Depth).
+_GUIDES = {"Denoising Albedo": "DiffCol", "Denoising Normal": "Normal", "Denoising Depth": "Depth"}
+
+
+def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: int,
+                   report: shading.Report) -> dict:
+    """The frame's passes with Cycles' denoising applied: Combined denoised by OIDN (its
+    alpha kept), the noisy Combined as "Noisy Image", the guides as Cycles names them --
+    Denoising Albedo (the first hit's diffuse albedo: the Diffuse Color pass), Denoising
+    Normal (the Normal pass in camera space, as Cycles writes it), Denoising Depth (the
+    Depth pass) -- each kept only when `wanted`. denoising: export/settings.py's Denoising,
+    or None (the image is not denoised, the guides are still written when wanted)."""
+    out = {name: pixels for name, pixels in passes.items() if name in wanted}
+    normal = passes.get("Normal")
+    if normal is not None:
+        # world -> camera: the rows of R^T, i.e. n @ R for row vectors; then Cycles' camera
+        # space, which looks down +Z (Blender's down -Z): z negated.
+        rotation = np.asarray(world_from_camera, dtype=np.float64)[:3, :3]
+        rotation = rotation / np.maximum(np.linalg.norm(rotation, axis=0), 1e-30)
+        normal = (normal.astype(np.float64) @ rotation * (1.0, 1.0, -1.0)).astype(np.float32)
+    guides = {"Denoising Albedo": passes.get("DiffCol"), "Denoising Normal": normal,
+              "Denoising Depth": passes.get("Depth")}
+    for name, pixels in guides.items():
+        if name in wanted and pixels is not None:
+            out[name] = pixels
+    if denoising is None:
+        return out
+    combined = passes["Combined"]
+    if export_settings.NOISY_IMAGE in wanted:
+        out[export_settings.NOISY_IMAGE] = combined.copy()
+    if not denoise.available():
+        report.once("Denoise: Blender's OpenImageDenoise library was not found, the image is not denoised")
+        return out
+    try:
+        clean = denoise.denoise(combined[..., :3], guides["Denoising Albedo"] if denoising.albedo else None,
+                                normal if denoising.normal else None, denoising.prefilter, denoising.quality, threads)
+    except RuntimeError as e:
+        # Skip, don't refuse: the frame is kept, noisy (e.g. an older Blender's OIDN refusing
+        # a setting it does not know).
+        report.once(f"Denoise failed ({e}): the image is not denoised")
+        return out
+    result = combined.copy()
+    result[..., :3] = clean
+    out["Combined"] = result
+    return out
+
+
 def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None, stats=None,
                  use_border: bool = True, headlight: Optional[bool] = None, keep: bool = False,
-                 settings: Optional[shading.RenderSettings] = None) -> Frame:
+                 settings: Optional[shading.RenderSettings] = None, views: Optional[list] = None,
+                 denoised: bool = True, frame_set=None) -> Frame:
     """Exports the depsgraph's view layer and renders the frame (or its border) with
     `method`. headlight: None follows the scene's Lighting setting (and falls back to the
     headlight, said in the report, when nothing in the scene gives light); True/False
-    force it. keep: keep the geometry for the next frame."""
+    force it. keep: keep the geometry for the next frame. views: a stereo or multi-view
+    render's views (export/scene.py View), each rendered with its own camera from the same
+    export (Frame.views); None renders the scene camera. The passes Cycles' denoising
+    writes ("Noisy Image", "Denoising ...") are made when asked for, and Combined is
+    denoised when the scene's Denoise is on (export/settings.py denoising_of) and `denoised`.
+    frame_set(frame, subframe): the render engine's, to sample transforms over the shutter
+    (motion blur; each view's camera over it); None renders the frame's time alone (said in
+    the report when motion blur is on)."""
     scene = depsgraph.scene
     props = scene.splat_tracer
     width, height = image_size(scene.render)
@@ -168,10 +226,19 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     say("Splat Tracer | exporting")
     CACHE.begin_frame()
     try:
+        motion = None
+        if frame_set is not None:
+            motion = export_motion.sample_motion(depsgraph, frame_set, report,
+                                                 [view.camera for view in views] if views else None)
+        elif scene.render.use_motion_blur:
+            report.once("Motion Blur is not rendered here: this render is of the frame's time alone (F12 and "
+                        "animation renders blur)")
         origin = export.camera_origin(depsgraph)
-        camera = export.export_camera(depsgraph, width, height, origin)
+        cameras = {view.name: export.export_camera(depsgraph, width, height, origin, view, motion)
+                   for view in views} if views else {"": export.export_camera(depsgraph, width, height, origin, motion=motion)}
         export_settings.report_unhonoured(scene, depsgraph.view_layer, report)
-        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report)
+        denoising = export_settings.denoising_of(scene, depsgraph.view_layer, report) if denoised else None
+        exported = export.export_scene(depsgraph, CACHE, origin, props.radius_factor, threads, report, motion)
     except BaseException:
         CACHE.end_frame(keep=False)
         raise
@@ -181,37 +248,97 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     summary = (f"Splat Tracer | {exported.instances} instances of {len(CACHE.used)} geometries "
                f"({exported.splats:,} splats, {exported.triangles:,} triangles), {exported.lights} lamps")
     say(summary + " | rendering")
+    wanted = tuple(passes)
+    # The guides come from the core's passes; a pass only the denoiser needs is not kept.
+    guides = [_GUIDES[name] for name in wanted if name in _GUIDES]
+    if denoising is not None:
+        guides += ["DiffCol"] * denoising.albedo + ["Normal"] * denoising.normal
+    core_passes = tuple(dict.fromkeys([name for name in wanted if name not in _GUIDES
+                                       and name != export_settings.NOISY_IMAGE] + guides))
     t1 = time.perf_counter()
+    view_layer = depsgraph.view_layer
+    view_passes, completed, counters, t_denoise, denoised_views = {}, True, {}, 0.0, 0
+    metadata = {}
+    light_groups = export_settings.light_groups(view_layer)
+    # Light groups' passes ("Combined_<group>") come with the render, not from `passes`: the
+    # denoiser's cut keeps them.
+    kept = wanted + tuple(shading.LIGHT_GROUP_PREFIX + g for g in light_groups)
     aovs = []
-    for name, kind in export_shading.view_layer_aovs(depsgraph.view_layer).items():
-        if name in shading.PASSES or name in passes:
-            report.once(f"view layer '{depsgraph.view_layer.name}': the Shader AOV '{name}' has the name of a pass "
+    for name, kind in export_shading.view_layer_aovs(view_layer).items():
+        if name in shading.PASSES or name in cryptomatte.KINDS or name in kept:
+            report.once(f"view layer '{view_layer.name}': the Shader AOV '{name}' has the name of a pass "
                         "the engine writes; it is not written")
         else:
             aovs.append((name, kind))
-    result = exported.render_scene.render(camera, width, height, settings, method, passes, window=(x0, y0, w, h),
-                                          threads=threads, progress=progress, aovs=aovs,
-                                          aov_alpha_threshold=depsgraph.view_layer.pass_alpha_threshold)
+    kept += tuple(name for name, _ in aovs)  # the denoiser's cut keeps them too
+    for name, camera in cameras.items():
+        moving = exported.render_scene.moving + (camera.motion is not None)
+        result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
+                                              window=(x0, y0, w, h), threads=threads, progress=progress,
+                                              cryptomatte_levels=view_layer.pass_cryptomatte_depth,
+                                              light_groups=light_groups,
+                                              aovs=aovs, aov_alpha_threshold=view_layer.pass_alpha_threshold,
+                                              shutter_curve=motion.curve if motion is not None and moving else None,
+                                              rolling_shutter=motion.rolling if motion is not None and moving else None)
+        position = result.passes.get("Position")
+        if position is not None:
+            # The core's positions are in the local frame; the pass is in world space, as
+            # Cycles'. A miss stays 0 (Cycles' value there); a hit is never at the local origin,
+            # which is the camera's own position.
+            hit = np.any(position != 0.0, axis=-1)
+            position[hit] = (position[hit] + exported.origin).astype(np.float32)
+        frame_passes = result.passes
+        if denoising is not None or set(core_passes) != set(wanted):
+            # A stopped render is not denoised, but loses the passes only the denoiser wanted.
+            t2 = time.perf_counter()
+            frame_passes = denoise_passes(frame_passes, kept, denoising if result.completed else None,
+                                          camera.local_from_camera, threads, report)
+            t_denoise += time.perf_counter() - t2
+            denoised_views += frame_passes.get("Combined") is not result.passes.get("Combined")
+        # Every view gets its Cryptomatte layers (cut after the denoiser, which keeps the
+        # passes `wanted` names); the manifests, the scene's names, are the same for every
+        # view: the result's metadata, written once.
+        metadata = cryptomatte_layers(frame_passes, exported.render_scene, view_layer.name)
+        view_passes[name] = frame_passes
+        completed = completed and result.completed
+        counters = counters or result.counters
+        if not result.completed:
+            break
     t_render = time.perf_counter() - t1
-    position = result.passes.get("Position")
-    if position is not None:
-        # The core's positions are in the local frame; the pass is in world space, as
-        # Cycles'. A miss stays 0 (Cycles' value there); a hit is never at the local origin,
-        # which is the camera's own position.
-        hit = np.any(position != 0.0, axis=-1)
-        position[hit] = (position[hit] + exported.origin).astype(np.float32)
+    sampling = sampling_summary(settings, counters, w * h)
+    if denoised_views:
+        sampling = "; ".join(filter(None, [sampling, f"{denoising.describe()} in {t_denoise:.2f} s"]))
     frame_stats = dict(instances=exported.instances, geometries=len(CACHE.used), built=CACHE.built,
                        reused=CACHE.reused, build_seconds=CACHE.build_seconds, export_seconds=t_export,
                        clouds=exported.clouds, closed_clouds=exported.closed_clouds,
                        render_seconds=t_render, splats=exported.splats, triangles=exported.triangles,
                        lights=exported.lights, headlight=bool(headlight), frame=scene.frame_current,
-                       view_layer=depsgraph.view_layer.name, samples=settings.samples, report=list(report.lines),
-                       completed=result.completed,
-                       sampling=sampling_summary(settings, result.counters, w * h),
-                       **result.counters)
+                       view_layer=view_layer.name, samples=settings.samples, report=list(report.lines),
+                       completed=completed, sampling=sampling, views=list(cameras) if views else [],
+                       moving=exported.render_scene.moving,
+                       camera_moves=any(c.motion is not None for c in cameras.values()),
+                       denoise_seconds=t_denoise, **counters)
     CACHE.end_frame(keep)
     HISTORY.append(frame_stats)
     del HISTORY[:-_HISTORY_LIMIT]
     say(f"{summary} | built {CACHE.built}, reused {CACHE.reused} ({CACHE.build_seconds:.2f} s) | "
         f"export {t_export:.2f} s, render {t_render:.2f} s")
-    return Frame(result.passes, result.completed, (x0, y0, w, h), width, height, frame_stats, report)
+    first = next(iter(view_passes.values()))
+    return Frame(first, completed, (x0, y0, w, h), width, height, frame_stats, report,
+                 view_passes if views else {}, metadata)
+
+
+def cryptomatte_layers(passes: dict, render_scene, view_layer_name: str) -> dict:
+    """Replaces each Cryptomatte pass of `passes` by its RGBA layers (CryptoObject00, ...),
+    and returns their metadata for the render result, as Cycles writes it: per kind, the
+    view layer's '<layer>.<kind>' name and the manifest of the names the scene holds (Cycles
+    lists every object and shader of its scene, whether seen or not)."""
+    names = {"CryptoObject": [n for n, _ in render_scene.instance_names],
+             "CryptoMaterial": render_scene.material_names,
+             "CryptoAsset": [a for _, a in render_scene.instance_names]}
+    metadata = {}
+    for kind in cryptomatte.KINDS:
+        if kind in passes:
+            passes.update(cryptomatte.layers(kind, passes.pop(kind)))
+            metadata.update(cryptomatte.metadata(f"{view_layer_name}.{kind}", names[kind]))
+    return metadata

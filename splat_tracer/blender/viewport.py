@@ -28,6 +28,8 @@ from ..render.camera import Camera, Lens
 from ..render.method import Method
 from ..render.scene import RenderScene
 from ..util import matrices
+from . import denoise
+from .export import settings as export_settings
 
 # --------------------------------------------------------------------------------------
 # The view
@@ -321,6 +323,7 @@ class _VariantRender:
     method: Method
     threads: int
     schedule: tuple
+    denoising: Optional[object] = None  # export/settings.py Denoising: the last pass is denoised
 
 
 def _scaled_window(window, width, height, lw, lh):
@@ -342,11 +345,22 @@ def render_pass(job: _VariantRender, index: int, progress=None) -> Optional[np.n
     settings = shading.RenderSettings(**{**job.settings.__dict__, "samples": samples})
     if scale == 1:
         x0, y0, w, h = v.window
-        result = job.render_scene.render(job.camera, v.width, v.height, settings, job.method, ("Combined",),
+        d = job.denoising if index == len(job.schedule) - 1 else None
+        passes = ("Combined",) + (("DiffCol",) if d is not None and d.albedo else ()) + \
+            (("Normal",) if d is not None and d.normal else ())
+        result = job.render_scene.render(job.camera, v.width, v.height, settings, job.method, passes,
                                          window=v.window, threads=job.threads, progress=progress)
         if not result.completed:
             return None
-        out[y0:y0 + h, x0:x0 + w] = result.passes["Combined"]
+        combined = result.passes["Combined"]
+        if d is not None:
+            # Cycles' viewport denoising, at the last pass only (each earlier pass would pay
+            # the denoiser's fraction of a second again); the normal stays in world space,
+            # which OIDN takes as well as camera space.
+            combined = combined.copy()
+            combined[..., :3] = denoise.denoise(combined, result.passes.get("DiffCol"), result.passes.get("Normal"),
+                                                d.prefilter, d.quality, job.threads)
+        out[y0:y0 + h, x0:x0 + w] = combined
         return out
     lw, lh = max(1, -(-v.width // scale)), max(1, -(-v.height // scale))
     lx, ly, lww, lhh = _scaled_window(v.window, v.width, v.height, lw, lh)
@@ -375,6 +389,7 @@ class Image:
     scale: int
     final: bool             # the last pass: the F12 image of this view (with this variant's settings)
     variant: str = "SCENE"  # 'SCENE', or 'A' / 'B' (the live A/B comparison)
+    denoised: bool = False  # the last pass, denoised (Cycles' viewport Denoise)
 
 
 def variants_of(props) -> tuple:
@@ -478,7 +493,12 @@ class ViewportSession:
         settings, _ = lit_settings(scene, first, export_shading.render_settings_of(scene, viewport=True), None,
                                     self.report)
         threads = int(scene.render.threads)
-        states = {v.name: (v, settings, threads, id(self.exports[v.radius_factor].render_scene)) for v in variants}
+        # Viewport denoising for the scene's own image only: the A/B variants compare the
+        # methods' surfaces, which a denoiser would smooth alike.
+        denoising = export_settings.denoising_of(scene, depsgraph.view_layer, viewport=True) \
+            if denoise.available() else None
+        states = {v.name: (v, settings, threads, id(self.exports[v.radius_factor].render_scene),
+                           denoising if v.name == "SCENE" else None) for v in variants}
         stale = [name for name, state in states.items() if exported_now or self._states.get(name) != state]
         self._states = states
         with self._cond:
@@ -529,12 +549,12 @@ class ViewportSession:
                                             self._view.clip, self._view.lens, self._view.panorama)
         with self._cond:
             for name in names if names is not None else list(self._states):
-                variant, settings, threads, _ = self._states[name]
+                variant, settings, threads, _, denoising = self._states[name]
                 self._generation += 1
                 self._jobs[name] = _VariantRender(
                     self._generation, name, self.exports[variant.radius_factor].render_scene, self._camera,
                     self._view, settings, variant.method, threads,
-                    tuple(pass_schedule(settings.samples, self.coarse_scale, _window_pixels(self._view))))
+                    tuple(pass_schedule(settings.samples, self.coarse_scale, _window_pixels(self._view))), denoising)
                 self._next[name] = 0
                 self.counters["restarts"] += 1
             self._cond.notify_all()
@@ -562,8 +582,9 @@ class ViewportSession:
             if pixels is None or not self._current(job):
                 return
             scale, samples = job.schedule[index]
-            self._images[job.variant] = Image(pixels, job.view, job.generation, index, samples, scale,
-                                              index == len(job.schedule) - 1, job.variant)
+            final = index == len(job.schedule) - 1
+            self._images[job.variant] = Image(pixels, job.view, job.generation, index, samples, scale, final,
+                                              job.variant, final and scale == 1 and job.denoising is not None)
             self._version += 1
             self._next[job.variant] = index + 1
 
@@ -640,7 +661,8 @@ def status(images: dict, done: bool) -> str:
     """The viewport's status line for {variant: newest Image}."""
     def one(image: Image) -> str:
         text = f"{image.samples} sample{'s' if image.samples > 1 else ''}"
-        return text + (f" at 1/{image.scale} resolution" if image.scale > 1 else "")
+        return text + (f" at 1/{image.scale} resolution" if image.scale > 1 else "") + \
+            (", denoised" if image.denoised else "")
     parts = [one(images["SCENE"])] if "SCENE" in images else [f"{name}: {one(images[name])}" for name in ("A", "B")
                                                               if name in images]
     return "Splat Tracer | " + ", ".join(parts) + ("" if done else " | refining")

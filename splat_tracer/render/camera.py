@@ -169,7 +169,9 @@ class Camera:
     its frustum is the image's rectangle in Cycles' panorama (u, v) coordinates ((0, 1, 0,
     1), moved by the lens shift), its rays leave the camera's centre (or its lens) and are
     clipped at clip start and end along themselves, and its Depth pass is the distance from
-    the camera (Cycles' camera_z_depth).
+    the camera (Cycles' camera_z_depth). motion: motion blur -- local_from_camera at S >= 2
+    evenly spaced times over the shutter (S 4x4 matrices, the first at its opening), or None
+    for a camera that does not move (local_from_camera is the frame's own either way).
     """
 
     local_from_camera: np.ndarray
@@ -178,6 +180,7 @@ class Camera:
     orthographic: bool = False
     lens: Optional[Lens] = None
     panorama: Optional[Panorama] = None
+    motion: Optional[np.ndarray] = None
 
     def __post_init__(self):
         m = np.array(self.local_from_camera, dtype=np.float64)
@@ -204,6 +207,12 @@ class Camera:
             raise TypeError(f"panorama must be a Panorama or None, got {type(self.panorama).__name__}")
         if self.panorama is not None and self.orthographic:
             raise ValueError("a camera is either orthographic or panoramic")
+        if self.motion is not None:
+            steps = np.array(self.motion, dtype=np.float64)
+            if (steps.ndim != 3 or len(steps) < 2 or steps.shape[1:] != (4, 4) or not np.isfinite(steps).all()
+                    or (steps[:, 3] != (0.0, 0.0, 0.0, 1.0)).any()):
+                raise ValueError("camera motion must be at least two finite affine 4x4 matrices")
+            object.__setattr__(self, "motion", np.ascontiguousarray(steps))
 
     @property
     def position(self) -> np.ndarray:
@@ -223,17 +232,22 @@ class Camera:
 
     def with_lens(self, lens: Optional[Lens]) -> "Camera":
         """This camera with another lens (None: a pinhole)."""
-        return Camera(self.local_from_camera, self.frustum, self.clip, self.orthographic, lens, self.panorama)
+        return Camera(self.local_from_camera, self.frustum, self.clip, self.orthographic, lens, self.panorama,
+                      self.motion)
 
     @classmethod
     def from_frustum(cls, world_from_camera, frustum, clip, orthographic: bool = False,
                      origin=(0.0, 0.0, 0.0), lens: Optional[Lens] = None,
-                     panorama: Optional[Panorama] = None) -> "Camera":
+                     panorama: Optional[Panorama] = None, motion=None) -> "Camera":
         """From the camera's world matrix (looking down its local -Z; scale is not removed)
-        and its parameters (see the class); `origin` is the scene's local-frame origin."""
+        and its parameters (see the class); `origin` is the scene's local-frame origin.
+        motion: the world matrices over the shutter (motion blur), or None."""
         m = np.array(world_from_camera, dtype=np.float64).reshape(4, 4)
         m[:3, 3] -= np.asarray(origin, dtype=np.float64)
-        return cls(m, frustum, clip, orthographic, lens, panorama)
+        if motion is not None:
+            motion = np.array(motion, dtype=np.float64).reshape(-1, 4, 4)
+            motion[:, :3, 3] -= np.asarray(origin, dtype=np.float64)
+        return cls(m, frustum, clip, orthographic, lens, panorama, motion)
 
     @classmethod
     def from_view_projection(cls, projection, world_from_camera, origin=(0.0, 0.0, 0.0), clip=None) -> "Camera":

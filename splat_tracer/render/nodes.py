@@ -19,12 +19,13 @@ import numpy as np
 
 WIDTH = 8            # int32 per instruction (native kNodeWidth)
 MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at export
+MAX_BUMP_DEPTH = 3   # native kMaxBumpDepth: Bump nodes within a Bump's height, each level 3x the cost
 
 # Opcodes, in the native Op order; the operand layout of each is in program.h.
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK")
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA")
@@ -55,9 +56,11 @@ NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
 
 # The shading point as run_nodes takes it: these vec3s, then point_alpha, backfacing and
 # tangent_sign. tangent: the UV map's (unit, perpendicular to surface_normal, the surface's
-# normal before it is turned towards the viewer).
+# normal before it is turned towards the viewer). bump_dx, bump_dy: the Bump node's two offset
+# points, relative to this one (every position-dependent global moves by them alike; u, v by
+# their x, y).
 GLOBAL_FIELDS = ("P", "N", "Ng", "I", "object", "object_normal", "generated", "uv", "point_colour", "tangent",
-                 "surface_normal")
+                 "surface_normal", "bump_dx", "bump_dy")
 _GLOBAL_FLOATS = 3 * len(GLOBAL_FIELDS) + 3
 
 

@@ -8,11 +8,13 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from .. import _core
+from . import cryptomatte
 from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
-from .shading import LIGHT_FIELDS, MATERIAL_FIELDS, PASSES, Light, Material, RenderSettings, World
+from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
+                      Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
 
 RAY_VISIBILITY = {"camera": 1, "diffuse": 2, "glossy": 4, "transmission": 8, "shadow": 16}
@@ -50,6 +52,7 @@ class InstanceRow(NamedTuple):
     holdout: bool
     pass_index: float
     shadow_catcher: bool
+    motion: Optional[np.ndarray]  # (S, 12): to_world at S evenly spaced times over the shutter; None: still
 
 
 def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: Sequence, lights: Sequence,
@@ -61,6 +64,15 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
     n = len(rows)
     col = lambda name, dtype, width=(): np.ascontiguousarray(
         np.array([getattr(r, name) for r in rows], dtype).reshape((n, *width)))
+    # Motion blur: the moving instances' steps in one table, each instance's (first, count).
+    # Only a scene where something moves passes them: a still one is the core's as before.
+    motion = motion_range = None
+    if any(r.motion is not None for r in rows):
+        steps = [np.asarray(r.motion, np.float64).reshape(-1, 12) if r.motion is not None else np.empty((0, 12))
+                 for r in rows]
+        counts = np.array([len(s) for s in steps], np.int64)
+        motion = np.ascontiguousarray(np.concatenate(steps), np.float64)
+        motion_range = np.ascontiguousarray(np.stack([np.cumsum(counts) - counts, counts], axis=1), np.int32)
     return _core.RenderScene(
         list(geometries), col("geometry_index", np.int32), col("to_world", np.float32, (12,)),
         col("to_object", np.float32, (12,)), col("material_range", np.int32, (2,)), col("visibility", np.int32),
@@ -70,6 +82,7 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
         threads,
         # Only a scene with a catcher passes the column: one without is the core's as before.
         shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None,
+        motion=motion, motion_range=motion_range,
         # Only materials with node programs pay for them: without any, the core's path is as before.
         programs=programs if programs is not None and any(p is not None for p in programs) else None)
 
@@ -78,7 +91,7 @@ class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
     normals express them; None: flat), material_index (T,) slots and corner_uv (T,3,2), the
-    UV map node programs read (None: 0). Immutable; share one Mesh between any number of
+    UV map node programs and the UV pass read (None: 0). Immutable; share one Mesh between any number of
     instances."""
 
     def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0,
@@ -109,7 +122,13 @@ class Instance:
     RAY_VISIBILITY; default all). holdout: camera rays that see it get alpha 0.
     pass_index: the Object Index pass value. shadow_catcher: it receives the other
     instances' shadows and reflections but is left out of Combined (Cycles' shadow catcher;
-    see RenderScene.render)."""
+    see RenderScene.render). motion: motion blur -- the 4x4 object-to-local matrix at S >= 2
+    evenly spaced times over the shutter (the first at its opening), interpolated between
+    them as Cycles does (translation and stretch linearly, rotation by slerp) at each camera
+    ray's time; None (default): it does not move, and costs nothing. `matrix` stays the
+    frame's own (mesh lights and the camera's inside test use it). name, asset: its object's
+    and asset's names in the Cryptomatte passes (render/cryptomatte.py; asset "" : the
+    object's name)."""
 
     geometry: object
     matrix: tuple = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
@@ -118,6 +137,10 @@ class Instance:
     holdout: bool = False
     pass_index: int = 0
     shadow_catcher: bool = False
+    motion: Optional[tuple] = None
+    name: str = ""
+    asset: str = ""
+    light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
 
 
 class FrameResult(NamedTuple):
@@ -146,6 +169,8 @@ class RenderScene:
         geometries, index_of = [], {}
         rows = []
         materials = []
+        # Cryptomatte's names: (object, asset) per instance, one per material-table entry.
+        self.instance_names, self.material_names = [], []
         for inst in instances:
             if not isinstance(inst, Instance):
                 raise TypeError(f"instances must be scene.Instance objects, got {type(inst).__name__}")
@@ -162,6 +187,16 @@ class RenderScene:
             if problem is not None:
                 raise ValueError(f"instance matrix must be finite and invertible: {problem}")
             inv = matrices.inverse(m)
+            motion = None
+            if inst.motion is not None:
+                motion = np.asarray(inst.motion, np.float64)
+                if motion.ndim != 3 or motion.shape[1:] != (4, 4) or len(motion) < 2:
+                    raise ValueError(f"instance motion must be at least two 4x4 matrices, got shape {motion.shape}")
+                for step in motion:
+                    problem = transform_problem(step)
+                    if problem is not None:
+                        raise ValueError(f"instance motion matrices must be finite and invertible: {problem}")
+                motion = motion[:, :3].reshape(-1, 12)
             unknown = set(inst.visibility) - set(RAY_VISIBILITY)
             if unknown:
                 raise ValueError(f"unknown ray visibility {sorted(unknown)}; use {sorted(RAY_VISIBILITY)}")
@@ -173,19 +208,23 @@ class RenderScene:
                                     to_object=inv[:3].ravel(), material_range=(len(materials), len(mats)),
                                     visibility=sum(RAY_VISIBILITY[k] for k in inst.visibility),
                                     holdout=inst.holdout, pass_index=inst.pass_index,
-                                    shadow_catcher=inst.shadow_catcher))
+                                    shadow_catcher=inst.shadow_catcher, motion=motion))
             materials.extend(mats)
+            self.instance_names.append((inst.name, inst.asset or inst.name))
+            self.material_names.extend(m.name for m in mats)
         self.world = world
         self.lights = tuple(lights)
         # The shader AOVs the materials' AOV Output nodes write, numbered for the core.
         self.aov_names = tuple(sorted({name for m in materials if m.program is not None
                                        for name, _, _ in m.program.aovs}))
         keys = {name: i for i, name in enumerate(self.aov_names)}
+        self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
                                    threads, [m.program.native(keys) if m.program is not None else None
                                              for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
+        self.moving = sum(r.motion is not None for r in rows)  # instances that move over the shutter
 
     def mesh_lights(self) -> list:
         """The emissive mesh triangles sampled as lights, as (instance index, triangle index,
@@ -198,11 +237,19 @@ class RenderScene:
                method: Method = Method(), passes: Sequence[str] = ("Combined",),
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
-               packets: bool = True, aovs: Sequence[tuple] = (), aov_alpha_threshold: float = 0.5) -> FrameResult:
+               packets: bool = True, shutter_curve=None, rolling_shutter: Optional[float] = None,
+               cryptomatte_levels: int = 6, light_groups: Sequence[str] = (), aovs: Sequence[tuple] = (),
+               aov_alpha_threshold: float = 0.5) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
-        ray; the same image).
+        ray; the same image). shutter_curve: motion blur's shutter curve, the shutter's
+        openness at evenly spaced times from its opening to its closing (>= 2 values, >= 0, not
+        all 0; Blender's Shutter Curve); None: a box shutter. Camera rays get a time in the
+        shutter only where something moves (an instance's or the camera's `motion`).
+        rolling_shutter: Cycles' rolling shutter (rows exposed from top to bottom), its
+        duration in [0, 1] (a row's exposure as a share of the shutter; 0: an instant);
+        None: off (a global shutter).
 
         With shadow-catcher instances, Combined is formed as Cycles forms it: the catcher is
         left out, and its shadow (its light with everything / its light with catchers only)
@@ -210,6 +257,16 @@ class RenderScene:
         onto a photograph darkens it), or darkens the world behind it on an opaque film. With
         the "Shadow Catcher" pass asked for, Combined leaves the shadow out entirely (the
         catcher is a hole) and the pass holds it, to multiply the photograph by.
+
+        The Cryptomatte passes (cryptomatte.KINDS) are (h, w, 2 slots) arrays of (id,
+        coverage) pairs, cryptomatte.slots_of(cryptomatte_levels) of them, sorted by coverage;
+        the ids are those of the instances' name and asset and the materials' name.
+
+
+        light_groups: group names (at most shading.MAX_LIGHT_GROUPS); each gets a pass
+        "Combined_<name>" holding the light of the lamps, emissive instances and world whose
+        light_group is that name (Cycles' light groups: the groups sum to Combined less what
+        belongs to none).
 
         aovs: the view layer's shader AOVs, (name, "COLOR" or "VALUE") each, returned among
         the passes under their names ((h, w, 4) RGBA or (h, w)): what the materials' AOV Output
@@ -222,27 +279,86 @@ class RenderScene:
                 raise TypeError(f"{name} must be a {kind.__name__}, got {type(value).__name__}")
         if isinstance(passes, str):
             raise TypeError("passes must be a sequence of pass names, not one string")
-        unknown = set(passes) - set(PASSES)
+        unknown = set(passes) - set(PASSES) - set(cryptomatte.KINDS)
         if unknown:
-            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES)}")
+            raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES) + list(cryptomatte.KINDS)}")
+        if isinstance(light_groups, str):
+            raise TypeError("light_groups must be a sequence of group names, not one string")
         aovs = tuple((str(name), str(kind)) for name, kind in aovs)
+        taken = {"Combined", *PASSES, *cryptomatte.KINDS, *passes, *(LIGHT_GROUP_PREFIX + g for g in light_groups)}
         for name, kind in aovs:
-            if kind not in AOV_CHANNELS or name in PASSES or name in ("Combined", *passes):
+            if kind not in AOV_CHANNELS or name in taken:
                 raise ValueError(f"AOV {name!r}: a type in {sorted(AOV_CHANNELS)} and a name no other pass has")
         if len({name for name, _ in aovs}) != len(aovs):
             raise ValueError("AOV names must differ")
+        ids = None
+        if set(passes) & set(cryptomatte.KINDS):
+            ids = (np.array([[cryptomatte.name_id(n) for n in pair] for pair in self.instance_names],
+                            np.float32).reshape(-1, 2),
+                   # The core's table has its default material when no instance brings one.
+                   np.array([cryptomatte.name_id(n) for n in self.material_names or [Material().name]], np.float32))
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
-                                           aovs, self.aov_names, aov_alpha_threshold)
+                                           cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels,
+                                           aovs=aovs, aov_names=self.aov_names,
+                                           aov_alpha_threshold=aov_alpha_threshold)
+        if light_groups:
+            kwargs.update(self._light_group_arguments(light_groups, buffers, *buffers["Combined"].shape[:2]))
+        if shutter_curve is not None:
+            kwargs["shutter_table"] = shutter_table(shutter_curve)
+        if rolling_shutter is not None:
+            if not 0.0 <= rolling_shutter <= 1.0:
+                raise ValueError(f"rolling_shutter must be a duration in [0, 1], got {rolling_shutter!r}")
+            kwargs["rolling_shutter_duration"] = float(rolling_shutter)
         done, counters = self._scene.render(**kwargs, threads=threads, progress=progress, tile_size=tile_size,
                                             packets=packets)
         return FrameResult(buffers, bool(done), counters)
+
+    def _light_group_arguments(self, groups: Sequence[str], buffers: dict, h: int, w: int) -> dict:
+        """The core's light-group keywords, and each group's pass added to `buffers`."""
+        groups = list(dict.fromkeys(groups))
+        if len(groups) > MAX_LIGHT_GROUPS:
+            raise ValueError(f"at most {MAX_LIGHT_GROUPS} light groups, got {len(groups)}")
+        planes = np.zeros((len(groups), h, w, 3), np.float32)
+        for i, name in enumerate(groups):
+            buffers[LIGHT_GROUP_PREFIX + name] = planes[i]
+        index = {name: i for i, name in enumerate(groups)}
+        of = lambda name: index.get(name, -1) if name else -1  # noqa: E731
+        return dict(light_groups=planes,
+                    light_group_lamps=np.array([of(l.light_group) for l in self.lights], np.int32),
+                    light_group_instances=np.array([of(g) for g in self.instance_light_groups], np.int32),
+                    light_group_world=of(self.world.light_group))
+
+
+# Entries of the shutter curve's inverse CDF the core interpolates (Cycles' shutter table has
+# 256 as well: finer than a curve drawn by hand).
+SHUTTER_TABLE_SIZE = 256
+
+
+def shutter_table(curve) -> np.ndarray:
+    """The shutter time (0 opens, 1 closes) of evenly spaced uniform numbers: the inverse of
+    the CDF of `curve`, the shutter's openness at evenly spaced times (piecewise linear), as
+    Cycles samples its shutter curve."""
+    w = np.asarray(curve, np.float64).ravel()
+    if w.size < 2 or not np.isfinite(w).all() or (w < 0).any() or not w.sum() > 0:
+        raise ValueError("shutter_curve must be >= 2 finite values >= 0, not all 0")
+    # CDF of the piecewise linear openness, on a grid 16 times finer than the table (so that
+    # the table's linear steps follow the CDF's curvature inside each of the curve's pieces).
+    x = np.linspace(0.0, 1.0, 16 * SHUTTER_TABLE_SIZE)
+    w = np.interp(x, np.linspace(0.0, 1.0, w.size), w)
+    cdf = np.concatenate([[0.0], np.cumsum((w[1:] + w[:-1]) * 0.5)])
+    cdf /= cdf[-1]
+    u = np.linspace(0.0, 1.0, SHUTTER_TABLE_SIZE)
+    # Flat (closed) stretches of the CDF are never sampled: interp takes the first x of a
+    # repeated CDF value, which is where the openness ends.
+    keep = np.concatenate([[True], np.diff(cdf) > 0])
+    return np.clip(np.interp(u, cdf[keep], x[keep]), 0.0, 1.0).astype(np.float32)
 
 
 # The core's keyword for each pass's buffer (Combined: "combined").
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
 
 
 # A shader AOV's channels by its type (Blender's AOV.type): RGBA as Cycles registers a colour AOV.
@@ -251,6 +367,7 @@ AOV_CHANNELS = {"COLOR": 4, "VALUE": 1}
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
                      passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None,
+                     cryptomatte_ids: Optional[tuple] = None, cryptomatte_levels: int = 6,
                      aovs: Sequence[tuple] = (), aov_names: Sequence[str] = (),
                      aov_alpha_threshold: float = 0.5) -> tuple[dict, dict]:
     """The keyword arguments of the core's RenderScene.render for a frame (all but threads,
@@ -258,10 +375,17 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
     AOVs' by theirs; aov_names: the scene's, RenderScene.aov_names). It
     checks only the window (before allocating): RenderScene.render checks its arguments
     first, and fuzz/fuzz_core.py passes unchecked ones on purpose, so that the fuzzed
-    layout is the add-on's."""
+    layout is the add-on's. cryptomatte_ids: (instance ids (instances, 2), material ids),
+    needed when a Cryptomatte pass is asked for (RenderScene.render makes them)."""
     x0, y0, w, h = window_rect(window, width, height)
     buffers = {}
+    slots = cryptomatte.slots_of(cryptomatte_levels)
     for name in ("Combined", *passes):
+        if name in LIGHT_PASSES and name != "DiffCol":
+            continue  # a plane of the light passes' buffer, below
+        if name in cryptomatte.KINDS:
+            buffers[name] = np.zeros((h, w, 2 * slots), np.float32)
+            continue
         c = PASSES[name]
         buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
     local_from_camera, frustum, orthographic = camera.native()
@@ -270,9 +394,26 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
                   method=method, world=world.radiance(), film_transparent=bool(world.transparent),
                   lens=camera.lens.native() if camera.lens else None,
                   world_visibility=sum(RAY_VISIBILITY[k] for k in world.visibility))
+    if world.environment is not None:  # a uniform world passes nothing more: the call is as before
+        kwargs["world_map"] = world.world_map()
+    if camera.motion is not None:  # motion blur: the camera over the shutter
+        kwargs["camera_motion"] = np.ascontiguousarray(np.asarray(camera.motion, np.float64)[:, :3].reshape(-1, 12))
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
-    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items()})
+    if "AO" in passes:
+        kwargs["ao_distance"] = float(world.ao_distance)
+    light = [name for name in LIGHT_PASSES if name in passes and name != "DiffCol"]
+    if light:
+        # All nine planes or none (the direct and indirect passes are divided by the colours'
+        # sums); the passes asked for are views of it. DiffCol keeps its own buffer (the
+        # integrator's colour there is the same).
+        planes = np.zeros((len(LIGHT_PASSES), h, w, 3), np.float32)
+        kwargs["light"] = planes
+        for name in light:
+            buffers[name] = planes[LIGHT_PASSES.index(name)]
+    kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name in PASS_KEYWORDS})
+    if any(kind in buffers for kind in cryptomatte.KINDS):
+        kwargs["cryptomatte"] = (*(buffers.get(kind) for kind in cryptomatte.KINDS), slots, *cryptomatte_ids)
     # The AOVs some material writes share one buffer, each a view of its channels; the others
     # stay zeros the core never sees (nothing to write: no cost).
     written = [(name, AOV_CHANNELS[kind]) for name, kind in aovs if name in aov_names]

@@ -11,6 +11,7 @@ Units are Blender's, so that a scene lit for Cycles renders at the same brightne
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 from typing import Optional, Sequence
@@ -55,6 +56,7 @@ class Material:
     program: the node program (render/nodes.py) that drives some of the inputs above at
         each shading point, or None (the constant values are the material). The inputs it
         does not drive keep their constant values.
+    name: the material's name in the Cryptomatte Material pass (render/cryptomatte.py).
     """
 
     base_colour: Sequence[float] = (0.8, 0.8, 0.8)
@@ -70,6 +72,7 @@ class Material:
     emission_sampling: str = "AUTO"
     pass_index: int = 0
     program: Optional[object] = None
+    name: str = "default_surface"  # cryptomatte.DEFAULT_MATERIAL: Cycles' name for no material
 
     def __post_init__(self):
         if self.emission_sampling not in EMISSION_SAMPLING:
@@ -155,6 +158,9 @@ class Light:
     visible_camera: bool = True
     visible_glossy: bool = True
     visible_transmission: bool = True
+    # The light group it belongs to (Object > Shading > Light Group; "": none), for the light
+    # groups' passes (RenderScene.render's light_groups). Not packed: a render-time map.
+    light_group: str = ""
 
     def __post_init__(self):
         if self.type not in LIGHT_TYPES:
@@ -206,7 +212,13 @@ class World:
     Ray Visibility: 'camera', 'diffuse', 'glossy', 'transmission'); a kind left out meets
     black instead -- camera rays on an opaque film keep alpha 1, as in Cycles.
     mist_start, mist_depth, mist_falloff: the World's Mist Pass settings (MIST_FALLOFFS), which
-    only the Mist pass reads; the defaults are Cycles' for a scene without a world."""
+    only the Mist pass reads; the defaults are Cycles' for a scene without a world.
+    environment: None (the uniform colour x strength), or the world as an equirectangular
+    image (float32, height x width x 3, scene-linear radiance, strength included; row 0 at the
+    nadir, column 0 at u = 0, Cycles' orientation: u = 0.5 - atan2(y, x) / 2 pi,
+    v = 0.5 + asin(z) / pi): seen by rays that leave the scene and sampled as a light.
+    camera_environment: with `environment`, what camera rays see instead (the world's Light
+    Path > Is Camera Ray trick), or None: the same. Compared by identity, not by value."""
 
     colour: Sequence[float] = (0.05, 0.05, 0.05)
     strength: float = 1.0
@@ -215,8 +227,22 @@ class World:
     mist_start: float = 0.0
     mist_depth: float = 100.0
     mist_falloff: str = "LINEAR"
+    # World > Light Settings > Distance: how far the AO pass's rays look (Cycles' ao_distance).
+    ao_distance: float = 10.0
+    light_group: str = ""  # World > Settings > Light Group ("": none)
+    environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
+    camera_environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
+        if not (math.isfinite(self.ao_distance) and self.ao_distance >= 0):
+            raise ValueError(f"ao_distance must be finite and >= 0, got {self.ao_distance!r}")
+        for name in ("environment", "camera_environment"):
+            image = getattr(self, name)
+            if image is not None and not (isinstance(image, np.ndarray) and image.dtype == np.float32
+                                          and image.ndim == 3 and image.shape[2] == 3):
+                raise ValueError(f"{name} must be a float32 (height, width, 3) array")
+        if self.camera_environment is not None and self.environment is None:
+            raise ValueError("camera_environment needs an environment")
         if self.mist_falloff not in MIST_FALLOFFS:
             raise ValueError(f"mist_falloff must be one of {sorted(MIST_FALLOFFS)}, got {self.mist_falloff!r}")
         if not (math.isfinite(self.mist_start) and math.isfinite(self.mist_depth) and self.mist_depth >= 0):
@@ -226,7 +252,26 @@ class World:
             raise ValueError(f"unknown world ray visibility {sorted(unknown)}; use {list(WORLD_RAYS)}")
 
     def radiance(self) -> tuple:
+        """The uniform radiance; with an environment image, its mean over the sphere."""
+        if self.environment is not None:
+            return self._environment_mean
         return tuple(float(c) * float(self.strength) for c in self.colour)
+
+    @functools.cached_property
+    def _environment_mean(self) -> tuple:
+        """The environment's mean radiance over the sphere (rows weighed by sin(theta)): once
+        per World, which a viewport renders many times."""
+        h = self.environment.shape[0]
+        weights = np.sin(np.pi * (np.arange(h) + 0.5) / h)
+        rows = self.environment.mean(axis=1, dtype=np.float64)
+        return tuple(float(c) for c in weights @ rows / weights.sum())
+
+    def world_map(self):
+        """The core's world_map argument: None, or (light image, camera image or None)."""
+        if self.environment is None:
+            return None
+        return (np.ascontiguousarray(self.environment),
+                None if self.camera_environment is None else np.ascontiguousarray(self.camera_environment))
 
     def mist(self) -> tuple:
         """(start, 1 / depth, falloff exponent), as the core takes them: Cycles' Film values
@@ -258,6 +303,7 @@ class RenderSettings:
         "MIS" (shadow rays aimed at them and the rays that meet them, weighed by multiple
         importance sampling, as Cycles), "LIGHT" (shadow rays only) or "BSDF" (the rays that
         meet them only). The last two are for verifying the first; all three converge alike.
+        The world's environment image (World.environment) is sampled by the same strategy.
 
     Noise control, Cycles' settings with Cycles' meaning (0 turns each off):
     clamp_direct / clamp_indirect: Cycles' Clamp Direct / Indirect. A sample's contribution
@@ -382,7 +428,23 @@ PASSES = {
     "IndexMA": 1,      # the material's pass index, pixel-centre sample
     "Mist": 1,         # Cycles' mist (World.mist_*): 0 at the start, 1 at start + depth and on a miss; averaged
     "Env": 3,          # the world seen by camera rays that leave the scene (black on surfaces), averaged
+    # Cycles' light passes, averaged: by the lobe of the path's first bounce, the light that
+    # reached the first surface straight from its source (Direct) or by more bounces (Indirect),
+    # divided by the lobe's colour as Cycles' film does, so (Dir + Ind) x Col is its light.
+    "DiffDir": 3, "DiffInd": 3, "GlossDir": 3, "GlossInd": 3, "GlossCol": 3,
+    "TransDir": 3, "TransInd": 3, "TransCol": 3,
+    "AO": 3,           # Cycles' AO pass: 1 where a cosine ray from the first hit meets nothing within World.ao_distance
+    "Vector": 4,       # Cycles' screen-space motion: 0 (no motion is rendered: the frame is sharp)
+    "UV": 3,           # the mesh's UV map (U, V, 1) at the pixel-centre sample's first hit; 0 on clouds and misses
 }
+# The light passes in the core's order (its `light` buffer's planes: PassLobe order, Direct,
+# Indirect, Color).
+LIGHT_PASSES = ("DiffDir", "GlossDir", "TransDir", "DiffInd", "GlossInd", "TransInd", "DiffCol", "GlossCol",
+                "TransCol")
+# Each light group's Combined, as Cycles names it (RenderScene.render's light_groups).
+LIGHT_GROUP_PREFIX = "Combined_"
+# The most light groups a render writes (native/shade/light_passes.h, kMaxLightGroups).
+MAX_LIGHT_GROUPS = 16
 
 
 @dataclass

@@ -229,6 +229,20 @@ def test_no_material_no_output_and_ignored_outputs(blender, empty_scene, es, rep
     assert report.lines[-1] == "material 'Foggy': Volume, Displacement are ignored"
 
 
+def test_a_volume_only_material_is_transparent_and_said(blender, empty_scene, es, report):
+    """Only a Volume into the Material Output: the volume is not rendered, so the surface is
+    absent (alpha 0), said once -- not a black box, and no claim that Cycles renders it so."""
+    material, _ = new_material(blender, "Fog", "ShaderNodeBsdfDiffuse")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    links.remove(output.inputs["Surface"].links[0])
+    links.new(nodes.new("ShaderNodeVolumePrincipled").outputs[0], output.inputs["Volume"])
+    m = es.material_of(material, report)
+    assert m.alpha == 0.0 and m.emission == (0, 0, 0)
+    assert report.lines == ["material 'Fog': only a Volume shader is connected; the volume is not rendered, "
+                            "the object is transparent"]
+
+
 # --------------------------------------------------------------------------------------
 # Lamps.
 
@@ -288,22 +302,85 @@ def test_rotated_scaled_area_lamp(blender, empty_scene, es, report):
     assert report.lines == ["light 'Area.002': a spread of 30 degrees is ignored (rendered as 180)"]
 
 
-def test_lamp_node_trees_and_light_linking_are_reported(blender, empty_scene, es, report):
+def _lamp_tree(bpy, scene, kind="POINT", **settings):
+    """A lamp with a node tree of its own: (object, its nodes, its links, its Emission)."""
+    obj = add_lamp(bpy, scene, kind, use_nodes=True, **settings)
+    obj.data = obj.data.copy()
+    tree = obj.data.node_tree
+    return obj, tree.nodes, tree.links, next(n for n in tree.nodes if n.type == "EMISSION")
+
+
+def test_lamp_node_trees_are_evaluated_once(blender, empty_scene, es, report):
+    """The Emission's Color x Strength from constant nodes multiplies the lamp's colour:
+    Blackbody (its colour, the unit tests' definition) times a Math chain; the default tree
+    changes nothing; light linking is still said."""
     bpy = blender
     plain = add_lamp(bpy, empty_scene, "POINT", use_nodes=True)  # the default Emission: nothing to say
-    lamp_of(bpy, es, plain, report)
-    assert report.lines == []
-    custom = add_lamp(bpy, empty_scene, "POINT", use_nodes=True)
-    custom.data = custom.data.copy()
-    emission = next(n for n in custom.data.node_tree.nodes if n.type == "EMISSION")
+    assert lamp_of(bpy, es, plain, report).colour == approx((1, 1, 1)) and report.lines == []
+    halved, _, _, emission = _lamp_tree(bpy, empty_scene)
     emission.inputs["Strength"].default_value = 0.5
+    assert lamp_of(bpy, es, halved, report).colour == approx((0.5, 0.5, 0.5))
+    warm, nodes_, links, emission = _lamp_tree(bpy, empty_scene, color=(1.0, 0.5, 1.0))
+    blackbody, value, math_ = (nodes_.new(t) for t in ("ShaderNodeBlackbody", "ShaderNodeValue", "ShaderNodeMath"))
+    blackbody.inputs["Temperature"].default_value = 3315.0
+    value.outputs[0].default_value = 1.5
+    math_.operation = "MULTIPLY"
+    math_.inputs[1].default_value = 2.0
+    links.new(blackbody.outputs["Color"], emission.inputs["Color"])
+    links.new(value.outputs[0], math_.inputs[0])
+    links.new(math_.outputs[0], emission.inputs["Strength"])
+    from splat_tracer.render import nodes as programs
+    b = programs.Builder()
+    out = b.register(width=3)
+    b.emit("BLACKBODY", out, b.register(3315.0))
+    bb = programs.run(b.program())[0, out:out + 3]
+    assert lamp_of(bpy, es, warm, report).colour == approx(tuple(np.array([1.0, 0.5, 1.0]) * bb * 3.0), rel=1e-5)
+    # Blender's own blackbody colour there, within the Blackbody node's stated 1 %.
+    assert lamp_of(bpy, es, warm, report).colour == approx((1.631801 * 3, 0.877736 * 1.5, 0.355867 * 3), rel=0.01)
     linked = add_lamp(bpy, empty_scene, "SPOT")
-    receivers = bpy.data.collections.new("Receivers")
-    linked.light_linking.receiver_collection = receivers
-    lamp_of(bpy, es, custom, report)
+    linked.light_linking.receiver_collection = bpy.data.collections.new("Receivers")
     lamp_of(bpy, es, linked, report)
-    assert report.lines == [f"light '{custom.name}': light node trees are ignored",
-                            f"light '{linked.name}': light linking is ignored"]
+    assert report.lines == [f"light '{linked.name}': light linking is ignored"]
+
+
+def test_blackbody_node_beside_blenders_own(blender, empty_scene):
+    """The Blackbody node's colour against Blender's own blackbody (a lamp's
+    temperature_color with Temperature on: the colour Cycles' Blackbody node gives), read
+    live: within 1 % per channel from 3000 K up, 2 % (0.002 absolute) at 2000 K."""
+    from splat_tracer.render import nodes as programs
+    light = add_lamp(blender, empty_scene, "POINT", use_temperature=True).data
+    for kelvin, rtol, atol in ((2000, 0.021, 0.002), (3000, 0.01, 1e-3), (4500, 0.01, 1e-3), (6500, 0.01, 1e-3),
+                               (9000, 0.01, 1e-3), (12000, 0.01, 1e-3), (16000, 0.01, 1e-3)):
+        light.temperature = kelvin
+        b = programs.Builder()
+        out = b.register(width=3)
+        b.emit("BLACKBODY", out, b.register(float(kelvin)))
+        got = programs.run(b.program())[0, out:out + 3]
+        np.testing.assert_allclose(got, light.temperature_color[:3], rtol=rtol, atol=atol, err_msg=str(kelvin))
+
+
+def test_lamp_node_trees_that_vary_or_are_not_emission_are_said(blender, empty_scene, es, report):
+    """A texture in the lamp's tree is read once, at the lamp's centre (said); a tree whose
+    output is not an Emission shader is ignored (said)."""
+    bpy = blender
+    textured, nodes_, links, emission = _lamp_tree(bpy, empty_scene, location=(1.5, 0, 0))
+    checker, coords = nodes_.new("ShaderNodeTexChecker"), nodes_.new("ShaderNodeTexCoord")
+    checker.inputs["Color1"].default_value = (1, 0, 0, 1)
+    checker.inputs["Color2"].default_value = (0, 0, 1, 1)
+    checker.inputs["Scale"].default_value = 1.0
+    links.new(coords.outputs["Object"], checker.inputs["Vector"])
+    links.new(checker.outputs["Color"], emission.inputs["Color"])
+    # The lamp's centre is its own space's origin: Color2 there (the scene's x = 1.5 would give Color1).
+    assert lamp_of(bpy, es, textured, report).colour == approx((0, 0, 1))
+    assert report.lines == [f"light '{textured.name}': its node tree varies over the lamp (object); "
+                            f"its colour at the lamp's centre is used"]
+    report.lines.clear()
+    other, nodes_, links, emission = _lamp_tree(bpy, empty_scene)
+    output = next(n for n in nodes_ if n.type == "OUTPUT_LIGHT")
+    links.new(nodes_.new("ShaderNodeBsdfDiffuse").outputs[0], output.inputs["Surface"])
+    assert lamp_of(bpy, es, other, report).colour == approx((1, 1, 1))
+    assert report.lines == [f"light '{other.name}': its node tree is ignored (only an Emission shader into the "
+                            f"Light Output is read)"]
 
 
 # --------------------------------------------------------------------------------------
@@ -350,14 +427,27 @@ def test_world_textures_fall_back_and_are_reported(blender, empty_scene, es, rep
     sky = nodes.new("ShaderNodeTexSky")
     links.new(sky.outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    assert w.colour == approx(es.SKY_RADIANCE) and w.strength == approx(0.5)
-    assert len(report.lines) == 1 and "Sky Texture is approximated by a uniform sky of radiance (1.7, 2.9, 4.8)" \
-        in report.lines[0]
+    # The Sky Texture is baked from its model (render/sky.py; compared with Cycles in
+    # test_world_environment.py) x strength: the default sky (Multiple Scattering, sun 15
+    # degrees up) at the zenith and straight down; its sun, smaller than the bake's pixels,
+    # spread over them, said once.
+    assert w.environment is not None and w.environment[-1, 0] == approx((0.310, 0.633, 1.328), rel=0.01)
+    assert w.environment[0, 0] == approx((0.00715, 0.0111, 0.0201), rel=0.01)
+    assert len(report.lines) == 1 and "sun disc (0.55 degrees) is smaller than 2 pixels" in report.lines[0]
     background.inputs["Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    # An Environment Texture is baked (tests/blender/test_world_environment.py); without an
+    # image, Cycles renders its missing-image pink (measured: (1.02, 0.0004, 1.04) on 8x8
+    # pixels), a uniform world: the uniform path, x strength, nothing to report.
     links.new(nodes.new("ShaderNodeTexEnvironment").outputs["Color"], background.inputs["Color"])
     w = es.world_of(empty_scene, report)
-    assert w.colour == approx((0.3, 0.3, 0.3))
-    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Environment Texture' node; "
+    assert w.environment is None and w.radiance() == approx((0.5, 0.0, 0.5))
+    assert len(report.lines) == 1
+    # A node the engine does not evaluate falls back to the socket's default value, said once
+    # (the Environment Texture left unconnected: nothing is baked).
+    links.new(nodes.new("ShaderNodeTexNoise").outputs["Color"], background.inputs["Color"])
+    w = es.world_of(empty_scene, report)
+    assert w.environment is None and w.radiance() == approx((0.15, 0.15, 0.15))
+    assert report.lines[1] == ("world 'Outdoor': Color is driven by a 'Noise Texture' node; "
                                "using its default value (0.3, 0.3, 0.3)")
 
 

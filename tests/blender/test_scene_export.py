@@ -118,7 +118,7 @@ def direct_light_only(scene):
 
 def render(bpy, scene, path: Path, size=(W, H)) -> dict:
     """Renders to a multilayer EXR and reads it back: {layer: {pass: (H, W[, C])}}, top row
-    first, channels in RGBA / XYZ order."""
+    first, channels in RGBA / XYZ(W) order."""
     import OpenEXR
 
     r = scene.render
@@ -141,7 +141,7 @@ def render(bpy, scene, path: Path, size=(W, H)) -> dict:
     for layer, passes in grouped.items():
         out[layer] = {}
         for pass_name, letters in passes.items():
-            letters.sort(key="RGBAXYZ".index)
+            letters.sort(key="RGBXYZWUVA".index)  # W: the Vector pass's 4th; U, V, A: the UV pass
             arrays = [channels[f"{layer}.{pass_name}.{c}"] for c in letters]
             out[layer][pass_name] = arrays[0] if len(arrays) == 1 else np.stack(arrays, axis=-1)
     keep_png(path.stem, out)

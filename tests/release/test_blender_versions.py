@@ -3,7 +3,8 @@ the manifest claims (4.2.13 to 5.2), each as the `bpy` module in its own venv
 (build/matrix/bpy-<series>/) with the Python and numpy that Blender release ships, the way a
 farm node installs it; then clouds of every format whose reader needs a bundled wheel are
 imported, the sphere is rendered twice (headlight; sun and world), and the renders are read
-back and checked.
+back and checked; and the settings audit's RNA walk (tests/blender/settings_walk.py) is run in
+each, so that a setting one of them has and the audit did not classify fails here.
 
     cd tests && python -m pytest release/test_blender_versions.py --bpy 4.2 --bpy 5.2
 
@@ -12,6 +13,7 @@ that the manifest's range is the matrix's always runs.
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -48,6 +50,7 @@ MATRIX = {
     "5.2": ("3.13", "bpy==5.2.3", "numpy==2.3.4"),
 }
 INSTALLER = ROOT / "tests" / "release" / "install_and_render.py"
+SETTINGS_WALK = ROOT / "tests" / "blender" / "settings_walk.py"
 TIMEOUT = 900  # seconds for one bpy process: the first import of a bpy is slow on a busy machine
 
 
@@ -135,6 +138,41 @@ def test_installed_from_the_command_line_it_imports_every_format_and_renders(ser
     check_lit_sphere_render(tmp_path / "render_lit.exr")
     print(f"matrix: bpy {series}: installed, imported {len(clouds)} formats and rendered in "
           f"{time.perf_counter() - started:.1f} s")
+
+
+def settings_walk(python: Path, home: Path, *args: str) -> dict:
+    """settings_walk.py's JSON, run by `python` (a bpy; no extension, no pytest)."""
+    proc = subprocess.run([str(python), str(SETTINGS_WALK), *args], cwd=home, env=blender_user_env(home),
+                          capture_output=True, text=True, timeout=TIMEOUT)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    (line,) = [line for line in proc.stdout.splitlines() if line.startswith("SETTINGS_WALK ")]
+    return json.loads(line.partition(" ")[2])
+
+
+@pytest.fixture(scope="module")
+def audited_settings(tmp_path_factory) -> Path:
+    """The settings the settings audit walks in the bpy it runs on (this Python's): each
+    classified there (tests/blender/test_settings_audit.py)."""
+    home = tmp_path_factory.mktemp("audited")
+    path = home / "keys.json"
+    path.write_text(json.dumps(settings_walk(Path(sys.executable), home)))
+    return path
+
+
+def test_every_setting_of_this_blender_is_audited(series, bpy_python, audited_settings, tmp_path):
+    """The settings audit's RNA walk in this series' bpy: every render setting it has was
+    walked by the audit in the bpy the audit runs on (honoured, said or listed there), or is
+    listed for this version (settings_not_rendered.py) -- a setting a Blender adds or keeps
+    from before fails here instead of going unsaid. Entries for settings this series lacks
+    are printed, not failed (an entry may be for other versions only)."""
+    started = time.perf_counter()
+    found = settings_walk(bpy_python, tmp_path, "--against", str(audited_settings))
+    print(f"matrix: bpy {series}: {found['keys']} settings walked in {time.perf_counter() - started:.1f} s; "
+          f"entries for settings this version lacks: {found['stale']}")
+    assert found["version"][:2] == [int(v) for v in series.split(".")[:2]]
+    assert not found["unaudited"], (f"Blender {series} has settings the audit (bpy {found['audited_version']}) did "
+                                    f"not walk and tests/blender/settings_not_rendered.py does not list for it: "
+                                    f"{found['unaudited']}")
 
 
 def test_the_manifest_claims_exactly_the_tested_range():

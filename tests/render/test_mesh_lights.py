@@ -253,5 +253,9 @@ def test_adaptive_sampling_and_the_time_limit_converge_with_mesh_lights():
     timed = scene.render(cam, w, h, RenderSettings(**base, time_limit=0.5))
     for res in (adaptive, timed):
         assert abs(res.passes["Combined"][..., :3].mean() / fixed - 1) < 0.01
-        assert (res.passes["Combined"][..., 3] == 1).all()
+        # Every sample hits the floor: alpha is 1 up to the float32 rounding of a mean of ones
+        # summed over rounds (0.99999994 was seen under load, 1 - 2^-24); a lost or miscounted
+        # sample would take it off by at least 1 / 256.
+        alpha = res.passes["Combined"][..., 3]
+        assert np.abs(alpha - 1).max() <= 8 * np.finfo(np.float32).eps, alpha.min()
     assert adaptive.counters["samples_taken"] < samples * w * h / 2  # it did stop early

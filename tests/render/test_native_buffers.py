@@ -98,7 +98,8 @@ def _run_nodes():
     r = b.register(width=3)
     b.emit("GLOBAL", r, nodes.GLOBALS.index("POSITION"))
     code, data, outputs, images = b.program().native()
-    return (_core.run_nodes, [code, data, outputs, images, np.zeros((N, 36), np.float32),
+    width = 3 * len(nodes.GLOBAL_FIELDS) + 3  # render/nodes.py run: the vec3 fields, then three floats
+    return (_core.run_nodes, [code, data, outputs, images, np.zeros((N, width), np.float32),
                               np.empty((N, len(data)), np.float32)], {})
 
 

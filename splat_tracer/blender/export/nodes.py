@@ -53,6 +53,7 @@ class Compiler:
         self.say = say
         self.memo: dict = {}
         self.consts: dict = {}
+        self.bump_depth = 0  # Bump nodes being compiled within one another
 
     # ---------------------------------------------------------------- sockets and links
 
@@ -458,6 +459,33 @@ class Compiler:
         out = self.b.register(width=3)
         self.b.emit("NORMAL_MAP", out, self._in(node, "Color", 3, stack), self._in(node, "Strength", 1, stack),
                     nodes.NORMAL_MAP_SPACES.index(node.space))
+        return {node.outputs[0].identifier: out}
+
+    def _bump(self, node, stack):
+        """Blender's Bump node. Its height is compiled afresh into rows of its own (no node
+        shared with what came before), which the core runs again at two nearby points of
+        the surface to find the height's slope."""
+        strength, distance = self._in(node, "Strength", 1, stack), self._in(node, "Distance", 1, stack)
+        normal = self._vector_or(node, stack, "NORMAL", "Normal")
+        out = self.b.register(width=3)
+        height = node.inputs["Height"]
+        if self.source(height, stack) is None:  # a constant height has no slope
+            self.b.emit("COPY", out, normal, 3)
+            return {node.outputs[0].identifier: out}
+        if self.bump_depth >= nodes.MAX_BUMP_DEPTH:
+            raise Unsupported(node, f"more than {nodes.MAX_BUMP_DEPTH} Bump nodes within one another")
+        outer, first = self.memo, len(self.b.code)
+        self.memo, self.bump_depth = {}, self.bump_depth + 1
+        try:
+            h = self.input(height, 1, stack)
+        finally:
+            self.memo, self.bump_depth = outer, self.bump_depth - 1
+        self.b.emit("BUMP", out, h, strength, distance, normal, first, int(node.invert))
+        return {node.outputs[0].identifier: out}
+
+    def _blackbody(self, node, stack):
+        out = self.b.register(width=3)
+        self.b.emit("BLACKBODY", out, self._in(node, "Temperature", 1, stack))
         return {node.outputs[0].identifier: out}
 
     # Textures

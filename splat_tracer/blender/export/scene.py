@@ -25,7 +25,7 @@ from ...render import shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
-from ...util import resources
+from ...util import matrices, resources
 from ...util.columns import finite_rows, nonzero_rows, rows_within
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
@@ -205,6 +205,7 @@ class _Frame:
         self.closed = set()    # id() of the closed clouds' geometry
         self.materials = {}
         self.splats = self.triangles = 0
+        self.want_uv = False   # the UV pass is on (meshes always carry their UV map: node programs read it)
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -319,13 +320,15 @@ class _Frame:
 
 
 def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_factor: float = 1.0,
-                 threads: int = 0, report: shading.Report | None = None) -> ExportedScene:
-    """The depsgraph's view layer as a RenderScene in the local frame at `origin`."""
+                 threads: int = 0, report: shading.Report | None = None, motion=None) -> ExportedScene:
+    """The depsgraph's view layer as a RenderScene in the local frame at `origin`. motion:
+    the transforms over the shutter (export/motion.py's Motion), or None (no motion blur)."""
     report = report if report is not None else shading.Report()
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
     aovs = export_shading.view_layer_aovs(view_layer)
+    frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights = [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
     for inst in depsgraph.object_instances:
@@ -359,14 +362,29 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
+        if kind == "cloud" and frame.want_uv:
+            report.once(f"view layer '{view_layer.name}': the UV pass is 0 on point clouds (a scan has no UV map; "
+                        "meshes show theirs)")
         if kind == "cloud" and materials[0].emission_sides:
             report.once(f"point cloud '{obj.name}' emits light: its emission lights the scene only where rays "
                         "happen to meet it (noisier than Cycles); an emissive cloud is not sampled as a light, "
                         "an emissive mesh is")
+        steps = motion.of(inst) if motion is not None else None
+        if steps is not None:
+            steps = steps.copy()
+            steps[:, :3, 3] -= origin
+            problem = next((p for p in map(transform_problem, steps) if p is not None), None)
+            if problem is not None:
+                report.once(f"object '{obj.name}': within the shutter {problem}; rendered without motion blur")
+                steps = None
+            elif kind == "mesh" and any(any(c > 0 for c in m.emission) for m in materials):
+                report.once(f"object '{obj.name}' emits light and moves: its surface is blurred, but the light it "
+                            "casts comes from where it is at the frame's time")
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
-            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"]))
+            pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], motion=steps, name=obj.name,
+            asset=asset_name(obj), light_group=getattr(_source(obj), "lightgroup", "")))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
@@ -376,17 +394,28 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
                          frame.splats, frame.triangles, len(lights), emission, report)
 
 
+def asset_name(obj) -> str:
+    """Cryptomatte's asset of an object, as Cycles names it: its top-level parent's name (its
+    own without a parent). An instance is named by the object it instances (Cycles' object
+    name), whose parents are followed, not the instancer's."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.name
+
+
 def geometry_has_colours(obj) -> bool:
     data = obj.data
     return data is not None and hasattr(data, "attributes") and COLOUR in data.attributes
 
 
-def camera_frustum(data, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0) -> tuple:
+def camera_frustum(data, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0,
+                   shift_x: Optional[float] = None) -> tuple:
     """(left, right, bottom, top) of a Blender camera's image (render.camera.Camera's
     frustum) at width x height pixels of pixel aspect aspect_x : aspect_y, in double, as
     Blender's view plane (BKE_camera_params_compute_viewplane): the sensor fit chooses the
     side the sensor (and the orthographic scale) spans, the shift moves the image by that
-    side's length, and the other side follows the image's aspect."""
+    side's length, and the other side follows the image's aspect. shift_x: a stereo eye's
+    horizontal shift (Blender's, with the off-axis eye's shift added) instead of the camera's."""
     size_x, size_y = width * aspect_x, height * aspect_y
     fit = data.sensor_fit if data.sensor_fit != "AUTO" else ("HORIZONTAL" if size_x >= size_y else "VERTICAL")
     # The sensor side is chosen by the camera's own setting (AUTO uses its width), even when
@@ -397,28 +426,49 @@ def camera_frustum(data, width: int, height: int, aspect_x: float = 1.0, aspect_
     side = width if fit == "HORIZONTAL" else y_scale * height  # the fitted side, in pixel widths
     pixel = span / side
     half_w, half_h = 0.5 * width * pixel, 0.5 * y_scale * height * pixel
-    dx, dy = data.shift_x * span, data.shift_y * span
+    dx, dy = (data.shift_x if shift_x is None else shift_x) * span, data.shift_y * span
     return (dx - half_w, dx + half_w, dy - half_h, dy + half_h)
 
 
-def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin) -> Camera:
-    """The scene camera from its parameters, in double (not from calc_matrix_camera's
-    float32 projection, which loses clipping ranges of about 1e8 and more)."""
+@dataclass(frozen=True)
+class View:
+    """One view of a stereo or multi-view render, as Blender's RenderEngine gives it after
+    active_view_set(name): the view's camera object (Multi-View: the camera with the view's
+    suffix), its model matrix (camera_model_matrix: Stereo 3D moves and, for Toe-in, turns
+    the camera by the eye's half of the interocular distance) and its horizontal lens shift
+    (camera_shift_x: Off-Axis adds the eye's shift towards the convergence plane)."""
+    name: str
+    camera: object
+    matrix: object  # mathutils.Matrix, 4x4
+    shift_x: float
+
+
+def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origin,
+                  view: Optional[View] = None, motion=None) -> Camera:
+    """The scene camera (or a stereo/multi-view render's `view`) from its parameters, in
+    double (not from calc_matrix_camera's float32 projection, which loses clipping ranges of
+    about 1e8 and more). motion: the transforms over the shutter (export/motion.py's
+    Motion), or None; a view's camera moves as its camera object does, the eye keeping its
+    place relative to it (camera_model_matrix's offset at the frame's time)."""
     scene = depsgraph.scene
-    if scene.camera is None:
+    if view is not None:
+        cam = view.camera.evaluated_get(depsgraph)
+    elif scene.camera is None:
         raise RuntimeError("the scene has no active camera")
-    cam = scene.camera.evaluated_get(depsgraph)
+    else:
+        cam = scene.camera.evaluated_get(depsgraph)
     if cam.type != "CAMERA":
         raise RuntimeError(f"the active camera '{cam.name}' is not a camera object")
     data = cam.data
     r = scene.render
     panorama = None
     if data.type == "PANO":
-        frustum, panorama = camera_panorama(cam, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
+        frustum, panorama = camera_panorama(cam, width, height, r.pixel_aspect_x, r.pixel_aspect_y,
+                                            None if view is None else view.shift_x)
     if not data.clip_start < data.clip_end:
         raise RuntimeError(f"camera '{cam.name}': Clip Start ({data.clip_start:g}) must be less than Clip End "
                            f"({data.clip_end:g})")
-    rigid = cam.matrix_world.normalized()
+    rigid = (cam.matrix_world if view is None else view.matrix).normalized()
     # A camera scaled to zero on an axis (itself, by a parent or by an animation) has no
     # view direction or no image along it: normalized() leaves that axis zero. (mathutils'
     # determinant, not numpy's: see util/matrices.py on BLAS threads.)
@@ -427,12 +477,22 @@ def export_camera(depsgraph: bpy.types.Depsgraph, width: int, height: int, origi
         raise RuntimeError(f"camera '{cam.name}' is scaled to zero (world scale {scale}): it has no view "
                            "direction or image there; give it a non-zero scale on every axis")
     if panorama is None:
-        frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y)
+        frustum = camera_frustum(data, width, height, r.pixel_aspect_x, r.pixel_aspect_y,
+                                 None if view is None else view.shift_x)
+    steps = motion.camera_of(cam.original) if motion is not None else None
+    if steps is not None and view is not None:
+        # The eye's offset from its camera object (Stereo 3D's interocular shift and Toe-in
+        # turn) is fixed in the camera's frame: each step is the camera's there, times it.
+        # In double, without BLAS (util/matrices.py; einsum unoptimised is numpy's own loop).
+        offset = np.einsum("ij,jk->ik", matrices.inverse(np.array(cam.matrix_world.normalized(), np.float64)),
+                           np.array(rigid, np.float64))
+        steps = np.einsum("sij,jk->sik", steps, offset)
     return Camera.from_frustum(np.array(rigid, dtype=np.float64), frustum, (data.clip_start, data.clip_end),
-                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama)
+                               data.type == "ORTHO", origin, camera_lens(cam, depsgraph), panorama, steps)
 
 
-def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0) -> tuple:
+def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_y: float = 1.0,
+                    shift_x: Optional[float] = None) -> tuple:
     """A panoramic camera's (u, v) window and render.camera.Panorama, read as Cycles'
     blender/camera.cpp reads them: the window is the unit square moved by the lens shift,
     the equisolid fisheye's sensor is fitted to the image (Panorama.equisolid_sensor). The
@@ -454,7 +514,8 @@ def camera_panorama(cam, width: int, height: int, aspect_x: float = 1.0, aspect_
         raise RuntimeError(f"camera '{cam.name}': the panorama type '{name}' is not rendered by Splat Tracer; use an "
                            "equirectangular, fisheye (equidistant or equisolid) or mirror ball panorama, or a "
                            "perspective or orthographic camera")
-    return (data.shift_x, 1.0 + data.shift_x, data.shift_y, 1.0 + data.shift_y), panorama
+    sx = data.shift_x if shift_x is None else shift_x
+    return (sx, 1.0 + sx, data.shift_y, 1.0 + data.shift_y), panorama
 
 
 def camera_lens(cam, depsgraph: bpy.types.Depsgraph) -> Optional[Lens]:

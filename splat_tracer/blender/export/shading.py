@@ -40,6 +40,7 @@ import numpy as np
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
 from . import nodes
+from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
 _TARGET = "CYCLES"
@@ -52,10 +53,6 @@ _BLACK = dict(base_colour=(0.0, 0.0, 0.0), specular_level=0.0)
 _IS_BSDF = "_bsdf"
 # Smallest IOR passed on: the contract needs a positive one (IOR < 1 is valid: a bubble).
 _MIN_IOR = 1e-3
-# The default Sky Texture (Multiple Scattering, sun 15 degrees up) as one uniform radiance:
-# the one giving the same irradiance on an upward-facing surface, measured by rendering the
-# sky with Cycles 5.0.1 (an equirectangular 256x128 image; without the sun disc).
-SKY_RADIANCE = (1.7, 2.9, 4.8)
 # Principled BSDF lobes the engine does not render, by the socket that turns each on.
 _PRINCIPLED_EXTRAS = {"Subsurface Weight": "subsurface", "Coat Weight": "coat", "Sheen Weight": "sheen",
                       "Anisotropic": "anisotropy", "Thin Film Thickness": "thin film"}
@@ -177,10 +174,10 @@ class _Sockets:
 # --------------------------------------------------------------------------------------
 # Materials. Each shader reader returns a dict of shading.Material fields (unset: the
 # contract's defaults), so that Mix and Add can blend them before the Material is made.
-# Emission Sampling is the material's setting, not a shader's: material_of sets it.
+# Emission Sampling and the name are the material's, not a shader's: material_of sets them.
 
 _DEFAULTS = {f.name: f.default for f in shading.Material.__dataclass_fields__.values()
-             if f.name not in ("emission_sampling", "program")}
+             if f.name not in ("emission_sampling", "program", "name")}
 
 
 def _principled(node, sockets: _Sockets) -> dict:
@@ -325,7 +322,8 @@ def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -
 
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
-    black, as in Cycles; Volume and Displacement are ignored. Every approximation is said
+    black, as in Cycles; Volume and Displacement are ignored (a material with only a Volume
+    is fully transparent: its volume is not rendered). Every approximation is said
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
@@ -337,7 +335,8 @@ def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -
         report.once(f"material '{bl_material.name}': emission driven by nodes is not sampled as a light "
                     f"(found by rays only)")
         sampling = "NONE"
-    return dataclasses.replace(material, emission_sampling=sampling, pass_index=bl_material.pass_index)
+    return dataclasses.replace(material, emission_sampling=sampling, pass_index=bl_material.pass_index,
+                               name=bl_material.name)
 
 
 def _emission_sampling(bl_material) -> str:
@@ -356,10 +355,17 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict) -> shadin
     if output is None:
         sockets.say(" has no Material Output; rendered black, as Cycles does")
         return _clamped(_BLACK, sockets)
-    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs if s.name != "Surface"])
+    source = _upstream(output.inputs["Surface"])
+    volume_only = source is None and "Volume" in output.inputs and _upstream(output.inputs["Volume"]) is not None
+    ignored = sockets.linked_inputs(output, [s.name for s in output.inputs
+                                            if s.name != "Surface" and not (volume_only and s.name == "Volume")])
     if ignored:
         sockets.say(f": {', '.join(ignored)} {'is' if len(ignored) == 1 else 'are'} ignored")
-    source = _upstream(output.inputs["Surface"])
+    if volume_only:
+        # Cycles renders the volume inside a surface that is not there. Volumes are not
+        # rendered here: the surface stays absent (fully transparent), never a black box.
+        sockets.say(": only a Volume shader is connected; the volume is not rendered, the object is transparent")
+        return _clamped(dict(_BLACK, alpha=0.0), sockets)
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets))
@@ -429,15 +435,62 @@ def _has_custom_nodes(light) -> bool:
             or emission.inputs["Strength"].default_value != 1.0)
 
 
+def _lamp_emission(light, position, direction, say):
+    """The colour x strength of a lamp's node tree, as Cycles multiplies it into the lamp's
+    colour and power: the Emission shader feeding the Light Output, its Color and Strength
+    evaluated once by the node evaluator (constant nodes, Blackbody, RGB, Value, Math, ...
+    fold to one colour). A texture or geometry input (varying over the lamp) is read at the
+    lamp's centre, said once. None where the tree is the default one or is not read (said)."""
+    if not _has_custom_nodes(light):
+        return None
+    output = _output_node(light.node_tree, "OUTPUT_LIGHT")
+    source = _upstream(output.inputs["Surface"]) if output is not None else None
+    if source is None or source[0].type != "EMISSION":
+        say("its node tree is ignored (only an Emission shader into the Light Output is read)")
+        return None
+    emission = source[0]
+    colour = np.array(emission.inputs["Color"].default_value[:3], np.float64)
+    colour = colour * float(emission.inputs["Strength"].default_value)
+    try:
+        program, _ = nodes.compile_shader(emission, lambda text: say("node tree" + text))
+    except nodes.ProgramTooLarge as e:
+        say(f"its node tree is too large to evaluate ({e}); the Emission's unlinked values are used")
+        program = None
+    if program is None:
+        return colour
+    from ...render import nodes as programs
+
+    reads = {programs.GLOBALS[row[2]] for row in np.array(program.code).reshape(-1, programs.WIDTH)
+             if row[0] == programs.OPS.index("GLOBAL")}
+    if reads:
+        say(f"its node tree varies over the lamp ({', '.join(sorted(g.lower() for g in reads))}); "
+            f"its colour at the lamp's centre is used")
+    regs = programs.run(program, P=position, N=direction, Ng=direction, I=direction, object_normal=(0, 0, 1),
+                        generated=(0.5, 0.5, 0.5), surface_normal=direction)
+    out = program.outputs[list(programs.OUTPUTS).index("emission")]
+    value = np.asarray(regs[0, out:out + 3], np.float64)
+    return np.where(np.isfinite(value), np.maximum(value, 0.0), 0.0)
+
+
+# Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
+_LIGHT_MAX_BOUNCES = 1024
+
+
 def _report_lamp_extras(obj, light, say) -> None:
     """One line each for what the engine ignores on a lamp."""
-    if _has_custom_nodes(light):
-        say("light node trees are ignored")
     linking = getattr(obj, "light_linking", None)
     if linking is not None and (linking.receiver_collection is not None or linking.blocker_collection is not None):
         say("light linking is ignored")
     if light.type != "SUN" and not getattr(light, "normalize", True):
         say("'Normalize' off is ignored (rendered as if on)")
+    factors = [label for prop, label in (("diffuse_factor", "Diffuse"), ("specular_factor", "Glossy"),
+                                         ("transmission_factor", "Transmission"))
+               if getattr(light, prop, 1.0) != 1.0]
+    if factors:
+        say(f"its {'/'.join(factors)} influence is ignored (rendered as 1)")
+    bounces = getattr(getattr(light, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        say(f"its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
 
 
 def _area_fields(light, matrix: np.ndarray, say) -> dict:
@@ -460,7 +513,7 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
 
     `matrix_world`: the lamp's 4x4 world matrix in the scene's local frame (float64).
     Power: energy x 2^exposure (W; W/m^2 for a sun), colour x the blackbody colour when
-    'Temperature' is on, as in Cycles. Position: the matrix translation; direction: its -Z
+    'Temperature' is on x its node tree's emission (_lamp_emission), as in Cycles. Position: the matrix translation; direction: its -Z
     column; u_axis: its X column; area sizes scale with the X and Y columns' lengths.
     Portals emit nothing and give None."""
     if obj_eval.type != "LIGHT":
@@ -475,6 +528,9 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
     colour = np.array(light.color[:3], np.float64)
     if getattr(light, "use_temperature", False):
         colour = colour * np.array(light.temperature_color[:3], np.float64)
+    emission = _lamp_emission(light, m[:3, 3], _unit(-m[:3, 2]), say)
+    if emission is not None:
+        colour = colour * emission
     fields = dict(type=light.type, colour=tuple(float(c) for c in colour),
                   power=max(float(light.energy) * 2.0 ** getattr(light, "exposure", 0.0), 0.0),
                   position=tuple(float(c) for c in m[:3, 3]), direction=_unit(-m[:3, 2]), u_axis=_unit(m[:3, 0]),
@@ -491,7 +547,8 @@ def light_of(obj_eval, matrix_world, report: shading.Report) -> shading.Light | 
         fields.update(_area_fields(light, m, say))
     fields.update(visible_camera=bool(getattr(obj_eval, "visible_camera", True)),
                   visible_glossy=bool(getattr(obj_eval, "visible_glossy", True)),
-                  visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)))
+                  visible_transmission=bool(getattr(obj_eval, "visible_transmission", True)),
+                  light_group=getattr(obj_eval, "lightgroup", ""))
     if not _within_limits(light.type, fields, say):
         return None
     return shading.Light(**fields)
@@ -534,13 +591,7 @@ def _within_limits(kind: str, fields: dict, say) -> bool:
 
 def _background(node, sockets: _Sockets) -> tuple:
     """(colour, strength) of a Background (or Emission) node of the world."""
-    strength = sockets.value(node, "Strength")
-    source = _upstream(node.inputs["Color"])
-    if source is not None and source[0].type == "TEX_SKY":
-        sockets.say(f": the Sky Texture is approximated by a uniform sky of radiance {_fmt(SKY_RADIANCE)} "
-                    f"x strength (the default sky's dome, as an upward-facing surface sees it)")
-        return SKY_RADIANCE, strength
-    return sockets.colour(node, "Color"), strength
+    return sockets.colour(node, "Color"), sockets.value(node, "Strength")
 
 
 def world_visibility(world, report: shading.Report) -> frozenset:
@@ -565,9 +616,17 @@ def world_of(scene, report: shading.Report) -> shading.World:
     if world is None:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, transparent=transparent)
     sockets = _Sockets("world", world.name, report)
+    bounces = getattr(getattr(world, "cycles", None), "max_bounces", _LIGHT_MAX_BOUNCES)
+    if bounces < _LIGHT_MAX_BOUNCES:
+        report.once(f"world '{world.name}': its Max Bounces ({bounces}) is ignored: the scene's bounce limits apply")
+    if not getattr(getattr(world, "cycles", None), "use_shadows", True):  # Blender 5.2's World > Shadows
+        report.once(f"world '{world.name}': Shadows off is not honoured: the world's light casts shadows")
     mist = world.mist_settings  # read by the Mist pass only
     film = dict(transparent=transparent, visibility=world_visibility(world, report), mist_start=float(mist.start),
-                mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff)
+                mist_depth=max(float(mist.depth), 0.0), mist_falloff=mist.falloff,
+                # Read by the AO pass and the light groups' passes only.
+                ao_distance=max(float(world.light_settings.distance), 0.0),
+                light_group=getattr(world, "lightgroup", ""))
     viewport = shading.World(colour=tuple(world.color[:3]), strength=1.0, **film)
     tree = _node_tree(world)
     if tree is None:
@@ -579,6 +638,16 @@ def world_of(scene, report: shading.Report) -> shading.World:
         return shading.World(colour=(0.0, 0.0, 0.0), strength=1.0, **film)
     if sockets.linked_inputs(output, ["Volume"]):
         sockets.say(": Volume is ignored")
+    if source[0].type in ("MIX_SHADER", "ADD_SHADER") or export_world.varying_nodes(output):
+        # A world that varies with the direction or the ray: baked into an image (world.py).
+        # A plain Background keeps the uniform path below, as before.
+        try:
+            fields = export_world.bake(tree, output, sockets, _upstream)
+        except Exception as error:  # noqa: BLE001 -- skip, don't refuse: the frame renders
+            sockets.say(f": its node tree could not be baked ({type(error).__name__}: {error}); "
+                        f"using the world's viewport colour")
+            return viewport
+        return shading.World(strength=1.0, **fields, **film)
     if source[0].type not in ("BACKGROUND", "EMISSION"):
         sockets.say(f": the '{source[0].bl_label}' shader is not supported; using the world's viewport colour")
         return viewport

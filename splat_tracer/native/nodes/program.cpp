@@ -62,6 +62,8 @@ const Layout &layout(Op op) {
         /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
         /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
         /* Brick */ {{kR3, kR1, kR3, kRW, kRW, kEnum, kEnum}, {0, 0, 0, 9, 8, 100, 100}},
+        /* Blackbody */ {{kR3, kR1}, {}},
+        /* Bump (first row checked apart) */ {{kR3, kR1, kR1, kR1, kR3, kNone, kEnum}, {0, 0, 0, 0, 0, 0, 2}},
     };
     return table[int(op)];
 }
@@ -580,7 +582,59 @@ void brick(Vec3 p, const float *q, int offset_frequency, int squash_frequency, f
     }
 }
 
+// The CIE 1931 2-degree observer's colour-matching functions at a wavelength in nm, by the
+// multi-lobe Gaussian fit of Wyman, Sloan and Shirley, "Simple Analytic Approximations to the
+// CIE XYZ Color Matching Functions" (JCGT 2013): a blackbody's colour without a table of the
+// observer (see docs/nodes.md for how close this comes to Blender's own blackbody).
+Vec3 cie_xyz(float nm) {
+    auto g = [nm](float mu, float below, float above) {
+        const float t = (nm - mu) / (nm < mu ? below : above);
+        return std::exp(-0.5f * t * t);
+    };
+    return {1.056f * g(599.8f, 37.9f, 31.0f) + 0.362f * g(442.0f, 16.0f, 26.7f) - 0.065f * g(501.1f, 20.4f, 26.2f),
+            0.821f * g(568.8f, 46.9f, 40.5f) + 0.286f * g(530.9f, 16.3f, 31.1f),
+            1.217f * g(437.0f, 11.8f, 36.0f) + 0.681f * g(459.0f, 26.0f, 13.8f)};
+}
+
+// Planck's law integrated against the observer, in linear Rec. 709 (its XYZ matrix, D65
+// white) scaled to luminance 1; before the clamp of negative channels.
+Vec3 planck_rec709(double kelvin) {
+    constexpr double kC2 = 1.438776877e-2;  // second radiation constant h c / k (m K)
+    double xyz[3] = {0, 0, 0};
+    for (int nm = 360; nm <= 830; ++nm) {  // the observer's range, 1 nm steps
+        const double l = nm * 1e-9;
+        const double radiance = 1.0 / (l * l * l * l * l * (std::exp(kC2 / (l * kelvin)) - 1.0));
+        const Vec3 w = cie_xyz(float(nm));
+        xyz[0] += radiance * w.x, xyz[1] += radiance * w.y, xyz[2] += radiance * w.z;
+    }
+    const double x = xyz[0] / xyz[1], z = xyz[2] / xyz[1];
+    return {float(3.2404542 * x - 1.5371385 - 0.4985314 * z), float(-0.9692660 * x + 1.8760108 + 0.0415560 * z),
+            float(0.0556434 * x - 0.2040259 + 1.0572252 * z)};
+}
+
 }  // namespace
+
+Vec3 blackbody_rec709(float kelvin) {
+    // Cycles' range: below 800 K and above 12000 K its colour holds.
+    constexpr float kLow = 800.f, kHigh = 12000.f;
+    constexpr int kRows = 512;  // over 1/T, where the colour varies smoothly: interpolation error < 1e-4
+    struct Table {
+        Vec3 rows[kRows];
+        Table() {
+            for (int i = 0; i < kRows; ++i) {
+                const double inv = 1.0 / kHigh + (1.0 / kLow - 1.0 / kHigh) * i / (kRows - 1);
+                rows[i] = planck_rec709(1.0 / inv);
+            }
+        }
+    };
+    static const Table table;  // built once, thread-safe (C++11 static initialisation)
+    if (!(kelvin == kelvin)) kelvin = kLow;  // NaN
+    kelvin = std::fmin(std::fmax(kelvin, kLow), kHigh);
+    const float f = (1.f / kelvin - 1.f / kHigh) / (1.f / kLow - 1.f / kHigh) * float(kRows - 1);
+    const int i = std::min(std::max(int(f), 0), kRows - 2);
+    const Vec3 c = lerp(table.rows[i], table.rows[i + 1], std::fmin(std::fmax(f - float(i), 0.f), 1.f));
+    return vmax(c, Vec3());
+}
 
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
 
@@ -663,6 +717,7 @@ void NodeProgram::validate() {
     const int64_t n = int64_t(data.size());
     if (code.size() % kNodeWidth) throw InputError(name + ": node code is not whole instructions");
     if (n > kMaxNodeRegisters) throw InputError(name + ": node program has too many registers");
+    std::vector<int> bump_depth(code.size() / kNodeWidth, 0);
     for (size_t row = 0; row < code.size() / kNodeWidth; ++row) {
         const int32_t *c = &code[row * kNodeWidth];
         auto fail = [&](const char *what) {
@@ -685,6 +740,21 @@ void NodeProgram::validate() {
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
         if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::Bump) {
+            // The height's rows come before the Bump's, and any Bump among them keeps its own
+            // rows inside them: ranges nest, at most kMaxBumpDepth deep (each level costs 3x).
+            if (c[6] < 0 || size_t(c[6]) > row) fail("bump rows out of range");
+            int depth = 1;
+            for (size_t inner = size_t(c[6]); inner < row; ++inner) {
+                const int32_t *d = &code[inner * kNodeWidth];
+                if (d[0] != int32_t(Op::Bump)) continue;
+                if (d[6] < c[6]) fail("bump rows overlap");
+                depth = std::max(depth, bump_depth[inner] + 1);
+            }
+            if (depth > kMaxBumpDepth) fail("bump nodes nested too deep");
+            bump_depth[row] = depth;
+            uses_bump = true;
+        }
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
             fail("image out of range");
@@ -720,8 +790,11 @@ void table_lookup(const float *t, int size, float f, bool interpolate, float *rg
 
 void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
     std::memcpy(r, data.data(), data.size() * sizeof(float));
-    const size_t rows = code.size() / kNodeWidth;
-    for (size_t row = 0; row < rows; ++row) {
+    run_rows(sg, r, 0, code.size() / kNodeWidth);
+}
+
+void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size_t end) const {
+    for (size_t row = begin; row < end; ++row) {
         const int32_t *c = &code[row * kNodeWidth];
         switch (Op(c[0])) {
             case Op::Global: {
@@ -964,6 +1037,32 @@ void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
                 if (m != 1.f) colour = colour * (1.f - tint) + load3(r, c[4] + 3) * tint;
                 store3(r, c[1], colour * (1.f - m) + load3(r, c[4] + 6) * m);
                 r[c[2]] = m;
+                break;
+            }
+            case Op::Blackbody: store3(r, c[1], blackbody_rec709(r[c[2]])); break;
+            case Op::Bump: {
+                // Blender's Bump node: the height here and at two nearby points of the surface
+                // give its gradient along the surface (Mikkelsen, "Bump Mapping Unparameterized
+                // Surfaces on the GPU", 2010, as Cycles computes it from its ray differentials).
+                const float hc = r[c[2]];
+                float h[2] = {hc, hc};
+                for (int k = 0; k < 2; ++k)
+                    if (size_t(c[6]) < row) {
+                        run_rows(sg.offset(k), r, size_t(c[6]), row);
+                        h[k] = r[c[2]];
+                    }
+                r[c[2]] = hc;
+                const Vec3 n_in = load3(r, c[5]), dx = sg.bump[0].P, dy = sg.bump[1].P;
+                const Vec3 rx = cross(dy, n_in), ry = cross(n_in, dx);
+                const float det = dot(dx, rx);
+                const Vec3 gradient = rx * (h[0] - hc) + ry * (h[1] - hc);
+                const float distance = c[7] ? -r[c[4]] : r[c[4]], strength = std::fmax(r[c[3]], 0.f);
+                Vec3 n = n_in * std::fabs(det) - gradient * (det < 0.f ? -distance : distance);
+                const float len2 = dot(n, n);
+                if (len2 > 0.f && std::isfinite(len2)) n = normalize(normalize(n) * strength + n_in * (1.f - strength));
+                else n = n_in;
+                if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
+                store3(r, c[1], n);
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -45,6 +45,19 @@ struct ShaderGlobals {
     Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    // The Bump node's two nearby shading points: for each, how far every position-dependent
+    // global moves from this point (all zero when the program has no Bump node).
+    struct Offset {
+        Vec3 P, object, generated, uv, camera;
+    };
+    Offset bump[2];
+    ShaderGlobals offset(int k) const {
+        ShaderGlobals s = *this;
+        const Offset &d = bump[k];
+        s.P = P + d.P, s.object = object + d.object, s.generated = generated + d.generated, s.uv = uv + d.uv;
+        s.camera = camera + d.camera;
+        return s;
+    }
     Vec3 object_to_world_normal(Vec3 n) const {
         const float *m = normal_matrix;
         return {m[0] * n.x + m[1] * n.y + m[2] * n.z, m[3] * n.x + m[4] * n.y + m[5] * n.z,
@@ -100,6 +113,10 @@ enum class Op : int32_t {
     Brick,          // out_colour, out_fac, vector, colours (9: colour 1, colour 2, mortar), params (8: scale,
                     // mortar size, mortar smooth, bias, brick width, row height, offset, squash),
                     // offset frequency, squash frequency
+    Blackbody,      // out, temperature (K)
+    Bump,           // out, height, strength, distance, normal, first row of the height's instructions, invert
+                    // (the rows from `first` up to this one compute the height: run again at the two
+                    // offset points of ShaderGlobals::bump)
     Count
 };
 
@@ -119,6 +136,7 @@ struct NodeProgram {
     bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
     bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
     bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
+    bool uses_bump = false;     // a Bump node needs ShaderGlobals::bump (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),
@@ -127,6 +145,9 @@ struct NodeProgram {
     // Runs the program at one shading point; `r` holds data.size() floats and receives the
     // registers (the outputs are read from there).
     void run(const ShaderGlobals &sg, float *r) const;
+
+  private:
+    void run_rows(const ShaderGlobals &sg, float *r, size_t begin, size_t end) const;
 };
 
 // Blender's colour helpers, shared by the nodes and their tests.
@@ -136,5 +157,10 @@ Vec3 hsv_to_rgb(Vec3 hsv);
 float perlin_signed(Vec3 p);
 float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize);
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
+// The Blackbody node's colour of a temperature in K: linear Rec. 709 of luminance 1 (as Cycles
+// normalises it), negative channels clamped to 0, the temperature held within 800-12000 K.
+Vec3 blackbody_rec709(float kelvin);
+
+constexpr int kMaxBumpDepth = 3;  // Bump nodes inside a Bump's height: each level triples its cost
 
 }  // namespace splat

@@ -21,6 +21,7 @@
 #include "base/simd.h"
 #include "bvh/packet.h"
 #include "python/py_util.h"
+#include "shade/environment.h"
 #include "shade/render.h"
 #include "splats/splat_scene.h"
 
@@ -469,7 +470,62 @@ PyObject *camera_rays(PyObject *, PyObject *args, PyObject *kwargs) {
     Py_RETURN_NONE;
 }
 
+// Test seam of the environment light (shade/environment.h): the map of `image` (h, w, 3
+// float32) draws a direction from each row of `uniforms` (n, 2) into out_directions (n, 3)
+// with its density in out_pdf (n); for each row of `directions` (m, 3, unit), the density
+// sample() has there into out_pdf_at (m) and the bilinear radiance into out_radiance (m, 3).
+PyObject *environment_map(PyObject *, PyObject *args) {
+    PyObject *oimage, *ou, *od, *oout_d, *oout_pdf, *oout_pdf_at, *oout_rad;
+    if (!PyArg_ParseTuple(args, "OOOOOOO", &oimage, &ou, &od, &oout_d, &oout_pdf, &oout_pdf_at, &oout_rad))
+        return nullptr;
+    View image, u, d, out_d, out_pdf, out_pdf_at, out_rad;
+    const Py_ssize_t s_image[3] = {-1, -1, 3}, s_u[2] = {-1, 2}, s_d[2] = {-1, 3};
+    if (!get_array(oimage, "image", 'f', 3, s_image, false, image) || !get_array(ou, "uniforms", 'f', 2, s_u, false, u) ||
+        !get_array(od, "directions", 'f', 2, s_d, false, d))
+        return nullptr;
+    const Py_ssize_t n = u.buf.shape[0], m = d.buf.shape[0], h = image.buf.shape[0], w = image.buf.shape[1];
+    const Py_ssize_t s_nd[2] = {n, 3}, s_n[1] = {n}, s_m[1] = {m}, s_md[2] = {m, 3};
+    if (!get_array(oout_d, "out_directions", 'f', 2, s_nd, true, out_d) ||
+        !get_array(oout_pdf, "out_pdf", 'f', 1, s_n, true, out_pdf) ||
+        !get_array(oout_pdf_at, "out_pdf_at", 'f', 1, s_m, true, out_pdf_at) ||
+        !get_array(oout_rad, "out_radiance", 'f', 2, s_md, true, out_rad))
+        return nullptr;
+    if (w < 2 || h < 2 || w > 65536 || h > 32768)
+        return PyErr_Format(PyExc_ValueError, "image must be 2..65536 wide and 2..32768 high");
+    const float *px = image.data<float>();
+    for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+        if (!(std::isfinite(px[k]) && px[k] >= 0.f)) return PyErr_Format(PyExc_ValueError, "image must be finite, >= 0");
+    const float *pu = u.data<float>();
+    for (Py_ssize_t k = 0; k < n * 2; ++k)
+        if (!(pu[k] >= 0.f && pu[k] < 1.f)) return PyErr_Format(PyExc_ValueError, "uniforms must be in [0, 1)");
+    std::string message;
+    if (PyObject *type = run_native(
+            [&] {
+                const EnvironmentMap map(px, int(w), int(h));
+                float *o = out_d.data<float>(), *p = out_pdf.data<float>();
+                for (Py_ssize_t k = 0; k < n; ++k) {
+                    const EnvironmentSample s = map.sample(pu[2 * k], pu[2 * k + 1]);
+                    o[3 * k] = s.wi.x, o[3 * k + 1] = s.wi.y, o[3 * k + 2] = s.wi.z;
+                    p[k] = s.valid ? s.pdf : 0.f;
+                }
+                const float *dd = d.data<float>();
+                float *pa = out_pdf_at.data<float>(), *r = out_rad.data<float>();
+                for (Py_ssize_t k = 0; k < m; ++k) {
+                    const Vec3 dir(dd[3 * k], dd[3 * k + 1], dd[3 * k + 2]);
+                    pa[k] = map.pdf(dir);
+                    const Vec3 c = map.lookup(dir);
+                    r[3 * k] = c.x, r[3 * k + 1] = c.y, r[3 * k + 2] = c.z;
+                }
+            },
+            message))
+        return PyErr_SetString(type, message.c_str()), nullptr;
+    Py_RETURN_NONE;
+}
+
 PyMethodDef module_methods[] = {
+    {"_environment_map", environment_map, METH_VARARGS,
+     "Test seam: _environment_map(image, uniforms, directions, out_directions, out_pdf, out_pdf_at, out_radiance): "
+     "the environment light's sampling and lookup (shade/environment.h)."},
     {"camera_rays", reinterpret_cast<PyCFunction>(reinterpret_cast<void (*)()>(camera_rays)),
      METH_VARARGS | METH_KEYWORDS,
      "camera_rays(local_from_camera, frustum, orthographic, width, height, out_origins, out_directions): the "

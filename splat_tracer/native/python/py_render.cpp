@@ -6,7 +6,9 @@
 #include <chrono>
 #include <cmath>
 #include <iterator>
+#include <cstring>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "python/py_util.h"
@@ -47,8 +49,10 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
                                     threads, uv.held ? uv.data<float>() : nullptr);
-        }))
+        })) {
+        delete mesh;  // null: the constructor refused an input
         return nullptr;
+    }
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
     if (!self) {
@@ -217,7 +221,7 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
     const bool ok = parse_program(triple, "program", prog, images);
     Py_DECREF(triple);
     if (!ok) return nullptr;
-    constexpr int kGlobalFloats = 36;
+    constexpr int kGlobalFloats = 42;
     View g, regs, code, data, outs;
     Py_ssize_t sg[2] = {-1, kGlobalFloats}, sc[2] = {-1, kNodeWidth}, sd[1] = {-1}, so[1] = {int(Output::Count)};
     if (!get_array(oglobals, "globals", 'f', 2, sg, false, g)) return nullptr;
@@ -233,29 +237,63 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
         Vec3 *vecs[11] = {&s.P,  &s.N,  &s.Ng, &s.I, &s.object, &s.object_normal, &s.generated, &s.uv, &s.point_colour,
                           &s.tangent, &s.surface_normal};
         for (int k = 0; k < 11; ++k) *vecs[k] = Vec3(x[3 * k], x[3 * k + 1], x[3 * k + 2]);
-        s.point_alpha = x[33], s.backfacing = x[34], s.tangent_sign = x[35];
+        // The Bump node's offsets: the test's shading point is its own object space, texture
+        // space and UV map, so every position-dependent global moves alike.
+        for (int k = 0; k < 2; ++k) {
+            const Vec3 d(x[33 + 3 * k], x[34 + 3 * k], x[35 + 3 * k]);
+            s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d};
+        }
+        s.point_alpha = x[39], s.backfacing = x[40], s.tangent_sign = x[41];
         prog.run(s, r);
         std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
     }
     Py_RETURN_NONE;
 }
 
+// The most motion steps a transform may have: Cycles' 2^(7-1) x 2 + 1 for its largest
+// Motion Steps (7), with room to spare.
+constexpr Py_ssize_t kMaxMotionSteps = 1025;
+
+// Motion steps (motion.h) from `count` rows of 12 doubles (row-major 3x4 transforms at
+// evenly spaced times over the shutter), each finite, within the coordinate limit and
+// invertible. Sets an exception and returns false otherwise.
+bool motion_keys(const double *rows, Py_ssize_t count, const char *what, Py_ssize_t which,
+                 std::vector<MotionKey> &keys) {
+    if (count < 2 || count > kMaxMotionSteps)
+        return PyErr_Format(PyExc_ValueError, "%s %zd: %zd motion steps (2..%zd)", what, which, count, kMaxMotionSteps),
+               false;
+    keys.resize(size_t(count));
+    for (Py_ssize_t i = 0; i < count; ++i) {
+        const double *m = rows + 12 * i;
+        for (int k = 0; k < 12; ++k)
+            if (!within_range(float(m[k])) || !std::isfinite(m[k]))
+                return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is not finite or beyond 1e18", what,
+                                    which, i),
+                       false;
+        if (!motion::decompose(m, keys[size_t(i)]))
+            return PyErr_Format(PyExc_ValueError, "%s %zd: motion step %zd is singular", what, which, i), false;
+    }
+    motion::align_quaternions(keys.data(), int(count));
+    return true;
+}
+
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", "programs", nullptr};
+                                   "shadow_catcher", "motion", "motion_range", "programs", nullptr};
     PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
-             *oprog = Py_None;
+             *omotion = Py_None, *omrange = Py_None, *oprog = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
-                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &oprog))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+                                     &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &omotion,
+                                     &omrange, &oprog))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
     if (!geometries) return nullptr;
     std::unique_ptr<PyObject, void (*)(PyObject *)> hold(geometries, [](PyObject *o) { Py_XDECREF(o); });
     const Py_ssize_t n_geo = PyTuple_Size(geometries);
-    View idx, w, o, range, vis, holdout, pass, mat, light, catcher;
+    View idx, w, o, range, vis, holdout, pass, mat, light, catcher, motion, mrange;
     Py_ssize_t s1[1] = {-1};
     if (!get_array(oidx, "geometry_index", 'i', 1, s1, false, idx)) return nullptr;
     const Py_ssize_t n = idx.dim(0);
@@ -268,6 +306,14 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         !get_array(opass, "pass_index", 'f', 1, sn, false, pass) ||
         !get_array(omat, "materials", 'f', 2, sm, false, mat) || !get_array(olight, "lights", 'f', 2, sl, false, light) ||
         (ocatch != Py_None && !get_array(ocatch, "shadow_catcher", 'B', 1, sn, false, catcher)))
+        return nullptr;
+    // Motion blur: instance i's steps are rows [first, first + count) of `motion` (count 0:
+    // it does not move). Both or neither.
+    if ((omotion == Py_None) != (omrange == Py_None))
+        return PyErr_Format(PyExc_TypeError, "motion and motion_range go together");
+    Py_ssize_t sm12[2] = {-1, 12};
+    if (omotion != Py_None && (!get_array(omotion, "motion", 'd', 2, sm12, false, motion) ||
+                               !get_array(omrange, "motion_range", 'i', 2, s2, false, mrange)))
         return nullptr;
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
@@ -295,6 +341,15 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
         inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
+        if (mrange.held) {
+            const int32_t mfirst = mrange.data<int32_t>()[2 * i], mcount = mrange.data<int32_t>()[2 * i + 1];
+            if (mcount == 0) continue;
+            if (mfirst < 0 || mcount < 0 || int64_t(mfirst) + mcount > int64_t(motion.dim(0)))
+                return PyErr_Format(PyExc_ValueError, "instance %zd: motion range (%d, %d) is not inside the %zd steps",
+                                    i, mfirst, mcount, motion.dim(0));
+            if (!motion_keys(motion.data<double>() + 12 * size_t(mfirst), mcount, "instance", i, inst.motion))
+                return nullptr;
+        }
     }
     std::vector<Material> materials(static_cast<size_t>(n_mat));
     for (Py_ssize_t i = 0; i < n_mat; ++i) {
@@ -357,27 +412,192 @@ void RenderScene_dealloc(PyObject *self) {
     Py_DECREF(type);
 }
 
+// The light groups' map (IntegratorSettings::light_groups): the count is the light_groups
+// buffer's planes; each lamp's and each instance's group (int32, -1: none) and the world's.
+bool parse_light_groups(const RenderScene &scene, PyObject *ogroups, PyObject *olamps, PyObject *oinstances,
+                        int world, LightGroupMap &map) {
+    if (ogroups == Py_None) {
+        if (olamps != Py_None || oinstances != Py_None || world != -1)
+            return PyErr_Format(PyExc_TypeError, "light group assignments need the light_groups buffer"), false;
+        return true;
+    }
+    View groups_view;  // only its shape is read here
+    const Py_ssize_t any[4] = {-1, -1, -1, -1};
+    if (!get_array(ogroups, "light_groups", 'f', 4, any, true, groups_view)) return false;
+    const Py_ssize_t count = groups_view.buf.shape[0];
+    if (count < 1 || count > kMaxLightGroups)
+        return PyErr_Format(PyExc_ValueError, "light_groups must have 1..%d planes", kMaxLightGroups), false;
+    map.count = int(count);
+    struct {
+        PyObject *obj;
+        const char *name;
+        size_t size;
+        std::vector<int> *out;
+    } lists[] = {{olamps, "light_group_lamps", scene.lights().size(), &map.lamp},
+                 {oinstances, "light_group_instances", scene.instance_count(), &map.instance}};
+    for (auto &l : lists) {
+        if (l.obj == Py_None) continue;
+        View v;
+        const Py_ssize_t shape[1] = {Py_ssize_t(l.size)};
+        if (!get_array(l.obj, l.name, 'i', 1, shape, false, v)) return false;
+        const int32_t *g = v.data<int32_t>();
+        l.out->assign(g, g + l.size);
+        for (int x : *l.out)
+            if (x < -1 || x >= map.count)
+                return PyErr_Format(PyExc_ValueError, "%s: group %d outside -1..%d", l.name, x, map.count - 1), false;
+    }
+    if (world < -1 || world >= map.count)
+        return PyErr_Format(PyExc_ValueError, "light_group_world %d outside -1..%d", world, map.count - 1), false;
+    map.world = world;
+    return true;
+}
+
+// The arrays of the Cryptomatte argument, held while the render runs.
+struct CryptomatteViews {
+    View out[CryptomatteFilm::kKinds], instance_ids, material_ids;
+};
+
+// render()'s `cryptomatte`: None, or (object, material, asset, slots, instance_ids,
+// material_ids) -- each of the first three None or a writable float32 (h, w, 2 slots) buffer,
+// slots in 1..kMaxCryptomatteSlots, instance_ids float32 (instances, 2) (each instance's
+// object and asset id), material_ids float32 (materials,). Ids must be finite and not 0 (0
+// marks a free slot; render/cryptomatte.py's ids never are).
+bool parse_cryptomatte(PyObject *arg, const RenderScene &scene, int w, int h, CryptomatteFilm &film,
+                       CryptomatteViews &views) {
+    if (arg == Py_None) return true;
+    // Blender's Levels go to 16 (pass_cryptomatte_depth's hard maximum).
+    constexpr int kMaxCryptomatteSlots = 16;
+    PyObject *kinds[CryptomatteFilm::kKinds], *oinst, *omat;
+    int slots = 0;
+    if (!PyArg_ParseTuple(arg, "OOOiOO;cryptomatte must be (object, material, asset, slots, instance_ids, "
+                               "material_ids)",
+                          &kinds[0], &kinds[1], &kinds[2], &slots, &oinst, &omat))
+        return false;
+    if (slots < 1 || slots > kMaxCryptomatteSlots)
+        return PyErr_Format(PyExc_ValueError, "cryptomatte slots must be in 1..%d", kMaxCryptomatteSlots), false;
+    const Py_ssize_t n_inst = Py_ssize_t(scene.instance_count()), n_mat = Py_ssize_t(scene.material_count());
+    const Py_ssize_t inst_shape[2] = {n_inst, 2}, mat_shape[1] = {n_mat};
+    if (!get_array(oinst, "cryptomatte instance_ids", 'f', 2, inst_shape, false, views.instance_ids) ||
+        !get_array(omat, "cryptomatte material_ids", 'f', 1, mat_shape, false, views.material_ids))
+        return false;
+    const float *ids[2] = {views.instance_ids.data<float>(), views.material_ids.data<float>()};
+    const size_t counts[2] = {size_t(n_inst) * 2, size_t(n_mat)};
+    for (int a = 0; a < 2; ++a)
+        for (size_t i = 0; i < counts[a]; ++i)
+            if (!std::isfinite(ids[a][i]) || ids[a][i] == 0.f)
+                return PyErr_Format(PyExc_ValueError, "cryptomatte ids must be finite and not 0"), false;
+    static const char *names[CryptomatteFilm::kKinds] = {"cryptomatte object", "cryptomatte material",
+                                                         "cryptomatte asset"};
+    for (int k = 0; k < CryptomatteFilm::kKinds; ++k) {
+        if (kinds[k] == Py_None) continue;
+        const Py_ssize_t shape[3] = {h, w, 2 * Py_ssize_t(slots)};
+        if (!get_array(kinds[k], names[k], 'f', 3, shape, true, views.out[k])) return false;
+        film.out[k] = views.out[k].data<float>();
+    }
+    film.slots = slots, film.instance_ids = ids[0], film.material_ids = ids[1];
+    return true;
+}
+
+// world_map: None, or (light, camera): the environment image lighting the scene and the one
+// camera rays see (None: the same), each a height x width x 3 float32 array of finite values
+// >= 0 (shade/environment.h's layout).
+// The environment maps of the last renders, by content: building one costs ~30 ns a pixel
+// (66 ms for 2048 x 1024), which the viewport would pay on every pass of every redraw; the
+// images' bytes are hashed (~1 ns a byte) and compared in full before one is reused.
+struct CachedMap {
+    uint64_t hash = 0;
+    int width = 0, height = 0;
+    std::vector<float> rgb;
+    std::shared_ptr<const EnvironmentMap> map;
+};
+
+std::shared_ptr<const EnvironmentMap> environment_map_of(const float *data, int w, int h) {
+    static std::mutex mutex;
+    static CachedMap cache[2];  // the world being edited and the one before it
+    static int next = 0;
+    const size_t n = size_t(w) * size_t(h) * 3;
+    uint64_t hash = 1469598103934665603ull;  // FNV-1a over the words: a quick first check
+    for (size_t k = 0; k < n; ++k) {
+        uint32_t bits;
+        std::memcpy(&bits, data + k, 4);
+        hash = (hash ^ bits) * 1099511628211ull;
+    }
+    {
+        std::lock_guard<std::mutex> lock(mutex);
+        for (const CachedMap &c : cache)
+            if (c.map && c.hash == hash && c.width == w && c.height == h &&
+                std::memcmp(c.rgb.data(), data, n * sizeof(float)) == 0)
+                return c.map;
+    }
+    auto map = std::make_shared<const EnvironmentMap>(data, w, h);
+    std::lock_guard<std::mutex> lock(mutex);
+    CachedMap &slot = cache[next];
+    next = (next + 1) % 2;
+    slot.hash = hash, slot.width = w, slot.height = h;
+    slot.rgb.assign(data, data + n);
+    slot.map = map;
+    return map;
+}
+
+bool parse_world_map(PyObject *obj, std::shared_ptr<const EnvironmentMap> &light,
+                     std::shared_ptr<const EnvironmentMap> &camera) {
+    if (obj == Py_None) return true;
+    if (!PyTuple_Check(obj) || PyTuple_Size(obj) != 2)
+        return PyErr_SetString(PyExc_TypeError, "world_map must be None or a (light, camera) tuple"), false;
+    for (int i = 0; i < 2; ++i) {
+        PyObject *item = PyTuple_GetItem(obj, i);
+        if (item == Py_None) {
+            if (i == 0) return PyErr_SetString(PyExc_TypeError, "world_map's light image is required"), false;
+            continue;
+        }
+        const char *name = i == 0 ? "world_map light" : "world_map camera";
+        View view;
+        const Py_ssize_t shape[3] = {-1, -1, 3};
+        if (!get_array(item, name, 'f', 3, shape, false, view)) return false;
+        const Py_ssize_t h = view.buf.shape[0], w = view.buf.shape[1];
+        if (w < 2 || h < 2 || w > 65536 || h > 32768)
+            return PyErr_Format(PyExc_ValueError, "%s must be 2..65536 wide and 2..32768 high", name), false;
+        const float *data = view.data<float>();
+        for (Py_ssize_t k = 0; k < w * h * 3; ++k)
+            if (!(std::isfinite(data[k]) && data[k] >= 0.f))
+                return PyErr_Format(PyExc_ValueError, "%s must be finite, >= 0", name), false;
+        std::string message;
+        std::shared_ptr<const EnvironmentMap> &target = i == 0 ? light : camera;
+        if (PyObject *type = run_native([&] { target = environment_map_of(data, int(w), int(h)); }, message))
+            return PyErr_SetString(type, message.c_str()), false;
+    }
+    return true;
+}
+
 PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"local_from_camera", "frustum", "orthographic", "width", "height", "window",
                                    "settings", "method", "world", "film_transparent", "combined", "depth", "normal",
                                    "diffcol", "emit", "shadow", "index", "splat_count", "threads", "progress",
                                    "tile_size", "packets", "lens", "shadow_catcher", "world_visibility", "position",
-                                   "material_index", "mist", "environment", "mist_settings", "aov", nullptr};
+                                   "material_index", "mist", "environment", "mist_settings", "cryptomatte",
+                                   "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
+                                   "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
+                                   "light_group_instances", "light_group_world", "uv", "aov", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
-             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *oaov = Py_None;
+             *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
+             *oshutter = Py_None, *oworldmap = Py_None, *olight = Py_None, *oao = Py_None, *ogroups = Py_None,
+             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None, *oaov = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
-        packets = 1, world_visibility = int(IntegratorSettings().world_visibility);
+        packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)O",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiOO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
                                      &odiff, &oemit, &oshadow, &oindex, &ocount, &threads, &progress, &tile_size,
                                      &packets, &olens, &ocatcher, &world_visibility, &oposition, &omatindex, &omist, &oenv,
-                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &oaov))
+                                     &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
+                                     &oshutter, &cfg.rolling_shutter_duration, &oworldmap, &olight, &oao,
+                                     &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
+                                     &ouvpass, &oaov))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -404,6 +624,8 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         return PyErr_Format(PyExc_ValueError, "the time limit and minimum samples must be >= 0");
     if (cfg.mesh_light_strategy < 0 || cfg.mesh_light_strategy > 2)
         return PyErr_Format(PyExc_ValueError, "mesh_light_strategy must be 0..2 (see shading.RenderSettings)");
+    if (!(std::isfinite(cfg.ao_distance) && cfg.ao_distance >= 0.f))
+        return PyErr_Format(PyExc_ValueError, "ao_distance must be finite, >= 0");
     if (cfg.ao_samples < 1 || cfg.ao_samples > 1024) return PyErr_Format(PyExc_ValueError, "ao_samples must be in 1..1024");
     cfg.headlight = headlight != 0, cfg.sky_ao = sky_ao != 0;
     if (cfg.samples < 1 || cfg.samples > (1 << 16) || cfg.shadow_samples < 1 || cfg.shadow_samples > 1024 ||
@@ -419,12 +641,42 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     if (world_visibility < 0 || world_visibility > int(kVisAll))
         return PyErr_Format(PyExc_ValueError, "world_visibility must be ray-kind bits in 0..%d", int(kVisAll));
     cfg.world_visibility = uint32_t(world_visibility);
+    std::shared_ptr<const EnvironmentMap> environment, camera_environment;
+    if (!parse_world_map(oworldmap, environment, camera_environment)) return nullptr;
+    if (environment) {
+        cfg.environment = environment.get(), cfg.camera_environment = camera_environment.get();
+        cfg.world = environment->mean();  // what the uniform world's uses (sky AO, "is the scene lit") see
+    }
     cfg.tile_size = tile_size;
     cfg.packets = packets != 0;
 
     Camera cam;
     CameraViews cam_views;
     if (!parse_camera(om, ofrustum, orthographic, cam, cam_views) || !parse_lens(olens, cam)) return nullptr;
+    // Motion blur: the camera's local_from_camera rows (S, 12) over the shutter, and the
+    // shutter curve's table (K,) of times in [0, 1], non-decreasing.
+    View cam_motion_view, shutter_view;
+    std::vector<MotionKey> cam_motion;
+    if (ocammotion != Py_None) {
+        Py_ssize_t sm12[2] = {-1, 12};
+        if (!get_array(ocammotion, "camera_motion", 'd', 2, sm12, false, cam_motion_view) ||
+            !motion_keys(cam_motion_view.data<double>(), cam_motion_view.dim(0), "camera", 0, cam_motion))
+            return nullptr;
+        cam.motion = cam_motion.data(), cam.motion_steps = int(cam_motion.size());
+    }
+    if (oshutter != Py_None) {
+        Py_ssize_t sk[1] = {-1};
+        if (!get_array(oshutter, "shutter_table", 'f', 1, sk, false, shutter_view)) return nullptr;
+        const Py_ssize_t k = shutter_view.dim(0);
+        const float *t = shutter_view.data<float>();
+        if (k < 2 || k > 65536) return PyErr_Format(PyExc_ValueError, "shutter_table must have 2..65536 entries");
+        for (Py_ssize_t i = 0; i < k; ++i)
+            if (!(t[i] >= 0.f && t[i] <= 1.f) || (i > 0 && t[i] < t[i - 1]))
+                return PyErr_Format(PyExc_ValueError, "shutter_table must be non-decreasing times in [0, 1]");
+        cfg.shutter_table = t, cfg.shutter_table_size = int(k);
+    }
+    if (!(cfg.rolling_shutter_duration <= 1.f))  // negative: off; NaN refused
+        return PyErr_Format(PyExc_ValueError, "rolling_shutter_duration must be <= 1 (negative: off)");
 
     Film film;
     film.width = width, film.height = height, film.x0 = x0, film.y0 = y0, film.w = w, film.h = h;
@@ -434,6 +686,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
         int channels;
         float **target;
         View view;
+        Py_ssize_t planes = 0;  // > 0: that many w x h x channels planes (-1: any number)
     } outs[] = {{ocomb, "combined", 4, &film.combined, {}},   {odepth, "depth", 1, &film.depth, {}},
                 {onormal, "normal", 3, &film.normal, {}},     {odiff, "diffcol", 3, &film.diffcol, {}},
                 {oemit, "emit", 3, &film.emit, {}},           {oshadow, "shadow", 3, &film.shadow, {}},
@@ -442,14 +695,30 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 {oposition, "position", 3, &film.position, {}},
                 {omatindex, "material_index", 1, &film.material_index, {}},
                 {omist, "mist", 1, &film.mist, {}},
-                {oenv, "environment", 3, &film.environment, {}}};
+                {oenv, "environment", 3, &film.environment, {}},
+                {oao, "ao", 3, &film.ao, {}},
+                {ouvpass, "uv", 3, &film.uv, {}},
+                {olight, "light", 3, &film.light, {}, 3 * kLobes},
+                {ogroups, "light_groups", 3, &film.light_groups, {}, -1}};
     for (Out &out : outs) {
         if (out.obj == Py_None) continue;
-        Py_ssize_t shape[3] = {h, w, out.channels};
-        if (!get_array(out.obj, out.name, 'f', out.channels == 1 ? 2 : 3, shape, true, out.view)) return nullptr;
+        if (out.planes != 0) {
+            Py_ssize_t shape[4] = {out.planes, h, w, out.channels};
+            if (!get_array(out.obj, out.name, 'f', 4, shape, true, out.view)) return nullptr;
+        } else {
+            Py_ssize_t shape[3] = {h, w, out.channels};
+            if (!get_array(out.obj, out.name, 'f', out.channels == 1 ? 2 : 3, shape, true, out.view)) return nullptr;
+        }
         *out.target = out.view.data<float>();
     }
+    if (!parse_light_groups(*reinterpret_cast<RenderSceneObject *>(self)->scene, ogroups, ogroup_lamps,
+                            ogroup_instances, group_world, cfg.light_groups))
+        return nullptr;
     if (!film.combined) return PyErr_Format(PyExc_TypeError, "combined is required");
+    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
+    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    CryptomatteViews crypto_views;
+    if (!parse_cryptomatte(ocrypto, scene, w, h, film.cryptomatte, crypto_views)) return nullptr;
     // Shader AOVs: (buffer float32 (h, w, channels), layout int32 (keys, 2) of [first channel or
     // -1, width 1 or 4], alpha threshold) -- render/scene.py render_arguments.
     View aov_view;
@@ -481,6 +750,11 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
             return nullptr;
         for (Out &out : outs)
             if (!check_separate({{aov_view, "aov"}, {out.view, out.name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{aov_view, "aov"}, {out, "a cryptomatte buffer"}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
     }
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
@@ -488,10 +762,18 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
             return nullptr;
         for (size_t j = 0; j < i; ++j)
             if (!check_separate({{outs[i].view, outs[i].name}, {outs[j].view, outs[j].name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{out, "a cryptomatte buffer"}, {outs[i].view, outs[i].name}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
     }
-
-    auto *obj = reinterpret_cast<RenderSceneObject *>(self);
-    const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
+    if (!check_separate({{crypto_views.out[0], "cryptomatte object"}, {crypto_views.out[1], "cryptomatte material"},
+                         {crypto_views.out[2], "cryptomatte asset"}},
+                        {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                         {crypto_views.material_ids, "cryptomatte material ids"},
+                         {cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+        return nullptr;
     RenderCounters counters;
     std::unique_ptr<Integrator> integrator;  // its constructor allocates: built where bad_alloc is caught
     std::string message;
@@ -583,10 +865,22 @@ PyMethodDef RenderScene_methods[] = {
      "render(local_from_camera, frustum, orthographic, width, height, window, settings, method, world, "
      "film_transparent, combined, depth=None, normal=None, diffcol=None, emit=None, shadow=None, index=None, splat_count=None, "
      "threads=0, progress=None, tile_size=32, packets=True, lens=None, shadow_catcher=None, world_visibility=15, "
-     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), aov=None)\n--\n\n"
+     "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
+     "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None, "
+     "light=None, ao=None, ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, "
+     "light_group_world=-1, uv=None, aov=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
-     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world."},
+     "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
+     "(object, material, asset, slots, instance_ids, material_ids) (render/cryptomatte.py). camera_motion: "
+     "None or (S, 12) float64, local_from_camera's first three rows at S evenly spaced times over the shutter "
+     "(motion blur); shutter_table: None (a box shutter) or (K,) float32, the shutter curve's inverse CDF; "
+     "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "
+     "negative (default): off. world_map: None "
+     "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light. aov: None or (buffer "
+     "float32 (h, w, channels), layout int32 (keys, 2) of [first channel or -1, width 1 or 4], alpha threshold): "
+     "the view layer's shader AOVs."},
     {nullptr, nullptr, 0, nullptr},
 };
 
@@ -601,7 +895,11 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_methods, RenderScene_methods},
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
-                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, programs=None)")},
+                                   "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, "
+                                   "motion=None, motion_range=None, programs=None)\n\nmotion: (M, 12) float64 to_world rows of "
+                                   "the moving instances at evenly spaced times over the shutter; motion_range: "
+                                   "(n, 2) int32 each instance's (first row, count), count 0 when it does not move; "
+                                   "programs: per material its node program (render/nodes.py Program.native()) or None.")},
     {0, nullptr},
 };
 

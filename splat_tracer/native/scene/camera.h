@@ -14,6 +14,7 @@
 #include <cmath>
 
 #include "base/ray.h"
+#include "scene/motion.h"
 
 namespace splat {
 
@@ -41,7 +42,23 @@ struct Camera {
     int projection = kPlanar;
     double pano[5] = {0, 0, 0, 0, 0};
 
+    // Motion blur: local_from_camera at evenly spaced times over the shutter (motion.h),
+    // held by the caller for the render; null when the camera does not move.
+    const MotionKey *motion = nullptr;
+    int motion_steps = 0;
+
     bool has_lens() const { return lens_radius > 0.0; }
+    bool moves() const { return motion != nullptr && motion_steps > 0; }
+
+    // This camera at shutter time `time` (0 opens it, 1 closes it).
+    Camera at(double time) const {
+        Camera c = *this;
+        if (moves()) {
+            motion::at(motion, motion_steps, time, c.local_from_camera);
+            c.derive_axes();
+        }
+        return c;
+    }
     bool panoramic() const { return projection != kPlanar; }
 
     // A pixel a panorama does not see (outside a fisheye's circle, or beyond a mirror

@@ -7,6 +7,42 @@
 
 namespace splat {
 
+Placement Instance::moving_at(float time, Affine scratch[2]) const {
+    double w[12], o[12];
+    motion::at(motion.data(), int(motion.size()), time, w);
+    // The keys were checked invertible (the bindings); an interpolated stretch between two
+    // invertible ones can still be singular (a mirror half way): the frame's transforms then.
+    if (!motion::invert_affine(w, o)) return {&to_world, &to_object};
+    for (int k = 0; k < 12; ++k) scratch[0].m[k] = float(w[k]), scratch[1].m[k] = float(o[k]);
+    return {&scratch[0], &scratch[1]};
+}
+
+// The box a moving instance's geometry (`local`: its object-space box) sweeps over the
+// shutter: the boxes at times spaced so that no step turns more than 22.5 degrees (8 times a
+// key interval; slerp turns at most 180 between keys), widened by the most a corner moves
+// between two of them -- a corner's path between two times strays from the chord by less
+// than the chord's length at such small turns, so the box holds the whole sweep.
+static AABB swept_bounds(const Instance &inst, const AABB &local) {
+    AABB world;
+    const int n = int(inst.motion.size());
+    const int times = 8 * (n - 1) + 1;
+    float pad = 0.f;
+    Vec3 prev[8];
+    for (int i = 0; i < times; ++i) {
+        PlacementScratch scratch;
+        const Placement at = inst.at(float(double(i) / (times - 1)), scratch.a);
+        for (int c = 0; c < 8; ++c) {
+            const Vec3 p = at.to_world->point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
+                                                   c & 4 ? local.hi.z : local.lo.z));
+            world.grow(p);
+            if (i > 0) pad = std::fmax(pad, length(p - prev[c]));
+            prev[c] = p;
+        }
+    }
+    world.lo = world.lo - Vec3(pad, pad, pad), world.hi = world.hi + Vec3(pad, pad, pad);
+    return world;
+}
+
 RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> materials, std::vector<Light> lights,
                          int threads, std::vector<NodeProgram> programs)
     : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)),
@@ -25,12 +61,19 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
         if (inst.shadow_catcher) inst.visibility |= (inst.visibility & kVisAll) << kCatcherShift, any_catcher_ = true;
         const AABB local = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
         AABB world;
-        if (!local.empty()) {
+        any_motion_ |= inst.moves();
+        if (!local.empty() && inst.moves()) {
+            world = swept_bounds(inst, local);
+        } else if (!local.empty()) {
             for (int c = 0; c < 8; ++c)
                 world.grow(inst.to_world.point(Vec3(c & 1 ? local.hi.x : local.lo.x, c & 2 ? local.hi.y : local.lo.y,
                                                     c & 4 ? local.hi.z : local.lo.z)));
             // The corners went through float arithmetic: widen by a few ulps of their size.
             const Vec3 pad = (vabs(world.lo) + vabs(world.hi)) * 4e-7f;
+            world.lo = world.lo - pad, world.hi = world.hi + pad;
+        }
+        if (!local.empty() && inst.moves()) {
+            const Vec3 pad = (vabs(world.lo) + vabs(world.hi)) * 4e-7f;  // as above
             world.lo = world.lo - pad, world.hi = world.hi + pad;
         }
         inst.bounds = world;
@@ -41,9 +84,15 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera, const AovSink *aov) const {
+                                       const Camera *camera, float time, const AovSink *aov) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
+    // A moving instance's object space is where it is at the ray's time: the point was found
+    // there (take_mesh_hit, take_splat_hit), so its object and Generated coordinates are the
+    // same at every time, as Cycles' are.
+    PlacementScratch scratch;
+    const Placement at = inst.at(time, scratch.a);
+    const Affine &to_world = *at.to_world, &to_object = *at.to_object;
     ShaderGlobals sg;
     sg.P = sp.p, sg.I = wo;
     // Cycles turns a back face's normals towards the viewer: so do the nodes' normals.
@@ -51,8 +100,8 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     sg.Ng = back ? sp.ng * -1.f : sp.ng;
     sg.N = dot(sp.ns, wo) < 0.f ? sp.ns * -1.f : sp.ns;
     sg.backfacing = back ? 1.f : 0.f;
-    sg.object = inst.to_object.point(sp.p);
-    sg.object_normal = normalize(inst.to_world.transposed_vector(sg.N));
+    sg.object = to_object.point(sp.p);
+    sg.object_normal = normalize(to_world.transposed_vector(sg.N));
     // Generated coordinates: the object-space position within the geometry's bounds (Blender's
     // automatic texture space).
     const AABB box = inst.splats ? inst.splats->bounds() : inst.mesh->bounds();
@@ -62,19 +111,29 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             sg.generated[k] = size > 0.f ? (sg.object[k] - box.lo[k]) / size : 0.5f;
         }
     sg.surface_normal = sp.ns;
+    // Into the camera's frame by the transpose of its rotation (its axes are unit and
+    // orthogonal), with Z negated: Cycles' camera space looks along +Z. A moving camera
+    // is where it is at the ray's time.
+    double moved[12];
+    const double *c = nullptr;
     if (camera && prog.uses_camera) {
-        // Into the camera's frame by the transpose of its rotation (its axes are unit and
-        // orthogonal), with Z negated: Cycles' camera space looks along +Z.
-        const double *c = camera->local_from_camera;
-        const double d[3] = {double(sp.p.x) - c[3], double(sp.p.y) - c[7], double(sp.p.z) - c[11]};
+        if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
+        c = camera->moves() ? moved : camera->local_from_camera;
+    }
+    auto camera_space = [c](Vec3 p, bool direction) {
+        const double d[3] = {double(p.x) - (direction ? 0.0 : c[3]), double(p.y) - (direction ? 0.0 : c[7]),
+                             double(p.z) - (direction ? 0.0 : c[11])};
+        Vec3 out;
         for (int k = 0; k < 3; ++k) {
             const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
             const double v = (c[k] * d[0] + c[4 + k] * d[1] + c[8 + k] * d[2]) / (len > 0 ? len : 1.0);
-            sg.camera[k] = float(k == 2 ? -v : v);
+            out[k] = float(k == 2 ? -v : v);
         }
-    }
+        return out;
+    };
+    if (camera && prog.uses_camera) sg.camera = camera_space(sp.p, false);
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
-        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = inst.to_object.m[4 * col + row];
+        for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
         sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
         Vec3 t;
@@ -82,13 +141,53 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         if (prog.uses_tangent && inst.mesh->uv_tangent(sp.prim, &t, &sign)) {
             // Into the scene frame, then perpendicular to the shading normal (Gram-Schmidt), as
             // a tangent interpolated over a smooth surface is.
-            t = inst.to_world.vector(t);
+            t = to_world.vector(t);
             t = t - sp.ns * dot(sp.ns, t);
             if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
         }
     }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
+    if (prog.uses_bump) {
+        // The Bump node's two nearby points: along two perpendicular directions in the plane of
+        // the surface, a fixed fraction of the object's size away. Cycles offsets by a tenth of
+        // the pixel's footprint; for a height that varies smoothly at that scale both give its
+        // gradient. A fraction of the object's size (the frame its textures are laid out in)
+        // keeps the offset far below a texture's features whatever the scene's units, and the
+        // floor of a few float ulps of the position keeps it resolvable far from the origin.
+        constexpr float kBumpOffset = 1e-4f, kPositionUlps = 1.5e-5f;  // 1.5e-5: ~128 ulps of |P|
+        const float size = inst.bounds.empty() ? 0.f : length(inst.bounds.hi - inst.bounds.lo);
+        const float eps = std::fmax(kBumpOffset * size, kPositionUlps * max_component(vabs(sp.p)));
+        // An orthonormal pair about the geometric normal (Duff et al., "Building an
+        // Orthonormal Basis, Revisited", 2017).
+        const Vec3 n = sg.Ng;
+        const float sign = std::copysign(1.f, n.z), a = -1.f / (sign + n.z), b = n.x * n.y * a;
+        const Vec3 tangents[2] = {{1.f + sign * n.x * n.x * a, sign * b, -sign * n.x},
+                                  {b, sign + n.y * n.y * a, -n.y}};
+        for (int k = 0; k < 2; ++k) {
+            ShaderGlobals::Offset &d = sg.bump[k];
+            d.P = tangents[k] * (eps > 0.f ? eps : 1e-6f);
+            d.object = inst.to_object.vector(d.P);
+            if (!box.empty())
+                for (int i = 0; i < 3; ++i) {
+                    const float extent = box.hi[i] - box.lo[i];
+                    d.generated[i] = extent > 0.f ? d.object[i] / extent : 0.f;
+                }
+            if (inst.mesh) {  // the UV map's change across the triangle for that step
+                Vec3 v0, v1, v2;
+                inst.mesh->vertices(sp.prim, &v0, &v1, &v2);
+                const Vec3 e1 = v1 - v0, e2 = v2 - v0;
+                const float a11 = dot(e1, e1), a12 = dot(e1, e2), a22 = dot(e2, e2);
+                const float det = a11 * a22 - a12 * a12;
+                if (det > 0.f) {
+                    const float r1 = dot(e1, d.object), r2 = dot(e2, d.object);
+                    const float db1 = (a22 * r1 - a12 * r2) / det, db2 = (a11 * r2 - a12 * r1) / det;
+                    d.uv = inst.mesh->uv(sp.prim, sp.b1 + db1, sp.b2 + db2) - sg.uv;
+                }
+            }
+            if (camera && prog.uses_camera) d.camera = camera_space(d.P, true);
+        }
+    }
     float r[kMaxNodeRegisters];
     prog.run(sg, r);
     if (aov && !prog.aovs.empty()) aov->write(prog, r);
@@ -121,10 +220,10 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     return out;
 }
 
-Ray RenderScene::to_object(const Instance &inst, const Ray &ray, float *scale) {
+Ray RenderScene::to_object(const Affine &to_object, const Ray &ray, float *scale) {
     Ray r;
-    r.o = inst.to_object.point(ray.o);
-    const Vec3 d = inst.to_object.vector(ray.d);
+    r.o = to_object.point(ray.o);
+    const Vec3 d = to_object.vector(ray.d);
     const float s = length(d);
     r.d = d * (1.f / s);
     r.tmin = ray.tmin * s;
@@ -157,8 +256,8 @@ std::vector<uint8_t> RenderScene::locate_camera(Vec3 eye) const {
 }
 
 // Visits, front to back, each instance visible to `ray_kind` whose box the ray enters before
-// `limit`: visit(index, instance, ray in object space, distance scale, starts on it?)
-// returns true to stop (an occluder found).
+// `limit`: visit(index, instance, its placement at the ray's time, ray in object space,
+// distance scale, starts on it?) returns true to stop (an occluder found).
 template <class Visit>
 void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                                     TraversalStats *stats, Visit &&visit) const {
@@ -176,9 +275,11 @@ void RenderScene::for_each_instance(const Ray &ray, const float &limit, uint32_t
                 // mean it enters each one's (a layer query where it does not finds nothing,
                 // at a traversal's cost: a quarter of a bunny-on-a-floor frame's queries).
                 if (intersect_box(inst.bounds, ray.o, inv_d, ray.tmin, limit) == kInfinity) continue;
+                PlacementScratch scratch;
+                const Placement at = inst.at(from.time, scratch.a);
                 float s;
-                Ray local = to_object(inst, ray, &s);
-                if (visit(index, inst, local, s, from.instance == index)) return true;
+                Ray local = to_object(*at.to_object, ray, &s);
+                if (visit(index, inst, at, local, s, from.instance == index)) return true;
             }
             return false;
         },
@@ -194,12 +295,13 @@ inline bool nearer(float t, int index, const SurfacePoint &best) {
 
 // A mesh hit `h` of instance `index` (ray in object space, `s` its distance scale) becomes
 // `best` when nearer.
-void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const {
+void RenderScene::take_mesh_hit(int index, const Instance &inst, Placement at, const MeshHit &h, float s,
+                                SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
     best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front, best.b1 = h.b1, best.b2 = h.b2;
     best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
-    const Vec3 ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(h.tri)));
-    const Vec3 ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+    const Vec3 ng = normalize(at.to_object->transposed_vector(inst.mesh->geometric_normal(h.tri)));
+    const Vec3 ns = normalize(at.to_object->transposed_vector(inst.mesh->shading_normal(h)));
     best.ng = ng, best.ns = ns;
     // The point is the triangle's own (barycentric interpolation, then the instance
     // transform), not ray.o + t d: that one carries the rounding of t and of the ray's
@@ -207,12 +309,12 @@ void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &
     // point that fell below the surface met the neighbouring triangle (black pixels on a UV
     // sphere near its pole).
     const Vec3 po = inst.mesh->point(h);
-    best.p = inst.to_world.point(po);
+    best.p = at.to_world->point(po);
     // Start secondary rays off the surface by the interpolation's error bound carried into
     // the scene frame, plus the transform's own rounding (gamma(3) (|M| |po| +
     // |translation|), per axis).
     const Vec3 obj_err = inst.mesh->point_error(h);
-    const Affine &M = inst.to_world;
+    const Affine &M = *at.to_world;
     const Vec3 abs_po = vabs(po);
     auto abs_row = [&](int r, Vec3 v) {
         return std::fabs(M.m[4 * r]) * v.x + std::fabs(M.m[4 * r + 1]) * v.y + std::fabs(M.m[4 * r + 2]) * v.z;
@@ -226,12 +328,12 @@ void RenderScene::take_mesh_hit(int index, const Instance &inst, const MeshHit &
 }
 
 // A splat surface `h` of instance `index` met by `ray` (scene frame) becomes `best` when nearer.
-void RenderScene::take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
-                                 SurfacePoint &best) const {
+void RenderScene::take_splat_hit(int index, const Instance &inst, Placement at, const Ray &ray, const SurfaceHit &h,
+                                 float s, SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
     best.t = h.t / s, best.instance = index, best.prim = h.id, best.front = h.front;
-    best.ng = normalize(inst.to_object.transposed_vector(inst.splats->normal(h.id)));
-    best.ns = normalize(inst.to_object.transposed_vector(h.normal));
+    best.ng = normalize(at.to_object->transposed_vector(inst.splats->normal(h.id)));
+    best.ns = normalize(at.to_object->transposed_vector(h.normal));
     best.p = ray.o + ray.d * best.t;
     best.offset = 0;  // splat rays leave by excluding the members instead
     best.radius = inst.splats->radius(h.id) / s;
@@ -257,18 +359,18 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
     SurfacePoint best;
     float limit = ray.tmax;
     for_each_instance(ray, limit, ray_kind, from, stats,
-                      [&](int index, const Instance &inst, Ray &local, float s, bool self) {
+                      [&](int index, const Instance &inst, Placement at, Ray &local, float s, bool self) {
                           if (inst.mesh) {
                               local.tmax = std::fmin(local.tmax, mesh_reach(limit, s));
-                              take_mesh_hit(index, inst, inst.mesh->intersect(local, self ? from.triangle : -1, stats),
-                                            s, best);
+                              take_mesh_hit(index, inst, at,
+                                            inst.mesh->intersect(local, self ? from.triangle : -1, stats), s, best);
                           } else {
                               // The whole ray, not cut at the nearest surface so far: the layer's
                               // window may reach past it (its members, and the far phase's exit),
                               // and what the ray sees must not depend on the instances' order.
                               const bool inside = from.inside == index || (self && from.back) ||
                                                   (camera_inside && camera_inside[index]);
-                              take_splat_hit(index, inst, ray,
+                              take_splat_hit(index, inst, at, ray,
                                              find_surface(*inst.splats, local, method, inside,
                                                           self ? from.members : nullptr, self ? from.n_members : 0,
                                                           false, stats),
@@ -281,7 +383,7 @@ SurfacePoint RenderScene::intersect(const Ray &ray, const Method &method, uint32
 }
 
 void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
-                                   SurfacePoint *out, TraversalStats *stats) const {
+                                   SurfacePoint *out, TraversalStats *stats, const float *times) const {
     for (int i = 0; i < n; ++i) new (&out[i]) SurfacePoint;
     // The camera-visible instances each ray enters (its own box test, through the top-level
     // tree as a packet), then each instance's rays together.
@@ -314,7 +416,11 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
         },
         stats ? &stats->nodes : nullptr);
     if (overflow) {  // a packet crossing more than kMaxEntered instances' boxes: ray by ray
-        for (int i = 0; i < n; ++i) out[i] = intersect(rays[i], method, kVisCamera, Origin(), camera_inside, stats);
+        for (int i = 0; i < n; ++i) {
+            Origin from;
+            from.time = times ? times[i] : 0.f;
+            out[i] = intersect(rays[i], method, kVisCamera, from, camera_inside, stats);
+        }
         return;
     }
     for (int e = 0; e < n_entered; ++e) {
@@ -323,6 +429,9 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
         Ray local[kPacketRays];
         float scale[kPacketRays];
         int ray_of[kPacketRays], m = 0;
+        // Each ray's placement of the instance: one for all unless it moves.
+        PlacementScratch scratch[kPacketRays];
+        Placement at[kPacketRays];
         for (uint32_t bits = entered[e].rays; bits; bits &= bits - 1) {
             const int i = __builtin_ctz(bits);
             // Behind the ray's nearest surface so far (instances come roughly front to back):
@@ -331,7 +440,8 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
             const float limit = std::fmin(out[i].t, rays[i].tmax);  // as intersect() bounds it
             if (intersect_box(inst.bounds, rays[i].o, inv, rays[i].tmin, limit) == kInfinity) continue;
             ray_of[m] = i;
-            local[m] = to_object(inst, rays[i], &scale[m]);
+            at[m] = inst.at(times ? times[i] : 0.f, scratch[m].a);
+            local[m] = to_object(*at[m].to_object, rays[i], &scale[m]);
             ++m;
         }
         if (inst.mesh) {
@@ -339,14 +449,15 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
                 SurfacePoint &best = out[ray_of[j]];
                 const float limit = std::fmin(best.t, rays[ray_of[j]].tmax);
                 local[j].tmax = std::fmin(local[j].tmax, mesh_reach(limit, scale[j]));
-                take_mesh_hit(index, inst, inst.mesh->intersect(local[j], -1, stats), scale[j], best);
+                take_mesh_hit(index, inst, at[j], inst.mesh->intersect(local[j], -1, stats), scale[j], best);
             }
         } else {
             bool inside[kPacketRays];
             for (int j = 0; j < m; ++j) inside[j] = camera_inside[index] != 0;
             SurfaceHit hits[kPacketRays];
             find_surfaces(*inst.splats, local, m, method, inside, nullptr, 0, hits, stats);
-            for (int j = 0; j < m; ++j) take_splat_hit(index, inst, rays[ray_of[j]], hits[j], scale[j], out[ray_of[j]]);
+            for (int j = 0; j < m; ++j)
+                take_splat_hit(index, inst, at[j], rays[ray_of[j]], hits[j], scale[j], out[ray_of[j]]);
         }
     }
 }
@@ -355,7 +466,7 @@ bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &f
     bool blocked = false;
     const float limit = ray.tmax;
     for_each_instance(ray, limit, kVisShadow, from, stats,
-                      [&](int index, const Instance &inst, Ray &local, float, bool self) {
+                      [&](int index, const Instance &inst, Placement, Ray &local, float, bool self) {
                           if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
                           // Splats block only where the visibility rules put a surface: a fringe
                           // disc (far phase) or the splats the ray starts from never cast a shadow.

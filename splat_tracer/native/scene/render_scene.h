@@ -16,6 +16,7 @@
 #include "scene/camera.h"
 #include "scene/mesh.h"
 #include "scene/mesh_lights.h"
+#include "scene/motion.h"
 #include "shade/shading.h"
 #include "splats/splat_scene.h"
 #include "splats/visibility.h"
@@ -54,10 +55,27 @@ struct Affine {  // row-major 3x4: p' = M p + t
     }
 };
 
+// An instance's transforms at one time of the shutter.
+struct Placement {
+    const Affine *to_world, *to_object;
+};
+
+// Room for Instance::at's interpolated transforms, left uninitialised: an instance that does
+// not move never touches it, and a packet's 16 of them cost nothing then.
+union PlacementScratch {
+    Affine a[2];
+    PlacementScratch() {}
+};
+
 struct Instance {
     const SplatScene *splats = nullptr;  // exactly one of these two
     const TriangleMesh *mesh = nullptr;
+    // The transforms at the frame's time: the only ones of an instance that does not move;
+    // those of a moving one's mesh lights and of locate_camera.
     Affine to_world, to_object;
+    // Motion blur: to_world at evenly spaced times over the shutter (motion.h); empty when
+    // the instance does not move, and then it costs nothing.
+    std::vector<MotionKey> motion;
     int material_offset = 0, material_count = 1;  // the instance's slots in the material table
     uint32_t visibility = kVisAll;
     bool holdout = false;        // camera rays that see it get alpha 0
@@ -66,6 +84,14 @@ struct Instance {
     bool shadow_catcher = false;
     float pass_index = 0;        // Object Index pass
     AABB bounds;                 // in the scene frame
+
+    bool moves() const { return !motion.empty(); }
+    // The transforms at shutter time `time` (0 opens it, 1 closes it): its own when it does
+    // not move, else interpolated into `scratch`.
+    Placement at(float time, Affine scratch[2]) const {
+        return motion.empty() ? Placement{&to_world, &to_object} : moving_at(time, scratch);
+    }
+    Placement moving_at(float time, Affine scratch[2]) const;
 
     // The material table index of a mesh triangle's slot (a slot past the object's: its first).
     int material_of(int32_t slot) const { return material_offset + (slot < material_count ? slot : 0); }
@@ -85,6 +111,9 @@ struct Origin {
     // The ray belongs to a catcher-only path: only shadow catchers are in its scene
     // (kCatcherShift). Unlike the fields above, it is the path's, and carried along it.
     bool catcher_only = false;
+    // The path's time in the shutter (motion blur: 0 opens it, 1 closes it), where the moving
+    // instances are; carried along the path as catcher_only is.
+    float time = 0.f;
 };
 
 struct SurfacePoint {
@@ -100,7 +129,9 @@ struct SurfacePoint {
     float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
     int material = 0;    // index in the material table
-    float b1 = 0, b2 = 0;  // meshes: barycentric coordinates of the triangle's vertices 1 and 2
+    // Meshes: barycentric coordinates of the triangle's vertices 1 and 2 (where node programs
+    // and the UV pass read the UV map).
+    float b1 = 0, b2 = 0;
     int n_members = 0;   // splats that formed the point
     int32_t members[kMaxLayerHits];
 
@@ -116,24 +147,26 @@ class RenderScene {
     const Instance &instance(int i) const { return instances_[i]; }
     size_t instance_count() const { return instances_.size(); }
     const Material &material(int i) const { return materials_[i]; }
-    // The material at a surface point seen from direction `wo` (towards the viewer): its
-    // node program run there, or the constant material when it has none. The one place
-    // the integrator asks for a material's inputs. A program that drives the normal (Normal
-    // Map) replaces sp.ns with it. `camera`: the render's, for the Camera texture coordinate.
-    // `aov`: where the program's AOV Output nodes write (a camera ray still writing its
-    // shader AOVs), or null.
-    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr,
+    size_t material_count() const { return materials_.size(); }
+    // The material at a surface point seen from direction `wo` (towards the viewer) at shutter
+    // time `time` (motion blur: where a moving instance is then): its node program run there,
+    // or the constant material when it has none. The one place the integrator asks for a
+    // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
+    // `camera`: the render's, for the Camera texture coordinate. `aov`: where the program's
+    // AOV Output nodes write (a camera ray still writing its shader AOVs), or null.
+    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f,
                          const AovSink *aov = nullptr) const {
         const Material &m = materials_[sp.material];
         // A program written for its AOVs alone runs only where they are written.
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
-        return evaluate_program(m, sp, wo, &sp.ns, camera, aov);
+        return evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }
     bool any_emission() const { return any_emission_; }  // a material emits light
     bool any_catcher() const { return any_catcher_; }    // an instance is a shadow catcher
+    bool any_motion() const { return any_motion_; }      // an instance moves over the shutter
     // The point is an open cloud's back (SplatScene::open_back); never a mesh's.
     bool open_back(const SurfacePoint &sp) const {
         const Instance &inst = instances_[sp.instance];
@@ -150,23 +183,25 @@ class RenderScene {
     SurfacePoint intersect(const Ray &ray, const Method &method, uint32_t ray_kind, const Origin &from,
                            const uint8_t *camera_inside, TraversalStats *stats) const;
     // intersect() for n <= kPacketRays camera rays (a 4x4 pixel block): the same answers,
-    // each instance's rays traced together as a packet (packet.h).
+    // each instance's rays traced together as a packet (packet.h). times: each ray's time
+    // in the shutter (null: 0).
     void intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
-                          SurfacePoint *out, TraversalStats *stats) const;
+                          SurfacePoint *out, TraversalStats *stats, const float *times = nullptr) const;
     // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                              const Camera *camera, const AovSink *aov) const;
+                              const Camera *camera, float time, const AovSink *aov) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
-    void take_mesh_hit(int index, const Instance &inst, const MeshHit &h, float s, SurfacePoint &best) const;
-    void take_splat_hit(int index, const Instance &inst, const Ray &ray, const SurfaceHit &h, float s,
+    void take_mesh_hit(int index, const Instance &inst, Placement at, const MeshHit &h, float s,
+                       SurfacePoint &best) const;
+    void take_splat_hit(int index, const Instance &inst, Placement at, const Ray &ray, const SurfaceHit &h, float s,
                         SurfacePoint &best) const;
     // The ray in an instance's object space: unit direction, distances scaled by `scale`.
-    static Ray to_object(const Instance &inst, const Ray &ray, float *scale);
+    static Ray to_object(const Affine &to_object, const Ray &ray, float *scale);
 
     std::vector<Instance> instances_;
     std::vector<Material> materials_;
@@ -174,7 +209,7 @@ class RenderScene {
     std::vector<NodeProgram> programs_;
     MeshLights mesh_lights_;
     BVH top_;
-    bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false;
+    bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false, any_motion_ = false;
 };
 
 }  // namespace splat

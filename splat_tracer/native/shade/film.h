@@ -11,6 +11,7 @@
 #include "base/ray.h"
 #include "scene/camera.h"
 #include "shade/aov.h"
+#include "shade/cryptomatte.h"
 #include "shade/sampling.h"
 #include "splats/visibility.h"
 
@@ -47,6 +48,20 @@ struct Film {
     // 3 floats: Cycles' Environment -- the world as camera rays that leave the scene see it
     // (black where they meet a surface, as Cycles' background pass), averaged over samples.
     float *environment = nullptr;
+    // Cycles' light passes (shade/light_passes.h), averaged over samples: 9 planes of w x h x 3
+    // floats -- Diffuse, Glossy, Transmission (PassLobe order) Direct, then Indirect, then
+    // Color -- all or none (the direct and indirect ones are divided by the colour's sums).
+    float *light = nullptr;
+    // 3 floats: Cycles' Ambient Occlusion pass (IntegratorSettings::ao_distance).
+    float *ao = nullptr;
+    // IntegratorSettings::light_groups.count planes of w x h x 3 floats: each light group's
+    // Combined (Cycles' "Combined_<group>"), averaged over samples.
+    float *light_groups = nullptr;
+    // 3 floats: Cycles' UV pass -- the mesh's UV map at the pixel-centre sample's first hit
+    // (U, V, A = 1 on a mesh), 0 on clouds and where nothing is hit.
+    float *uv = nullptr;
+    // Cryptomatte's object, material and asset passes (shade/cryptomatte.h), integrator only.
+    CryptomatteFilm cryptomatte;
     // The view layer's shader AOVs (shade/aov.h); off unless a material writes one asked for.
     AovFilm aov;
 };

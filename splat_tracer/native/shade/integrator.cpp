@@ -35,6 +35,10 @@ struct Integrator::PathState {
     Vec3 weight{1.f, 1.f, 1.f};  // the product of the bounces' weights: what the pixel gets of light found here
     // Cycles' min_ray_pdf: the smallest pdf of the directions sampled so far (Filter Glossy).
     float min_pdf = kInfinity;
+    // Light passes and groups only (else null): the camera sample's sums, and the lobe of the
+    // path's first bounce, which names the pass its light goes to.
+    LightSums *split = nullptr;
+    int lobe = kLobeNone;
 };
 
 struct Integrator::Primary {
@@ -51,6 +55,9 @@ struct Integrator::Primary {
     float mist = 0;    // 1 - Cycles' mist there (0 where nothing is hit); only with the Mist pass
     Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
     float *aov = nullptr;  // the pixel's shader-AOV sums (Film::aov), null when none is written
+    float ao = 0;      // the AO pass's term (only with that pass)
+    Vec3 uv;           // the UV pass's (U, V, 1) on a mesh; 0 on a cloud
+    int instance = -1, material = 0;  // of the first opaque surface (not a holdout): Cryptomatte's names
 };
 
 struct Integrator::Pixel {
@@ -60,6 +67,7 @@ struct Integrator::Pixel {
     float alpha = 0;
     Primary centre;  // sample 0 is the pixel centre: depth, normal, index and splat count
     CatcherSums catcher;  // scenes with shadow catchers only
+    LightSums light;      // light passes and groups only
 };
 
 namespace {
@@ -144,6 +152,13 @@ struct Integrator::Lobes {
         return std::clamp(f0 * a + b * std::fmin(1.f, f0 / 0.04f), 0.f, 1.f);
     }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
+    // The glossy lobes' albedo seen from cos_o: the Glossy Color pass (Cycles' is the
+    // closures' albedo). Mirror-smooth, the Fresnel reflectance itself.
+    Vec3 glossy_albedo(float cos_o) const {
+        if (delta) return specular(cos_o);
+        return schlick(base, cos_o) * metal +
+               Vec3(1, 1, 1) * (plastic * specular_albedo(cos_o) + glass * fresnel_dielectric(cos_o, eta));
+    }
     // Cycles' bsdf_blur (Filter Glossy): the roughness (alpha) raised to at least `a`; a
     // mirror-smooth lobe so blurred is sampled like any rough one.
     void blur(float a) {
@@ -179,10 +194,21 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
       mesh_lights_(settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly && !scene.mesh_lights().empty()
                        ? &scene.mesh_lights()
                        : nullptr),
+      environment_light_(settings.environment && settings.environment->sampled() && !settings.sky_ao &&
+                                 settings.mesh_light_strategy != IntegratorSettings::kBsdfOnly
+                             ? settings.environment
+                             : nullptr),
       // Cycles' Integrator::device_update: the clamps times 3, since they bound R + G + B.
       clamp_direct_(settings.clamp_direct > 0.f ? 3.f * settings.clamp_direct : kInfinity),
       clamp_indirect_(settings.clamp_indirect > 0.f ? 3.f * settings.clamp_indirect : kInfinity),
-      filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f) {
+      filter_glossy_(settings.filter_glossy > 0.f ? 1.f / settings.filter_glossy : 0.f),
+      timed_(scene.any_motion() || camera.moves()) {
+    if (film.cryptomatte.enabled()) {
+        // Its slots are sums until each pixel's finish(), whatever the buffers held (0: free).
+        const size_t floats = size_t(film.w) * size_t(film.h) * 2 * size_t(film.cryptomatte.slots);
+        for (float *buf : film.cryptomatte.out)
+            if (buf) std::fill(buf, buf + floats, 0.f);
+    }
     if (settings.progressive()) {
         const size_t pixels = size_t(film.w) * size_t(film.h);
         half_.assign(pixels, Vec3());
@@ -190,6 +216,7 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
         converged_.assign(pixels, uint8_t(0));
         // Combined and the Shadow Catcher pass are formed from these sums in finish().
         if (scene.any_catcher()) catcher_.assign(pixels, CatcherSums());
+        if (light_split()) light_.assign(pixels, LightSums());
         // The buffers hold sums until finish().
         auto zero = [&](float *buf, int channels) {
             if (buf) std::fill(buf, buf + pixels * size_t(channels), 0.f);
@@ -198,6 +225,17 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
         zero(film.environment, 3), zero(film.mist, 1);
         zero(film.aov.buffer, film.aov.channels);
     }
+}
+
+// The time in the shutter of a uniform number u: the shutter table's inverse CDF, linearly
+// interpolated between its entries, or u itself for a box shutter.
+float Integrator::shutter_time(float u) const {
+    const int n = settings_.shutter_table_size;
+    if (!settings_.shutter_table || n < 2) return u;
+    const float x = u * float(n - 1);
+    const int i = std::min(int(x), n - 2);
+    const float f = x - float(i);
+    return settings_.shutter_table[i] + (settings_.shutter_table[i + 1] - settings_.shutter_table[i]) * f;
 }
 
 void Integrator::render_tile(size_t tile, const std::atomic<bool> *stop) const {
@@ -247,7 +285,9 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.environment, a.environment * inv);
         if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
         if (film_.aov.on()) film_.aov.scale(p, inv);  // the samples added their AOVs straight into the film
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
         write_centre(a.centre, p);
+        if (light_split()) write_light(a.light, inv, p);
     }
 }
 
@@ -259,7 +299,9 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
     const int samples = settings_.samples;
     const bool half = settings_.adaptive;
     const bool catchers = scene_.any_catcher();
-    const Vec3 backdrop = world_seen(kVisCamera);
+    auto backdrop = [&](Vec3 d) { return world_seen(kVisCamera, d); };
+    const bool split = light_split();
+    const bool crypto = film_.cryptomatte.enabled();
     // Each pixel's sample 0, by which its pixel points are moved so that it is the centre.
     uint32_t first[2 * kPacketRays];
     if (samples > 1)
@@ -287,12 +329,38 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             }
             if (lens) lens_point(camera_, Sampler::to_unit(u[2]), Sampler::to_unit(u[3]), &lens_xy[2 * k], &lens_xy[2 * k + 1]);
         }
+        // Motion blur: each ray's time in the shutter, its own stratified dimension (the
+        // others' numbers unchanged), and the camera where it is then.
+        float times[kPacketRays];
+        if (timed_)
+            for (int k = 0; k < n; ++k) {
+                float t = shutter_time(Sampler(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed).get1(Sampler::kTime));
+                const float duration = settings_.rolling_shutter_duration;
+                if (duration >= 0.f) {
+                    // Cycles' rolling shutter: the row's own instant, (row + 1) / height from
+                    // the top (Cycles' 1 - y / height, its y counted from the bottom), blended
+                    // with the sampled time by the duration.
+                    const float row = float(film_.y0 + rows[k] + 1) / float(film_.height);
+                    t = (t - 0.5f) * duration + (row - 0.5f) * (1.f - duration) + 0.5f;
+                }
+                times[k] = t;
+            }
         Ray rays[kPacketRays];
-        if (lens) block_lens_rays(camera_, film_, cols, rows, n, offsets, lens_xy, rays);
-        else block_rays(camera_, film_, cols, rows, n, offsets, rays);
+        if (camera_.moves()) {
+            for (int k = 0; k < n; ++k) {
+                const Camera now = camera_.at(times[k]);
+                if (lens) block_lens_rays(now, film_, cols + k, rows + k, 1, offsets + 2 * k, lens_xy + 2 * k, rays + k);
+                else block_rays(now, film_, cols + k, rows + k, 1, offsets + 2 * k, rays + k);
+            }
+        } else if (lens) {
+            block_lens_rays(camera_, film_, cols, rows, n, offsets, lens_xy, rays);
+        } else {
+            block_rays(camera_, film_, cols, rows, n, offsets, rays);
+        }
         SurfacePoint hits[kPacketRays];
         if (settings_.packets)
-            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats);
+            scene_.intersect_camera(rays, n, settings_.method, camera_inside_.data(), hits, &tally.stats,
+                                    timed_ ? times : nullptr);
         for (int k = 0; k < n; ++k) {
             // A pixel the panorama does not see: nothing is traced or added (Cycles': black,
             // alpha 0, no pass written).
@@ -301,8 +369,11 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             Primary prim;
             if (film_.aov.on()) prim.aov = film_.aov.pixel(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]));
             ++tally.camera;
-            const Vec3 c = radiance(rays[k], PathState(), rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
             Pixel &a = acc[k];
+            PathState path;
+            path.from.time = timed_ ? times[k] : 0.f;
+            if (split) path.split = &a.light;
+            const Vec3 c = radiance(rays[k], path, rng, &prim, tally, settings_.packets ? &hits[k] : nullptr);
             const Vec3 v = c * prim.alpha;  // premultiplied: a holdout or a transparent film adds nothing
             a.sum = a.sum + v;
             if (half && sample_is_class_a(uint32_t(s))) a.half = a.half + v * 2.f;
@@ -315,22 +386,30 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
                     // exactly 1: no noise outside the shadows).
                     PathState alone;
                     alone.from.catcher_only = true;
+                    alone.from.time = path.from.time;
                     ++tally.camera;
                     CatcherSums &cs = a.catcher;
                     cs.alone = cs.alone + radiance(rays[k], alone, rng, nullptr, tally);
                     cs.full = cs.full + c, cs.samples += 1.f;
-                    cs.background = cs.background + backdrop;
+                    cs.background = cs.background + backdrop(rays[k].d);
                 } else {
                     CatcherSums &cs = a.catcher;
                     cs.matte = cs.matte + v, cs.matte_alpha += prim.alpha;
-                    if (!prim.hit) cs.background = cs.background + backdrop;
+                    if (!prim.hit) cs.background = cs.background + backdrop(rays[k].d);
                 }
             }
             a.diffcol = a.diffcol + prim.diffcol, a.emit = a.emit + prim.emit;
             a.environment = a.environment + prim.environment, a.mist += prim.mist;
+            a.light.ao += prim.ao;
             const float lit = prim.unshadowed > 0.f ? prim.lit / prim.unshadowed : 1.f;
             a.shadow = a.shadow + Vec3(lit, lit, lit);
-            if (s == 0) a.centre = prim, a.centre.t = prim.hit ? float(camera_.depth(rays[k], prim.t)) : 0.f;
+            // Each sample counts 1 for the name it meets (Cycles' matte weight: the camera
+            // ray's throughput, 1, times the opacity, 1 where alpha is sampled stochastically).
+            if (crypto && prim.instance >= 0)
+                film_.cryptomatte.add(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]), prim.instance,
+                                      prim.material, 1.f);
+            if (s == 0)
+                a.centre = prim, a.centre.t = prim.hit ? float(camera_.at(timed_ ? times[k] : 0.f).depth(rays[k], prim.t)) : 0.f;
         }
     }
     return true;
@@ -362,6 +441,7 @@ void Integrator::render_tile_samples(size_t tile, int s0, int s1, const std::ato
             if (film_.mist) film_.mist[p] += a.mist;
             half_[p] = half_[p] + a.half;
             if (!catcher_.empty()) catcher_[p].add(a.catcher);
+            if (!light_.empty()) light_[p].add(a.light, settings_.light_groups.count);
             taken_[p] += uint32_t(s1 - s0);
             if (s0 == 0) write_centre(a.centre, p);  // the centre sample's passes
         }
@@ -443,6 +523,8 @@ uint64_t Integrator::finish() {
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
         if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
         if (film_.aov.on()) film_.aov.scale(p, inv);
+        if (!light_.empty()) write_light(light_[p], inv, p);
+        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
     }
     return total;
 }
@@ -458,6 +540,7 @@ void Integrator::write_centre(const Primary &c, size_t p) const {
     if (film_.index) film_.index[p] = c.hit ? c.index : 0.f;
     if (film_.material_index) film_.material_index[p] = c.hit ? c.material_index : 0.f;
     if (film_.splat_count) film_.splat_count[p] = float(c.splats);
+    put3(film_.uv, c.hit ? c.uv : Vec3());
 }
 
 // Cycles' mist (kernel/film/data_passes.h): the distance from the camera (along its view
@@ -534,27 +617,39 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         else
             sp = scene_.intersect(ray, cfg.method, st.kind, st.from, st.camera ? camera_inside_.data() : nullptr,
                                   &tally.stats);
-        if (st.specular && !cfg.headlight)
-            for (const Light &light : scene_.lights())
-                if (light.visibility & st.kind) lamps = lamps + lamp_radiance(light, ray, sp.t);
+        if (st.specular && !cfg.headlight) {
+            // A pointer range, as a range-for: the end is not reloaded each lamp.
+            const Light *first_lamp = scene_.lights().data(), *end = first_lamp + scene_.lights().size();
+            for (const Light *light = first_lamp; light != end; ++light)
+                if (light->visibility & st.kind) {
+                    const Vec3 seen = lamp_radiance(*light, ray, sp.t);
+                    lamps = lamps + seen;
+                    // (With Clamp on, each lamp is clamped alone here; Combined clamps their sum.)
+                    if (st.split)
+                        tap(st, clamped(seen, st.weight, st.bounces > 1),
+                            cfg.light_groups.of_lamp(size_t(light - first_lamp)), true);
+                }
+        }
         if (!sp.valid()) {
             // Cycles' Environment pass: the world a camera ray leaves into, on a transparent
             // film too (its background pass is evaluated there for that pass alone).
             if (primary && st.camera && film_.environment)
-                primary->environment = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+                primary->environment = clamped(world_seen(st.kind, ray.d), st.weight, st.bounces > 1);
             if (st.camera && cfg.film_transparent) {
                 if (primary) primary->alpha = 0.f;
                 return Vec3();
             }
             // Cycles clamps light that a ray finds with the ray's bounce - 1: light reaching
             // the first surface is direct, whether sampled there or found by its bounce ray.
-            return clamped(world_seen(st.kind), st.weight, st.bounces > 1) + clamped(lamps, st.weight, st.bounces > 1);
+            const Vec3 world = clamped(world_missed(st, ray.d), st.weight, st.bounces > 1);
+            if (st.split) tap(st, world, cfg.light_groups.world, true);
+            return world + clamped(lamps, st.weight, st.bounces > 1);
         }
         if (st.camera && scene_.instance(sp.instance).holdout) {  // a hole in the image
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, aov_writing ? &aov : nullptr);
+        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
         if (aov_writing && film_.aov.done_after(opacity)) aov_writing = false;
@@ -564,14 +659,16 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         ++st.transparent, ++tally.transparent;
         passed = sp;
         st.from = Origin{passed.instance, passed.prim, passed.members, passed.n_members,
-                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only};
+                         inside_after_crossing(passed, st.from.inside), false, st.from.catcher_only,
+                         st.from.time};
         const float travelled = sp.t;
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmin = 0.f;
         ray.tmax = ray.tmax - travelled;
         if (!(ray.tmax > 0.f)) {
-            const Vec3 world = clamped(world_seen(st.kind), st.weight, st.bounces > 1);
+            const Vec3 world = clamped(world_missed(st, ray.d), st.weight, st.bounces > 1);
             if (primary && st.camera && film_.environment) primary->environment = world;
+            if (st.split) tap(st, world, cfg.light_groups.world, true);
             return world;
         }
     }
@@ -598,7 +695,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     const Vec3 diffuse_albedo = lobes.diffuse(cos_o);
 
     Vec3 emitted = mat.emission;  // two-sided, like Cycles' Emission shader
-    if (st.mis_pdf > 0.f) {
+    if (st.mis_pdf > 0.f && mesh_lights_) {  // (the environment light sets mis_pdf too)
         // Shadow rays could have found this point too: the power heuristic shares it between
         // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
         // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
@@ -621,8 +718,23 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         primary->index = scene_.instance(sp.instance).pass_index, primary->splats = sp.n_members;
         primary->catcher = scene_.instance(sp.instance).shadow_catcher;
         primary->position = sp.p, primary->material_index = mat.pass_index;
+        primary->instance = sp.instance, primary->material = sp.material;
         if (film_.mist) primary->mist = mist_term(sp.p);
+        if (film_.uv) {
+            if (const TriangleMesh *mesh = scene_.instance(sp.instance).mesh) {
+                const Vec3 uv = mesh->uv(sp.prim, sp.b1, sp.b2);
+                primary->uv = Vec3(uv.x, uv.y, 1.f);
+            }
+        }
+        if (st.split) {
+            // Cycles' colour passes: the lobes' albedos seen from the camera.
+            LightSums &ls = *st.split;
+            ls.color[kLobeDiffuse] = ls.color[kLobeDiffuse] + diffuse_albedo;
+            ls.color[kLobeGlossy] = ls.color[kLobeGlossy] + lobes.glossy_albedo(cos_o);
+            ls.color[kLobeTransmission] = ls.color[kLobeTransmission] + lobes.transmission(cos_o);
+        }
     }
+    if (st.split) tap(st, emission, cfg.light_groups.of_instance(sp.instance), true);
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
@@ -632,7 +744,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
     // the origin moved off the disc by a small fraction of its radius -- and they do hit the
     // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only};
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only,
+                st.from.time};
     if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
         here.members = nullptr, here.n_members = 0;
         sp.offset = kPlainSplatOffset * sp.radius;
@@ -646,6 +759,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // mirror image of what rays leaving its front see.
         here.back = true;
     }
+    if (primary && st.camera && film_.ao) primary->ao = ao_term(sp, here, n, ng, rng, tally);
     auto spawn = [&](Vec3 dir) {
         Ray r;
         const Vec3 side = (dot(dir, ng) >= 0.f) ? ng : ng * -1.f;
@@ -668,7 +782,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     }
 
     L = L + direct_light(sp, here, n, ng, wo, cos_o, lobes, picks, rng, st.camera ? primary : nullptr, tally,
-                         st.weight, st.bounces > 0);
+                         st.weight, st.bounces > 0, st);
 
     // Nothing in the scene gives light (no lamp, a black world, no emission): no further ray
     // can bring any back, so none is traced.
@@ -707,6 +821,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         }
         next.weight = st.weight * weight;
         next.min_pdf = std::fmin(st.min_pdf, pdf);
+        if (st.split && st.lobe == kLobeNone)  // the first bounce names the light passes of all that follows
+            next.lobe = kind == kVisDiffuse ? kLobeDiffuse : kind == kVisGlossy ? kLobeGlossy : kLobeTransmission;
         ++(tally.*count);
         L = L + weight * radiance(spawn(dir), next, next_rng, nullptr, tally);
     };
@@ -727,8 +843,12 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
 
     // Sky light by ambient occlusion replaces the diffuse bounce.
     const Vec3 sky = world_seen(kVisDiffuse);
-    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f)
-        L = L + clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
+    if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f) {
+        const Vec3 skylight =
+            clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
+        L = L + skylight;
+        if (st.split) tap(st, skylight, cfg.light_groups.world, false, kLobeDiffuse);
+    }
 
     // One sampled continuation among the lobes that are not traced exactly.
     const float w_diffuse = picks.diffuse, w_glossy = picks.glossy, w_trans = picks.transmission,
@@ -744,10 +864,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // lights (0 without them: emission the ray meets counts in full).
         float pdf = kInfinity, mis_pdf = 0.f;
         auto densities = [&](Vec3 wi) {
-            if (!(filter_glossy_ > 0.f) && !mesh_lights_) return;
+            if (!(filter_glossy_ > 0.f) && !mesh_lights_ && !environment_light_) return;
             const float p = reflection_pdf(lobes, n, wo, cos_o, wi, picks);
             if (filter_glossy_ > 0.f) pdf = p;
-            if (mesh_lights_) mis_pdf = p;
+            if (mesh_lights_ || environment_light_) mis_pdf = p;
         };
         if (u < w_diffuse) {
             const Vec3 wi = sample_cosine(n, u1, u2);
@@ -808,9 +928,10 @@ float Integrator::reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_
 
 Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                               const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
-                              Primary *primary, Tally &tally, Vec3 weight, bool indirect) const {
+                              Primary *primary, Tally &tally, Vec3 weight, bool indirect,
+                              const PathState &st) const {
     const std::vector<Light> &lights = scene_.lights();
-    if (lights.empty() && !mesh_lights_) return Vec3();  // no light to sample: no shadow ray, no work
+    if (lights.empty() && !mesh_lights_ && !environment_light_) return Vec3();  // nothing to sample: no work
     const Vec3 diffuse = lobes.diffuse(cos_o) * (1.f / kPi);
     const bool glossy = !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
     if (luminance(diffuse) <= 0.f && !glossy) return Vec3();  // mirror, glass, pure emitter
@@ -826,10 +947,20 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
+    const bool split = st.split != nullptr;  // read once: the stores below may alias it
+    // Light passes: one source's light `all` here, of which `diffuse_part` lit the diffuse
+    // lobe (the rest the glossy one), and `added`, what the path got of it after the clamp.
+    auto tap_split = [&](Vec3 all, Vec3 diffuse_part, Vec3 added, int group) {
+        const float total = luminance(all);
+        if (!(total > 0.f)) return;
+        const float scale = luminance(added) / total;  // the clamp scales all channels alike
+        tap(st, diffuse_part * scale, group, false, kLobeDiffuse);
+        tap(st, (all - diffuse_part) * scale, group, false, kLobeGlossy);
+    };
     Vec3 L;
     for (size_t i = 0; i < lights.size(); ++i) {
         const Light &light = lights[i];
-        Vec3 lamp;
+        Vec3 lamp, lamp_diffuse;  // lamp_diffuse, and lamp without the clamp: light passes only
         for (int s = 0; s < k; ++s) {
             float u[2];
             rng.get(Sampler::kLamp + Sampler::kDimStride * uint32_t(i), u, 2, uint32_t(s), uint32_t(k));
@@ -849,9 +980,15 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             }
             if (clamp) lamp = lamp + c * visible;
             else L = L + c * visible;
+            if (split) {
+                if (!clamp) lamp = lamp + c * visible;
+                lamp_diffuse = lamp_diffuse + diffuse * ls.irradiance * visible * (cos_i * share);
+            }
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }
         if (clamp) L = L + clamped(lamp, weight, indirect);
+        if (split) tap_split(lamp, lamp_diffuse, clamp ? clamped(lamp, weight, indirect) : lamp,
+                                settings_.light_groups.of_lamp(i));
     }
     // Emissive triangles: a point of one picked by power, weighed against the chance that
     // the path's own sampled reflection finds it (the weight its emission gets in radiance()).
@@ -882,10 +1019,79 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             ++tally.shadow;
             // Not in the Shadow pass, which is the lamps' (a closed emitter's far side, shadowed
             // by its near side, would darken it everywhere).
-            const Vec3 lit = c * shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            const Vec3 lit = c * through;
             // Clamped, each sample is one of Cycles' shadow rays (one emitter picked, its light
             // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
-            L = L + (clamp ? clamped(lit * float(k), weight, indirect) * share : lit);
+            const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
+            L = L + added;
+            if (split) {
+                const Vec3 diffuse_part = (emitter.visibility & kVisDiffuse ? diffuse : Vec3()) * ls.emission *
+                                          through * (cos_i * w / light_pdf);
+                tap_split(lit, diffuse_part, added, settings_.light_groups.of_instance(ls.instance));
+            }
+        }
+    }
+    if (environment_light_)
+        L = L + environment_light(sp, from, n, ng, wo, cos_o, lobes, picks, rng, tally, weight, indirect, st);
+    return L;
+}
+
+Vec3 Integrator::world_missed(const PathState &st, Vec3 d) const {
+    const Vec3 world = world_seen(st.kind, d);
+    // A sampled diffuse or glossy bounce (mis_pdf > 0) could have been drawn by the
+    // environment light too: the power heuristic shares the direction between the two ways.
+    if (!environment_light_ || !(st.mis_pdf > 0.f)) return world;
+    if (settings_.mesh_light_strategy == IntegratorSettings::kLightOnly) return Vec3();
+    const float light_pdf = environment_light_->pdf(d) * float(settings_.shadow_samples);
+    return world * power_heuristic(st.mis_pdf, light_pdf);
+}
+
+Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo,
+                                   float cos_o, const Lobes &lobes, const LobePicks &picks, const Sampler &rng,
+                                   Tally &tally, Vec3 weight, bool indirect, const PathState &st) const {
+    const uint32_t vis = settings_.world_visibility;
+    // As a world hidden from diffuse (glossy) rays lights no diffuse (glossy) lobe in Cycles.
+    const Vec3 diffuse = vis & kVisDiffuse ? lobes.diffuse(cos_o) * (1.f / kPi) : Vec3();
+    const bool glossy = (vis & kVisGlossy) && !lobes.delta && luminance(lobes.specular(cos_o)) > 0.f;
+    if (luminance(diffuse) <= 0.f && !glossy) return Vec3();
+    const int k = settings_.shadow_samples;
+    const float share = 1.f / float(k);
+    const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
+    Vec3 L;
+    for (int s = 0; s < k; ++s) {
+        float u[2];
+        rng.get(Sampler::kEnvironment, u, 2, uint32_t(s), uint32_t(k));
+        const EnvironmentSample es = environment_light_->sample(u[0], u[1]);
+        if (!es.valid) continue;
+        const float cos_i = dot(n, es.wi);
+        if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
+        Vec3 f = diffuse;
+        if (glossy) {
+            const Vec3 h = normalize(wo + es.wi);
+            const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
+            f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
+                        (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
+        }
+        const float light_pdf = es.pdf * float(k);
+        const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
+                            ? 1.f
+                            : power_heuristic(light_pdf, reflection_pdf(lobes, n, wo, cos_o, es.wi, picks));
+        const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
+        if (!(luminance(c) > 0.f)) continue;
+        ++tally.shadow;
+        const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
+        const Vec3 lit = c * through;
+        const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
+        L = L + added;
+        const float total = luminance(lit);
+        if (st.split && total > 0.f) {  // (0: shadowed, nothing to split)
+            // The world's light reaching a surface is Direct light in Cycles' passes, as a
+            // lamp's: its diffuse share to Diffuse, the rest to Glossy, all to the world's group.
+            const float scale = luminance(added) / total;  // the clamp scales all channels alike
+            const Vec3 diffuse_part = diffuse * es.radiance * through * (cos_i * w / light_pdf);
+            tap(st, diffuse_part * scale, settings_.light_groups.world, false, kLobeDiffuse);
+            tap(st, (lit - diffuse_part) * scale, settings_.light_groups.world, false, kLobeGlossy);
         }
     }
     return L;
@@ -920,18 +1126,76 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
         sp = scene_.intersect(ray, method, kVisShadow, from, nullptr, &tally.stats);
         if (!sp.valid()) return t;
-        const Material m = scene_.material_at(sp, ray.d * -1.f, &camera_);
+        const Material m = scene_.material_at(sp, ray.d * -1.f, &camera_, from.time);
         const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);
         if (a >= 1.f) return Vec3();
         t = t * (1.f - a);
         previous = sp;
         from = Origin{previous.instance, previous.prim, previous.members, previous.n_members,
-                      inside_after_crossing(previous, from.inside), false, from.catcher_only};
+                      inside_after_crossing(previous, from.inside), false, from.catcher_only,
+                      from.time};
         ray.o = sp.p + ray.d * sp.offset;
         ray.tmax -= sp.t;
         if (!(ray.tmax > 0.f)) return t;
     }
     return Vec3();
+}
+
+}  // namespace splat
+
+namespace splat {
+
+// Where a path's light goes in Cycles' light passes (kernel/film/light_passes.h): by the lobe
+// of the path's first bounce, Direct when it reached the first surface straight from its
+// source -- sampled there, or found by the first bounce's ray (emission, a lamp, the world) --
+// Indirect otherwise. What the camera itself sees is the Emission and Environment passes.
+// Every piece counts in its light group, whatever the depth.
+void Integrator::tap(const PathState &st, Vec3 c, int group, bool found, int lobe) const {
+    LightSums &sums = *st.split;
+    const Vec3 v = st.weight * c;  // what the pixel gets of it
+    if (group >= 0 && group < settings_.light_groups.count) sums.group[group] = sums.group[group] + v;
+    const int l = st.lobe != kLobeNone ? st.lobe : lobe;
+    if (l == kLobeNone) return;
+    if (st.bounces == (found ? 1 : 0)) sums.direct[l] = sums.direct[l] + v;
+    else sums.indirect[l] = sums.indirect[l] + v;
+}
+
+float Integrator::ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
+                          Tally &tally) const {
+    float u[2];
+    rng.get(Sampler::kAoPass, u, 2);
+    const Vec3 wi = sample_cosine(n, u[0], u[1]);
+    if (dot(wi, ng) <= 0.f) return 0.f;  // Cycles adds nothing for a direction under the surface
+    Ray r;
+    r.o = sp.p + ng * sp.offset;
+    r.d = wi;
+    r.tmin = 0.f;
+    r.tmax = settings_.ao_distance;
+    ++tally.shadow;
+    return scene_.occluded(r, settings_.method, from, &tally.stats) ? 0.f : 1.f;
+}
+
+// Cycles' film read (kernel/film/read.h, film_get_pass_pixel_divide_even_color): the direct
+// and indirect passes are the ratio of their sums to the colour's (0 where the colour is 0);
+// the colours, AO and the groups are means.
+void Integrator::write_light(const LightSums &sums, float inv, size_t p) const {
+    const size_t plane = size_t(film_.w) * size_t(film_.h) * 3;
+    auto put = [&](float *buf, Vec3 v) { buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z; };
+    if (film_.light) {
+        auto divide = [](float a, float b) { return b != 0.f ? a / b : 0.f; };
+        for (int l = 0; l < kLobes; ++l) {
+            const Vec3 col = sums.color[l];
+            for (int which = 0; which < 2; ++which) {
+                const Vec3 v = which == 0 ? sums.direct[l] : sums.indirect[l];
+                put(film_.light + plane * size_t(which * kLobes + l),
+                    Vec3(divide(v.x, col.x), divide(v.y, col.y), divide(v.z, col.z)));
+            }
+            put(film_.light + plane * size_t(2 * kLobes + l), col * inv);
+        }
+    }
+    if (film_.ao) put(film_.ao, Vec3(1, 1, 1) * (sums.ao * inv));
+    if (film_.light_groups)
+        for (int g = 0; g < settings_.light_groups.count; ++g) put(film_.light_groups + plane * size_t(g), sums.group[g] * inv);
 }
 
 }  // namespace splat

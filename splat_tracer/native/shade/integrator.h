@@ -10,7 +10,9 @@
 
 #include "scene/camera.h"
 #include "scene/render_scene.h"
+#include "shade/environment.h"
 #include "shade/film.h"
+#include "shade/light_passes.h"
 #include "shade/sampling.h"
 
 namespace splat {
@@ -29,6 +31,11 @@ struct IntegratorSettings : FrameSettings {
     // film, as in Cycles.
     uint32_t world_visibility = kVisCamera | kVisDiffuse | kVisGlossy | kVisTransmission;
     bool film_transparent = false;
+    // The world as an environment image (null: the uniform `world` above, as before). With it,
+    // `world` is its mean radiance. `camera_environment`: what camera rays see instead (the
+    // world's Light Path > Is Camera Ray trick), null: the same. Owned by the caller.
+    const EnvironmentMap *environment = nullptr;
+    const EnvironmentMap *camera_environment = nullptr;
     // Preview shading: base colour x |cos| between the view ray and the normal (a light at the
     // eye), no lamps, no secondary rays. What a scene without any light source renders with.
     bool headlight = false;
@@ -51,11 +58,25 @@ struct IntegratorSettings : FrameSettings {
     // rays that meet them, weighed by multiple importance sampling (the default, as Cycles);
     // shadow rays only; or the rays that meet them only (as before mesh lights, and as a
     // material whose Emission Sampling is None). The last two exist to verify the first.
+    // The environment image as a light follows the same strategy.
     enum MeshLightStrategy { kMis = 0, kLightOnly = 1, kBsdfOnly = 2 };
     int mesh_light_strategy = kMis;
     // Cycles' Film mist settings (the World's Mist Pass panel): start, 1 / depth (0: a depth
     // of 0) and the falloff's exponent (Quadratic 2, Linear 1, Inverse Quadratic 0.5).
     float mist_start = 0.f, mist_inv_depth = 0.01f, mist_falloff = 1.f;
+    // The AO pass's reach (World > Light Settings > Distance, Cycles' ao_distance).
+    float ao_distance = 10.f;
+    // Film::light_groups: which group each lamp, emissive instance and the world lights.
+    LightGroupMap light_groups;
+    // Motion blur's shutter curve (Cycles' shutter table): the time in the shutter (0..1) of
+    // evenly spaced values of a uniform number, its inverse CDF, held by the caller for the
+    // render; null: a box shutter (the time is the number). Used only when something moves.
+    const float *shutter_table = nullptr;
+    int shutter_table_size = 0;
+    // Cycles' rolling shutter (Top: the image's rows are exposed from top to bottom): the
+    // duration of a row's exposure as a share of the shutter (0: each row at one instant);
+    // negative: off, every row sees the whole shutter.
+    float rolling_shutter_duration = -1.f;
 };
 
 // Rays traced, by kind, and the queries' work: what proves a scene pays only for what it uses.
@@ -123,7 +144,7 @@ class Integrator {
     // the clamp.
     Vec3 direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
                       const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Primary *primary, Tally &tally,
-                      Vec3 weight, bool indirect) const;
+                      Vec3 weight, bool indirect, const PathState &st) const;
     // The density with which the path's sampled reflection at a point goes in direction wi
     // (solid angle): the lobe picks times their densities; 0 when the path ends there.
     static float reflection_pdf(const Lobes &lobes, Vec3 n, Vec3 wo, float cos_o, Vec3 wi, const LobePicks &picks);
@@ -135,6 +156,19 @@ class Integrator {
     // 1 - Cycles' mist at local point p (what Cycles accumulates: the pass is 1 - the mean).
     float mist_term(Vec3 p) const;
     void write_centre(const Primary &centre, size_t p) const;
+    // Light passes and groups (light_passes.h). tap: light `c` met at a vertex of path `st`
+    // (`found`: by the ray that reached it -- emission, a lamp, the world -- rather than
+    // sampled there), of light group `group` (-1: none); `lobe`: at the camera's own vertex,
+    // the lobe that light sampled there lit.
+    void tap(const PathState &st, Vec3 c, int group, bool found, int lobe = kLobeNone) const;
+    // Cycles' AO pass at the camera ray's first hit: 1 if a cosine-distributed ray from it
+    // meets nothing within ao_distance, else 0.
+    float ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
+                  Tally &tally) const;
+    // A pixel's light-pass sums written to the film; `inv` one over the samples.
+    void write_light(const LightSums &sums, float inv, size_t p) const;
+    // The film's light passes or groups are asked for: paths tap their light.
+    bool light_split() const { return film_.light || film_.ao || film_.light_groups; }
     void shade_block(const int *cols, const int *rows, int n, Tally &tally, const std::atomic<bool> *stop) const;
     // Samples [s0, s1) of n pixels added to acc; false when stopped.
     bool shade_samples(const int *cols, const int *rows, int n, int s0, int s1, Pixel *acc, Tally &tally,
@@ -160,6 +194,24 @@ class Integrator {
     Vec3 world_seen(uint32_t kind) const {
         return (settings_.world_visibility & kind) ? settings_.world : Vec3();
     }
+    // The same towards direction d: the environment image's radiance there (the camera's own
+    // image for camera rays), else the uniform world.
+    Vec3 world_seen(uint32_t kind, Vec3 d) const {
+        if (!settings_.environment) return world_seen(kind);
+        if (!(settings_.world_visibility & kind)) return Vec3();
+        const EnvironmentMap *map =
+            kind == kVisCamera && settings_.camera_environment ? settings_.camera_environment : settings_.environment;
+        return map->lookup(d);
+    }
+    // The world met by a ray of state `st` leaving the scene along d, weighed against the
+    // chance that environment_light() drew that direction (multiple importance sampling).
+    Vec3 world_missed(const PathState &st, Vec3 d) const;
+    // The environment image as a light at a surface point: shadow rays towards directions
+    // drawn from its distribution, weighed against the path's sampled reflection.
+    Vec3 environment_light(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, Vec3 wo, float cos_o,
+                           const Lobes &lobes, const LobePicks &picks, const Sampler &rng, Tally &tally, Vec3 weight,
+                           bool indirect,
+                           const PathState &st) const;
 
     const RenderScene &scene_;
     const Camera &camera_;
@@ -170,9 +222,16 @@ class Integrator {
     const std::vector<uint8_t> camera_inside_;  // this render's RenderScene::locate_camera
     bool lit_scene_;  // something emits light: secondary rays can matter
     const MeshLights *mesh_lights_;  // sampled emissive triangles, or null (none, or not sampled)
+    // The environment sampled as a light, or null (a uniform world, a black image, or sky AO
+    // -- which lights diffuse surfaces by occlusion rays instead).
+    const EnvironmentMap *environment_light_;
     // Cycles' kernel values: the clamps times 3 (they bound a sum of three channels) or
     // infinity; filter glossy as 1 / Filter Glossy, or 0 when off.
     float clamp_direct_, clamp_indirect_, filter_glossy_;
+    // Motion blur: camera rays get a time in the shutter (an instance or the camera moves);
+    // false leaves the time dimension out entirely, so a still scene renders as before.
+    const bool timed_;
+    float shutter_time(float u) const;
     // Progressive rendering only: per pixel of the window, the class-A half of the combined
     // sum (times 2, Cycles' adaptive aux buffer), the samples taken, and whether it converged.
     std::vector<Vec3> half_;
@@ -180,6 +239,8 @@ class Integrator {
     std::vector<uint8_t> converged_;
     // Progressive rendering of a scene with shadow catchers: each pixel's catcher sums.
     std::vector<CatcherSums> catcher_;
+    // Progressive rendering with light passes or groups: each pixel's light sums.
+    std::vector<LightSums> light_;
 };
 
 }  // namespace splat

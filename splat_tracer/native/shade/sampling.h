@@ -146,6 +146,9 @@ class Sampler {
         kMeshLight = 5,    // point u1, u2; emitter pick
         kOcclusion = 6,    // sky AO direction u1, u2
         kTransparent = 7,  // + kDimStride x layer: passing a partly transparent surface
+        kTime = 8,         // the camera ray's time in the shutter (motion blur)
+        kAoPass = 9,       // the AO pass's direction u1, u2 (camera vertex only)
+        kEnvironment = 13,  // the environment light's direction u1, u2 (a value no other Dim takes)
     };
     // Added per lamp or layer to a Dim: any constant above the Dims keeps the keys apart.
     static constexpr uint32_t kDimStride = 16;

@@ -1,0 +1,173 @@
+"""Renders the user guide's composite: a scan put into a photograph with its shadow, with
+Splat Tracer and with Cycles, through Blender's compositor.
+
+    python -m tools.composite_images --output docs/composite.png --cycles docs/composite_cycles.png
+
+What an artist does with a photograph and an HDRI shot at the same place, with both taken
+from Blender itself (no file outside the repository is needed): the HDRI is one of the CC0
+Poly Haven HDRIs that ship with Blender (datafiles/studiolights/world, "city" by default:
+Portland's landing pad, a sun 48 degrees up), and the "photograph" is that HDRI seen through
+the render's camera -- a Cycles render of the world alone, made once and given to both
+engines, as a plate is given.
+
+The scene: the HDRI as the World (Environment Texture) lights the scan -- Suzanne's points, as
+in tools/demo.py -- standing on a plane marked Object > Visibility > Shadow Catcher, with
+Film > Transparent on. The compositor (scene.compositing_node_group) lays the render over the
+photograph with Alpha Over; each engine renders and composites the same scene with the same
+samples, and the times printed are those of bpy.ops.render.render (render and compositing).
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import time
+from pathlib import Path
+
+from tools import dev_extension
+from tools.demo import principled, suzanne_cloud
+
+BUILD = dev_extension.REPO_ROOT / "build" / "composite"
+HDRIS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
+
+
+def hdri_path(bpy, name: str) -> Path:
+    """One of the HDRIs Blender ships for its viewport's studio lights (CC0, Poly Haven;
+    1024 x 512, see license.txt beside them)."""
+    return Path(bpy.utils.system_resource("DATAFILES", path="studiolights/world")) / f"{name}.exr"
+
+
+def hdri_world(bpy, scene, path: Path) -> None:
+    scene.world = bpy.data.worlds.new("HDRI")
+    tree = scene.world.node_tree
+    texture = tree.nodes.new("ShaderNodeTexEnvironment")
+    texture.image = bpy.data.images.load(str(path))
+    tree.links.new(texture.outputs["Color"], tree.nodes["Background"].inputs["Color"])
+
+
+def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
+    """The scan on its catcher floor under the HDRI; returns (scene, scan, floor)."""
+    from splat_tracer.pointcloud.readers import ply
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    positions, normals = suzanne_cloud(bpy, levels)
+    path = BUILD / "suzanne.ply"
+    ply.write_ply(str(path), positions, normals)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    scan = bpy.context.active_object
+    scan.name = "Scan"
+    # Linked to the object: Mesh to Points drops the mesh's materials (see tools/demo.py).
+    scan.data.materials.append(None)
+    scan.material_slots[0].link = "OBJECT"
+    scan.material_slots[0].material = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1),
+                                                                 "Roughness": 0.45})
+    # Suzanne (2 m) sits on the ground, facing the camera.
+    scan.location = (0.0, 0.0, 0.82)
+    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+
+    bpy.ops.mesh.primitive_plane_add(size=40.0)
+    floor = bpy.context.active_object
+    floor.name = "Catcher"
+    floor.data.materials.append(principled(bpy, "Ground", **{"Base Color": (0.5, 0.5, 0.5, 1), "Roughness": 0.8}))
+    floor.is_shadow_catcher = True
+
+    hdri_world(bpy, scene, hdri)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    # At eye height (the HDRI's own camera stood about there), looking a little down; the
+    # city HDRI's sun then shines from behind the camera's right.
+    cam.location = (0.9, -8.0, 1.7)
+    cam.rotation_euler = (math.radians(84), 0.0, math.radians(6))
+    cam.data.lens = 30
+    scene.camera = cam
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
+    scene.view_settings.view_transform = "Standard"  # the radiance as computed, as the demo
+    return scene, scan, floor
+
+
+def render_plate(bpy, scene, hidden, samples: int, output: Path) -> Path:
+    """The "photograph": the world alone through the camera, an opaque float EXR."""
+    for obj in hidden:
+        obj.hide_render = True
+    r = scene.render
+    r.engine, r.film_transparent, r.use_compositing = "CYCLES", False, False
+    scene.cycles.samples = samples
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    r.filepath = str(output)
+    bpy.ops.render.render(write_still=True)
+    for obj in hidden:
+        obj.hide_render = False
+    return output
+
+
+def alpha_over_compositor(bpy, scene, plate: Path):
+    """Render Layers' Image (premultiplied, alpha from Film > Transparent) over the plate
+    with Alpha Over, into the node group's output (Blender 5's compositor)."""
+    tree = bpy.data.node_groups.new("Composite Over Photograph", "CompositorNodeTree")
+    tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+    layers = tree.nodes.new("CompositorNodeRLayers")
+    photo = tree.nodes.new("CompositorNodeImage")
+    photo.image = bpy.data.images.load(str(plate))
+    over = tree.nodes.new("CompositorNodeAlphaOver")
+    out = tree.nodes.new("NodeGroupOutput")
+    tree.links.new(photo.outputs["Image"], over.inputs["Background"])
+    tree.links.new(layers.outputs["Image"], over.inputs["Foreground"])
+    tree.links.new(over.outputs["Image"], out.inputs[0])
+    scene.compositing_node_group = tree
+    scene.render.use_compositing = True
+    scene.render.film_transparent = True
+    return tree
+
+
+def render(bpy, scene, engine: str, output: Path, file_format: str = "PNG") -> float:
+    scene.render.engine = engine
+    scene.render.image_settings.file_format = file_format
+    if file_format == "PNG":
+        scene.render.image_settings.color_depth = "8"
+    scene.render.filepath = str(output)
+    t0 = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    seconds = time.perf_counter() - t0
+    if not output.is_file():
+        raise SystemExit(f"composite: no image was written to {output}")
+    return seconds
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--output", default="composite.png", help="Splat Tracer's composite (PNG)")
+    ap.add_argument("--cycles", default=None, help="also render and composite with Cycles to this PNG")
+    ap.add_argument("--width", type=int, default=400)
+    ap.add_argument("--height", type=int, default=300)
+    ap.add_argument("--samples", type=int, default=32, help="samples per pixel, for both engines")
+    ap.add_argument("--levels", type=int, default=3, help="subdivision levels of Suzanne (3: 31,500 points)")
+    ap.add_argument("--hdri", default="city", choices=HDRIS, help="which of Blender's HDRIs (default: city)")
+    args = ap.parse_args(argv)
+
+    BUILD.mkdir(parents=True, exist_ok=True)
+    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
+    import bpy
+
+    dev_extension.enable_from_source(BUILD)
+    scene, scan, floor = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
+    scene.splat_tracer.samples = args.samples
+    c = scene.cycles
+    c.samples = c.preview_samples = args.samples
+    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
+    plate = render_plate(bpy, scene, (scan, floor), args.samples, BUILD / f"plate_{args.hdri}.exr")
+    alpha_over_compositor(bpy, scene, plate)
+    seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
+    print(f"composite: {len(scan.data.vertices):,} splats on a shadow catcher under Blender's '{args.hdri}' "
+          f"HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s -> {args.output}")
+    if args.cycles:
+        cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
+        print(f"composite: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
+              f"{args.cycles}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
