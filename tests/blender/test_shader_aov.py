@@ -174,3 +174,33 @@ def test_transparent_surfaces_add_their_aovs_until_the_alpha_threshold_as_in_cyc
     scene.view_layers[0].pass_alpha_threshold = 0.5
     mine, cycles = means("veil")
     assert mine == pytest.approx(0.25 + 0.7, abs=0.02) and cycles == pytest.approx(0.25 + 0.743, abs=0.02)
+
+
+def test_aovs_survive_denoising_in_every_stereo_view(blender, empty_scene, tmp_path):
+    """A stereo render with Cycles' Denoise on: each eye's EXR view has the AOV, drawn from that
+    eye's camera (the cube's mask moves with its Object Index silhouette between the eyes) and
+    kept through the denoiser's cut of the passes."""
+    from test_stereo import INDEX, _render, _scene
+
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene, "PARALLEL")
+    out = bpy.data.materials["Y"].node_tree.nodes.new("ShaderNodeOutputAOV")
+    out.aov_name, out.inputs["Value"].default_value = "Cube", 1.0
+    _aov(scene, "Cube", "VALUE")
+    scene.cycles.use_denoising = True
+    scene.render.engine = "SPLAT_TRACER"
+    views = _render(bpy, scene, tmp_path / "stereo_aov.exr")
+    assert set(views) == {"left", "right"}, sorted(views)
+    for name, passes in views.items():
+        assert "Cube" in passes, (name, sorted(passes))
+        cube = np.rint(passes[INDEX]) == 1
+        assert cube.sum() > 20, name
+        # The AOV is 1 where the cube is: the Object Index is the pixel centre's, the AOV the
+        # 8 samples' average, so a pixel next to the silhouette may lose a sample (1/8).
+        inner = cube & np.roll(cube, 1, 0) & np.roll(cube, -1, 0) & np.roll(cube, 1, 1) & np.roll(cube, -1, 1)
+        np.testing.assert_allclose(passes["Cube"][inner], 1.0, atol=0.126)
+        assert passes["Cube"][inner].mean() > 0.99, name
+        assert not passes["Cube"][np.rint(passes[INDEX]) == 2].any(), "the sphere writes no AOV"
+    # Each view its own camera: the masks differ between the eyes.
+    assert not np.array_equal(views["left"]["Cube"], views["right"]["Cube"])
+    assert not [line for line in stats()["report"] if "AOV" in line]
