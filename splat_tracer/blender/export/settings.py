@@ -173,7 +173,10 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
         if not getattr(view_layer, prop, True):
             report.once(f"{layer}: Filter > {label} off is not honoured (rendered as on)")
     if view_layer.pass_alpha_threshold != _ALPHA_THRESHOLD:
-        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is not read")
+        # Read by the shader AOVs (session.py); Cycles' data passes would stop at it too.
+        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is read by the "
+                    "Shader AOVs only: Depth, Normal and the other data passes are of the surface the "
+                    "pixel-centre sample stops at")
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")
