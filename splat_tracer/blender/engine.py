@@ -110,6 +110,13 @@ class SplatTracerEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, shading.LIGHT_GROUP_PREFIX + name, 3, "RGB", "COLOR")
         if renderlayer.splat_tracer.use_pass_splat_count:
             self.register_pass(scene, renderlayer, SPLAT_COUNT, 1, "X", "VALUE")
+        # Shader AOVs, as Cycles registers them: RGBA for a colour AOV, X for a value one.
+        for aov in renderlayer.aovs:
+            if aov.is_valid:
+                if aov.type == "COLOR":
+                    self.register_pass(scene, renderlayer, aov.name, 4, "RGBA", "COLOR")
+                else:
+                    self.register_pass(scene, renderlayer, aov.name, 1, "X", "VALUE")
         for name in export_settings.denoising_passes(scene, renderlayer):
             self.register_pass(scene, renderlayer, name, *_DENOISING_PASSES[name])
         layers = cryptomatte.slots_of(renderlayer.pass_cryptomatte_depth) // 2

@@ -263,12 +263,21 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     # Light groups' passes ("Combined_<group>") come with the render, not from `passes`: the
     # denoiser's cut keeps them.
     kept = wanted + tuple(shading.LIGHT_GROUP_PREFIX + g for g in light_groups)
+    aovs = []
+    for name, kind in export_shading.view_layer_aovs(view_layer).items():
+        if name in shading.PASSES or name in cryptomatte.KINDS or name in kept:
+            report.once(f"view layer '{view_layer.name}': the Shader AOV '{name}' has the name of a pass "
+                        "the engine writes; it is not written")
+        else:
+            aovs.append((name, kind))
+    kept += tuple(name for name, _ in aovs)  # the denoiser's cut keeps them too
     for name, camera in cameras.items():
         moving = exported.render_scene.moving + (camera.motion is not None)
         result = exported.render_scene.render(camera, width, height, settings, method, core_passes,
                                               window=(x0, y0, w, h), threads=threads, progress=progress,
                                               cryptomatte_levels=view_layer.pass_cryptomatte_depth,
                                               light_groups=light_groups,
+                                              aovs=aovs, aov_alpha_threshold=view_layer.pass_alpha_threshold,
                                               shutter_curve=motion.curve if motion is not None and moving else None,
                                               rolling_shutter=motion.rolling if motion is not None and moving else None)
         position = result.passes.get("Position")

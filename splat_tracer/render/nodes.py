@@ -93,11 +93,21 @@ class Program:
     data: tuple
     outputs: tuple
     images: tuple = ()  # Image objects, by the index IMAGE instructions give
+    # AOV Output nodes: (AOV name, Color register (3 wide), Value register), written on the
+    # camera ray's surfaces into the view layer's AOV of that name (native shade/aov.h).
+    aovs: tuple = ()
 
-    def native(self) -> tuple:
-        """(code, data, outputs, images) as the core takes them."""
-        return (np.array(self.code, np.int32).reshape(-1, WIDTH), np.array(self.data, np.float32),
-                np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
+    def native(self, aov_keys: Optional[dict] = None) -> tuple:
+        """(code, data, outputs, images[, aovs]) as the core takes them; aovs: (k, 3) int32
+        rows (key, colour, value) for the AOV Output nodes whose name aov_keys numbers."""
+        out = (np.array(self.code, np.int32).reshape(-1, WIDTH), np.array(self.data, np.float32),
+               np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
+        rows = [(aov_keys[name], c, v) for name, c, v in self.aovs if aov_keys and name in aov_keys]
+        return out + (np.array(rows, np.int32).reshape(-1, 3),) if rows else out
+
+    def writes_only_aovs(self) -> bool:
+        """Whether the program drives no material input (it exists for its AOV Output nodes)."""
+        return all(o < 0 for o in self.outputs)
 
     def drives(self, name: str) -> bool:
         return self.outputs[list(OUTPUTS).index(name)] >= 0
@@ -115,6 +125,7 @@ class Builder:
         self.data: list = []
         self.outputs = {name: -1 for name in OUTPUTS}
         self.images: list = []
+        self.aovs: list = []
 
     def image(self, image: Image) -> int:
         """The index of an image in this program (added once)."""
@@ -155,8 +166,13 @@ class Builder:
     def output(self, name: str, reg: int) -> None:
         self.outputs[name] = reg
 
+    def aov(self, name: str, colour: int, value: int) -> None:
+        """An AOV Output node: its Color (a 3-wide register) and Value into the AOV `name`."""
+        self.aovs.append((str(name), int(colour), int(value)))
+
     def program(self) -> Program:
-        return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images))
+        return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images),
+                       tuple(self.aovs))
 
 
 def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, **globals_) -> np.ndarray:

@@ -214,9 +214,14 @@ class RenderScene:
             self.material_names.extend(m.name for m in mats)
         self.world = world
         self.lights = tuple(lights)
+        # The shader AOVs the materials' AOV Output nodes write, numbered for the core.
+        self.aov_names = tuple(sorted({name for m in materials if m.program is not None
+                                       for name, _, _ in m.program.aovs}))
+        keys = {name: i for i, name in enumerate(self.aov_names)}
         self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads, [m.program.native() if m.program is not None else None for m in materials])
+                                   threads, [m.program.native(keys) if m.program is not None else None
+                                             for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
         self.moving = sum(r.motion is not None for r in rows)  # instances that move over the shutter
@@ -233,7 +238,8 @@ class RenderScene:
                window: Optional[Sequence[int]] = None, threads: int = 0,
                progress: Optional[Callable[[int, int], bool]] = None, tile_size: int = 32,
                packets: bool = True, shutter_curve=None, rolling_shutter: Optional[float] = None,
-               cryptomatte_levels: int = 6, light_groups: Sequence[str] = ()) -> FrameResult:
+               cryptomatte_levels: int = 6, light_groups: Sequence[str] = (), aovs: Sequence[tuple] = (),
+               aov_alpha_threshold: float = 0.5) -> FrameResult:
         """Renders `passes` (names from shading.PASSES; Combined always) of a window of the
         image (x0, y0, w, h; default all). progress(done, total) as for SplatCloud.render.
         packets: each sample's camera rays of 4x4 pixels found as one packet (False: ray by
@@ -260,7 +266,13 @@ class RenderScene:
         light_groups: group names (at most shading.MAX_LIGHT_GROUPS); each gets a pass
         "Combined_<name>" holding the light of the lamps, emissive instances and world whose
         light_group is that name (Cycles' light groups: the groups sum to Combined less what
-        belongs to none)."""
+        belongs to none).
+
+        aovs: the view layer's shader AOVs, (name, "COLOR" or "VALUE") each, returned among
+        the passes under their names ((h, w, 4) RGBA or (h, w)): what the materials' AOV Output
+        nodes of that name write on the camera ray's surfaces up to the first whose alpha
+        reaches aov_alpha_threshold (Cycles' view-layer Alpha Threshold), averaged over the
+        samples; 0 where nothing writes it. Costs nothing unless a material writes one."""
         for value, kind, name in ((camera, Camera, "camera"), (settings, RenderSettings, "settings"),
                                   (method, Method, "method")):
             if not isinstance(value, kind):
@@ -270,6 +282,15 @@ class RenderScene:
         unknown = set(passes) - set(PASSES) - set(cryptomatte.KINDS)
         if unknown:
             raise ValueError(f"unknown passes {sorted(unknown)}; known: {sorted(PASSES) + list(cryptomatte.KINDS)}")
+        if isinstance(light_groups, str):
+            raise TypeError("light_groups must be a sequence of group names, not one string")
+        aovs = tuple((str(name), str(kind)) for name, kind in aovs)
+        taken = {"Combined", *PASSES, *cryptomatte.KINDS, *passes, *(LIGHT_GROUP_PREFIX + g for g in light_groups)}
+        for name, kind in aovs:
+            if kind not in AOV_CHANNELS or name in taken:
+                raise ValueError(f"AOV {name!r}: a type in {sorted(AOV_CHANNELS)} and a name no other pass has")
+        if len({name for name, _ in aovs}) != len(aovs):
+            raise ValueError("AOV names must differ")
         ids = None
         if set(passes) & set(cryptomatte.KINDS):
             ids = (np.array([[cryptomatte.name_id(n) for n in pair] for pair in self.instance_names],
@@ -277,10 +298,10 @@ class RenderScene:
                    # The core's table has its default material when no instance brings one.
                    np.array([cryptomatte.name_id(n) for n in self.material_names or [Material().name]], np.float32))
         kwargs, buffers = render_arguments(camera, width, height, settings, method, self.world, passes, window,
-                                           cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels)
+                                           cryptomatte_ids=ids, cryptomatte_levels=cryptomatte_levels,
+                                           aovs=aovs, aov_names=self.aov_names,
+                                           aov_alpha_threshold=aov_alpha_threshold)
         if light_groups:
-            if isinstance(light_groups, str):
-                raise TypeError("light_groups must be a sequence of group names, not one string")
             kwargs.update(self._light_group_arguments(light_groups, buffers, *buffers["Combined"].shape[:2]))
         if shutter_curve is not None:
             kwargs["shutter_table"] = shutter_table(shutter_curve)
@@ -340,11 +361,18 @@ PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "
                  "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
 
 
+# A shader AOV's channels by its type (Blender's AOV.type): RGBA as Cycles registers a colour AOV.
+AOV_CHANNELS = {"COLOR": 4, "VALUE": 1}
+
+
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
                      passes: Sequence[str] = ("Combined",), window: Optional[Sequence[int]] = None,
-                     cryptomatte_ids: Optional[tuple] = None, cryptomatte_levels: int = 6) -> tuple[dict, dict]:
+                     cryptomatte_ids: Optional[tuple] = None, cryptomatte_levels: int = 6,
+                     aovs: Sequence[tuple] = (), aov_names: Sequence[str] = (),
+                     aov_alpha_threshold: float = 0.5) -> tuple[dict, dict]:
     """The keyword arguments of the core's RenderScene.render for a frame (all but threads,
-    progress, tile_size and packets), and the zeroed buffers they write, by pass name. It
+    progress, tile_size and packets), and the zeroed buffers they write, by pass name (the
+    AOVs' by theirs; aov_names: the scene's, RenderScene.aov_names). It
     checks only the window (before allocating): RenderScene.render checks its arguments
     first, and fuzz/fuzz_core.py passes unchecked ones on purpose, so that the fuzzed
     layout is the add-on's. cryptomatte_ids: (instance ids (instances, 2), material ids),
@@ -386,4 +414,20 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
     kwargs.update({PASS_KEYWORDS[name]: buf for name, buf in buffers.items() if name in PASS_KEYWORDS})
     if any(kind in buffers for kind in cryptomatte.KINDS):
         kwargs["cryptomatte"] = (*(buffers.get(kind) for kind in cryptomatte.KINDS), slots, *cryptomatte_ids)
+    # The AOVs some material writes share one buffer, each a view of its channels; the others
+    # stay zeros the core never sees (nothing to write: no cost).
+    written = [(name, AOV_CHANNELS[kind]) for name, kind in aovs if name in aov_names]
+    channels = sum(c for _, c in written)
+    block = np.zeros((h, w, channels), np.float32) if written else None
+    layout, first = np.full((len(aov_names), 2), -1, np.int32), 0
+    for name, kind in aovs:
+        c = AOV_CHANNELS[kind]
+        if block is not None and name in aov_names:
+            layout[list(aov_names).index(name)] = (first, c)
+            buffers[name] = block[..., first] if c == 1 else block[..., first:first + c]
+            first += c
+        else:
+            buffers[name] = np.zeros((h, w) if c == 1 else (h, w, c), np.float32)
+    if block is not None:
+        kwargs["aov"] = (block, layout, float(aov_alpha_threshold))
     return kwargs, buffers

@@ -55,12 +55,6 @@ def _stereo_panorama(bpy, scene):
             "not Cycles' spherical stereo")
 
 
-def _aov(bpy, scene):
-    aov = scene.view_layers[0].aovs.add()
-    aov.name = "Wetness"
-    return (f"{LAYER}: the Shader AOV 'Wetness' pass is not written",)
-
-
 def _light_groups_past_the_bound(bpy, scene):
     # Each group up to the core's bound gets its Combined_<group> pass (test_light_passes.py);
     # the one past it is the one line.
@@ -114,7 +108,7 @@ def _lamp_influence(bpy, scene):
     return ("light 'Lamp': its Diffuse influence is ignored (rendered as 1)",)
 
 
-CASES = {"stereo panorama": _stereo_panorama, "shader AOV": _aov,
+CASES = {"stereo panorama": _stereo_panorama,
          "light groups past the bound": _light_groups_past_the_bound, "vector": _vector,
          "OptiX denoiser": _optix, "film exposure": _film_exposure, "caustics": _caustics,
          "view layer samples": _layer_samples, "view layer filter": _layer_filter, "lamp influence": _lamp_influence}
@@ -128,6 +122,12 @@ def test_a_scene_setting_not_honoured_is_said_once(blender, small_scene, case):
     assert not lines_with(before, parts[0]), before
     after = render(bpy)
     assert len(lines_with(after, *parts)) == 1, (parts, after)
+
+
+def test_a_shader_aov_is_written_not_said(blender, small_scene):
+    """Shader AOVs are honoured (tests/blender/test_shader_aov.py): adding one says nothing."""
+    small_scene.view_layers[0].aovs.add().name = "Wetness"
+    assert not lines_with(render(blender), "AOV"), "a shader AOV is written: nothing to say"
 
 
 def test_vector_with_motion_blur_is_cycles_own_zero(blender, small_scene):

@@ -674,11 +674,13 @@ SHADER_INPUTS = {
 }
 
 
-def compile_shader(node, say, skip=()) -> tuple:
+def compile_shader(node, say, skip=(), aovs=()) -> tuple:
     """(Program or None, the input sockets it drives) for a shader node's linked inputs
-    (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads).
-    None when nothing needs a program: such a material costs nothing more to render."""
-    fields = SHADER_INPUTS.get(node.type, {})
+    (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads)
+    and for AOV Output nodes: `aovs`, (AOV name, width, the node's Color or Value socket)
+    each. None when nothing needs a program: such a material costs nothing more to render.
+    node: None when nothing feeds the Material Output (AOVs only)."""
+    fields = SHADER_INPUTS.get(node.type, {}) if node is not None else {}
     compiler = Compiler(say)
     driven = []
     for field, names in fields.items():
@@ -699,6 +701,11 @@ def compile_shader(node, say, skip=()) -> tuple:
             continue
         compiler.b.output(field, compiler.input(socket, nodes.OUTPUTS[field]))
         driven.append(socket)
-    if not driven:
+    for name, width, socket in aovs:
+        # Cycles compiles the input the view layer's AOV type reads (Color or Value).
+        reg = compiler.input(socket, width)
+        colour, value = (reg, compiler.const(0.0, 1)) if width == 3 else (compiler.const((0, 0, 0), 3), reg)
+        compiler.b.aov(name, colour, value)
+    if not driven and not aovs:
         return None, []
     return compiler.b.program(), driven

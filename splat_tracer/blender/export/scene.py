@@ -167,14 +167,14 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats, uv
 
 
-def _materials(slots: list, cache: dict, report: shading.Report) -> tuple:
+def _materials(slots: list, cache: dict, report: shading.Report, aovs: dict) -> tuple:
     """Blender materials (an object's slots, see _slot_materials) as shading.Material (one
-    default for none)."""
+    default for none). aovs: the view layer's (export_shading.view_layer_aovs)."""
     out = []
     for m in slots or [None]:
         key = m.name_full if m is not None else None
         if key not in cache:
-            cache[key] = export_shading.material_of(m, report)
+            cache[key] = export_shading.material_of(m, report, aovs)
         out.append(cache[key])
     return tuple(out)
 
@@ -327,6 +327,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     origin = np.asarray(origin, np.float64)
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
+    aovs = export_shading.view_layer_aovs(view_layer)
     frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights = [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
@@ -357,7 +358,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         parent = inst.parent if inst.is_instance else None
         vis = export_shading.object_visibility(obj, view_layer, parent)
         slots = _slot_materials(obj)
-        materials = _materials(slots, frame.materials, report)
+        materials = _materials(slots, frame.materials, report, aovs)
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)

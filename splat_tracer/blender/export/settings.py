@@ -173,13 +173,13 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
         if not getattr(view_layer, prop, True):
             report.once(f"{layer}: Filter > {label} off is not honoured (rendered as on)")
     if view_layer.pass_alpha_threshold != _ALPHA_THRESHOLD:
-        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is not read")
+        # Read by the shader AOVs (session.py); Cycles' data passes would stop at it too.
+        report.once(f"{layer}: the passes' Alpha Threshold ({view_layer.pass_alpha_threshold:g}) is read by the "
+                    "Shader AOVs only: Depth, Normal and the other data passes are of the surface the "
+                    "pixel-centre sample stops at")
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")
-    for aov in view_layer.aovs:
-        report.once(f"{layer}: the Shader AOV '{aov.name}' pass is not written (AOV Output nodes are not "
-                    "evaluated)")
     if _on(view_layer, "use_pass_vector") and not render.use_motion_blur:
         # Cycles writes Vector only with motion blur off (its Data panel greys the switch out
         # when on, and the pass stays zero): the engine's zero is Cycles' own then.

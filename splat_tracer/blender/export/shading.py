@@ -315,8 +315,10 @@ def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
                          roughness=bl_material.roughness), sockets)
 
 
-def material_of(bl_material, report: shading.Report) -> shading.Material:
+def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -> shading.Material:
     """The engine's Material for a Blender material (None, an empty slot: default grey).
+    aovs: the view layer's shader AOVs to write, name -> "COLOR" or "VALUE" (view_layer_aovs):
+    the material's AOV Output nodes naming one are compiled, the others cost nothing.
 
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
@@ -325,7 +327,7 @@ def material_of(bl_material, report: shading.Report) -> shading.Material:
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
-    material = _surface_material(bl_material, report)
+    material = _surface_material(bl_material, report, aovs or {})
     sampling = _emission_sampling(bl_material)
     if material.program is not None and material.program.drives("emission") and sampling != "NONE":
         # The core samples emissive triangles by their constant emission: a node-driven one is
@@ -343,7 +345,7 @@ def _emission_sampling(bl_material) -> str:
     return value if value in shading.EMISSION_SAMPLING else "AUTO"
 
 
-def _surface_material(bl_material, report: shading.Report) -> shading.Material:
+def _surface_material(bl_material, report: shading.Report, aovs: dict) -> shading.Material:
     """material_of's reading of the node tree (or the viewport settings)."""
     sockets = _Sockets("material", bl_material.name, report)
     tree = _node_tree(bl_material)
@@ -366,19 +368,44 @@ def _surface_material(bl_material, report: shading.Report) -> shading.Material:
         return _clamped(dict(_BLACK, alpha=0.0), sockets)
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
-    program = _program(source[0], sockets) if source is not None else None
+    program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets))
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
     return dataclasses.replace(material, program=program) if program is not None else material
 
 
-def _program(shader, sockets: _Sockets):
-    """The node program for the linked inputs of the material's shader, or None (nothing
-    needs one). Colour Attribute and Attribute nodes linked straight into the colour or alpha
-    keep the constant path (the points' own colours; no program to run)."""
-    direct = [s for s in shader.inputs if s.name in ("Base Color", "Color") and _is_point_data(_upstream(s), "Color")]
-    direct += [s for s in shader.inputs if s.name == "Alpha" and _is_point_data(_upstream(s), "Alpha")]
+def view_layer_aovs(view_layer) -> dict:
+    """The view layer's shader AOVs as material_of takes them: name -> "COLOR" or "VALUE"
+    (those Blender marks as conflicting left out, as Cycles leaves them)."""
+    return {aov.name: aov.type for aov in getattr(view_layer, "aovs", ()) if aov.is_valid}
+
+
+def _aov_outputs(tree, aovs: dict, sockets: _Sockets) -> list:
+    """(name, width, socket) for the tree's AOV Output nodes that write an AOV of the view
+    layer: the Color input for a colour AOV, the Value input for a value AOV, as Cycles
+    compiles them. Inside node groups they are not found (said)."""
+    if not aovs:
+        return []
+    found = []
+    for node in tree.nodes:
+        if node.type == "OUTPUT_AOV" and not node.mute and node.aov_name in aovs:
+            colour = aovs[node.aov_name] == "COLOR"
+            found.append((node.aov_name, 3 if colour else 1, node.inputs["Color" if colour else "Value"]))
+        elif node.type == "GROUP" and node.node_tree is not None and any(
+                n.type == "OUTPUT_AOV" for n in node.node_tree.nodes):
+            sockets.say(f": the AOV Output nodes inside the node group '{node.node_tree.name}' are not evaluated")
+    return found
+
+
+def _program(shader, sockets: _Sockets, aovs=()):
+    """The node program for the linked inputs of the material's shader (None: nothing feeds
+    the Material Output) and its AOV Output nodes (_aov_outputs), or None (nothing needs
+    one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
+    the constant path (the points' own colours; no program to run)."""
+    inputs = shader.inputs if shader is not None else ()
+    direct = [s for s in inputs if s.name in ("Base Color", "Color") and _is_point_data(_upstream(s), "Color")]
+    direct += [s for s in inputs if s.name == "Alpha" and _is_point_data(_upstream(s), "Alpha")]
     try:
-        program, driven = nodes.compile_shader(shader, sockets.say, skip=direct)
+        program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None

@@ -766,6 +766,10 @@ void NodeProgram::validate() {
         const int width = (k == int(Output::Base) || k == int(Output::Emission) || k == int(Output::Normal)) ? 3 : 1;
         if (o < -1 || (o >= 0 && int64_t(o) + width > n)) throw InputError(name + ": node output out of range");
     }
+    aov_only = std::all_of(outputs, outputs + int(Output::Count), [](int32_t o) { return o < 0; });
+    for (const AovWrite &a : aovs)
+        if (a.key < 0 || a.colour < 0 || int64_t(a.colour) + 3 > n || a.value < 0 || int64_t(a.value) + 1 > n)
+            throw InputError(name + ": AOV output out of range");
 }
 
 namespace {

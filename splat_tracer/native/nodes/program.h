@@ -120,13 +120,22 @@ enum class Op : int32_t {
     Count
 };
 
+// One AOV Output node (render/nodes.py Builder.aov): after the program runs, its Color
+// (3 registers) and Value (1) are the shader AOV `key` -- an index into the scene's list of
+// AOV names, mapped to the film's channels by the render (shade/aov.h).
+struct AovWrite {
+    int32_t key, colour, value;
+};
+
 struct NodeProgram {
     std::vector<int32_t> code;  // rows of kNodeWidth
     std::vector<float> data;    // initial registers
     int32_t outputs[int(Output::Count)];
+    std::vector<AovWrite> aovs;  // AOV Output nodes (checked by validate)
     std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
     bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
     bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
+    bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
     bool uses_bump = false;     // a Bump node needs ShaderGlobals::bump (set by validate)
     std::string name;           // the material's, for errors
 

@@ -156,11 +156,11 @@ std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table
 }
 
 // A node program from Python: (code int32 (n, kNodeWidth), data float32 (m,), outputs int32
-// (Output::Count,)[, images: a sequence of parse_image tuples]) -- render/nodes.py
-// Program.native(). Checked by NodeProgram::validate.
+// (Output::Count,)[, images: a sequence of parse_image tuples[, aovs: int32 (k, 3) rows of
+// AovWrite]]) -- render/nodes.py Program.native(). Checked by NodeProgram::validate.
 bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, ImageTable &images) {
-    PyObject *ocode, *odata, *oout, *oimages = nullptr;
-    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|O", &ocode, &odata, &oout, &oimages)) {
+    PyObject *ocode, *odata, *oout, *oimages = nullptr, *oaovs = nullptr;
+    if (!PyTuple_Check(obj) || !PyArg_ParseTuple(obj, "OOO|OO", &ocode, &odata, &oout, &oimages, &oaovs)) {
         PyErr_Clear();
         PyErr_Format(PyExc_TypeError, "%s: a node program is a (code, data, outputs[, images]) tuple", name.c_str());
         return false;
@@ -183,6 +183,13 @@ bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, Im
     if (!get_array(ocode, "node code", 'i', 2, sc, false, code) || !get_array(odata, "node data", 'f', 1, sd, false, data) ||
         !get_array(oout, "node outputs", 'i', 1, so, false, out))
         return false;
+    if (oaovs && oaovs != Py_None) {
+        View aovs;
+        Py_ssize_t sa[2] = {-1, 3};
+        if (!get_array(oaovs, "node AOVs", 'i', 2, sa, false, aovs)) return false;
+        const int32_t *a = aovs.data<int32_t>();
+        for (Py_ssize_t i = 0; i < aovs.dim(0); ++i) prog.aovs.push_back({a[3 * i], a[3 * i + 1], a[3 * i + 2]});
+    }
     prog.name = name;
     prog.code.assign(code.data<int32_t>(), code.data<int32_t>() + code.dim(0) * kNodeWidth);
     prog.data.assign(data.data<float>(), data.data<float>() + data.dim(0));
@@ -570,18 +577,18 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "material_index", "mist", "environment", "mist_settings", "cryptomatte",
                                    "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
                                    "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
-                                   "light_group_instances", "light_group_world", "uv", nullptr};
+                                   "light_group_instances", "light_group_world", "uv", "aov", nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
              *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
              *oshutter = Py_None, *oworldmap = Py_None, *olight = Py_None, *oao = Py_None, *ogroups = Py_None,
-             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None;
+             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None, *oaov = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiOO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
@@ -590,7 +597,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                      &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
                                      &oshutter, &cfg.rolling_shutter_duration, &oworldmap, &olight, &oao,
                                      &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
-                                     &ouvpass))
+                                     &ouvpass, &oaov))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -712,6 +719,43 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
     const RenderScene &scene = *obj->scene;  // shared by renders running at once: never changed
     CryptomatteViews crypto_views;
     if (!parse_cryptomatte(ocrypto, scene, w, h, film.cryptomatte, crypto_views)) return nullptr;
+    // Shader AOVs: (buffer float32 (h, w, channels), layout int32 (keys, 2) of [first channel or
+    // -1, width 1 or 4], alpha threshold) -- render/scene.py render_arguments.
+    View aov_view;
+    if (oaov != Py_None) {
+        PyObject *obuf, *olayout;
+        float threshold;
+        if (!PyTuple_Check(oaov) || !PyArg_ParseTuple(oaov, "OOf", &obuf, &olayout, &threshold)) {
+            PyErr_Clear();
+            return PyErr_Format(PyExc_TypeError, "aov must be a (buffer, layout, alpha_threshold) tuple");
+        }
+        if (!(std::isfinite(threshold) && threshold >= 0.f && threshold <= 1.f))
+            return PyErr_Format(PyExc_ValueError, "the AOV alpha threshold must be in 0..1");
+        View layout;
+        Py_ssize_t sl[2] = {-1, 2};
+        if (!get_array(olayout, "aov layout", 'i', 2, sl, false, layout)) return nullptr;
+        Py_ssize_t sb[3] = {h, w, -1};
+        if (!get_array(obuf, "aov", 'f', 3, sb, true, aov_view)) return nullptr;
+        const int channels = int(aov_view.dim(2));
+        const int32_t *l = layout.data<int32_t>();
+        for (Py_ssize_t i = 0; i < layout.dim(0); ++i) {
+            const int32_t first = l[2 * i], width = l[2 * i + 1];
+            if (first >= 0 && !((width == 1 || width == 4) && int64_t(first) + width <= channels))
+                return PyErr_Format(PyExc_ValueError, "aov layout row %zd: a pass of 1 or 4 channels within the buffer", i);
+            film.aov.offset.push_back(first < 0 ? -1 : first), film.aov.width.push_back(width);
+        }
+        film.aov.alpha_threshold = threshold;
+        if (channels > 0) film.aov.buffer = aov_view.data<float>(), film.aov.channels = channels;
+        if (!check_separate({{aov_view, "aov"}}, {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
+            return nullptr;
+        for (Out &out : outs)
+            if (!check_separate({{aov_view, "aov"}, {out.view, out.name}}, {})) return nullptr;
+        for (const View &out : crypto_views.out)
+            if (!check_separate({{aov_view, "aov"}, {out, "a cryptomatte buffer"}},
+                                {{crypto_views.instance_ids, "cryptomatte instance ids"},
+                                 {crypto_views.material_ids, "cryptomatte material ids"}}))
+                return nullptr;
+    }
     for (size_t i = 0; i < std::size(outs); ++i) {
         if (!check_separate({{outs[i].view, outs[i].name}},
                             {{cam_views.m, "local_from_camera"}, {cam_views.frustum, "frustum"}}))
@@ -824,7 +868,7 @@ PyMethodDef RenderScene_methods[] = {
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
      "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None, "
      "light=None, ao=None, ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, "
-     "light_group_world=-1, uv=None)\n--\n\n"
+     "light_group_world=-1, uv=None, aov=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "
@@ -834,7 +878,9 @@ PyMethodDef RenderScene_methods[] = {
      "rolling_shutter_duration: Cycles' rolling shutter (top to bottom) with that duration in [0, 1], "
      "negative (default): off. world_map: None "
      "(the uniform `world`) or (light, camera): equirectangular float32 (h, w, 3) radiance images of the world, "
-     "the second (or None: the first) seen by camera rays; the first is sampled as a light."},
+     "the second (or None: the first) seen by camera rays; the first is sampled as a light. aov: None or (buffer "
+     "float32 (h, w, channels), layout int32 (keys, 2) of [first channel or -1, width 1 or 4], alpha threshold): "
+     "the view layer's shader AOVs."},
     {nullptr, nullptr, 0, nullptr},
 };
 

@@ -84,7 +84,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera, float time) const {
+                                       const Camera *camera, float time, const AovSink *aov) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     // A moving instance's object space is where it is at the ray's time: the point was found
@@ -190,6 +190,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     }
     float r[kMaxNodeRegisters];
     prog.run(sg, r);
+    if (aov && !prog.aovs.empty()) aov->write(prog, r);
     Material out = m;
     auto scalar = [&](Output o, float lo, float hi, float &field) {
         const int32_t i = prog.outputs[int(o)];

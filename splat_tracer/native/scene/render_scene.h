@@ -12,6 +12,7 @@
 
 #include "bvh/bvh.h"
 #include "nodes/program.h"
+#include "shade/aov.h"
 #include "scene/camera.h"
 #include "scene/mesh.h"
 #include "scene/mesh_lights.h"
@@ -151,10 +152,14 @@ class RenderScene {
     // time `time` (motion blur: where a moving instance is then): its node program run there,
     // or the constant material when it has none. The one place the integrator asks for a
     // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
-    // `camera`: the render's, for the Camera texture coordinate.
-    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f) const {
+    // `camera`: the render's, for the Camera texture coordinate. `aov`: where the program's
+    // AOV Output nodes write (a camera ray still writing its shader AOVs), or null.
+    Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f,
+                         const AovSink *aov = nullptr) const {
         const Material &m = materials_[sp.material];
-        return m.program < 0 ? m : evaluate_program(m, sp, wo, &sp.ns, camera, time);
+        // A program written for its AOVs alone runs only where they are written.
+        if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
+        return evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
     }
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
@@ -187,7 +192,7 @@ class RenderScene {
 
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                              const Camera *camera, float time) const;
+                              const Camera *camera, float time, const AovSink *aov) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;

@@ -10,6 +10,7 @@
 
 #include "base/ray.h"
 #include "scene/camera.h"
+#include "shade/aov.h"
 #include "shade/cryptomatte.h"
 #include "shade/sampling.h"
 #include "splats/visibility.h"
@@ -61,6 +62,8 @@ struct Film {
     float *uv = nullptr;
     // Cryptomatte's object, material and asset passes (shade/cryptomatte.h), integrator only.
     CryptomatteFilm cryptomatte;
+    // The view layer's shader AOVs (shade/aov.h); off unless a material writes one asked for.
+    AovFilm aov;
 };
 
 // What both renderers take the same way.

@@ -54,6 +54,7 @@ struct Integrator::Primary {
     float material_index = 0;
     float mist = 0;    // 1 - Cycles' mist there (0 where nothing is hit); only with the Mist pass
     Vec3 environment;  // the world seen where the ray leaves the scene (black where it meets a surface)
+    float *aov = nullptr;  // the pixel's shader-AOV sums (Film::aov), null when none is written
     float ao = 0;      // the AO pass's term (only with that pass)
     Vec3 uv;           // the UV pass's (U, V, 1) on a mesh; 0 on a cloud
     int instance = -1, material = 0;  // of the first opaque surface (not a holdout): Cryptomatte's names
@@ -222,6 +223,7 @@ Integrator::Integrator(const RenderScene &scene, const Camera &camera, const Fil
         };
         zero(film.combined, 4), zero(film.diffcol, 3), zero(film.emit, 3), zero(film.shadow, 3);
         zero(film.environment, 3), zero(film.mist, 1);
+        zero(film.aov.buffer, film.aov.channels);
     }
 }
 
@@ -282,6 +284,7 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         put3(film_.shadow, a.shadow * inv);
         put3(film_.environment, a.environment * inv);
         if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
+        if (film_.aov.on()) film_.aov.scale(p, inv);  // the samples added their AOVs straight into the film
         if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
         write_centre(a.centre, p);
         if (light_split()) write_light(a.light, inv, p);
@@ -364,6 +367,7 @@ bool Integrator::shade_samples(const int *cols, const int *rows, int n, int s0, 
             if (Camera::is_none(rays[k])) continue;
             const Sampler rng(pixel_id_of(cols[k], rows[k]), uint32_t(s), settings_.seed);
             Primary prim;
+            if (film_.aov.on()) prim.aov = film_.aov.pixel(size_t(rows[k]) * size_t(film_.w) + size_t(cols[k]));
             ++tally.camera;
             Pixel &a = acc[k];
             PathState path;
@@ -518,6 +522,7 @@ uint64_t Integrator::finish() {
             if (buf)
                 for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
         if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
+        if (film_.aov.on()) film_.aov.scale(p, inv);
         if (!light_.empty()) write_light(light_[p], inv, p);
         if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
     }
@@ -603,6 +608,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     Vec3 base;
     float opacity = 1.f;
     // Surfaces with alpha < 1 are passed through stochastically (transparent bounces).
+    // The camera ray writes shader AOVs at each surface until one stops it (AovFilm::done_after).
+    const AovSink aov{&film_.aov, primary && st.camera ? primary->aov : nullptr};
+    bool aov_writing = aov.pixel != nullptr;
     Vec3 lamps;  // lamps seen directly on the way (camera, mirror and glass rays only)
     for (;;) {
         if (first) sp = *first, first = nullptr;  // the camera packet's answer for this ray
@@ -641,9 +649,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time);
+        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
+        if (aov_writing && film_.aov.done_after(opacity)) aov_writing = false;
         if (opacity >= 1.f || st.transparent >= cfg.transparent_bounces ||
             rng.get1(Sampler::kTransparent + Sampler::kDimStride * uint32_t(st.transparent)) < opacity)
             break;
