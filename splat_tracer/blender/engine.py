@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 
 from ..render import ab, cryptomatte, shading
-from . import session, viewport
+from . import denoise, session, viewport
 from .export import settings as export_settings
 from .export.scene import View
 
@@ -300,3 +300,5 @@ def unregister():
             handlers.remove(_job_ended)
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)
+    # The denoiser's kept OIDN device goes with the add-on (a reload makes a new module).
+    denoise.release()

@@ -211,3 +211,54 @@ def test_denoising_initialises_no_gpu_library(tmp_path):
     log = run.stdout + run.stderr
     assert "SAMPLING" in log and "denoised by OpenImageDenoise (CPU)" in log, log[-2000:]
     assert "CUEW" not in log and "CUDA" not in log, log[-2000:]
+
+
+def _inputs(w: int, h: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+    color = (rng.random((h, w, 4)) ** 3 * 4).astype(np.float32)  # RGBA, as Combined: alpha ignored
+    albedo = rng.random((h, w, 3)).astype(np.float32)
+    n = rng.normal(size=(h, w, 3))
+    return color, albedo, (n / np.linalg.norm(n, axis=-1, keepdims=True)).astype(np.float32)
+
+
+@pytest.mark.parametrize("prefilter", ["ACCURATE", "FAST"])
+def test_the_denoiser_is_kept_across_frames_with_the_same_result(blender, prefilter):
+    """The OIDN device and filters live across frames (creating them was most of a small
+    frame's denoising time): a second frame creates none, a new size remakes the filters on
+    the same device, other threads a new device -- and every result is bit-identical to a
+    fresh device's."""
+    denoise = extension_module("blender.denoise")
+    if not denoise.available():
+        pytest.skip("no OpenImageDenoise in this Blender")
+    small, large = _inputs(48, 32), _inputs(80, 40, 1)
+
+    def fresh(inputs, threads=0):
+        denoise.release()
+        return denoise.denoise(*inputs, prefilter, "HIGH", threads)
+
+    first = fresh(small)
+    created = dict(denoise.CREATED)
+    second = denoise.denoise(*small, prefilter, "HIGH", 0)
+    assert denoise.CREATED == created, (denoise.CREATED, created)
+    np.testing.assert_array_equal(second, first)
+    # The returned image is the caller's: the next frame does not overwrite it.
+    assert not np.shares_memory(second, denoise.denoise(*small, prefilter, "HIGH", 0))
+    np.testing.assert_array_equal(second, first)
+    # A new size: same device, new filters; its result is a fresh device's, and back again.
+    resized = denoise.denoise(*large, prefilter, "HIGH", 0)
+    assert resized.shape == (40, 80, 3)
+    assert denoise.CREATED["devices"] == created["devices"]
+    assert denoise.CREATED["filters"] > created["filters"]
+    np.testing.assert_array_equal(denoise.denoise(*small, prefilter, "HIGH", 0), first)
+    np.testing.assert_array_equal(resized, fresh(large))
+    # Fewer guides (the albedo only) remake the main filter, not the device.
+    devices = denoise.CREATED["devices"]
+    albedo_only = denoise.denoise(small[0], small[1], None, prefilter, "HIGH", 0)
+    assert denoise.CREATED["devices"] == devices
+    np.testing.assert_array_equal(albedo_only, fresh((small[0], small[1], None)))
+    assert np.abs(albedo_only - first).max() > 0  # the test sees the guides change
+    # Another thread count: a new device.
+    devices = denoise.CREATED["devices"]
+    denoise.denoise(*small, prefilter, "HIGH", 1)
+    assert denoise.CREATED["devices"] == devices + 1
+    denoise.release()
