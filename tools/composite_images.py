@@ -25,7 +25,7 @@ import time
 from pathlib import Path
 
 from tools import dev_extension
-from tools.demo import principled, suzanne_cloud
+from tools.demo import add_camera, import_cloud, principled, suzanne_cloud
 
 BUILD = dev_extension.REPO_ROOT / "build" / "composite"
 HDRIS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
@@ -45,26 +45,22 @@ def hdri_world(bpy, scene, path: Path) -> None:
     tree.links.new(texture.outputs["Color"], tree.nodes["Background"].inputs["Color"])
 
 
+def clay_scan(bpy, build: Path, levels: int):
+    """Suzanne's points in clay, named "Scan", standing on the ground (z = 0) and facing a
+    camera on -Y: the scan of this tool and of tools/demo_hdri.py."""
+    positions, normals = suzanne_cloud(bpy, levels)
+    clay = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1), "Roughness": 0.45})
+    scan = import_cloud(bpy, build, "Scan", positions, normals, clay)
+    scan.location = (0.0, 0.0, 0.82)  # Suzanne (2 m) sits on the ground
+    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    return scan
+
+
 def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     """The scan on its catcher floor under the HDRI; returns (scene, scan, floor)."""
-    from splat_tracer.pointcloud.readers import ply
-
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
-    positions, normals = suzanne_cloud(bpy, levels)
-    path = BUILD / "suzanne.ply"
-    ply.write_ply(str(path), positions, normals)
-    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    scan = bpy.context.active_object
-    scan.name = "Scan"
-    # Linked to the object: Mesh to Points drops the mesh's materials (see tools/demo.py).
-    scan.data.materials.append(None)
-    scan.material_slots[0].link = "OBJECT"
-    scan.material_slots[0].material = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1),
-                                                                 "Roughness": 0.45})
-    # Suzanne (2 m) sits on the ground, facing the camera.
-    scan.location = (0.0, 0.0, 0.82)
-    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    scan = clay_scan(bpy, BUILD, levels)
 
     bpy.ops.mesh.primitive_plane_add(size=40.0)
     floor = bpy.context.active_object
@@ -73,17 +69,9 @@ def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     floor.is_shadow_catcher = True
 
     hdri_world(bpy, scene, hdri)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
     # At eye height (the HDRI's own camera stood about there), looking a little down; the
     # city HDRI's sun then shines from behind the camera's right.
-    cam.location = (0.9, -8.0, 1.7)
-    cam.rotation_euler = (math.radians(84), 0.0, math.radians(6))
-    cam.data.lens = 30
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    scene.view_settings.view_transform = "Standard"  # the radiance as computed, as the demo
+    add_camera(bpy, scene, (0.9, -8.0, 1.7), (84, 0, 6), 30, width, height)
     return scene, scan, floor
 
 

@@ -15,13 +15,12 @@ the same samples; the times printed are those of bpy.ops.render.render.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from pathlib import Path
 
 from tools import dev_extension
-from tools.composite_images import HDRIS, hdri_path, hdri_world
-from tools.demo import principled, render, suzanne_cloud
+from tools.composite_images import HDRIS, clay_scan, hdri_path, hdri_world
+from tools.demo import add_camera, principled, render
 
 BUILD = dev_extension.REPO_ROOT / "build" / "demo_hdri"
 # Floor textures the benchmark compares (benchmarks/frame_time.py); the demo uses "image".
@@ -93,23 +92,9 @@ def floor_material(bpy, kind: str, repeat: float = 6.0):
 
 def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     """The scan on its textured floor under the HDRI; returns (scene, scan, floor)."""
-    from splat_tracer.pointcloud.readers import ply
-
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
-    positions, normals = suzanne_cloud(bpy, levels)
-    path = BUILD / "suzanne.ply"
-    ply.write_ply(str(path), positions, normals)
-    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    scan = bpy.context.active_object
-    scan.name = "Scan"
-    # Linked to the object: Mesh to Points drops the mesh's materials (see tools/demo.py).
-    scan.data.materials.append(None)
-    scan.material_slots[0].link = "OBJECT"
-    scan.material_slots[0].material = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1),
-                                                                 "Roughness": 0.45})
-    scan.location = (0.0, 0.0, 0.82)  # Suzanne (2 m) on the floor, facing the camera
-    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    scan = clay_scan(bpy, BUILD, levels)
 
     bpy.ops.mesh.primitive_plane_add(size=16.0)  # UV-mapped 0..1 across it
     floor = bpy.context.active_object
@@ -117,18 +102,9 @@ def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     floor.data.materials.append(floor_material(bpy, "image"))
 
     hdri_world(bpy, scene, hdri)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
     # The composite's view (tools/composite_images.py), a little higher to show the floor;
     # the city HDRI's sun then shines from behind the camera's right.
-    cam.location = (0.9, -8.0, 2.6)
-    cam.rotation_euler = (math.radians(78), 0.0, math.radians(6))
-    cam.data.lens = 32
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.image_settings.file_format = "PNG"
-    scene.view_settings.view_transform = "Standard"  # the radiance as computed, as the demo
+    add_camera(bpy, scene, (0.9, -8.0, 2.6), (78, 0, 6), 32, width, height)
     scene.cycles.diffuse_bounces = 1  # the same light paths for both engines
     return scene, scan, floor
 
