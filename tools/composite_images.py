@@ -21,11 +21,10 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
 from tools import dev_extension
-from tools.demo import add_camera, import_cloud, principled, suzanne_cloud
+from tools.demo import add_camera, equal_samples, import_cloud, principled, render, suzanne_cloud
 
 BUILD = dev_extension.REPO_ROOT / "build" / "composite"
 HDRIS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
@@ -110,24 +109,13 @@ def alpha_over_compositor(bpy, scene, plate: Path):
     return tree
 
 
-def render(bpy, scene, engine: str, output: Path, file_format: str = "PNG") -> float:
-    scene.render.engine = engine
-    scene.render.image_settings.file_format = file_format
-    if file_format == "PNG":
-        scene.render.image_settings.color_depth = "8"
-    scene.render.filepath = str(output)
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    seconds = time.perf_counter() - t0
-    if not output.is_file():
-        raise SystemExit(f"composite: no image was written to {output}")
-    return seconds
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output", default="composite.png", help="Splat Tracer's composite (PNG)")
-    ap.add_argument("--cycles", default=None, help="also render and composite with Cycles to this PNG")
+def start_hdri_tool(build: Path, description: str, output: str, argv=None):
+    """The start of this tool and of tools/demo_hdri.py: their arguments (the same scene
+    options), bpy with throwaway user directories under `build`, and the extension enabled
+    from source. Returns (args, bpy)."""
+    ap = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--output", default=output, help=f"Splat Tracer's image (PNG, default: {output})")
+    ap.add_argument("--cycles", default=None, help="also render the same with Cycles to this PNG")
     ap.add_argument("--width", type=int, default=400)
     ap.add_argument("--height", type=int, default=300)
     ap.add_argument("--samples", type=int, default=32, help="samples per pixel, for both engines")
@@ -135,16 +123,19 @@ def main(argv=None) -> int:
     ap.add_argument("--hdri", default="city", choices=HDRIS, help="which of Blender's HDRIs (default: city)")
     args = ap.parse_args(argv)
 
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
+    build.mkdir(parents=True, exist_ok=True)
+    dev_extension.isolate_user_dirs(str(build / "blender_user"))
     import bpy
 
-    dev_extension.enable_from_source(BUILD)
+    dev_extension.enable_from_source(build)
+    return args, bpy
+
+
+def main(argv=None) -> int:
+    args, bpy = start_hdri_tool(BUILD, __doc__, "composite.png", argv)
     scene, scan, floor = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
     scene.splat_tracer.samples = args.samples
-    c = scene.cycles
-    c.samples = c.preview_samples = args.samples
-    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
+    equal_samples(scene, args.samples)
     plate = render_plate(bpy, scene, (scan, floor), args.samples, BUILD / f"plate_{args.hdri}.exr")
     alpha_over_compositor(bpy, scene, plate)
     seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())

@@ -147,14 +147,27 @@ def build_scene(bpy, levels: int, width: int, height: int):
     return scene, sum(len(c[1]) for c in clouds)
 
 
+def equal_samples(scene, samples: int) -> None:
+    """Cycles at `samples` samples per pixel, denoising and adaptive sampling off, on the CPU:
+    what the tools' side-by-side images and times compare, the same work for both engines."""
+    c = scene.cycles
+    c.samples = c.preview_samples = samples
+    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
+
+
 def render(bpy, scene, engine: str, output: Path) -> float:
+    """Renders the frame with `engine` to the 8-bit PNG `output`; returns the seconds of
+    bpy.ops.render.render (compositing included). The format is set here: a render before
+    (tools/composite_images.py's plate) may have left it at a float EXR."""
     scene.render.engine = engine
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_depth = "8"
     scene.render.filepath = str(output)
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     seconds = time.perf_counter() - t0
     if not output.is_file():
-        raise SystemExit(f"demo: no image was written to {output}")
+        raise SystemExit(f"{engine}: no image was written to {output}")
     return seconds
 
 

@@ -14,13 +14,12 @@ the same samples; the times printed are those of bpy.ops.render.render.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 from tools import dev_extension
-from tools.composite_images import HDRIS, clay_scan, hdri_path, hdri_world
-from tools.demo import add_camera, principled, render
+from tools.composite_images import clay_scan, hdri_path, hdri_world, start_hdri_tool
+from tools.demo import add_camera, equal_samples, principled, render
 
 BUILD = dev_extension.REPO_ROOT / "build" / "demo_hdri"
 # Floor textures the benchmark compares (benchmarks/frame_time.py); the demo uses "image".
@@ -110,25 +109,9 @@ def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output", default="demo_hdri.png", help="PNG to write (default: demo_hdri.png)")
-    ap.add_argument("--cycles", default=None, help="also render the scene with Cycles to this PNG")
-    ap.add_argument("--width", type=int, default=400)
-    ap.add_argument("--height", type=int, default=300)
-    ap.add_argument("--samples", type=int, default=32, help="samples per pixel, for both engines")
-    ap.add_argument("--levels", type=int, default=3, help="subdivision levels of Suzanne (3: 31,500 points)")
-    ap.add_argument("--hdri", default="city", choices=HDRIS, help="which of Blender's HDRIs (default: city)")
-    args = ap.parse_args(argv)
-
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
-    import bpy
-
-    dev_extension.enable_from_source(BUILD)
+    args, bpy = start_hdri_tool(BUILD, __doc__, "demo_hdri.png", argv)
     scene, scan, _ = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
-    c = scene.cycles
-    c.samples = c.preview_samples = args.samples
-    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
+    equal_samples(scene, args.samples)
     seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
     print(f"demo-hdri: {len(scan.data.vertices):,} splats on an image-textured floor under Blender's "
           f"'{args.hdri}' HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s "

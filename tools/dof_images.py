@@ -57,12 +57,8 @@ def build_scene(bpy, width: int, height: int):
     dof.use_dof = True
     dof.focus_distance = FOCUS
     dof.aperture_fstop = FSTOP
-    c = scene.cycles
-    c.samples = c.preview_samples = SAMPLES
-    c.use_adaptive_sampling = False   # equal samples for both engines
-    c.use_denoising = False
-    c.diffuse_bounces = 1             # the same light paths for both engines (as the demo)
-    c.device = "CPU"
+    demo.equal_samples(scene, SAMPLES)
+    scene.cycles.diffuse_bounces = 1  # the same light paths for both engines (as the demo)
     return scene
 
 
