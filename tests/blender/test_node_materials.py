@@ -68,6 +68,14 @@ def _both(bpy, scene, tmp_path, name):
     return ours, theirs, report
 
 
+def _floor_both(bpy, scene, tmp_path, material, name):
+    """A 2 m floor of `material` that fills _setup's orthographic view (UV 0..1 across it),
+    rendered by both engines: (ours, Cycles', our report) as _both returns them."""
+    plane(bpy, "Floor", 2.0, (0, 0, 0), material)
+    _setup(bpy, scene)
+    return _both(bpy, scene, tmp_path, name)
+
+
 def correlation(a, b) -> float:
     a, b = a.mean(axis=-1).ravel(), b.mean(axis=-1).ravel()
     return float(np.corrcoef(a, b)[0, 1])
@@ -100,9 +108,7 @@ def test_uv_checker_floor_matches_cycles(blender, empty_scene, tmp_path):
     coords = nodes.new("ShaderNodeTexCoord")
     checker = _checker(nodes, links, coords.outputs["UV"])
     links.new(checker.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)  # fills the view: UV 0..1 across it
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "uv_checker")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "uv_checker")
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     cell = SIZE // 4
@@ -127,9 +133,7 @@ def test_noise_through_a_colour_ramp_matches_cycles(blender, empty_scene, tmp_pa
     links.new(coords.outputs["Object"], noise.inputs["Vector"])
     links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
     links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "noise_ramp")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "noise_ramp")
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     assert correlation(np.roll(ours, SIZE // 3, axis=0), theirs) < 0.5, "a shifted noise must fail"
@@ -164,9 +168,7 @@ def test_nested_node_groups_match_cycles(blender, empty_scene, tmp_path):
     coords = nodes.new("ShaderNodeTexCoord")
     links.new(coords.outputs["UV"], outer.inputs["Vector"])
     links.new(outer.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "nested")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "nested")
     assert correlation(ours, theirs) >= TEXTURE_CORRELATION
     assert not [line for line in report if "Nested" in line], report
 
@@ -373,9 +375,7 @@ def test_procedural_textures_match_cycles(blender, empty_scene, tmp_path, kind):
     m, nodes, links, shader = _material(bpy, f"Procedural_{kind}")
     _, output = _procedural(nodes, links, kind)
     links.new(output, shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, kind)
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, kind)
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     assert not [line for line in report if "Procedural" in line], report
@@ -414,9 +414,7 @@ def test_a_chain_of_colour_nodes_matches_cycles(blender, empty_scene, tmp_path):
     links.new(invert.outputs["Color"], gamma.inputs["Color"])
     links.new(gamma.outputs["Color"], bc.inputs["Color"])
     links.new(bc.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "chain")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "chain")
     _assert_like_cycles(ours, theirs, report, "Chain")
 
 
@@ -459,9 +457,7 @@ def test_rgb_curves_match_cycles(blender, empty_scene, tmp_path):
     links.new(coords.outputs["UV"], gradient.inputs["Vector"])
     links.new(gradient.outputs["Color"], curves.inputs["Color"])
     links.new(curves.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "curves")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "curves")
     _assert_like_cycles(ours, theirs, report, "Curves")
 
 
@@ -673,9 +669,7 @@ def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     links.new(to_kelvin.outputs["Result"], blackbody.inputs["Temperature"])
     links.new(blackbody.outputs["Color"], emission.inputs["Color"])
     links.new(emission.outputs[0], output.inputs["Surface"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "blackbody_floor")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "blackbody_floor")
     ratio = lambda img: (img[..., 0] / np.maximum(img[..., 2], 1e-6)).ravel()  # noqa: E731
     r = float(np.corrcoef(ratio(ours), ratio(theirs))[0, 1])
     off = np.abs(ours.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max()
