@@ -131,6 +131,18 @@ def start_hdri_tool(build: Path, description: str, output: str, argv=None):
     return args, bpy
 
 
+def render_both(bpy, scene, args, tool: str, what: str) -> None:
+    """Renders with Splat Tracer to args.output and, given args.cycles, with Cycles there, and
+    prints each time: the end of this tool and of tools/demo_hdri.py."""
+    seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
+    print(f"{tool}: {what}, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s "
+          f"-> {args.output}")
+    if args.cycles:
+        cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
+        print(f"{tool}: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
+              f"{args.cycles}")
+
+
 def main(argv=None) -> int:
     args, bpy = start_hdri_tool(BUILD, __doc__, "composite.png", argv)
     scene, scan, floor = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
@@ -138,13 +150,8 @@ def main(argv=None) -> int:
     equal_samples(scene, args.samples)
     plate = render_plate(bpy, scene, (scan, floor), args.samples, BUILD / f"plate_{args.hdri}.exr")
     alpha_over_compositor(bpy, scene, plate)
-    seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
-    print(f"composite: {len(scan.data.vertices):,} splats on a shadow catcher under Blender's '{args.hdri}' "
-          f"HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s -> {args.output}")
-    if args.cycles:
-        cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
-        print(f"composite: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
-              f"{args.cycles}")
+    render_both(bpy, scene, args, "composite",
+                f"{len(scan.data.vertices):,} splats on a shadow catcher under Blender's '{args.hdri}' HDRI")
     return 0
 
 

@@ -18,8 +18,8 @@ import sys
 from pathlib import Path
 
 from tools import dev_extension
-from tools.composite_images import clay_scan, hdri_path, hdri_world, start_hdri_tool
-from tools.demo import add_camera, equal_samples, principled, render
+from tools.composite_images import clay_scan, hdri_path, hdri_world, render_both, start_hdri_tool
+from tools.demo import add_camera, equal_samples, principled
 
 BUILD = dev_extension.REPO_ROOT / "build" / "demo_hdri"
 # Floor textures the benchmark compares (benchmarks/frame_time.py); the demo uses "image".
@@ -112,14 +112,8 @@ def main(argv=None) -> int:
     args, bpy = start_hdri_tool(BUILD, __doc__, "demo_hdri.png", argv)
     scene, scan, _ = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
     equal_samples(scene, args.samples)
-    seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
-    print(f"demo-hdri: {len(scan.data.vertices):,} splats on an image-textured floor under Blender's "
-          f"'{args.hdri}' HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s "
-          f"-> {args.output}")
-    if args.cycles:
-        cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
-        print(f"demo-hdri: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
-              f"{args.cycles}")
+    render_both(bpy, scene, args, "demo-hdri",
+                f"{len(scan.data.vertices):,} splats on an image-textured floor under Blender's '{args.hdri}' HDRI")
     return 0
 
 
