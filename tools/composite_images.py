@@ -21,11 +21,10 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-import time
 from pathlib import Path
 
 from tools import dev_extension
-from tools.demo import principled, suzanne_cloud
+from tools.demo import add_camera, equal_samples, import_cloud, principled, render, suzanne_cloud
 
 BUILD = dev_extension.REPO_ROOT / "build" / "composite"
 HDRIS = ("city", "courtyard", "forest", "interior", "night", "studio", "sunrise", "sunset")
@@ -45,26 +44,22 @@ def hdri_world(bpy, scene, path: Path) -> None:
     tree.links.new(texture.outputs["Color"], tree.nodes["Background"].inputs["Color"])
 
 
+def clay_scan(bpy, build: Path, levels: int):
+    """Suzanne's points in clay, named "Scan", standing on the ground (z = 0) and facing a
+    camera on -Y: the scan of this tool and of tools/demo_hdri.py."""
+    positions, normals = suzanne_cloud(bpy, levels)
+    clay = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1), "Roughness": 0.45})
+    scan = import_cloud(bpy, build, "Scan", positions, normals, clay)
+    scan.location = (0.0, 0.0, 0.82)  # Suzanne (2 m) sits on the ground
+    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    return scan
+
+
 def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     """The scan on its catcher floor under the HDRI; returns (scene, scan, floor)."""
-    from splat_tracer.pointcloud.readers import ply
-
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
-    positions, normals = suzanne_cloud(bpy, levels)
-    path = BUILD / "suzanne.ply"
-    ply.write_ply(str(path), positions, normals)
-    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    scan = bpy.context.active_object
-    scan.name = "Scan"
-    # Linked to the object: Mesh to Points drops the mesh's materials (see tools/demo.py).
-    scan.data.materials.append(None)
-    scan.material_slots[0].link = "OBJECT"
-    scan.material_slots[0].material = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1),
-                                                                 "Roughness": 0.45})
-    # Suzanne (2 m) sits on the ground, facing the camera.
-    scan.location = (0.0, 0.0, 0.82)
-    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    scan = clay_scan(bpy, BUILD, levels)
 
     bpy.ops.mesh.primitive_plane_add(size=40.0)
     floor = bpy.context.active_object
@@ -73,17 +68,9 @@ def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     floor.is_shadow_catcher = True
 
     hdri_world(bpy, scene, hdri)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
     # At eye height (the HDRI's own camera stood about there), looking a little down; the
     # city HDRI's sun then shines from behind the camera's right.
-    cam.location = (0.9, -8.0, 1.7)
-    cam.rotation_euler = (math.radians(84), 0.0, math.radians(6))
-    cam.data.lens = 30
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    scene.view_settings.view_transform = "Standard"  # the radiance as computed, as the demo
+    add_camera(bpy, scene, (0.9, -8.0, 1.7), (84, 0, 6), 30, width, height)
     return scene, scan, floor
 
 
@@ -122,24 +109,13 @@ def alpha_over_compositor(bpy, scene, plate: Path):
     return tree
 
 
-def render(bpy, scene, engine: str, output: Path, file_format: str = "PNG") -> float:
-    scene.render.engine = engine
-    scene.render.image_settings.file_format = file_format
-    if file_format == "PNG":
-        scene.render.image_settings.color_depth = "8"
-    scene.render.filepath = str(output)
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    seconds = time.perf_counter() - t0
-    if not output.is_file():
-        raise SystemExit(f"composite: no image was written to {output}")
-    return seconds
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output", default="composite.png", help="Splat Tracer's composite (PNG)")
-    ap.add_argument("--cycles", default=None, help="also render and composite with Cycles to this PNG")
+def start_hdri_tool(build: Path, description: str, output: str, argv=None):
+    """The start of this tool and of tools/demo_hdri.py: their arguments (the same scene
+    options), bpy with throwaway user directories under `build`, and the extension enabled
+    from source. Returns (args, bpy)."""
+    ap = argparse.ArgumentParser(description=description, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--output", default=output, help=f"Splat Tracer's image (PNG, default: {output})")
+    ap.add_argument("--cycles", default=None, help="also render the same with Cycles to this PNG")
     ap.add_argument("--width", type=int, default=400)
     ap.add_argument("--height", type=int, default=300)
     ap.add_argument("--samples", type=int, default=32, help="samples per pixel, for both engines")
@@ -147,25 +123,35 @@ def main(argv=None) -> int:
     ap.add_argument("--hdri", default="city", choices=HDRIS, help="which of Blender's HDRIs (default: city)")
     args = ap.parse_args(argv)
 
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
+    build.mkdir(parents=True, exist_ok=True)
+    dev_extension.isolate_user_dirs(str(build / "blender_user"))
     import bpy
 
-    dev_extension.enable_from_source(BUILD)
-    scene, scan, floor = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
-    scene.splat_tracer.samples = args.samples
-    c = scene.cycles
-    c.samples = c.preview_samples = args.samples
-    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
-    plate = render_plate(bpy, scene, (scan, floor), args.samples, BUILD / f"plate_{args.hdri}.exr")
-    alpha_over_compositor(bpy, scene, plate)
+    dev_extension.enable_from_source(build)
+    return args, bpy
+
+
+def render_both(bpy, scene, args, tool: str, what: str) -> None:
+    """Renders with Splat Tracer to args.output and, given args.cycles, with Cycles there, and
+    prints each time: the end of this tool and of tools/demo_hdri.py."""
     seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
-    print(f"composite: {len(scan.data.vertices):,} splats on a shadow catcher under Blender's '{args.hdri}' "
-          f"HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s -> {args.output}")
+    print(f"{tool}: {what}, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s "
+          f"-> {args.output}")
     if args.cycles:
         cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
-        print(f"composite: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
+        print(f"{tool}: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
               f"{args.cycles}")
+
+
+def main(argv=None) -> int:
+    args, bpy = start_hdri_tool(BUILD, __doc__, "composite.png", argv)
+    scene, scan, floor = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
+    scene.splat_tracer.samples = args.samples
+    equal_samples(scene, args.samples)
+    plate = render_plate(bpy, scene, (scan, floor), args.samples, BUILD / f"plate_{args.hdri}.exr")
+    alpha_over_compositor(bpy, scene, plate)
+    render_both(bpy, scene, args, "composite",
+                f"{len(scan.data.vertices):,} splats on a shadow catcher under Blender's '{args.hdri}' HDRI")
     return 0
 
 

@@ -74,9 +74,53 @@ def checker_floor(bpy, size: float, tiles: int):
     return floor
 
 
-def build_scene(bpy, levels: int, width: int, height: int):
+def import_cloud(bpy, build: Path, name: str, positions, normals, material):
+    """Writes the points to a PLY file in `build`, imports it with the add-on's importer and
+    gives the object `material`. Linked to the object, not the mesh: Geometry Nodes' Mesh to
+    Points drops the mesh's materials, and Cycles must see the same material as Splat Tracer."""
     from splat_tracer.pointcloud.readers import ply
 
+    path = build / f"{name.lower().replace(' ', '_')}.ply"
+    ply.write_ply(str(path), positions, normals)
+    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
+    obj = bpy.context.active_object
+    obj.name = name
+    obj.data.materials.append(None)
+    obj.material_slots[0].link = "OBJECT"
+    obj.material_slots[0].material = material
+    return obj
+
+
+def sun_and_sky(bpy, scene) -> None:
+    """The demo's light: a sun with a soft angle for the shadows and a blue sky colour."""
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.data.angle = math.radians(4.0)  # a soft shadow edge
+    sun.rotation_euler = (math.radians(40), math.radians(-15), math.radians(30))
+    scene.collection.objects.link(sun)
+    scene.world = bpy.data.worlds.new("World")
+    background = scene.world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (0.35, 0.45, 0.6, 1.0)
+    background.inputs["Strength"].default_value = 0.6
+
+
+def add_camera(bpy, scene, location, rotation_degrees, lens: float, width: int, height: int):
+    """The scene's camera (rotation in degrees, XYZ Euler) and a width x height PNG output
+    with the Standard view transform: the radiance as computed, the same for both engines."""
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    scene.collection.objects.link(cam)
+    cam.location = location
+    cam.rotation_euler = tuple(math.radians(a) for a in rotation_degrees)
+    cam.data.lens = lens
+    scene.camera = cam
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
+    r.image_settings.file_format = "PNG"
+    scene.view_settings.view_transform = "Standard"
+    return cam
+
+
+def build_scene(bpy, levels: int, width: int, height: int):
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     positions, normals = suzanne_cloud(bpy, levels)
@@ -91,53 +135,39 @@ def build_scene(bpy, levels: int, width: int, height: int):
                                                   "Roughness": 0.0, "IOR": 1.45}),
     }
     for name, pos, nrm in clouds:
-        path = BUILD / f"{name.lower().replace(' ', '_')}.ply"
-        ply.write_ply(str(path), pos, nrm)
-        bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-        obj = bpy.context.active_object
-        obj.name = name
-        # Linked to the object, not the mesh: Geometry Nodes' Mesh to Points drops the mesh's
-        # materials, and Cycles must see the same material as Splat Tracer.
-        obj.data.materials.append(None)
-        obj.material_slots[0].link = "OBJECT"
-        obj.material_slots[0].material = materials[name]
+        import_cloud(bpy, BUILD, name, pos, nrm, materials[name])
     bpy.data.objects["Suzanne"].location = (0.0, 0.0, 1.0)
     checker_floor(bpy, 12.0, 12)
 
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.data.energy = 3.0
-    sun.data.angle = math.radians(4.0)  # a soft shadow edge
-    sun.rotation_euler = (math.radians(40), math.radians(-15), math.radians(30))
-    scene.collection.objects.link(sun)
-    scene.world = bpy.data.worlds.new("World")
-    background = scene.world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (0.35, 0.45, 0.6, 1.0)
-    background.inputs["Strength"].default_value = 0.6
-
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
-    cam.location = (0.3, -7.8, 2.9)
-    cam.rotation_euler = (math.radians(74), 0.0, math.radians(2))
-    cam.data.lens = 40
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.image_settings.file_format = "PNG"
-    scene.view_settings.view_transform = "Standard"  # show the radiance as computed
+    sun_and_sky(bpy, scene)
+    add_camera(bpy, scene, (0.3, -7.8, 2.9), (74, 0, 2), 40, width, height)
     scene.cycles.diffuse_bounces = 1   # the same light paths for both engines
     scene.cycles.glossy_bounces = 4
     scene.cycles.transmission_bounces = 8
     return scene, sum(len(c[1]) for c in clouds)
 
 
+def equal_samples(scene, samples: int) -> None:
+    """Cycles at `samples` samples per pixel, denoising and adaptive sampling off, on the CPU:
+    what the tools' side-by-side images and times compare, the same work for both engines."""
+    c = scene.cycles
+    c.samples = c.preview_samples = samples
+    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
+
+
 def render(bpy, scene, engine: str, output: Path) -> float:
+    """Renders the frame with `engine` to the 8-bit PNG `output`; returns the seconds of
+    bpy.ops.render.render (compositing included). The format is set here: a render before
+    (tools/composite_images.py's plate) may have left it at a float EXR."""
     scene.render.engine = engine
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_depth = "8"
     scene.render.filepath = str(output)
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=True)
     seconds = time.perf_counter() - t0
     if not output.is_file():
-        raise SystemExit(f"demo: no image was written to {output}")
+        raise SystemExit(f"{engine}: no image was written to {output}")
     return seconds
 
 

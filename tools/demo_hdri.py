@@ -14,14 +14,12 @@ the same samples; the times printed are those of bpy.ops.render.render.
 """
 from __future__ import annotations
 
-import argparse
-import math
 import sys
 from pathlib import Path
 
 from tools import dev_extension
-from tools.composite_images import HDRIS, hdri_path, hdri_world
-from tools.demo import principled, render, suzanne_cloud
+from tools.composite_images import clay_scan, hdri_path, hdri_world, render_both, start_hdri_tool
+from tools.demo import add_camera, equal_samples, principled
 
 BUILD = dev_extension.REPO_ROOT / "build" / "demo_hdri"
 # Floor textures the benchmark compares (benchmarks/frame_time.py); the demo uses "image".
@@ -93,23 +91,9 @@ def floor_material(bpy, kind: str, repeat: float = 6.0):
 
 def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     """The scan on its textured floor under the HDRI; returns (scene, scan, floor)."""
-    from splat_tracer.pointcloud.readers import ply
-
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
-    positions, normals = suzanne_cloud(bpy, levels)
-    path = BUILD / "suzanne.ply"
-    ply.write_ply(str(path), positions, normals)
-    bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-    scan = bpy.context.active_object
-    scan.name = "Scan"
-    # Linked to the object: Mesh to Points drops the mesh's materials (see tools/demo.py).
-    scan.data.materials.append(None)
-    scan.material_slots[0].link = "OBJECT"
-    scan.material_slots[0].material = principled(bpy, "Clay", **{"Base Color": (0.5, 0.26, 0.12, 1),
-                                                                 "Roughness": 0.45})
-    scan.location = (0.0, 0.0, 0.82)  # Suzanne (2 m) on the floor, facing the camera
-    scan.rotation_euler = (0.0, 0.0, math.radians(-10))
+    scan = clay_scan(bpy, BUILD, levels)
 
     bpy.ops.mesh.primitive_plane_add(size=16.0)  # UV-mapped 0..1 across it
     floor = bpy.context.active_object
@@ -117,50 +101,19 @@ def build_scene(bpy, hdri: Path, levels: int, width: int, height: int):
     floor.data.materials.append(floor_material(bpy, "image"))
 
     hdri_world(bpy, scene, hdri)
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
     # The composite's view (tools/composite_images.py), a little higher to show the floor;
     # the city HDRI's sun then shines from behind the camera's right.
-    cam.location = (0.9, -8.0, 2.6)
-    cam.rotation_euler = (math.radians(78), 0.0, math.radians(6))
-    cam.data.lens = 32
-    scene.camera = cam
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.image_settings.file_format = "PNG"
-    scene.view_settings.view_transform = "Standard"  # the radiance as computed, as the demo
+    add_camera(bpy, scene, (0.9, -8.0, 2.6), (78, 0, 6), 32, width, height)
     scene.cycles.diffuse_bounces = 1  # the same light paths for both engines
     return scene, scan, floor
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--output", default="demo_hdri.png", help="PNG to write (default: demo_hdri.png)")
-    ap.add_argument("--cycles", default=None, help="also render the scene with Cycles to this PNG")
-    ap.add_argument("--width", type=int, default=400)
-    ap.add_argument("--height", type=int, default=300)
-    ap.add_argument("--samples", type=int, default=32, help="samples per pixel, for both engines")
-    ap.add_argument("--levels", type=int, default=3, help="subdivision levels of Suzanne (3: 31,500 points)")
-    ap.add_argument("--hdri", default="city", choices=HDRIS, help="which of Blender's HDRIs (default: city)")
-    args = ap.parse_args(argv)
-
-    BUILD.mkdir(parents=True, exist_ok=True)
-    dev_extension.isolate_user_dirs(str(BUILD / "blender_user"))
-    import bpy
-
-    dev_extension.enable_from_source(BUILD)
+    args, bpy = start_hdri_tool(BUILD, __doc__, "demo_hdri.png", argv)
     scene, scan, _ = build_scene(bpy, hdri_path(bpy, args.hdri), args.levels, args.width, args.height)
-    c = scene.cycles
-    c.samples = c.preview_samples = args.samples
-    c.use_denoising, c.use_adaptive_sampling, c.device = False, False, "CPU"
-    seconds = render(bpy, scene, "SPLAT_TRACER", Path(args.output).resolve())
-    print(f"demo-hdri: {len(scan.data.vertices):,} splats on an image-textured floor under Blender's "
-          f"'{args.hdri}' HDRI, {args.samples} samples, {args.width}x{args.height}: Splat Tracer {seconds:.2f} s "
-          f"-> {args.output}")
-    if args.cycles:
-        cycles_seconds = render(bpy, scene, "CYCLES", Path(args.cycles).resolve())
-        print(f"demo-hdri: Cycles (the cloud as spheres), {args.samples} samples: {cycles_seconds:.2f} s -> "
-              f"{args.cycles}")
+    equal_samples(scene, args.samples)
+    render_both(bpy, scene, args, "demo-hdri",
+                f"{len(scan.data.vertices):,} splats on an image-textured floor under Blender's '{args.hdri}' HDRI")
     return 0
 
 

@@ -16,7 +16,6 @@ off, the camera's Depth of Field as an artist sets it for Cycles.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys
@@ -35,23 +34,14 @@ LENS_MM, FSTOP, FOCUS = 50.0, 0.5, 4.0
 
 
 def build_scene(bpy, width: int, height: int):
-    from splat_tracer.pointcloud.readers import ply
-
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     positions, normals = demo.suzanne_cloud(bpy, 3)
     clouds = [("Suzanne", positions * 0.5 + (0.0, 0.0, 0.5), normals, (0.8, 0.42, 0.2, 1)),  # 1.4 m wide
               ("Far Ball", *demo.sphere_cloud(20_000, 0.6, (1.3, 4.0, 0.6)), (0.2, 0.6, 0.25, 1))]
     for name, pos, nrm, colour in clouds:
-        path = BUILD / f"{name.lower().replace(' ', '_')}.ply"
-        ply.write_ply(str(path), pos, nrm)
-        bpy.ops.splat_tracer.import_cloud(filepath=str(path))
-        obj = bpy.context.active_object
-        obj.name = name
-        # Linked to the object (as tools/demo.py): Mesh to Points drops the mesh's materials.
-        obj.data.materials.append(None)
-        obj.material_slots[0].link = "OBJECT"
-        obj.material_slots[0].material = demo.principled(bpy, name, **{"Base Color": colour, "Roughness": 0.5})
+        demo.import_cloud(bpy, BUILD, name, pos, nrm,
+                          demo.principled(bpy, name, **{"Base Color": colour, "Roughness": 0.5}))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.35, location=(-0.45, -2.1, 0.35), segments=48, ring_count=24)
     near = bpy.context.active_object
     near.name = "Near Sphere"
@@ -59,37 +49,16 @@ def build_scene(bpy, width: int, height: int):
     near.data.materials.append(demo.principled(bpy, "Blue", **{"Base Color": (0.15, 0.3, 0.8, 1), "Roughness": 0.4}))
     demo.checker_floor(bpy, 24.0, 24)
 
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.data.energy = 3.0
-    sun.data.angle = math.radians(4.0)
-    sun.rotation_euler = (math.radians(40), math.radians(-15), math.radians(30))
-    scene.collection.objects.link(sun)
-    scene.world = bpy.data.worlds.new("World")
-    background = scene.world.node_tree.nodes["Background"]
-    background.inputs["Color"].default_value = (0.35, 0.45, 0.6, 1.0)
-    background.inputs["Strength"].default_value = 0.6
+    demo.sun_and_sky(bpy, scene)
 
-    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    scene.collection.objects.link(cam)
-    cam.location = (0.0, -FOCUS, 0.8)
-    cam.rotation_euler = (math.radians(88), 0.0, 0.0)  # looking along +Y, a little down
-    cam.data.lens = LENS_MM
+    # Looking along +Y, a little down.
+    cam = demo.add_camera(bpy, scene, (0.0, -FOCUS, 0.8), (88, 0, 0), LENS_MM, width, height)
     dof = cam.data.dof
     dof.use_dof = True
     dof.focus_distance = FOCUS
     dof.aperture_fstop = FSTOP
-    scene.camera = cam
-
-    r = scene.render
-    r.resolution_x, r.resolution_y, r.resolution_percentage = width, height, 100
-    r.image_settings.file_format = "PNG"
-    scene.view_settings.view_transform = "Standard"
-    c = scene.cycles
-    c.samples = c.preview_samples = SAMPLES
-    c.use_adaptive_sampling = False   # equal samples for both engines
-    c.use_denoising = False
-    c.diffuse_bounces = 1             # the same light paths for both engines (as the demo)
-    c.device = "CPU"
+    demo.equal_samples(scene, SAMPLES)
+    scene.cycles.diffuse_bounces = 1  # the same light paths for both engines (as the demo)
     return scene
 
 

@@ -10,10 +10,14 @@ class SplatTracerPanel:
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
     COMPAT_ENGINES = {ENGINE}
+    # The context member the panel draws ("object", "world", ...): without one (no world in
+    # the scene, no material in the slot) the panel is hidden, as Cycles' panels are.
+    context_member = None
 
     @classmethod
     def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES
+        return context.engine in cls.COMPAT_ENGINES and (
+            cls.context_member is None or getattr(context, cls.context_member, None) is not None)
 
 
 class SPLAT_TRACER_PT_render(SplatTracerPanel, bpy.types.Panel):
@@ -157,11 +161,12 @@ class SPLAT_TRACER_PT_performance(SplatTracerPanel, bpy.types.Panel):
 class SPLAT_TRACER_PT_object(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Splat Cloud"
     bl_context = "object"
+    context_member = "object"
 
     @classmethod
     def poll(cls, context):
         obj = context.object
-        return super().poll(context) and obj is not None and obj.type in {"MESH", "POINTCLOUD"}
+        return super().poll(context) and obj.type in {"MESH", "POINTCLOUD"}
 
     def draw(self, context):
         layout = self.layout
@@ -244,10 +249,11 @@ class SPLAT_TRACER_PT_object_light_group(SplatTracerPanel, bpy.types.Panel):
     """The light group of an object's emission or of a lamp (Cycles' Object > Shading)."""
     bl_label = "Light Group"
     bl_context = "object"
+    context_member = "object"
 
     @classmethod
     def poll(cls, context):
-        return super().poll(context) and context.object is not None and hasattr(context.object, "lightgroup")
+        return super().poll(context) and hasattr(context.object, "lightgroup")
 
     def draw(self, context):
         _draw_light_group(self.layout, context.object, context.view_layer)
@@ -256,10 +262,7 @@ class SPLAT_TRACER_PT_object_light_group(SplatTracerPanel, bpy.types.Panel):
 class SPLAT_TRACER_PT_world_light_group(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Light Group"
     bl_context = "world"
-
-    @classmethod
-    def poll(cls, context):
-        return super().poll(context) and context.world is not None
+    context_member = "world"
 
     def draw(self, context):
         _draw_light_group(self.layout, context.world, context.view_layer)
@@ -292,11 +295,12 @@ class SPLAT_TRACER_PT_object_visibility(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Ray Visibility"
     bl_context = "object"
     bl_parent_id = "OBJECT_PT_visibility"
+    context_member = "object"
 
     @classmethod
     def poll(cls, context):
         obj = context.object
-        return super().poll(context) and obj is not None and obj.type not in {"CAMERA", "LIGHT", "EMPTY"}
+        return super().poll(context) and obj.type not in {"CAMERA", "LIGHT", "EMPTY"}
 
     def draw(self, context):
         layout = self.layout
@@ -318,10 +322,7 @@ class SPLAT_TRACER_PT_light(SplatTracerPanel, bpy.types.Panel):
     the engine does not render."""
     bl_label = "Light"
     bl_context = "data"
-
-    @classmethod
-    def poll(cls, context):
-        return super().poll(context) and context.light is not None
+    context_member = "light"
 
     def draw(self, context):
         layout = self.layout
@@ -438,11 +439,12 @@ class SPLAT_TRACER_PT_object_motion_blur(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Motion Blur"
     bl_context = "object"
     bl_options = {"DEFAULT_CLOSED"}
+    context_member = "object"
 
     @classmethod
     def poll(cls, context):
         obj = context.object
-        return (super().poll(context) and obj is not None and hasattr(obj, "cycles")
+        return (super().poll(context) and hasattr(obj, "cycles")
                 and (obj.type not in {"LIGHT", "EMPTY", "LIGHT_PROBE", "SPEAKER", "ARMATURE", "LATTICE"}
                      or (obj.instance_type == "COLLECTION" and obj.instance_collection is not None)))
 
@@ -467,10 +469,11 @@ class SPLAT_TRACER_PT_camera_panorama(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Panorama"
     bl_context = "data"
     bl_parent_id = "DATA_PT_lens"
+    context_member = "camera"
 
     @classmethod
     def poll(cls, context):
-        return super().poll(context) and context.camera is not None and context.camera.type == "PANO"
+        return super().poll(context) and context.camera.type == "PANO"
 
     def draw(self, context):
         layout = self.layout
@@ -550,10 +553,7 @@ def _draw_surface(layout, idblock, output_type: str, input_name: str) -> None:
 class SPLAT_TRACER_PT_material(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Surface"
     bl_context = "material"
-
-    @classmethod
-    def poll(cls, context):
-        return super().poll(context) and context.material is not None
+    context_member = "material"
 
     def draw(self, context):
         _draw_surface(self.layout, context.material, "OUTPUT_MATERIAL", "Surface")
@@ -562,10 +562,7 @@ class SPLAT_TRACER_PT_material(SplatTracerPanel, bpy.types.Panel):
 class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Surface"
     bl_context = "world"
-
-    @classmethod
-    def poll(cls, context):
-        return super().poll(context) and context.world is not None
+    context_member = "world"
 
     def draw(self, context):
         _draw_surface(self.layout, context.world, "OUTPUT_WORLD", "Surface")
@@ -577,10 +574,11 @@ class SPLAT_TRACER_PT_world_ray_visibility(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Ray Visibility"
     bl_context = "world"
     bl_options = {"DEFAULT_CLOSED"}
+    context_member = "world"
 
     @classmethod
     def poll(cls, context):
-        return super().poll(context) and context.world is not None and hasattr(context.world, "cycles_visibility")
+        return super().poll(context) and hasattr(context.world, "cycles_visibility")
 
     def draw(self, context):
         layout = self.layout

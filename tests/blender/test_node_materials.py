@@ -68,9 +68,28 @@ def _both(bpy, scene, tmp_path, name):
     return ours, theirs, report
 
 
+def _floor_both(bpy, scene, tmp_path, material, name):
+    """A 2 m floor of `material` that fills _setup's orthographic view (UV 0..1 across it),
+    rendered by both engines: (ours, Cycles', our report) as _both returns them."""
+    plane(bpy, "Floor", 2.0, (0, 0, 0), material)
+    _setup(bpy, scene)
+    return _both(bpy, scene, tmp_path, name)
+
+
 def correlation(a, b) -> float:
     a, b = a.mean(axis=-1).ravel(), b.mean(axis=-1).ravel()
     return float(np.corrcoef(a, b)[0, 1])
+
+
+def _assert_like_cycles(ours, theirs, report, material=None, atol=0.0):
+    """Our image is Cycles' as a texture: the same pattern (correlation), the same mean colour
+    (COLOUR_RTOL, plus `atol` where a mean is near black); and, given a material's name, the
+    render report says nothing of it (nothing in it was approximated or left out)."""
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL,
+                               atol=atol)
+    if material is not None:
+        assert not [line for line in report if material in line], report
 
 
 def _checker(nodes, links, vector_from=None, scale=4.0):
@@ -89,9 +108,7 @@ def test_uv_checker_floor_matches_cycles(blender, empty_scene, tmp_path):
     coords = nodes.new("ShaderNodeTexCoord")
     checker = _checker(nodes, links, coords.outputs["UV"])
     links.new(checker.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)  # fills the view: UV 0..1 across it
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "uv_checker")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "uv_checker")
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     cell = SIZE // 4
@@ -116,9 +133,7 @@ def test_noise_through_a_colour_ramp_matches_cycles(blender, empty_scene, tmp_pa
     links.new(coords.outputs["Object"], noise.inputs["Vector"])
     links.new(noise.outputs["Fac"], ramp.inputs["Fac"])
     links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "noise_ramp")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "noise_ramp")
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     assert correlation(np.roll(ours, SIZE // 3, axis=0), theirs) < 0.5, "a shifted noise must fail"
@@ -153,9 +168,7 @@ def test_nested_node_groups_match_cycles(blender, empty_scene, tmp_path):
     coords = nodes.new("ShaderNodeTexCoord")
     links.new(coords.outputs["UV"], outer.inputs["Vector"])
     links.new(outer.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "nested")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "nested")
     assert correlation(ours, theirs) >= TEXTURE_CORRELATION
     assert not [line for line in report if "Nested" in line], report
 
@@ -277,8 +290,7 @@ def test_packed_and_float_images_match_cycles(blender, empty_scene, tmp_path, so
     _image_floor(bpy, _grid_image(bpy, tmp_path, source), "Linear", "REPEAT")
     _setup(bpy, scene)
     ours, theirs, report = _both(bpy, scene, tmp_path, f"image_{source}")
-    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
-    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+    _assert_like_cycles(ours, theirs, report)
 
 
 def test_a_wrong_extension_fails_the_correlation(blender, empty_scene, tmp_path):
@@ -363,9 +375,7 @@ def test_procedural_textures_match_cycles(blender, empty_scene, tmp_path, kind):
     m, nodes, links, shader = _material(bpy, f"Procedural_{kind}")
     _, output = _procedural(nodes, links, kind)
     links.new(output, shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, kind)
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, kind)
     r = correlation(ours, theirs)
     assert r >= TEXTURE_CORRELATION, r
     assert not [line for line in report if "Procedural" in line], report
@@ -404,12 +414,8 @@ def test_a_chain_of_colour_nodes_matches_cycles(blender, empty_scene, tmp_path):
     links.new(invert.outputs["Color"], gamma.inputs["Color"])
     links.new(gamma.outputs["Color"], bc.inputs["Color"])
     links.new(bc.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "chain")
-    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
-    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
-    assert not [line for line in report if "Chain" in line], report
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "chain")
+    _assert_like_cycles(ours, theirs, report, "Chain")
 
 
 def test_point_colours_through_a_colour_ramp(blender, empty_scene, tmp_path):
@@ -451,12 +457,8 @@ def test_rgb_curves_match_cycles(blender, empty_scene, tmp_path):
     links.new(coords.outputs["UV"], gradient.inputs["Vector"])
     links.new(gradient.outputs["Color"], curves.inputs["Color"])
     links.new(curves.outputs["Color"], shader.inputs["Base Color"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "curves")
-    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
-    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
-    assert not [line for line in report if "Curves" in line], report
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "curves")
+    _assert_like_cycles(ours, theirs, report, "Curves")
 
 
 def test_a_normal_mapped_floor_matches_cycles(blender, empty_scene, tmp_path):
@@ -480,10 +482,8 @@ def test_a_normal_mapped_floor_matches_cycles(blender, empty_scene, tmp_path):
     _setup(bpy, scene)
     scene.objects["Sun"].rotation_euler = (math.radians(40), math.radians(25), 0)
     ours, theirs, report = _both(bpy, scene, tmp_path, "normal_map")
-    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
-    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL)
+    _assert_like_cycles(ours, theirs, report, "Bumpy")
     assert theirs.mean(-1).std() > 0.05  # the normal map shows
-    assert not [line for line in report if "Bumpy" in line], report
 
 
 def _bump_floor(bpy, scene, name, invert=False, chain_normal_map=False, sun_angle=75):
@@ -583,10 +583,8 @@ def test_camera_coordinates_match_cycles(blender, empty_scene, tmp_path):
     scene.camera.location, scene.camera.rotation_euler = (0, -3.5, 2.5), (math.radians(55), 0, 0)
     bpy.context.view_layer.update()
     ours, theirs, report = _both(bpy, scene, tmp_path, "camera_space")
-    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
-    np.testing.assert_allclose(ours.reshape(-1, 3).mean(0), theirs.reshape(-1, 3).mean(0), rtol=COLOUR_RTOL, atol=0.005)
+    _assert_like_cycles(ours, theirs, report, "CameraSpace", atol=0.005)
     assert theirs[..., 0].mean() > 0.05  # the depth shows: negated, it would be all 0
-    assert not [line for line in report if "CameraSpace" in line], report
 
 
 # A lamp's colour from its node tree against Cycles': the Blackbody node's stated accuracy
@@ -671,9 +669,7 @@ def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     links.new(to_kelvin.outputs["Result"], blackbody.inputs["Temperature"])
     links.new(blackbody.outputs["Color"], emission.inputs["Color"])
     links.new(emission.outputs[0], output.inputs["Surface"])
-    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
-    _setup(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "blackbody_floor")
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "blackbody_floor")
     ratio = lambda img: (img[..., 0] / np.maximum(img[..., 2], 1e-6)).ravel()  # noqa: E731
     r = float(np.corrcoef(ratio(ours), ratio(theirs))[0, 1])
     off = np.abs(ours.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max()

@@ -51,13 +51,20 @@ WORLD = 0.5
 ALPHA_TOL, OUTSIDE_TOL, LIGHT_RTOL = 0.06, 0.01, 0.04
 
 
-def _scene(bpy):
+def scan_on_floor(bpy):
+    """A new empty scene with a grey cloud sphere, the "scan" (Object Index SCAN), over an 8 m
+    grey floor (FLOOR): the scene here and in test_world_environment.py, before its camera and
+    light. Returns (scene, floor, scan)."""
     bpy.ops.wm.read_homefile(use_empty=True)
-    scene = bpy.context.scene
     grey = principled(bpy, "Grey")
     floor = plane(bpy, "Floor", 8.0, (0, 0, 0), grey)
     scan = cloud_sphere(bpy, "Scan", 4000, 0.6, (0, 0, 1.0), grey)
     floor.pass_index, scan.pass_index = FLOOR, SCAN
+    return bpy.context.scene, floor, scan
+
+
+def _scene(bpy):
+    scene, floor, scan = scan_on_floor(bpy)
     lamp(bpy, "SUN", rotation=(math.radians(-35), 0, 0), energy=3.0)
     add_camera(bpy, scene, (0, -5, 4), (math.radians(60), 0, 0))
     scene.world = bpy.data.worlds.new("Grey")

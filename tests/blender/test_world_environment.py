@@ -25,11 +25,11 @@ import numpy as np
 import pytest
 
 from blender_helpers import add_camera
-from test_scene_export import INDEX, cloud_sphere, erode, iou, plane, principled, render
+from test_scene_export import INDEX, erode, iou, render
+from test_shadow_catcher import FLOOR, SCAN, scan_on_floor
 
 W, H = 160, 120
 SAMPLES = 64
-FLOOR, SCAN = 1, 2
 REGION_RTOL, SHADOW_RTOL, SHADOW_IOU, MOVED_IOU = 0.08, 0.15, 0.6, 0.3
 SKY_LIT_RTOL, SKY_SHADOW_RTOL, SKY_GROUND_RTOL = 0.04, 0.4, 0.02  # see the Sky Texture's test
 SKY, GROUND = (0.25, 0.32, 0.45), (0.12, 0.09, 0.06)
@@ -69,12 +69,7 @@ def save_hdri(bpy, path, mirrored=False):
 
 
 def _scene(bpy, folder):
-    bpy.ops.wm.read_homefile(use_empty=True)
-    scene = bpy.context.scene
-    grey = principled(bpy, "Grey")
-    floor = plane(bpy, "Floor", 8.0, (0, 0, 0), grey)
-    scan = cloud_sphere(bpy, "Scan", 4000, 0.6, (0, 0, 1.0), grey)
-    floor.pass_index, scan.pass_index = FLOOR, SCAN
+    scene, floor, scan = scan_on_floor(bpy)
     add_camera(bpy, scene, (0, -6, 3.5), (math.radians(66), 0, 0))
     world = scene.world = bpy.data.worlds.new("HDRI")
     nodes, links = world.node_tree.nodes, world.node_tree.links
