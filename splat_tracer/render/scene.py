@@ -337,7 +337,8 @@ def shutter_table(curve) -> np.ndarray:
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv",
+                 "Instance": "instance"}
 
 
 def render_arguments(camera: Camera, width: int, height: int, settings: RenderSettings, method: Method, world: World,
