@@ -52,7 +52,8 @@ _PASSES = (
     ("use_pass_transmission_color", "TransCol", "Transmission Color" if _NEW_PASS_NAMES else "TransCol", 3, "RGB",
      "COLOR"),
     ("use_pass_ambient_occlusion", "AO", "Ambient Occlusion" if _NEW_PASS_NAMES else "AO", 3, "RGB", "COLOR"),
-    # Zero: no motion is computed (said in the render report, export/settings.py).
+    # Cycles' motion to the previous and next frames with motion blur off (export/motion.py
+    # vector_pass); 0 with it on, as Cycles'.
     ("use_pass_vector", "Vector", "Vector", 4, "XYZW", "VECTOR"),
     # The mesh's UV map at the first hit (0 on clouds, said in the report).
     ("use_pass_uv", "UV", "UV", 3, "UVA", "VECTOR"),

@@ -233,6 +233,15 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
         elif scene.render.use_motion_blur:
             report.once("Motion Blur is not rendered here: this render is of the frame's time alone (F12 and "
                         "animation renders blur)")
+        # Cycles' Vector pass, written with motion blur off (with it on, Cycles' is 0 too).
+        frame_motion = None
+        if "Vector" in passes and not scene.render.use_motion_blur:
+            if frame_set is None:
+                report.once(f"{depsgraph.view_layer.name}: the Vector pass is 0 here: only F12 and animation "
+                            "renders read the previous and next frames")
+            else:
+                frame_motion = export_motion.sample_frame_motion(depsgraph, frame_set, report,
+                                                                 [view.camera for view in views] if views else None)
         origin = export.camera_origin(depsgraph)
         cameras = {view.name: export.export_camera(depsgraph, width, height, origin, view, motion)
                    for view in views} if views else {"": export.export_camera(depsgraph, width, height, origin, motion=motion)}
@@ -253,6 +262,8 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
     guides = [_GUIDES[name] for name in wanted if name in _GUIDES]
     if denoising is not None:
         guides += ["DiffCol"] * denoising.albedo + ["Normal"] * denoising.normal
+    if frame_motion is not None:
+        guides += ["Position", "Instance"]  # the Vector pass is computed from them (below)
     core_passes = tuple(dict.fromkeys([name for name in wanted if name not in _GUIDES
                                        and name != export_settings.NOISY_IMAGE] + guides))
     t1 = time.perf_counter()
@@ -281,6 +292,19 @@ def render_frame(depsgraph, method: Method, passes=("Combined",), progress=None,
                                               shutter_curve=motion.curve if motion is not None and moving else None,
                                               rolling_shutter=motion.rolling if motion is not None and moving else None)
         position = result.passes.get("Position")
+        if frame_motion is not None:
+            if camera.panorama is not None:
+                report.once(f"{view_layer.name}: the Vector pass is 0 for a panoramic camera (its motion is "
+                            "computed for perspective and orthographic cameras)")
+            elif camera.orthographic:
+                # Measured with bpy 5.0.1 (tests/blender/test_vector_pass.py).
+                report.once(f"{view_layer.name}: the Vector pass of an orthographic camera is its orthographic "
+                            "screen motion; Cycles' projects the previous and next frames' positions through the "
+                            "lens as if perspective, so the two differ")
+            scene_camera = (views[[v.name for v in views].index(name)].camera if views else scene.camera)
+            result.passes["Vector"] = export_motion.vector_pass(
+                position, result.passes["Instance"], exported.keys, frame_motion, camera,
+                scene_camera.name_full, exported.origin, width, height)
         if position is not None:
             # The core's positions are in the local frame; the pass is in world space, as
             # Cycles'. A miss stays 0 (Cycles' value there); a hit is never at the local origin,

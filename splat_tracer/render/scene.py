@@ -358,7 +358,8 @@ def shutter_table(curve) -> np.ndarray:
 PASS_KEYWORDS = {"Combined": "combined", "Depth": "depth", "Normal": "normal", "DiffCol": "diffcol", "Emit": "emit",
                  "Shadow": "shadow", "IndexOB": "index", "Splat Count": "splat_count",
                  "Shadow Catcher": "shadow_catcher", "Position": "position", "IndexMA": "material_index",
-                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv"}
+                 "Mist": "mist", "Env": "environment", "AO": "ao", "UV": "uv",
+                 "Instance": "instance"}
 
 
 # A shader AOV's channels by its type (Blender's AOV.type): RGBA as Cycles registers a colour AOV.

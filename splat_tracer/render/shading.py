@@ -434,7 +434,8 @@ PASSES = {
     "DiffDir": 3, "DiffInd": 3, "GlossDir": 3, "GlossInd": 3, "GlossCol": 3,
     "TransDir": 3, "TransInd": 3, "TransCol": 3,
     "AO": 3,           # Cycles' AO pass: 1 where a cosine ray from the first hit meets nothing within World.ao_distance
-    "Vector": 4,       # Cycles' screen-space motion: 0 (no motion is rendered: the frame is sharp)
+    "Vector": 4,       # Cycles' screen-space motion: 0 here (blender/export/motion.py vector_pass fills it)
+    "Instance": 1,     # the pixel-centre sample's first hit's instance + 1 (0 on a miss): for the Vector pass
     "UV": 3,           # the mesh's UV map (U, V, 1) at the pixel-centre sample's first hit; 0 on clouds and misses
 }
 # The light passes in the core's order (its `light` buffer's planes: PassLobe order, Direct,

@@ -24,8 +24,10 @@ def test_fuzz_core_renders_some_scenes():
         for seed in SEEDS:
             fdp = atheris.FuzzedDataProvider(np.random.default_rng(seed).bytes(4096))
             counters = fuzz_core.fuzz_render_scene(fdp, fuzz_core.fuzz_scene(fdp))
-            if counters is not None:
-                assert counters["camera_rays"] > 0, counters
+            # An accepted render may cast no camera ray when a hostile value the core takes
+            # (a lens rotation of -1e308: NaN rays, skipped) spoils them all; it still must
+            # finish (the harness asserts it). Only renders that cast rays count below.
+            if counters is not None and counters["camera_rays"] > 0:
                 rendered.append((seed, counters["lights"], counters["instances"]))
     assert len(rendered) >= 2, f"only {rendered} of seeds {list(SEEDS)} rendered: has a layout drifted?"
     # Lamps and instances too: a drifted row layout refuses only the scenes that have them.

@@ -216,3 +216,137 @@ def _thinned(mats: list, total: int, steps: int) -> list:
     """An object's own steps of the shutter's `total` (both 2^k + 1: every stride-th)."""
     stride = (total - 1) // (steps - 1)
     return mats[::stride]
+
+
+# Cycles' Vector pass (motion blur off): the motion from the frame to these frames, as
+# Cycles' sync samples it for the pass (the previous and the next frame).
+VECTOR_FRAMES = (-1, 1)
+
+
+@dataclass
+class FrameMotion:
+    """How the instances and cameras move from the frame to the previous and the next frame:
+    world-space (2, 4, 4) changes D with M(frame + k) = D[i] @ M(frame) for k in
+    VECTOR_FRAMES, by instance_key and by camera object name; only what moves is kept."""
+
+    objects: dict = field(default_factory=dict)
+    cameras: dict = field(default_factory=dict)
+
+
+def sample_frame_motion(depsgraph, frame_set: Callable[[int, float], None], report: shading.Report,
+                        cameras=None) -> FrameMotion:
+    """The instances' and cameras' changes to VECTOR_FRAMES (the Vector pass's), read by
+    evaluating the depsgraph there with frame_set (RenderEngine.frame_set), as motion blur
+    does; the frame's own time is evaluated again before returning. cameras: the camera
+    objects rendered; None: the scene camera."""
+    from ...util import matrices
+
+    scene = depsgraph.scene
+    frame, subframe = scene.frame_current, scene.frame_subframe
+    cameras = {c.name_full: c for c in (cameras or [scene.camera]) if c is not None}
+    deforming = set()
+
+    def read():
+        objects = {}
+        for inst in depsgraph.object_instances:
+            if inst.object.type in ("LIGHT", "CAMERA", "EMPTY"):
+                continue
+            objects[instance_key(inst)] = np.array(inst.matrix_world, np.float64)
+        return objects, {name: np.array(c.evaluated_get(depsgraph).matrix_world.normalized(), np.float64)
+                         for name, c in cameras.items()}
+
+    now = read()
+    for inst in depsgraph.object_instances:
+        source = inst.object.original or inst.object
+        if inst.object.type not in ("LIGHT", "CAMERA", "EMPTY") and _may_deform(source):
+            deforming.add(source.name)
+    others = []
+    try:
+        for k in VECTOR_FRAMES:
+            frame_set(frame + k, subframe)
+            others.append(read())
+    finally:
+        frame_set(frame, subframe)
+
+    def changes(kind: int) -> dict:
+        out = {}
+        for key, m in now[kind].items():
+            steps = [other[kind].get(key) for other in others]
+            if any(s is None for s in steps) or all(np.array_equal(s, m) for s in steps):
+                continue  # still, or not there at another frame (appears, vanishes): no motion
+            try:
+                inverse = matrices.inverse(m)
+            except np.linalg.LinAlgError:
+                continue  # scaled to zero: not rendered (export/scene.py says it)
+            out[key] = np.array([np.einsum("ij,jk->ik", s, inverse) for s in steps])
+        return out
+
+    if deforming:
+        names = ", ".join(f"'{n}'" for n in sorted(deforming)[:3]) + (" ..." if len(deforming) > 3 else "")
+        report.once(f"Vector pass: deformation is not captured ({names}): objects move as wholes by their "
+                    "transforms between frames; points that move within an object (shape keys, modifiers) "
+                    "are taken as still")
+    return FrameMotion(changes(0), changes(1))
+
+
+def _in_local_frame(change: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """World-space changes (..., 4, 4) as changes of the local frame at `origin` (p_local =
+    p_world - origin): the same rotation, the translation R o + t - o."""
+    local = np.array(change, np.float64)
+    local[..., :3, 3] += np.einsum("...ij,j->...i", local[..., :3, :3], origin) - origin
+    return local
+
+
+def _raster(camera, local_from_camera: np.ndarray, points: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Cycles' raster coordinates (pixels, x right, y up from the image's bottom) of (n, 3)
+    local-frame points seen by `camera`'s projection from `local_from_camera`."""
+    from ...util import matrices
+
+    m = matrices.inverse(local_from_camera)
+    p = points @ m[:3, :3].T + m[:3, 3]
+    if camera.orthographic:
+        s = p[:, :2]
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = p[:, :2] / -p[:, 2:3]
+    left, right, bottom, top = camera.frustum
+    return (s - (left, bottom)) / (right - left, top - bottom) * (width, height)
+
+
+def vector_pass(position: np.ndarray, instance: np.ndarray, keys: list, motion: FrameMotion, camera,
+                camera_name: str, origin, width: int, height: int) -> np.ndarray:
+    """Cycles' Vector pass (motion blur off) of a render: (h, w, 4), per pixel the camera's
+    first hit's screen-space motion in pixels, as Cycles' primitive_motion_vector: x, y its
+    position at the previous frame minus at this one, z, w at this one minus at the next
+    (both point the opposite way to the motion; Blender's Vector Blur reads them so); 0
+    where nothing is hit. position: (h, w, 3) first hits in the local frame at `origin`;
+    instance: (h, w) their instance + 1 (the core's "Instance" pass); keys: instance_key
+    of each instance; camera: the frame's (render.camera.Camera), its object's motion by
+    camera_name. A panoramic camera gives 0 (the caller says it)."""
+    origin = np.asarray(origin, np.float64)
+    ids = np.asarray(instance).astype(np.int64).ravel()
+    hit = ids > 0
+    out = np.zeros(position.shape[:2] + (4,), np.float32)
+    if not hit.any() or not keys or camera.panorama is not None:
+        return out
+    points = np.asarray(position, np.float64).reshape(-1, 3)[hit]
+    ids = ids[hit] - 1
+    # Per instance, its changes to the previous and the next frame (identity: still).
+    changes = np.broadcast_to(np.eye(4), (len(keys), 2, 4, 4)).copy()
+    for i, key in enumerate(keys):
+        change = motion.objects.get(key)
+        if change is not None:
+            changes[i] = _in_local_frame(change, origin)
+    eye = camera.local_from_camera
+    eye_change = motion.cameras.get(camera_name)
+    eyes = ([eye, eye] if eye_change is None
+            else [np.einsum("ij,jk->ik", c, eye) for c in _in_local_frame(eye_change, origin)])
+    centre = _raster(camera, eye, points, width, height)
+    c = changes[np.clip(ids, 0, len(keys) - 1)]
+    moved = [np.einsum("nij,nj->ni", c[:, k, :3, :3], points) + c[:, k, :3, 3] for k in range(2)]
+    before = _raster(camera, eyes[0], moved[0], width, height)
+    after = _raster(camera, eyes[1], moved[1], width, height)
+    vector = np.concatenate([before - centre, centre - after], axis=1)
+    flat = out.reshape(-1, 4)
+    flat[np.flatnonzero(hit)] = np.nan_to_num(vector, nan=0.0, posinf=0.0, neginf=0.0)
+    return out

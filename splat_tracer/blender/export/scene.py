@@ -27,6 +27,7 @@ from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transfo
 from ...render.splats import MAX_COORDINATE, SplatCloud
 from ...util import matrices, resources
 from ...util.columns import finite_rows, nonzero_rows, rows_within
+from .motion import instance_key
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
 
@@ -49,6 +50,9 @@ class ExportedScene:
     lights: int = 0
     emission: bool = False             # some material emits light
     report: shading.Report = field(default_factory=shading.Report)
+    # export/motion.py instance_key of each of render_scene's instances, in its order (the
+    # Vector pass finds a pixel's instance's motion by it).
+    keys: list = field(default_factory=list)
 
 
 def _read(attribute, key: str, width: int, n: int) -> np.ndarray:
@@ -329,7 +333,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     view_layer = depsgraph.view_layer
     aovs = export_shading.view_layer_aovs(view_layer)
     frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
-    instances, lights = [], []
+    instances, lights, keys = [], [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -380,6 +384,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             elif kind == "mesh" and any(any(c > 0 for c in m.emission) for m in materials):
                 report.once(f"object '{obj.name}' emits light and moves: its surface is blurred, but the light it "
                             "casts comes from where it is at the frame's time")
+        keys.append(instance_key(inst))
         instances.append(Instance(
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
@@ -391,7 +396,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
                                threads=threads)
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
-                         frame.splats, frame.triangles, len(lights), emission, report)
+                         frame.splats, frame.triangles, len(lights), emission, report, keys)
 
 
 def asset_name(obj) -> str:

@@ -180,11 +180,6 @@ def report_unhonoured(scene, view_layer, report: shading.Report) -> None:
     for owner, prop, label in UNWRITTEN_PASSES:
         if _on(owners[owner], prop):
             report.once(f"{layer}: the {label} pass is not written")
-    if _on(view_layer, "use_pass_vector") and not render.use_motion_blur:
-        # Cycles writes Vector only with motion blur off (its Data panel greys the switch out
-        # when on, and the pass stays zero): the engine's zero is Cycles' own then.
-        report.once(f"{layer}: the Vector pass is written as zero: no motion between frames is computed "
-                    "(right for a still camera and scene)")
     for group in list(view_layer.lightgroups)[shading.MAX_LIGHT_GROUPS:]:
         # Past the core's bound: what the group holds lights Combined as usual.
         report.once(f"{layer}: the light group '{group.name}' pass is not written (only the first "

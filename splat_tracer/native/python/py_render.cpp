@@ -577,18 +577,20 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                    "material_index", "mist", "environment", "mist_settings", "cryptomatte",
                                    "camera_motion", "shutter_table", "rolling_shutter_duration", "world_map",
                                    "light", "ao", "ao_distance", "light_groups", "light_group_lamps",
-                                   "light_group_instances", "light_group_world", "uv", "aov", nullptr};
+                                   "light_group_instances", "light_group_world", "uv", "aov", "instance",
+                                   nullptr};
     PyObject *om, *ofrustum, *osettings, *ometh, *ocomb, *odepth = Py_None, *onormal = Py_None,
              *odiff = Py_None, *oemit = Py_None, *oshadow = Py_None, *oindex = Py_None, *ocount = Py_None,
              *progress = Py_None, *olens = Py_None, *ocatcher = Py_None, *oposition = Py_None,
              *omatindex = Py_None, *omist = Py_None, *oenv = Py_None, *ocrypto = Py_None, *ocammotion = Py_None,
              *oshutter = Py_None, *oworldmap = Py_None, *olight = Py_None, *oao = Py_None, *ogroups = Py_None,
-             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None, *oaov = Py_None;
+             *ogroup_lamps = Py_None, *ogroup_instances = Py_None, *ouvpass = Py_None, *oaov = Py_None,
+             *oinstance = Py_None;
     int orthographic, width, height, x0, y0, w, h, threads = 0, tile_size = kDefaultTileSize, transparent = 0,
         packets = 1, world_visibility = int(IntegratorSettings().world_visibility), group_world = -1;
     float world[3];
     IntegratorSettings cfg;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiOO",
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOpii(iiii)OO(fff)pO|OOOOOOOiOipOOiOOOO(fff)OOOfOOOfOOOiOOO",
                                      const_cast<char **>(kwlist),
                                      &om, &ofrustum, &orthographic, &width, &height, &x0, &y0, &w, &h, &osettings,
                                      &ometh, &world[0], &world[1], &world[2], &transparent, &ocomb, &odepth, &onormal,
@@ -597,7 +599,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                                      &cfg.mist_start, &cfg.mist_inv_depth, &cfg.mist_falloff, &ocrypto, &ocammotion,
                                      &oshutter, &cfg.rolling_shutter_duration, &oworldmap, &olight, &oao,
                                      &cfg.ao_distance, &ogroups, &ogroup_lamps, &ogroup_instances, &group_world,
-                                     &ouvpass, &oaov))
+                                     &ouvpass, &oaov, &oinstance))
         return nullptr;
     if (!check_render_args(width, height, x0, y0, w, h, tile_size, threads, progress)) return nullptr;
     for (float v : world)
@@ -698,6 +700,7 @@ PyObject *RenderScene_render(PyObject *self, PyObject *args, PyObject *kwargs) {
                 {oenv, "environment", 3, &film.environment, {}},
                 {oao, "ao", 3, &film.ao, {}},
                 {ouvpass, "uv", 3, &film.uv, {}},
+                {oinstance, "instance", 1, &film.instance, {}},
                 {olight, "light", 3, &film.light, {}, 3 * kLobes},
                 {ogroups, "light_groups", 3, &film.light_groups, {}, -1}};
     for (Out &out : outs) {
@@ -868,7 +871,7 @@ PyMethodDef RenderScene_methods[] = {
      "position=None, material_index=None, mist=None, environment=None, mist_settings=(0, 0.01, 1), "
      "cryptomatte=None, camera_motion=None, shutter_table=None, rolling_shutter_duration=-1, world_map=None, "
      "light=None, ao=None, ao_distance=10, light_groups=None, light_group_lamps=None, light_group_instances=None, "
-     "light_group_world=-1, uv=None, aov=None)\n--\n\n"
+     "light_group_world=-1, uv=None, aov=None, instance=None)\n--\n\n"
      "Renders a window; returns (completed, counters). lens: None (a pinhole) or (radius, focus_distance, blades, "
      "rotation, ratio). shadow_catcher: the Shadow Catcher pass (its presence also takes the catchers' shadows out of "
      "combined, as Cycles). world_visibility: the ray kinds (visibility bits) that see the world. cryptomatte: None or "

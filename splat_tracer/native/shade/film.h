@@ -60,6 +60,9 @@ struct Film {
     // 3 floats: Cycles' UV pass -- the mesh's UV map at the pixel-centre sample's first hit
     // (U, V, A = 1 on a mesh), 0 on clouds and where nothing is hit.
     float *uv = nullptr;
+    // 1 float: the pixel-centre sample's first opaque hit's instance + 1 (0 on a miss): with
+    // Position, what the Vector pass is computed from (the caller knows each instance's motion).
+    float *instance = nullptr;
     // Cryptomatte's object, material and asset passes (shade/cryptomatte.h), integrator only.
     CryptomatteFilm cryptomatte;
     // The view layer's shader AOVs (shade/aov.h); off unless a material writes one asked for.

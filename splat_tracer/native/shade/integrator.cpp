@@ -541,6 +541,8 @@ void Integrator::write_centre(const Primary &c, size_t p) const {
     if (film_.material_index) film_.material_index[p] = c.hit ? c.material_index : 0.f;
     if (film_.splat_count) film_.splat_count[p] = float(c.splats);
     put3(film_.uv, c.hit ? c.uv : Vec3());
+    // Instances are far fewer than 2^24: instance + 1 is exact in a float.
+    if (film_.instance) film_.instance[p] = c.hit && c.instance >= 0 ? float(c.instance + 1) : 0.f;
 }
 
 // Cycles' mist (kernel/film/data_passes.h): the distance from the camera (along its view
