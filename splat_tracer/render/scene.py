@@ -13,6 +13,7 @@ from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
+from .nodes import attribute_layout, columns_of
 from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
                       Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
@@ -218,9 +219,17 @@ class RenderScene:
         self.aov_names = tuple(sorted({name for m in materials if m.program is not None
                                        for name, _, _ in m.program.aovs}))
         keys = {name: i for i, name in enumerate(self.aov_names)}
+        # The point attributes the programs read, in the one layout every cloud carries them in.
+        self.attribute_layout = attribute_layout([m.program for m in materials])
+        for inst in instances:
+            layout = getattr(inst.geometry, "attribute_layout", ())
+            if layout and layout != self.attribute_layout:
+                raise ValueError(f"instance '{inst.name}': its cloud carries the point attributes {layout}, "
+                                 f"the materials read {self.attribute_layout}")
+        columns = columns_of(self.attribute_layout)
         self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads, [m.program.native(keys) if m.program is not None else None
+                                   threads, [m.program.native(keys, columns) if m.program is not None else None
                                              for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers

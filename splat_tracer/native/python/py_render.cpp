@@ -210,10 +210,12 @@ bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, Im
 
 // _core.run_nodes(code, data, outputs, images, globals, out): runs a node program at each row
 // of `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)),
-// the registers after the run. For the evaluator's tests.
+// the registers after the run; `attributes` (optional, (n, k) floats): the point attributes
+// there (ShaderGlobals::attributes). For the evaluator's tests.
 PyObject *run_nodes(PyObject *, PyObject *args) {
-    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs;
-    if (!PyArg_ParseTuple(args, "OOOOOO", &ocode, &odata, &oout, &oimages, &oglobals, &oregs)) return nullptr;
+    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs, *oattr = Py_None;
+    if (!PyArg_ParseTuple(args, "OOOOOO|O", &ocode, &odata, &oout, &oimages, &oglobals, &oregs, &oattr))
+        return nullptr;
     PyObject *triple = PyTuple_Pack(4, ocode, odata, oout, oimages);
     if (!triple) return nullptr;
     NodeProgram prog;
@@ -230,6 +232,11 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
         !get_array(odata, "data", 'f', 1, sd, false, data) || !get_array(oout, "outputs", 'i', 1, so, false, outs) ||
         !check_separate({{regs, "out"}}, {{g, "globals"}, {code, "code"}, {data, "data"}, {outs, "outputs"}}))
         return nullptr;
+    View attr;
+    Py_ssize_t sa[2] = {g.dim(0), -1};
+    if (oattr != Py_None && !get_array(oattr, "attributes", 'f', 2, sa, false, attr)) return nullptr;
+    if (attr.held && attr.dim(1) > kMaxPointAttributes)
+        return PyErr_Format(PyExc_ValueError, "attributes: at most %d per point", kMaxPointAttributes), nullptr;
     float r[kMaxNodeRegisters];
     for (Py_ssize_t i = 0; i < g.dim(0); ++i) {
         const float *x = g.data<float>() + kGlobalFloats * i;
@@ -244,6 +251,7 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
             s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d};
         }
         s.point_alpha = x[39], s.backfacing = x[40], s.tangent_sign = x[41];
+        if (attr.held) s.attributes = attr.data<float>() + i * attr.dim(1), s.attribute_count = int(attr.dim(1));
         prog.run(s, r);
         std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
     }
@@ -923,7 +931,7 @@ int add_render_types(PyObject *module) {
     }
     static PyMethodDef run_nodes_def = {
         "run_nodes", run_nodes, METH_VARARGS,
-        "run_nodes(code, data, outputs, images, globals, out): a node program run at each row of globals; out receives "
+        "run_nodes(code, data, outputs, images, globals, out[, attributes]): a node program run at each row of globals; out receives "
         "the registers (render/nodes.py)."};
     PyObject *fn = PyCFunction_NewEx(&run_nodes_def, nullptr, nullptr);
     if (!fn || PyModule_AddObject(module, "run_nodes", fn) < 0) {
