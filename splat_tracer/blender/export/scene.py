@@ -21,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from ...render import shading
+from ...render import nodes, shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
@@ -139,7 +139,42 @@ def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Repo
     if not ok.all():
         keep = (lambda a: None if a is None else a[ok])
         pos, nrm, rad, col, alpha = pos[ok], nrm[ok], rad[ok], keep(col), keep(alpha)
-    return pos, nrm, rad, col, alpha
+    return pos, nrm, rad, col, alpha, ok
+
+
+# How a point attribute's values are read (foreach_get key, floats per point): the numeric
+# types a Blender attribute can have; a 2-D vector is padded with 0, a colour drops its alpha.
+_ATTRIBUTE_READS = {"FLOAT": ("value", 1), "INT": ("value", 1), "INT8": ("value", 1), "BOOLEAN": ("value", 1),
+                    "FLOAT_VECTOR": ("vector", 3), "FLOAT2": ("vector", 2), "INT32_2D": ("value", 2),
+                    "FLOAT_COLOR": ("color", 4), "BYTE_COLOR": ("color", 4)}
+
+
+def _point_attributes(obj, attrs, n: int, layout: tuple, report: shading.Report) -> dict:
+    """{name: (n, 3) float32} of the point attributes `layout` names that the cloud has on its
+    points, a float filling all three components (nodes.py Compiler._attribute reads three).
+    A name it lacks is left out (read as 0, as Cycles reads a missing attribute); one on
+    another domain or of a type without numbers is said and left out too."""
+    values = {}
+    for name, _ in layout:
+        a = attrs.get(name)
+        if a is None:
+            continue
+        read = _ATTRIBUTE_READS.get(a.data_type)
+        if read is None or a.domain != "POINT":
+            report.once(f"point cloud '{obj.name}': attribute '{name}' is {a.data_type} on {a.domain}, not a "
+                        "number on its points; its Attribute nodes read 0")
+            continue
+        key, width = read
+        buf = np.empty(n * width, np.int32 if a.data_type == "INT32_2D" else np.float32)
+        a.data.foreach_get(key, buf)
+        v = buf.astype(np.float32).reshape(n, width)
+        out = np.zeros((n, 3), np.float32)
+        if width == 1:
+            out[:] = v
+        else:
+            out[:, :min(width, 3)] = v[:, :3]
+        values[name] = np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
+    return values
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
@@ -206,6 +241,7 @@ class _Frame:
         self.materials = {}
         self.splats = self.triangles = 0
         self.want_uv = False   # the UV pass is on (meshes always carry their UV map: node programs read it)
+        self.attribute_layout = ()  # the point attributes the materials read (nodes.attribute_layout)
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -213,15 +249,19 @@ class _Frame:
         arrays = _cloud_arrays(obj, attrs, n, self.radius_factor, self.report)
         if arrays is None:
             return None
-        pos, nrm, rad, col, alpha = arrays
+        pos, nrm, rad, col, alpha, ok = arrays
         if len(pos) == 0:
             self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
-        key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
+        layout = self.attribute_layout
+        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()}
+        columns = nodes.attribute_columns(layout, values, len(pos))
+        key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor, layout, columns))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
                                 len(pos) * resources.BYTES_PER_SPLAT,
                                 lambda: SplatCloud(pos, nrm, rad * self.radius_factor, col, closed=closed,
-                                                   threads=self.threads, alphas=alpha))
+                                                   threads=self.threads, alphas=alpha, attributes=columns,
+                                                   attribute_layout=layout))
         self.splats += self._first_use(key, geometry)
         if closed:
             self.closed.add(id(geometry))
@@ -331,6 +371,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights = [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
+    frame.attribute_layout = _attribute_layout(depsgraph, frame, report, aovs)
     for inst in depsgraph.object_instances:
         obj = inst.object
         matrix = np.array(inst.matrix_world, dtype=np.float64)
@@ -362,6 +403,10 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
+        read = sorted(nodes.attributes_read([m.program for m in materials]))
+        if kind == "mesh" and read:
+            report.once(f"mesh '{obj.name}': its material reads the attribute {', '.join(repr(n) for n in read)}, "
+                        "which is read from point clouds only: 0 on meshes (Cycles reads the mesh's)")
         if kind == "cloud" and frame.want_uv:
             report.once(f"view layer '{view_layer.name}': the UV pass is 0 on point clouds (a scan has no UV map; "
                         "meshes show theirs)")
@@ -392,6 +437,23 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report)
+
+
+def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: dict) -> tuple:
+    """The point attributes the materials of the scene's clouds read (nodes.attribute_layout),
+    which every cloud then carries: only those (none without an Attribute node). The materials
+    are compiled here once (frame.materials keeps them for the instances)."""
+    programs = []
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type == "POINTCLOUD" or (obj.type == "MESH" and NORMAL in obj.data.attributes):
+            programs += [m.program for m in _materials(_slot_materials(obj), frame.materials, report, aovs)]
+    layout = nodes.attribute_layout(programs)
+    left_out = sorted(set(nodes.attributes_read(programs)) - {name for name, _ in layout})
+    if left_out:
+        report.once(f"the materials read more point attributes than the renderer carries ({len(layout)} of them, "
+                    f"by name); attribute {', '.join(repr(n) for n in left_out)} reads 0")
+    return layout
 
 
 def asset_name(obj) -> str:
