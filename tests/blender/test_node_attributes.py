@@ -119,3 +119,45 @@ def test_an_attribute_linked_straight_into_the_colour_is_read_not_the_point_colo
     for mine, cycles, t in zip(_halves(ours), _halves(theirs), INTENSITY):
         np.testing.assert_allclose(mine, (t, t, t), rtol=COLOUR_RTOL, atol=0.01)
         np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
+
+
+@pytest.mark.parametrize("domain", ["POINT", "FACE", "CORNER"])
+def test_a_mesh_float_attribute_drives_base_colour_as_in_cycles(blender, empty_scene, tmp_path, domain):
+    """A lit floor (2 x 1 faces over -1..1) whose float attribute `intensity`, on its vertices
+    (0.5 + 0.3 x: interpolated), faces or face corners (0.2 left, 0.8 right), feeds Base Color
+    through a Color Ramp; `classification` (the other way round) is the wrong one."""
+    import bmesh
+
+    from test_node_materials import _material
+    from test_scene_export import mesh_object
+
+    bpy, scene = blender, empty_scene
+    m, nodes, links, shader = _material(bpy, "Floor")
+    attribute, ramp = nodes.new("ShaderNodeAttribute"), nodes.new("ShaderNodeValToRGB")
+    attribute.attribute_name = "intensity"
+    for element, colour in zip(ramp.color_ramp.elements, RAMP):
+        element.color = (*colour, 1.0)
+    links.new(attribute.outputs["Fac"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
+    obj = mesh_object(bpy, "Floor", lambda bm: bmesh.ops.create_grid(bm, x_segments=2, y_segments=1, size=1.0),
+                      materials=[m])
+    mesh = obj.data
+    if domain == "POINT":
+        x = np.array([v.co.x for v in mesh.vertices])
+        values, other = 0.5 + 0.3 * x, 0.5 - 0.3 * x
+    else:
+        x = np.array([p.center.x for p in mesh.polygons])
+        if domain == "CORNER":
+            x = np.repeat(x, [p.loop_total for p in mesh.polygons])  # a fresh mesh's loops run face by face
+        values, other = np.where(x < 0, *INTENSITY), np.where(x < 0, *CLASSIFICATION)
+    mesh.attributes.new("intensity", "FLOAT", domain).data.foreach_set("value", values.astype(np.float32))
+    mesh.attributes.new("classification", "FLOAT", domain).data.foreach_set("value", other.astype(np.float32))
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"mesh_{domain}")
+    means = (0.35, 0.65) if domain == "POINT" else INTENSITY
+    wrongs = (0.65, 0.35) if domain == "POINT" else CLASSIFICATION
+    for mine, cycles, t, wrong in zip(_halves(ours), _halves(theirs), means, wrongs):
+        np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
+        # Lit by the same sun, the other attribute's albedo would fail the tolerance.
+        assert not np.allclose(cycles * _ramp(wrong) / _ramp(t), cycles, rtol=COLOUR_RTOL, atol=0.01)
+    assert not [line for line in report if "attribute" in line], report

@@ -106,8 +106,10 @@ PyObject *SplatCloud_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
                                    closed.held ? closed.data<uint8_t>() : nullptr, size_t(count), threads,
                                    alpha.held ? alpha.data<float>() : nullptr);
             if (attr.held && attr.dim(1) > 0) scene->set_attributes(attr.data<float>(), int(attr.dim(1)));
-        }))
+        })) {
+        delete scene;  // null, or built before its attributes were refused
         return nullptr;
+    }
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
     if (!self) {

@@ -27,14 +27,14 @@ struct MeshObject {
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", "corner_uv",
-                                   nullptr};
-    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None;
+                                   "corner_attributes", nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None, *oattr = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
-                                     &threads, &ouv))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiOO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads, &ouv, &oattr))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
-    View v, t, n, m, uv;
+    View v, t, n, m, uv, attr;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
     if (!get_array(ot, "triangles", 'i', 2, s3, false, t)) return nullptr;
@@ -44,11 +44,15 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
     Py_ssize_t suv[3] = {nt, 3, 2};
     if (ouv != Py_None && !get_array(ouv, "corner_uv", 'f', 3, suv, false, uv)) return nullptr;
+    // The attributes the node programs read, per corner (TriangleMesh::set_attributes).
+    Py_ssize_t sattr[3] = {nt, 3, -1};
+    if (oattr != Py_None && !get_array(oattr, "corner_attributes", 'f', 3, sattr, false, attr)) return nullptr;
     TriangleMesh *mesh = nullptr;
     if (!without_gil([&] {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
                                     threads, uv.held ? uv.data<float>() : nullptr);
+            if (attr.held && attr.dim(2) > 0) mesh->set_attributes(attr.data<float>(), int(attr.dim(2)));
         })) {
         delete mesh;  // null: the constructor refused an input
         return nullptr;
@@ -90,7 +94,8 @@ PyType_Slot Mesh_slots[] = {
     {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
     {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
     {Py_tp_getset, Mesh_getset},
-    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None)")},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None, "
+                                   "corner_attributes=None)")},
     {0, nullptr},
 };
 

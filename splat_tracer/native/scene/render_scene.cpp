@@ -149,6 +149,11 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
     sg.attributes = sp.attributes, sg.attribute_count = sp.n_attributes;
+    float mesh_attributes[kMaxPointAttributes];
+    if (inst.mesh && inst.mesh->attribute_count() > 0) {  // interpolated over the triangle, as Cycles does
+        inst.mesh->attributes(sp.prim, sp.b1, sp.b2, mesh_attributes);
+        sg.attributes = mesh_attributes, sg.attribute_count = inst.mesh->attribute_count();
+    }
     if (prog.uses_bump) {
         // The Bump node's two nearby points: along two perpendicular directions in the plane of
         // the surface, a fixed fraction of the object's size away. Cycles offsets by a tenth of

@@ -117,5 +117,30 @@ def test_cloud_without_the_attribute_reads_zero_and_wrong_layout_is_refused():
     bare = SplatCloud(np.array([[0, 0, 0.0]]), np.array([[0, 0, 1.0]]), np.array([2.0]))
     assert _render_emission(prog, bare).max() == 0.0
     wrong = _grid_cloud(lambda x: x * 0 + 0.7, (("intensity", 1), ("tint", 3)))
-    with pytest.raises(ValueError, match="point attributes"):
+    with pytest.raises(ValueError, match="carries the attributes"):
         _render_emission(prog, wrong)
+
+
+def test_mesh_corner_attribute_is_interpolated_over_the_triangles():
+    """A floor whose `intensity` is 0.2 at its x = -1 corners and 0.8 at x = 1: read across it
+    as the linear blend Cycles interpolates (0.5 in the middle)."""
+    b = nodes.Builder()
+    col, _ = b.attribute("intensity", 1)
+    b.output("emission", col)
+    prog = b.program()
+    layout = nodes.attribute_layout([prog])
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float32)
+    t = np.array([[0, 1, 2], [0, 2, 3]])
+    per_vertex = np.where(v[:, 0] < 0, 0.2, 0.8)
+    corners = nodes.attribute_columns(layout, {"intensity": per_vertex[t].ravel()}, t.size).reshape(len(t), 3, -1)
+    floor = scene.Mesh(v, t, corner_attributes=corners, attribute_layout=layout)
+    material = shading.Material(base_colour=(0, 0, 0), program=prog)
+    rs = scene.RenderScene([scene.Instance(floor, materials=(material,))], world=shading.World(colour=(0, 0, 0)))
+    cam = Camera.look_at((0, 0, 2), (0, 0, 0), up=(0, 1, 0), fov_y=40, aspect=1, ortho_height=2.0)
+    img = rs.render(cam, 32, 32, shading.RenderSettings(samples=1, max_bounces=0)).passes["Combined"][..., 0]
+    x = (np.arange(32) + 0.5) / 32 * 2 - 1  # pixel centres across the floor
+    np.testing.assert_allclose(img[16], 0.5 + 0.3 * x, atol=0.02)
+    bad = corners.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        scene.Mesh(v, t, corner_attributes=bad, attribute_layout=layout)
