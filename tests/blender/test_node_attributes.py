@@ -8,6 +8,8 @@ a lamp, because Cycles renders points as spheres (their shading over a sphere is
 while the emitted colour is the attribute's through the ramp in both.
 - COLOUR_RTOL = 0.05 (atol 0.01): the mean colour per half against Cycles' and against the ramp
   computed here; reading the wrong attribute (classification) is outside it.
+A lit mesh floor with a float attribute on its vertices, faces or face corners feeds Base Color
+the same way (measured: equal to Cycles' within 1e-5 per half).
 """
 from __future__ import annotations
 
@@ -25,13 +27,14 @@ def _ramp(t):
     return np.add(np.multiply(1 - t, RAMP[0]), np.multiply(t, RAMP[1]))
 
 
-def _cloud(bpy, material, with_attributes=True):
+def _cloud(bpy, material, with_attributes=True, extra=None):
     from splat_tracer.blender import cloud_object
 
     g = np.stack(np.meshgrid(np.linspace(-0.9, 0.9, 37), np.linspace(-0.9, 0.9, 37)), -1).reshape(-1, 2)
     left = g[:, 0] < 0
     attributes = {"intensity": np.where(left, *INTENSITY).astype(np.float32),
                   "classification": np.where(left, *CLASSIFICATION).astype(np.float32)}
+    attributes.update({name: np.full(len(g), value, np.float32) for name, value in (extra or {}).items()})
     obj = cloud_object.create_cloud_object("Scan", np.column_stack([g, np.zeros(len(g))]),
                                            np.tile([0.0, 0.0, 1.0], (len(g), 1)), np.full(len(g), 0.05),
                                            np.full((len(g), 4), 0.5),  # the importer sets the material on coloured clouds
@@ -161,3 +164,32 @@ def test_a_mesh_float_attribute_drives_base_colour_as_in_cycles(blender, empty_s
         # Lit by the same sun, the other attribute's albedo would fail the tolerance.
         assert not np.allclose(cycles * _ramp(wrong) / _ramp(t), cycles, rtol=COLOUR_RTOL, atol=0.01)
     assert not [line for line in report if "attribute" in line], report
+
+
+def test_more_attributes_than_carried_are_said_and_read_zero(blender, empty_scene, tmp_path):
+    """Five names (the core carries four, three floats each): the last by name reads 0, said
+    once; the others still read their values."""
+    from test_scene_export import render, stats
+
+    bpy, scene = blender, empty_scene
+    m = _ramped(bpy, "intensity")
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    total = nodes["Color Ramp"].inputs["Fac"]
+    for name in ("a1", "a2", "a3", "zz"):  # summed into the ramp's input with the intensity
+        extra, add = nodes.new("ShaderNodeAttribute"), nodes.new("ShaderNodeMath")
+        extra.attribute_name = name
+        links.new(_live_source(total), add.inputs[0])
+        links.new(extra.outputs["Fac"], add.inputs[1])
+        links.new(add.outputs[0], total)
+    _cloud(bpy, m, extra={"zz": 0.5})  # read, it would move the ramp by half its length
+    _setup(bpy, scene)
+    ours = render(bpy, scene, tmp_path / "many.exr", (80, 80))["ViewLayer"]["Combined"][..., :3]
+    said = [line for line in stats()["report"] if "point attributes" in line]
+    assert said == ["the materials read more point attributes than the renderer carries (4 of them, by name); "
+                    "attribute 'zz' reads 0"], said
+    for mine, t in zip(_halves(ours), INTENSITY):  # a1..a3 are missing (0): the intensity alone
+        np.testing.assert_allclose(mine, _ramp(t), rtol=COLOUR_RTOL, atol=0.01)
+
+
+def _live_source(socket):
+    return next(link.from_socket for link in socket.links)
