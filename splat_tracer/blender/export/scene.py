@@ -108,8 +108,8 @@ def _valid_points(name: str, pos, nrm, rad, col, alpha, radius_factor: float, re
 
 
 def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Report):
-    """(positions, normals, radii, colours or None, alphas or None, mask of the points kept) of a point cloud or of a
-    vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
+    """(positions, normals, radii, colours or None, alphas or None, mask of the points kept) of a
+    point cloud or of a vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
     some point is not opaque. None (said in the report) when the splat attributes are missing
     or of another type: the object is left out, the frame renders."""
     rad_name = RADIUS if RADIUS in attrs else "radius"
@@ -152,10 +152,9 @@ _ATTRIBUTE_READS = {"FLOAT": ("value", 1), "INT": ("value", 1), "INT8": ("value"
 def _point_attributes(obj, attrs, n, layout: tuple, report: shading.Report, domains=("POINT",)) -> dict:
     """{name: (n, 3) float32} of the attributes `layout` names that the geometry has on one of
     `domains` (n: that domain's size; with several, n is {domain: size} and the keys are
-    (domain, name)), a float
-    filling all three components (nodes.py Compiler._attribute reads three). A name it lacks
-    is left out (read as 0, as Cycles reads a missing attribute); one on another domain or of
-    a type without numbers is said and left out too."""
+    (domain, name)), a float filling all three components (nodes.py Compiler._attribute reads
+    three). A name it lacks is left out (read as 0, as Cycles reads a missing attribute); one
+    on another domain or of a type without numbers is said and left out too."""
     values = {}
     kind = "point cloud" if domains == ("POINT",) else "mesh"
     for name, _ in layout:
@@ -471,12 +470,17 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
 
 def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: dict) -> tuple:
     """The attributes the materials of the scene's clouds and meshes read
-    (nodes.attribute_layout), which every cloud and mesh then carries: only those (none without an Attribute node). The materials
-    are compiled here once (frame.materials keeps them for the instances)."""
-    programs = []
+    (nodes.attribute_layout), which every cloud and mesh then carries: only those (none
+    without an Attribute node). The materials are compiled here once (frame.materials keeps
+    them for the instances)."""
+    programs, seen = [], set()
     for inst in depsgraph.object_instances:
         obj = inst.object
-        if obj.type == "POINTCLOUD" or obj.type in _MESH_LIKE:
+        # Instances of one geometry share its slots (an object's own geometry and the point
+        # cloud its Geometry Nodes make are two, with slots of their own).
+        key = (obj.name, obj.type, obj.data.as_pointer() if obj.data is not None else 0)
+        if (obj.type == "POINTCLOUD" or obj.type in _MESH_LIKE) and key not in seen:
+            seen.add(key)
             programs += [m.program for m in _materials(_slot_materials(obj), frame.materials, report, aovs)]
     layout = nodes.attribute_layout(programs)
     left_out = sorted(set(nodes.attributes_read(programs)) - {name for name, _ in layout})
