@@ -25,7 +25,10 @@ MAX_BUMP_DEPTH = 3   # native kMaxBumpDepth: Bump nodes within a Bump's height, 
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP")
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE")
+# The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
+# float attribute takes one, a vector or colour three.
+MAX_POINT_ATTRIBUTES = 12
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA")
@@ -96,11 +99,22 @@ class Program:
     # AOV Output nodes: (AOV name, Color register (3 wide), Value register), written on the
     # camera ray's surfaces into the view layer's AOV of that name (native shade/aov.h).
     aovs: tuple = ()
+    # The point attributes its Attribute nodes read: (name, width) in the order their
+    # ATTRIBUTE instructions number them (width 1: float, 3: vector or colour).
+    attributes: tuple = ()
 
-    def native(self, aov_keys: Optional[dict] = None) -> tuple:
+    def native(self, aov_keys: Optional[dict] = None, attribute_columns: Optional[dict] = None) -> tuple:
         """(code, data, outputs, images[, aovs]) as the core takes them; aovs: (k, 3) int32
-        rows (key, colour, value) for the AOV Output nodes whose name aov_keys numbers."""
-        out = (np.array(self.code, np.int32).reshape(-1, WIDTH), np.array(self.data, np.float32),
+        rows (key, colour, value) for the AOV Output nodes whose name aov_keys numbers.
+        attribute_columns: {name: first column} of the scene's point attributes
+        (attribute_layout); without it the program's own order (columns_of)."""
+        code = np.array(self.code, np.int32).reshape(-1, WIDTH)
+        if self.attributes:
+            columns = attribute_columns if attribute_columns is not None else columns_of(self.attributes)
+            for i in np.flatnonzero(code[:, 0] == OPS.index("ATTRIBUTE")):
+                # A name the scene's clouds do not carry (past the limit): a column no point has, 0.
+                code[i, 3] = columns.get(self.attributes[code[i, 3]][0], MAX_POINT_ATTRIBUTES)
+        out = (code, np.array(self.data, np.float32),
                np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
         rows = [(aov_keys[name], c, v) for name, c, v in self.aovs if aov_keys and name in aov_keys]
         return out + (np.array(rows, np.int32).reshape(-1, 3),) if rows else out
@@ -117,6 +131,58 @@ class ProgramTooLarge(ValueError):
     pass
 
 
+def columns_of(attributes) -> dict:
+    """{name: first column} for (name, width) pairs laid out one after another."""
+    columns, first = {}, 0
+    for name, width in attributes:
+        if name not in columns:
+            columns[name] = first
+            first += width
+    return columns
+
+
+def attributes_read(programs) -> dict:
+    """{name: width} of the point attributes the programs read (a name read both as a float
+    and as a colour: the wider)."""
+    widths = {}
+    for program in programs:
+        if program is not None:
+            for name, width in program.attributes:
+                widths[name] = max(widths.get(name, 0), width)
+    return widths
+
+
+def attribute_layout(programs) -> tuple:
+    """The point attributes a scene's programs read, as the clouds carry them: (name, width)
+    sorted by name, each once, as many as fit in MAX_POINT_ATTRIBUTES floats (the others read
+    0: attributes_read tells which were left out)."""
+    layout, used = [], 0
+    for name, width in sorted(attributes_read(programs).items()):
+        if used + width <= MAX_POINT_ATTRIBUTES:
+            layout.append((name, width))
+            used += width
+    return tuple(layout)
+
+
+def attribute_columns(layout, values: dict, n: int) -> Optional[np.ndarray]:
+    """The (n, k) float32 array a cloud carries for `layout` (attribute_layout), from its
+    `values` ({name: (n,) or (n, 3) array}); a name it lacks is 0, as a missing attribute
+    is in Cycles (a float read from a vector: its components' average). None for no layout."""
+    if not layout:
+        return None
+    out = np.zeros((n, sum(w for _, w in layout)), np.float32)
+    first = 0
+    for name, width in layout:
+        if name in values:
+            v = np.asarray(values[name], np.float32).reshape(n, -1)
+            if width == 1:
+                out[:, first] = v.mean(axis=1)
+            else:
+                out[:, first:first + 3] = v[:, :3] if v.shape[1] >= 3 else v[:, :1]
+        first += width
+    return out
+
+
 class Builder:
     """Writes a Program: registers (constants or results), instructions, outputs."""
 
@@ -126,6 +192,7 @@ class Builder:
         self.outputs = {name: -1 for name in OUTPUTS}
         self.images: list = []
         self.aovs: list = []
+        self.attributes: list = []
 
     def image(self, image: Image) -> int:
         """The index of an image in this program (added once)."""
@@ -163,6 +230,18 @@ class Builder:
         self.emit("GLOBAL", out, GLOBALS.index(name))
         return out
 
+    def attribute(self, name: str, width: int) -> tuple:
+        """A point attribute (width 1: float, 3: vector or colour) as Cycles' Attribute node
+        gives it: (colour/vector register, fac register)."""
+        if width not in (1, 3):
+            raise ValueError(f"attribute width must be 1 or 3, got {width}")
+        entry = (str(name), width)
+        if entry not in self.attributes:
+            self.attributes.append(entry)
+        colour, fac = self.register(width=3), self.register()
+        self.emit("ATTRIBUTE", colour, fac, self.attributes.index(entry), width)
+        return colour, fac
+
     def output(self, name: str, reg: int) -> None:
         self.outputs[name] = reg
 
@@ -172,13 +251,15 @@ class Builder:
 
     def program(self) -> Program:
         return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images),
-                       tuple(self.aovs))
+                       tuple(self.aovs), tuple(self.attributes))
 
 
-def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, **globals_) -> np.ndarray:
+def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, attributes=None,
+        **globals_) -> np.ndarray:
     """The registers after running `program` at n shading points (n, len(data)): each of
     GLOBAL_FIELDS given as (3,) or (n, 3) (default 0), point_alpha and backfacing as scalars
-    or (n,). For tests and tools: renders run programs inside the core."""
+    or (n,); attributes: {name: (n,) or (n, 3) values} the points carry (a name the program
+    reads and they lack is 0). For tests and tools: renders run programs inside the core."""
     from .. import _core
 
     unknown = set(globals_) - set(GLOBAL_FIELDS)
@@ -192,6 +273,13 @@ def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_s
     g[:, -2] = backfacing
     g[:, -1] = tangent_sign
     out = np.zeros((n, len(program.data)), np.float32)
-    code, data, outputs, images = program.native()
-    _core.run_nodes(code, data, outputs, images, g, out)
+    layout = attribute_layout([program])
+    code, data, outputs, images = program.native(attribute_columns=columns_of(layout))
+    values = {k: np.broadcast_to(np.asarray(v, np.float32), (n,)) if np.ndim(v) == 0 else v
+              for k, v in (attributes or {}).items()}
+    columns = attribute_columns(layout, values, n)
+    if columns is None:
+        _core.run_nodes(code, data, outputs, images, g, out)
+    else:
+        _core.run_nodes(code, data, outputs, images, g, out, columns)
     return out

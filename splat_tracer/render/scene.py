@@ -13,6 +13,7 @@ from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
+from .nodes import attribute_layout, columns_of
 from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
                       Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
@@ -91,11 +92,13 @@ class Mesh:
     """A triangle mesh and its BVH: vertices (V,3), triangles (T,3) vertex indices, optional
     corner_normals (T,3,3) shading normals (smooth, flat and sharp edges as Blender's corner
     normals express them; None: flat), material_index (T,) slots and corner_uv (T,3,2), the
-    UV map node programs and the UV pass read (None: 0). Immutable; share one Mesh between any number of
-    instances."""
+    UV map node programs and the UV pass read (None: 0). corner_attributes (T,3,k): the
+    attributes the scene's node programs read (Attribute node) at each triangle corner, laid out
+    for `attribute_layout` as a SplatCloud's are (splats.SplatCloud), interpolated over the
+    triangle. Immutable; share one Mesh between any number of instances."""
 
     def __init__(self, vertices, triangles, corner_normals=None, material_index=None, threads: int = 0,
-                 corner_uv=None):
+                 corner_uv=None, corner_attributes=None, attribute_layout: tuple = ()):
         v = as_f32(vertices, "vertices", (-1, 3))
         t = np.asarray(triangles)
         if t.size and not np.issubdtype(t.dtype, np.integer):
@@ -107,7 +110,12 @@ class Mesh:
                                                      (len(t), 3, 3))
         m = None if material_index is None else np.ascontiguousarray(material_index, dtype=np.int32)
         uv = None if corner_uv is None else as_f32(np.asarray(corner_uv).reshape(-1, 3, 2), "corner_uv", (len(t), 3, 2))
-        self._mesh = _core.Mesh(v, t, n, m, threads, corner_uv=uv)
+        self.attribute_layout = tuple(attribute_layout) if corner_attributes is not None else ()
+        attr = None
+        if corner_attributes is not None:
+            k = sum(w for _, w in self.attribute_layout)
+            attr = as_f32(np.asarray(corner_attributes).reshape(-1, 3, k), "corner_attributes", (len(t), 3, k))
+        self._mesh = _core.Mesh(v, t, n, m, threads, corner_uv=uv, corner_attributes=attr)
 
     def __len__(self) -> int:
         return self._mesh.size
@@ -218,9 +226,17 @@ class RenderScene:
         self.aov_names = tuple(sorted({name for m in materials if m.program is not None
                                        for name, _, _ in m.program.aovs}))
         keys = {name: i for i, name in enumerate(self.aov_names)}
+        # The point attributes the programs read, in the one layout every cloud carries them in.
+        self.attribute_layout = attribute_layout([m.program for m in materials])
+        for inst in instances:
+            layout = getattr(inst.geometry, "attribute_layout", ())
+            if layout and layout != self.attribute_layout:
+                raise ValueError(f"instance '{inst.name}': its geometry carries the attributes {layout}, "
+                                 f"the materials read {self.attribute_layout}")
+        columns = columns_of(self.attribute_layout)
         self.instance_light_groups = tuple(inst.light_group for inst in instances)
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads, [m.program.native(keys) if m.program is not None else None
+                                   threads, [m.program.native(keys, columns) if m.program is not None else None
                                              for m in materials])
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers

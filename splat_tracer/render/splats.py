@@ -68,16 +68,25 @@ class SplatCloud:
     bad splat (non-finite value, zero normal, radius <= 0, alpha outside 0..1), TypeError for
     unusable arrays.
     threads: default thread count for tracing and rendering (0: all cores).
+    attributes: the point attributes the scene's node programs read (Attribute node), as
+    render/nodes.py attribute_columns lays them out for `attribute_layout` (the scene's
+    nodes.attribute_layout: a Scene refuses a cloud laid out otherwise); blended at a hit as
+    the colours are. Without them an Attribute node reads 0 here, as a missing one does.
     """
 
-    def __init__(self, centres, normals, radii, colours=None, closed=False, threads: int = 0, alphas=None):
+    def __init__(self, centres, normals, radii, colours=None, closed=False, threads: int = 0, alphas=None,
+                 attributes=None, attribute_layout: tuple = ()):
         c = as_f32(centres, "centres", (-1, 3))
         n = as_f32(normals, "normals", (len(c), 3))
         r = as_f32(radii, "radii", (len(c),))
         col = None if colours is None else as_f32(colours, "colours", (len(c), 3))
         a = None if alphas is None else as_f32(alphas, "alphas", (len(c),))
         flags = np.broadcast_to(np.asarray(closed, dtype=np.uint8), (len(c),))
-        self._scene = _core.SplatCloud(c, n, r, col, np.ascontiguousarray(flags), threads, a)
+        self.attribute_layout = tuple(attribute_layout) if attributes is not None else ()
+        attr = None
+        if attributes is not None:
+            attr = as_f32(attributes, "attributes", (len(c), sum(w for _, w in self.attribute_layout)))
+        self._scene = _core.SplatCloud(c, n, r, col, np.ascontiguousarray(flags), threads, a, attr)
 
     def __len__(self) -> int:
         return self._scene.size

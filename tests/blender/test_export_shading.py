@@ -90,7 +90,7 @@ def test_point_colours_through_a_reroute_and_point_alpha(blender, empty_scene, e
     material, principled = new_material(blender, "Scan", "ShaderNodeBsdfPrincipled")
     nodes, links = material.node_tree.nodes, material.node_tree.links
     attribute = nodes.new("ShaderNodeAttribute")
-    attribute.attribute_name = "Col"  # any name: the engine reads the points' own colours
+    attribute.attribute_name = "Col"  # a colour attribute's name: the points' own colours
     reroute = nodes.new("NodeReroute")
     links.new(attribute.outputs["Color"], reroute.inputs[0])
     links.new(reroute.outputs[0], principled.inputs["Base Color"])

@@ -541,24 +541,6 @@ def test_a_bump_mapped_floor_matches_cycles(blender, empty_scene, tmp_path, chai
         assert correlation(inverted, theirs) < 0, "an inverted bump must fail"
 
 
-def test_an_attribute_other_than_the_colour_is_said(blender, empty_scene):
-    """An Attribute node naming a scan's other attribute (intensity) through a Color Ramp:
-    not evaluated (the points' colour would be a false answer), said once."""
-    bpy = blender
-    from splat_tracer.blender.export import shading as export_shading
-    from splat_tracer.render import shading
-
-    m, nodes, links, shader = _material(bpy, "Intensity")
-    attribute, ramp = nodes.new("ShaderNodeAttribute"), nodes.new("ShaderNodeValToRGB")
-    attribute.attribute_name = "intensity"
-    links.new(attribute.outputs["Fac"], ramp.inputs["Fac"])
-    links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
-    report = shading.Report()
-    export_shading.material_of(m, report)
-    assert report.lines == ["material 'Intensity': the 'Attribute (attribute 'intensity')' node is not supported; "
-                            "Factor uses its unlinked value 0.5"]
-
-
 def test_camera_coordinates_match_cycles(blender, empty_scene, tmp_path):
     """Texture Coordinate > Camera (Cycles' camera space: +Z along the view) seen by a
     perspective camera looking down at a floor: depth Z through a Map Range into red, X

@@ -25,8 +25,9 @@ _VECTORS = ("VECTOR", "RGBA")  # socket types held in three registers (colours d
 _SRGB = ("sRGB",)
 _LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
 # Attribute names read as the points' own colour: the importer's, and the usual names of a
-# colour attribute. Another name (a scan's intensity, classification, ...) is not evaluated.
-_COLOUR_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", "Colour", "Cd", "rgb", "RGB", "rgba", "RGBA")
+# colour attribute. Another name (a scan's intensity, classification, ...) is read from the
+# geometry as a point attribute (Compiler._attribute).
+COLOUR_ATTRIBUTE_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", "Colour", "Cd", "rgb", "RGB", "rgba", "RGBA")
 # What Cycles renders for an image it cannot load (its missing-texture colour): magenta.
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 # Images read from Blender, by what identifies their pixels (see _image_pixels).
@@ -266,9 +267,15 @@ class Compiler:
     def _attribute(self, node, stack):
         if node.attribute_type != "GEOMETRY":
             raise Unsupported(node, f"{node.attribute_type.lower()} attributes")
-        if node.attribute_name not in _COLOUR_NAMES:
-            raise Unsupported(node, f"attribute '{node.attribute_name}'")
-        return self._point_data(node, True)
+        if node.attribute_name in COLOUR_ATTRIBUTE_NAMES:
+            return self._point_data(node, True)
+        # Three floats whatever the attribute's type, which the geometry decides (the export
+        # fills a float into all three, scene.py _point_attributes): a float's Color and
+        # Vector are its value in each component and its Fac the value, a vector's or
+        # colour's Fac their average -- Cycles' Attribute node either way. Alpha: 1, as
+        # Cycles gives it for anything but a colour attribute's.
+        colour, fac = self.b.attribute(node.attribute_name, 3)
+        return self._ids(node, {"Color": colour, "Vector": colour, "Fac": fac, "Alpha": self.const(1.0, 1)})
 
     # Math and colour
     def _math(self, node, stack):

@@ -21,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from ...render import shading
+from ...render import nodes, shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
@@ -112,8 +112,8 @@ def _valid_points(name: str, pos, nrm, rad, col, alpha, radius_factor: float, re
 
 
 def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Report):
-    """(positions, normals, radii, colours or None, alphas or None) of a point cloud or of a
-    vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
+    """(positions, normals, radii, colours or None, alphas or None, mask of the points kept) of a
+    point cloud or of a vertex-only mesh carrying the splat attributes, invalid points left out. Alphas only when
     some point is not opaque. None (said in the report) when the splat attributes are missing
     or of another type: the object is left out, the frame renders."""
     rad_name = RADIUS if RADIUS in attrs else "radius"
@@ -143,7 +143,70 @@ def _cloud_arrays(obj, attrs, n: int, radius_factor: float, report: shading.Repo
     if not ok.all():
         keep = (lambda a: None if a is None else a[ok])
         pos, nrm, rad, col, alpha = pos[ok], nrm[ok], rad[ok], keep(col), keep(alpha)
-    return pos, nrm, rad, col, alpha
+    return pos, nrm, rad, col, alpha, ok
+
+
+# How a point attribute's values are read (foreach_get key, floats per point): the numeric
+# types a Blender attribute can have; a 2-D vector is padded with 0, a colour drops its alpha.
+_ATTRIBUTE_READS = {"FLOAT": ("value", 1), "INT": ("value", 1), "INT8": ("value", 1), "BOOLEAN": ("value", 1),
+                    "FLOAT_VECTOR": ("vector", 3), "FLOAT2": ("vector", 2), "INT32_2D": ("value", 2),
+                    "FLOAT_COLOR": ("color", 4), "BYTE_COLOR": ("color", 4)}
+
+
+def _point_attributes(obj, attrs, n, layout: tuple, report: shading.Report, domains=("POINT",)) -> dict:
+    """{name: (n, 3) float32} of the attributes `layout` names that the geometry has on one of
+    `domains` (n: that domain's size; with several, n is {domain: size} and the keys are
+    (domain, name)), a float filling all three components (nodes.py Compiler._attribute reads
+    three). A name it lacks is left out (read as 0, as Cycles reads a missing attribute); one
+    on another domain or of a type without numbers is said and left out too."""
+    values = {}
+    kind = "point cloud" if domains == ("POINT",) else "mesh"
+    for name, _ in layout:
+        a = attrs.get(name)
+        if a is None:
+            continue
+        read = _ATTRIBUTE_READS.get(a.data_type)
+        if read is None or a.domain not in domains:
+            report.once(f"{kind} '{obj.name}': attribute '{name}' is {a.data_type} on {a.domain}, not a "
+                        f"number on its {' or '.join(d.lower() for d in domains)}s; its Attribute nodes read 0")
+            continue
+        if isinstance(n, dict):
+            values[a.domain, name] = _attribute_values(a, read, n[a.domain])
+        else:
+            values[name] = _attribute_values(a, read, n)
+    return values
+
+
+def _attribute_values(a, read, n: int) -> np.ndarray:
+    """An attribute's values as (n, 3) float32 (a float in every component, NaN as 0)."""
+    key, width = read
+    buf = np.empty(n * width, np.int32 if a.data_type == "INT32_2D" else np.float32)
+    a.data.foreach_get(key, buf)
+    v = buf.astype(np.float32).reshape(n, width)
+    out = np.zeros((n, 3), np.float32)
+    if width == 1:
+        out[:] = v
+    else:
+        out[:, :min(width, 3)] = v[:, :3]
+    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
+    """(T, 3, k) float32: the attributes `layout` names at each loop triangle's corners, from
+    the vertex, face or face-corner domain (Blender's; an edge's is said and reads 0), laid
+    out as nodes.attribute_columns does; None for no layout."""
+    if not layout:
+        return None
+    nt = len(mesh.loop_triangles)
+    tris, loops, faces = (np.empty(nt * 3, np.int32), np.empty(nt * 3, np.int32), np.empty(nt, np.int32))
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    mesh.loop_triangles.foreach_get("polygon_index", faces)
+    sizes = {"POINT": len(mesh.vertices), "CORNER": len(mesh.loops), "FACE": len(mesh.polygons)}
+    read = _point_attributes(obj, mesh.attributes, sizes, layout, report, domains=tuple(sizes))
+    index = {"POINT": tris, "CORNER": loops, "FACE": np.repeat(faces, 3)}
+    values = {name: v[index[domain]] for (domain, name), v in read.items()}
+    return nodes.attribute_columns(layout, values, nt * 3).reshape(nt, 3, sum(w for _, w in layout))
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
@@ -210,6 +273,7 @@ class _Frame:
         self.materials = {}
         self.splats = self.triangles = 0
         self.want_uv = False   # the UV pass is on (meshes always carry their UV map: node programs read it)
+        self.attribute_layout = ()  # the point attributes the materials read (nodes.attribute_layout)
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -217,15 +281,19 @@ class _Frame:
         arrays = _cloud_arrays(obj, attrs, n, self.radius_factor, self.report)
         if arrays is None:
             return None
-        pos, nrm, rad, col, alpha = arrays
+        pos, nrm, rad, col, alpha, ok = arrays
         if len(pos) == 0:
             self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
-        key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor))
+        layout = self.attribute_layout
+        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()}
+        columns = nodes.attribute_columns(layout, values, len(pos))
+        key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor, layout, columns))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",
                                 len(pos) * resources.BYTES_PER_SPLAT,
                                 lambda: SplatCloud(pos, nrm, rad * self.radius_factor, col, closed=closed,
-                                                   threads=self.threads, alphas=alpha))
+                                                   threads=self.threads, alphas=alpha, attributes=columns,
+                                                   attribute_layout=layout))
         self.splats += self._first_use(key, geometry)
         if closed:
             self.closed.add(id(geometry))
@@ -260,27 +328,31 @@ class _Frame:
             return None
         try:
             verts, tris, normals, mats, uv = _mesh_arrays(mesh)
+            attrs = _corner_attributes(obj, mesh, self.attribute_layout, self.report)
         finally:
             if temporary:
                 obj.to_mesh_clear()
-        verts, tris, normals, mats, uv = self._usable_triangles(obj.name, verts, tris, normals, mats, uv)
+        verts, tris, normals, mats, uv, attrs = self._usable_triangles(obj.name, verts, tris, normals, mats, uv, attrs)
         if len(tris) == 0:
             return None
-        key = ("mesh", _digest(verts, tris, normals, mats, *(() if uv is None else (uv,))))
+        layout = self.attribute_layout if attrs is not None else ()
+        key = ("mesh", _digest(verts, tris, normals, mats, *(() if uv is None else (uv,)),
+                               *(() if attrs is None else (layout, attrs))))
         geometry = self._cached(key, f"mesh '{obj.name}' ({len(tris):,} triangles)",
                                 len(tris) * resources.BYTES_PER_TRIANGLE,
-                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads, corner_uv=uv))
+                                lambda: Mesh(verts, tris, normals, mats, threads=self.threads, corner_uv=uv,
+                                             corner_attributes=attrs, attribute_layout=layout))
         self.triangles += self._first_use(key, geometry)
         return geometry
 
-    def _usable_triangles(self, name: str, verts, tris, normals, mats, uv=None):
+    def _usable_triangles(self, name: str, verts, tris, normals, mats, uv=None, attrs=None):
         """The mesh without the triangles that touch a vertex the core cannot hold (not
         finite, or beyond its limit: a NaN from a driver or a modifier), which are counted
         in the report; the rest of the mesh renders. Those vertices are set to 0, as the
         core checks every vertex, used or not."""
         bad = ~rows_within(verts, MAX_COORDINATE)
         if not bad.any():
-            return verts, tris, normals, mats, uv
+            return verts, tris, normals, mats, uv, attrs
         touching = bad[tris].any(axis=1)
         self.report.once(f"mesh '{name}': {int(bad.sum())} vertices are not finite or beyond the renderer's limit "
                          f"({MAX_COORDINATE:.0e}) (first: vertex {int(np.flatnonzero(bad)[0])}); the "
@@ -288,7 +360,8 @@ class _Frame:
         keep = ~touching
         verts = verts.copy()
         verts[bad] = 0.0
-        return verts, tris[keep], normals[keep], mats[keep], None if uv is None else uv[keep]
+        return (verts, tris[keep], normals[keep], mats[keep], None if uv is None else uv[keep],
+                None if attrs is None else attrs[keep])
 
     def geometry(self, obj):
         """(geometry or None, 'cloud' | 'mesh'), memoised by the evaluated datablock."""
@@ -335,6 +408,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights, keys = [], [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
+    frame.attribute_layout = _attribute_layout(depsgraph, frame, report, aovs)
     for inst in depsgraph.object_instances:
         obj = inst.object
         matrix = np.array(inst.matrix_world, dtype=np.float64)
@@ -397,6 +471,28 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report, keys)
+
+
+def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: dict) -> tuple:
+    """The attributes the materials of the scene's clouds and meshes read
+    (nodes.attribute_layout), which every cloud and mesh then carries: only those (none
+    without an Attribute node). The materials are compiled here once (frame.materials keeps
+    them for the instances)."""
+    programs, seen = [], set()
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        # Instances of one geometry share its slots (an object's own geometry and the point
+        # cloud its Geometry Nodes make are two, with slots of their own).
+        key = (obj.name, obj.type, obj.data.as_pointer() if obj.data is not None else 0)
+        if (obj.type == "POINTCLOUD" or obj.type in _MESH_LIKE) and key not in seen:
+            seen.add(key)
+            programs += [m.program for m in _materials(_slot_materials(obj), frame.materials, report, aovs)]
+    layout = nodes.attribute_layout(programs)
+    left_out = sorted(set(nodes.attributes_read(programs)) - {name for name, _ in layout})
+    if left_out:
+        report.once(f"the materials read more point attributes than the renderer carries ({len(layout)} of them, "
+                    f"by name); attribute {', '.join(repr(n) for n in left_out)} reads 0")
+    return layout
 
 
 def asset_name(obj) -> str:

@@ -121,7 +121,10 @@ def _is_point_data(source, output: str) -> bool:
     node, socket = source
     if node.type not in _POINT_DATA_NODES or socket.name != output:
         return False
-    return node.type == "VERTEX_COLOR" or node.attribute_type == "GEOMETRY"
+    # An Attribute naming another attribute (a scan's intensity) is that attribute, read by a
+    # node program, not the points' colour.
+    return node.type == "VERTEX_COLOR" or (node.attribute_type == "GEOMETRY" and
+                                           node.attribute_name in nodes.COLOUR_ATTRIBUTE_NAMES)
 
 
 class _Sockets:

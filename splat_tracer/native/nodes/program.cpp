@@ -64,6 +64,8 @@ const Layout &layout(Op op) {
         /* Brick */ {{kR3, kR1, kR3, kRW, kRW, kEnum, kEnum}, {0, 0, 0, 9, 8, 100, 100}},
         /* Blackbody */ {{kR3, kR1}, {}},
         /* Bump (first row checked apart) */ {{kR3, kR1, kR1, kR1, kR3, kNone, kEnum}, {0, 0, 0, 0, 0, 0, 2}},
+        /* Attribute (width checked apart; column kMaxPointAttributes: never carried, reads 0) */
+        {{kR3, kR1, kEnum, kEnum}, {0, 0, kMaxPointAttributes + 1, 4}},
     };
     return table[int(op)];
 }
@@ -740,6 +742,7 @@ void NodeProgram::validate() {
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
         if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::Attribute && (c[4] != 1 && c[4] != 3)) fail("attribute width must be 1 or 3");
         if (op == Op::Bump) {
             // The height's rows come before the Bump's, and any Bump among them keeps its own
             // rows inside them: ranges nest, at most kMaxBumpDepth deep (each level costs 3x).
@@ -1040,6 +1043,21 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::Blackbody: store3(r, c[1], blackbody_rec709(r[c[2]])); break;
+            case Op::Attribute: {
+                // Cycles' Attribute node: a float attribute is its Color and Vector in every
+                // component and its Fac; a vector's or colour's Fac is its components' average.
+                // A column the point does not carry reads 0, as a missing attribute does there.
+                Vec3 v;
+                float fac = 0.f;
+                if (c[3] + c[4] <= sg.attribute_count) {
+                    const float *a = sg.attributes + c[3];
+                    v = c[4] == 1 ? Vec3(a[0], a[0], a[0]) : Vec3(a[0], a[1], a[2]);
+                    fac = c[4] == 1 ? a[0] : (a[0] + a[1] + a[2]) * (1.f / 3.f);
+                }
+                store3(r, c[1], v);
+                r[c[2]] = fac;
+                break;
+            }
             case Op::Bump: {
                 // Blender's Bump node: the height here and at two nearby points of the surface
                 // give its gradient along the surface (Mikkelsen, "Bump Mapping Unparameterized

@@ -20,6 +20,7 @@
 
 #include "base/vec3.h"
 #include "nodes/image.h"
+#include "splats/layer.h"
 
 namespace splat {
 
@@ -37,6 +38,10 @@ struct ShaderGlobals {
     Vec3 generated;  // object-space position in the geometry's bounds, 0..1
     Vec3 uv;         // the mesh's UV map (u, v, 0); 0 on clouds
     Vec3 point_colour;   // the points' own colour (0 where there is none)
+    // The points' other attributes (SplatScene::set_attributes), blended at this point; an
+    // Attribute instruction reading past attribute_count gets 0, as Cycles gives a missing one.
+    const float *attributes = nullptr;
+    int attribute_count = 0;
     float point_alpha = 1.f;
     float backfacing = 0.f;  // 1 when the ray met the back of the surface
     Vec3 tangent;            // the UV map's tangent (unit, perpendicular to the surface's normal); 0 without
@@ -117,6 +122,8 @@ enum class Op : int32_t {
     Bump,           // out, height, strength, distance, normal, first row of the height's instructions, invert
                     // (the rows from `first` up to this one compute the height: run again at the two
                     // offset points of ShaderGlobals::bump)
+    Attribute,      // out_colour, out_fac, first (column of ShaderGlobals::attributes), width (1: float, 3: vector
+                    // or colour): Cycles' Attribute node (a float fills the colour; Fac averages a vector)
     Count
 };
 

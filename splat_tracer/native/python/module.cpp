@@ -78,14 +78,14 @@ struct SplatCloudObject {
 };
 
 PyObject *SplatCloud_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
-    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", "alphas", nullptr};
-    PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None, *oalpha = Py_None;
+    static const char *kwlist[] = {"centres", "normals", "radii", "colours", "closed", "threads", "alphas", "attributes", nullptr};
+    PyObject *oc, *on, *orad, *ocol = Py_None, *oclosed = Py_None, *oalpha = Py_None, *oattr = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOiO", const_cast<char **>(kwlist), &oc, &on, &orad,
-                                     &ocol, &oclosed, &threads, &oalpha))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOO|OOiOO", const_cast<char **>(kwlist), &oc, &on, &orad,
+                                     &ocol, &oclosed, &threads, &oalpha, &oattr))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
-    View c, n, r, col, closed, alpha;
+    View c, n, r, col, closed, alpha, attr;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(oc, "centres", 'f', 2, s3, false, c)) return nullptr;
     const Py_ssize_t count = c.dim(0);
@@ -95,6 +95,9 @@ PyObject *SplatCloud_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (ocol != Py_None && !get_array(ocol, "colours", 'f', 2, sn, false, col)) return nullptr;
     if (oclosed != Py_None && !get_array(oclosed, "closed", 'B', 1, s1, false, closed)) return nullptr;
     if (oalpha != Py_None && !get_array(oalpha, "alphas", 'f', 1, s1, false, alpha)) return nullptr;
+    // The point attributes the node programs read (SplatScene::set_attributes): n x k.
+    Py_ssize_t sa[2] = {count, -1};
+    if (oattr != Py_None && !get_array(oattr, "attributes", 'f', 2, sa, false, attr)) return nullptr;
 
     SplatScene *scene = nullptr;
     if (!without_gil([&] {
@@ -102,8 +105,11 @@ PyObject *SplatCloud_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
                                    col.held ? col.data<float>() : nullptr,
                                    closed.held ? closed.data<uint8_t>() : nullptr, size_t(count), threads,
                                    alpha.held ? alpha.data<float>() : nullptr);
-        }))
+            if (attr.held && attr.dim(1) > 0) scene->set_attributes(attr.data<float>(), int(attr.dim(1)));
+        })) {
+        delete scene;  // null, or built before its attributes were refused
         return nullptr;
+    }
     auto alloc = reinterpret_cast<allocfunc>(PyType_GetSlot(type, Py_tp_alloc));
     PyObject *self = alloc(type, 0);
     if (!self) {
@@ -391,7 +397,7 @@ PyType_Slot SplatCloud_slots[] = {
     {Py_tp_dealloc, reinterpret_cast<void *>(SplatCloud_dealloc)},
     {Py_tp_methods, SplatCloud_methods},
     {Py_tp_getset, SplatCloud_getset},
-    {Py_tp_doc, const_cast<char *>("SplatCloud(centres, normals, radii, colours=None, threads=0): splats and their BVH.")},
+    {Py_tp_doc, const_cast<char *>("SplatCloud(centres, normals, radii, colours=None, closed=None, threads=0, alphas=None, attributes=None): splats and their BVH.")},
     {0, nullptr},
 };
 

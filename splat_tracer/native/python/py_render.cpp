@@ -27,14 +27,14 @@ struct MeshObject {
 
 PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"vertices", "triangles", "corner_normals", "material_index", "threads", "corner_uv",
-                                   nullptr};
-    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None;
+                                   "corner_attributes", nullptr};
+    PyObject *ov, *ot, *on = Py_None, *om = Py_None, *ouv = Py_None, *oattr = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
-                                     &threads, &ouv))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OOiOO", const_cast<char **>(kwlist), &ov, &ot, &on, &om,
+                                     &threads, &ouv, &oattr))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
-    View v, t, n, m, uv;
+    View v, t, n, m, uv, attr;
     Py_ssize_t s3[2] = {-1, 3};
     if (!get_array(ov, "vertices", 'f', 2, s3, false, v)) return nullptr;
     if (!get_array(ot, "triangles", 'i', 2, s3, false, t)) return nullptr;
@@ -44,11 +44,15 @@ PyObject *Mesh_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     if (om != Py_None && !get_array(om, "material_index", 'i', 1, s1, false, m)) return nullptr;
     Py_ssize_t suv[3] = {nt, 3, 2};
     if (ouv != Py_None && !get_array(ouv, "corner_uv", 'f', 3, suv, false, uv)) return nullptr;
+    // The attributes the node programs read, per corner (TriangleMesh::set_attributes).
+    Py_ssize_t sattr[3] = {nt, 3, -1};
+    if (oattr != Py_None && !get_array(oattr, "corner_attributes", 'f', 3, sattr, false, attr)) return nullptr;
     TriangleMesh *mesh = nullptr;
     if (!without_gil([&] {
             mesh = new TriangleMesh(v.data<float>(), size_t(v.dim(0)), t.data<int32_t>(), size_t(nt),
                                     n.held ? n.data<float>() : nullptr, m.held ? m.data<int32_t>() : nullptr,
                                     threads, uv.held ? uv.data<float>() : nullptr);
+            if (attr.held && attr.dim(2) > 0) mesh->set_attributes(attr.data<float>(), int(attr.dim(2)));
         })) {
         delete mesh;  // null: the constructor refused an input
         return nullptr;
@@ -90,7 +94,8 @@ PyType_Slot Mesh_slots[] = {
     {Py_tp_new, reinterpret_cast<void *>(Mesh_new)},
     {Py_tp_dealloc, reinterpret_cast<void *>(Mesh_dealloc)},
     {Py_tp_getset, Mesh_getset},
-    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None)")},
+    {Py_tp_doc, const_cast<char *>("Mesh(vertices, triangles, corner_normals=None, material_index=None, threads=0, corner_uv=None, "
+                                   "corner_attributes=None)")},
     {0, nullptr},
 };
 
@@ -210,10 +215,12 @@ bool parse_program(PyObject *obj, const std::string &name, NodeProgram &prog, Im
 
 // _core.run_nodes(code, data, outputs, images, globals, out): runs a node program at each row
 // of `globals` (n, kGlobalFloats: render/nodes.py GLOBAL_FIELDS) into `out` (n, len(data)),
-// the registers after the run. For the evaluator's tests.
+// the registers after the run; `attributes` (optional, (n, k) floats): the point attributes
+// there (ShaderGlobals::attributes). For the evaluator's tests.
 PyObject *run_nodes(PyObject *, PyObject *args) {
-    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs;
-    if (!PyArg_ParseTuple(args, "OOOOOO", &ocode, &odata, &oout, &oimages, &oglobals, &oregs)) return nullptr;
+    PyObject *ocode, *odata, *oout, *oimages, *oglobals, *oregs, *oattr = Py_None;
+    if (!PyArg_ParseTuple(args, "OOOOOO|O", &ocode, &odata, &oout, &oimages, &oglobals, &oregs, &oattr))
+        return nullptr;
     PyObject *triple = PyTuple_Pack(4, ocode, odata, oout, oimages);
     if (!triple) return nullptr;
     NodeProgram prog;
@@ -230,6 +237,11 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
         !get_array(odata, "data", 'f', 1, sd, false, data) || !get_array(oout, "outputs", 'i', 1, so, false, outs) ||
         !check_separate({{regs, "out"}}, {{g, "globals"}, {code, "code"}, {data, "data"}, {outs, "outputs"}}))
         return nullptr;
+    View attr;
+    Py_ssize_t sa[2] = {g.dim(0), -1};
+    if (oattr != Py_None && !get_array(oattr, "attributes", 'f', 2, sa, false, attr)) return nullptr;
+    if (attr.held && attr.dim(1) > kMaxPointAttributes)
+        return PyErr_Format(PyExc_ValueError, "attributes: at most %d per point", kMaxPointAttributes), nullptr;
     float r[kMaxNodeRegisters];
     for (Py_ssize_t i = 0; i < g.dim(0); ++i) {
         const float *x = g.data<float>() + kGlobalFloats * i;
@@ -244,6 +256,7 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
             s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d};
         }
         s.point_alpha = x[39], s.backfacing = x[40], s.tangent_sign = x[41];
+        if (attr.held) s.attributes = attr.data<float>() + i * attr.dim(1), s.attribute_count = int(attr.dim(1));
         prog.run(s, r);
         std::copy(r, r + prog.data.size(), regs.data<float>() + i * Py_ssize_t(prog.data.size()));
     }
@@ -926,7 +939,7 @@ int add_render_types(PyObject *module) {
     }
     static PyMethodDef run_nodes_def = {
         "run_nodes", run_nodes, METH_VARARGS,
-        "run_nodes(code, data, outputs, images, globals, out): a node program run at each row of globals; out receives "
+        "run_nodes(code, data, outputs, images, globals, out[, attributes]): a node program run at each row of globals; out receives "
         "the registers (render/nodes.py)."};
     PyObject *fn = PyCFunction_NewEx(&run_nodes_def, nullptr, nullptr);
     if (!fn || PyModule_AddObject(module, "run_nodes", fn) < 0) {

@@ -138,6 +138,18 @@ Vec3 TriangleMesh::point_error(const MeshHit &h) const {
     return a * kGamma7;
 }
 
+void TriangleMesh::set_attributes(const float *corner_values, int count) {
+    if (count < 0 || count > kMaxPointAttributes)
+        throw InputError("mesh attributes: " + std::to_string(count) + " per corner (0.." +
+                         std::to_string(kMaxPointAttributes) + ")");
+    const size_t n = 3 * v0_.size() * size_t(count);  // v0_: every input triangle, degenerate ones too
+    for (size_t i = 0; i < n; ++i)
+        if (!std::isfinite(corner_values[i]))
+            throw InputError("triangle " + std::to_string(i / (3 * size_t(count))) + ": attribute is not finite");
+    attributes_.assign(corner_values, corner_values + n);
+    attribute_count_ = count;
+}
+
 bool TriangleMesh::uv_tangent(int32_t tri, Vec3 *tangent, float *sign) const {
     if (uv_.empty()) return false;
     const float *t = &uv_[6 * size_t(tri)];

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "bvh/bvh.h"
+#include "splats/layer.h"  // kMaxPointAttributes
 
 namespace splat {
 
@@ -54,6 +55,17 @@ class TriangleMesh {
         const float *t = &uv_[6 * size_t(tri)], b0 = 1.f - b1 - b2;
         return {b0 * t[0] + b1 * t[2] + b2 * t[4], b0 * t[1] + b1 * t[3] + b2 * t[5], 0.f};
     }
+    // The attributes a scene's node programs read (Attribute node), per triangle corner:
+    // nt x 3 x count floats (count <= kMaxPointAttributes), each finite (a vertex's, a face's
+    // or a corner's value, as the export spreads them over the corners). Throws InputError.
+    void set_attributes(const float *corner_values, int count);
+    int attribute_count() const { return attribute_count_; }
+    // Interpolated at barycentric (b1, b2) of a triangle into out[attribute_count()].
+    void attributes(int32_t tri, float b1, float b2, float *out) const {
+        const size_t k = size_t(attribute_count_);
+        const float *a = attributes_.data() + 3 * k * size_t(tri), b0 = 1.f - b1 - b2;
+        for (size_t i = 0; i < k; ++i) out[i] = b0 * a[i] + b1 * a[k + i] + b2 * a[2 * k + i];
+    }
     // Bound on the rounding error of point(h), per axis: a secondary ray starting there is
     // moved this far off the surface (pbrt-v4's error bounds for barycentric interpolation).
     Vec3 point_error(const MeshHit &h) const;
@@ -68,6 +80,8 @@ class TriangleMesh {
     std::vector<Vec3> normals_;       // 3 per triangle, or empty
     std::vector<int32_t> material_;
     std::vector<float> uv_;           // 6 per triangle, or empty
+    std::vector<float> attributes_;   // 3 x attribute_count_ per triangle
+    int attribute_count_ = 0;
     AABB bounds_;
     BVH bvh_;
 };

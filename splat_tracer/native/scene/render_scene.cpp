@@ -148,6 +148,12 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
+    sg.attributes = sp.attributes, sg.attribute_count = sp.n_attributes;
+    float mesh_attributes[kMaxPointAttributes];
+    if (inst.mesh && inst.mesh->attribute_count() > 0) {  // interpolated over the triangle, as Cycles does
+        inst.mesh->attributes(sp.prim, sp.b1, sp.b2, mesh_attributes);
+        sg.attributes = mesh_attributes, sg.attribute_count = inst.mesh->attribute_count();
+    }
     if (prog.uses_bump) {
         // The Bump node's two nearby points: along two perpendicular directions in the plane of
         // the surface, a fixed fraction of the object's size away. Cycles offsets by a tenth of
@@ -299,7 +305,7 @@ void RenderScene::take_mesh_hit(int index, const Instance &inst, Placement at, c
                                 SurfacePoint &best) const {
     if (!h.valid() || !nearer(h.t / s, index, best)) return;
     best.t = h.t / s, best.instance = index, best.prim = h.tri, best.front = h.front, best.b1 = h.b1, best.b2 = h.b2;
-    best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f;
+    best.n_members = 0, best.has_point_colour = false, best.point_alpha = 1.f, best.n_attributes = 0;
     const Vec3 ng = normalize(at.to_object->transposed_vector(inst.mesh->geometric_normal(h.tri)));
     const Vec3 ns = normalize(at.to_object->transposed_vector(inst.mesh->shading_normal(h)));
     best.ng = ng, best.ns = ns;
@@ -339,6 +345,8 @@ void RenderScene::take_splat_hit(int index, const Instance &inst, Placement at, 
     best.radius = inst.splats->radius(h.id) / s;
     best.point_colour = h.colour, best.has_point_colour = inst.splats->has_colours();
     best.point_alpha = h.alpha;
+    best.n_attributes = inst.splats->attribute_count();
+    std::copy_n(h.attributes, best.n_attributes, best.attributes);
     best.material = inst.material_offset;
     best.n_members = h.n_members;
     for (int m = 0; m < h.n_members; ++m) best.members[m] = h.members[m];

@@ -128,6 +128,8 @@ struct SurfacePoint {
     Vec3 point_colour;
     float point_alpha = 1.f;  // the points' own opacity (1 on meshes and clouds without alpha)
     bool has_point_colour = false;
+    int n_attributes = 0;  // the cloud's point attributes, blended (SurfaceHit::attributes); none on meshes
+    float attributes[kMaxPointAttributes];
     int material = 0;    // index in the material table
     // Meshes: barycentric coordinates of the triangle's vertices 1 and 2 (where node programs
     // and the UV pass read the UV map).

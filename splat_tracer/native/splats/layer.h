@@ -28,6 +28,12 @@ namespace splat {
 // is full the farthest hit is dropped and `overflow` is set, so a layer is then made of
 // its nearest kMaxLayerHits discs. Rays cost this much stack each: 32 x 24 bytes.
 constexpr int kMaxLayerHits = 32;
+// The most per-point attributes (floats: a colour attribute takes three) a cloud carries for
+// the node programs' Attribute nodes, blended at a hit as the colour is; a fixed bound keeps
+// a hit's blend on the stack. Twelve: four attributes as the Blender export carries them
+// (three floats each, whatever their type: render/nodes.py attribute_layout), e.g. a scan's
+// intensity, classification, return number and a second colour.
+constexpr int kMaxPointAttributes = 12;
 
 struct LayerHit {
     float t;

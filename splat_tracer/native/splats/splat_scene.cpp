@@ -95,9 +95,21 @@ SplatScene::SplatScene(const float *centres, const float *normals, const float *
     splats_.adopt(prims);
 }
 
+void SplatScene::set_attributes(const float *values, int count) {
+    if (count < 0 || count > kMaxPointAttributes)
+        throw InputError("point attributes: " + std::to_string(count) + " per splat (0.." +
+                         std::to_string(kMaxPointAttributes) + ")");
+    const size_t n = size() * size_t(count);
+    for (size_t i = 0; i < n; ++i)
+        if (!std::isfinite(values[i])) bad_splat(i / size_t(count), "attribute is not finite");
+    attributes_.assign(values, values + n);
+    attribute_count_ = count;
+}
+
 size_t SplatScene::memory_bytes() const {
     return splats_.bytes() + slot_.bytes() +
            colours_.capacity() * sizeof(Vec3) + closed_.capacity() + alphas_.capacity() * sizeof(float) +
+           attributes_.capacity() * sizeof(float) +
            bvh_.memory_bytes();
 }
 

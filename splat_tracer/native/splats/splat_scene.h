@@ -58,6 +58,12 @@ class SplatScene {
     Vec3 colour(int32_t id) const { return has_colours_ ? colours_[id] : Vec3(1.f, 1.f, 1.f); }
     float alpha(int32_t id) const { return alphas_.empty() ? 1.f : alphas_[id]; }
     bool has_alphas() const { return !alphas_.empty(); }
+    // The points' other attributes a scene's node programs read (Attribute node): `count`
+    // floats per splat (n x count row-major, input order, count <= kMaxPointAttributes), each
+    // finite; blended at a hit as the colour is. Throws InputError naming the first bad splat.
+    void set_attributes(const float *values, int count);
+    int attribute_count() const { return attribute_count_; }
+    const float *attributes(int32_t id) const { return attributes_.data() + size_t(id) * size_t(attribute_count_); }
 
     // Bytes kept after the build: the splats, their attributes and the BVH.
     size_t memory_bytes() const;
@@ -94,6 +100,8 @@ class SplatScene {
     std::vector<Vec3> colours_;        // input order; empty without per-point colours
     std::vector<uint8_t> closed_;
     std::vector<float> alphas_;
+    std::vector<float> attributes_;  // input order, attribute_count_ per splat
+    int attribute_count_ = 0;
     bool any_closed_ = false, has_colours_ = false;
     float max_radius_ = 0.f;  // bounds any layer's window (LayerQuery::max_radius)
     AABB bounds_;

@@ -25,6 +25,7 @@ SurfaceHit single_splat(const SplatScene &scene, const Hit &h) {
     s.t = h.t, s.id = h.id, s.front = h.front;
     s.normal = scene.normal(h.id), s.colour = scene.colour(h.id), s.alpha = scene.alpha(h.id);
     s.n_members = 1, s.members[0] = h.id;
+    std::copy_n(scene.attributes(h.id), scene.attribute_count(), s.attributes);
     return s;
 }
 
@@ -57,11 +58,13 @@ void resolve_layer(const SplatScene &scene, const LayerQuery &q, const Method &m
     const LayerHit &h = q.hits[chosen];
     s.t = h.t, s.id = h.id, s.front = h.front, s.overflow = q.overflow;
     s.normal = scene.splat(h.slot).n, s.colour = scene.colour(h.id), s.alpha = scene.alpha(h.id);
+    const int n_attributes = scene.attribute_count();
+    std::copy_n(scene.attributes(h.id), n_attributes, s.attributes);
     s.n_members = n;
     for (int k = 0; k < n; ++k) s.members[k] = q.hits[idx[k]].id;
     if (m.normal_interpolation && n > 1) {
         Vec3 nsum, csum;
-        float wsum = 0.f, asum = 0.f;
+        float wsum = 0.f, asum = 0.f, attr_sum[kMaxPointAttributes] = {};
         // At a crease the layer holds discs of both faces: blending them all rounds the edge
         // over about a radius. With a crease angle, only the surface splat's side blends.
         const Vec3 own = scene.splat(h.slot).n;
@@ -73,6 +76,8 @@ void resolve_layer(const SplatScene &scene, const LayerQuery &q, const Method &m
             nsum = nsum + mn * w;
             csum = csum + scene.colour(mh.id) * w;
             asum += scene.alpha(mh.id) * w;
+            const float *attr = scene.attributes(mh.id);
+            for (int a = 0; a < n_attributes; ++a) attr_sum[a] += attr[a] * w;
             wsum += w;
         }
         // All members hit exactly on their rims (weight 0): keep the chosen splat's own.
@@ -80,6 +85,7 @@ void resolve_layer(const SplatScene &scene, const LayerQuery &q, const Method &m
             s.normal = normalize(nsum);
             s.colour = csum * (1.f / wsum);
             s.alpha = asum / wsum;
+            for (int a = 0; a < n_attributes; ++a) s.attributes[a] = attr_sum[a] / wsum;
         }
     }
 }

@@ -47,6 +47,7 @@ struct SurfaceHit {
     bool front = false;
     Vec3 normal, colour;
     float alpha = 1.f;  // the points' own opacity, blended like the colour
+    float attributes[kMaxPointAttributes];  // SplatScene::attributes blended like the colour (its count of them)
     int n_members = 0;  // the splats that contributed (secondary rays exclude them)
     int32_t members[kMaxLayerHits];
     bool overflow = false;
