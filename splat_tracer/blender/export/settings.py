@@ -53,7 +53,8 @@ def _report_cycles_scene(scene, cycles, report: shading.Report) -> None:
                     "film's alpha")
     if cycles.use_fast_gi:
         report.once("Cycles' Fast GI Approximation is not used: indirect light is traced to the bounce limits")
-    if cycles.use_sample_subset:
+    # Sample Subset came in Blender 4.4: older releases have no such setting.
+    if getattr(cycles, "use_sample_subset", False):
         report.once(f"Cycles' Sample Subset is not used: all {cycles.samples} samples are taken")
     # Blender 5.2's texture cache scales the images Cycles reads (1: full resolution).
     scale = getattr(cycles, "texture_resolution_render", 1.0)
