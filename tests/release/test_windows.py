@@ -57,7 +57,10 @@ ROOT = Path(__file__).resolve().parents[2]
 CORE_CHECK = ROOT / "tests" / "release" / "core_check.py"
 INSTALLER = ROOT / "tests" / "release" / "install_and_render.py"
 # Answers that average samples (see the docstring), and how far Windows may be from Linux.
-SAMPLED = {"scene_Combined", "scene_DiffCol", "render_lit.exr:ViewLayer.Combined"}
+# Noisy Image is the lit render's Combined before the denoiser (Cycles' Denoise is on by
+# default): the same average.
+SAMPLED = {"scene_Combined", "scene_DiffCol", "render_lit.exr:ViewLayer.Combined",
+           "render_lit.exr:ViewLayer.Noisy Image"}
 SAMPLED_SHARE, SAMPLED_TOLERANCE = 0.01, 1e-5
 # What core_check.py answers without numpy (its first half).
 CORE_ANSWERS = {"trace_t", "trace_id", "trace_front", "trace_normal", "headlight_rgba", "headlight_depth",
