@@ -15,6 +15,7 @@ import numpy as np
 
 from ...render import nodes
 from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised through compile_shader)
+from .sockets import live_link as _live_link
 
 # Cycles bakes Color Ramps and RGB Curves into tables of this many rows (its RAMP_TABLE_SIZE),
 # read linearly between rows: baking the same table reads the ramp exactly as Cycles does.
@@ -40,10 +41,6 @@ class Unsupported(Exception):
     def __init__(self, node, what: str = ""):
         super().__init__(what)
         self.node, self.what = node, what
-
-
-def _live_link(socket):
-    return next((link for link in socket.links if link.is_valid and not link.is_muted), None)
 
 
 class Compiler:

@@ -40,6 +40,7 @@ import numpy as np
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
 from . import nodes
+from .sockets import fmt as _fmt, live_link as _link_into
 from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
@@ -63,13 +64,6 @@ _POINT_DATA_NODES = ("VERTEX_COLOR", "ATTRIBUTE")
 # --------------------------------------------------------------------------------------
 # Node-tree helpers.
 
-def _fmt(value) -> str:
-    """A socket value as the report shows it: 3 significant digits, RGB only."""
-    if isinstance(value, (int, float)):
-        return f"{value:.3g}"
-    return "(" + ", ".join(f"{v:.3g}" for v in tuple(value)[:3]) + ")"
-
-
 def _node_tree(idblock):
     """The node tree Blender renders `idblock` (a material or world) with, or None when it
     uses its viewport settings instead (no tree; `use_nodes` off before Blender 5.0)."""
@@ -91,11 +85,6 @@ def _output_node(tree, node_type: str):
         if best is None or rank > best_rank:
             best, best_rank = node, rank
     return best
-
-
-def _link_into(socket):
-    """The link feeding an input socket, ignoring muted and invalid links."""
-    return next((link for link in socket.links if link.is_valid and not link.is_muted), None)
 
 
 def _upstream(socket):

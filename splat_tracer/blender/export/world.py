@@ -33,6 +33,7 @@ from typing import Optional
 
 import numpy as np
 
+from .sockets import fmt as _fmt
 
 BAKE_WIDTH = 1024  # a procedural world's image: 1024 x 512, ~0.35 degree a pixel
 MAX_WIDTH = 4096   # an HDRI wider than this is baked at this width (4096 x 2048: 100 MB in the core)
@@ -263,12 +264,6 @@ def _sun_pixels(grid, sun, radius):
     cell = (2 * math.pi / width) * (math.pi / height) * np.cos(((np.arange(height) + 0.5) / height - 0.5) * np.pi)
     inside = np.einsum("hwj,j->hw", d, np.array(sun)) >= math.cos(reach)
     return reach, float((inside * cell[:, None]).sum()) or 1.0
-
-
-def _fmt(value) -> str:
-    if isinstance(value, (int, float)):
-        return f"{value:.3g}"
-    return "(" + ", ".join(f"{v:.3g}" for v in tuple(value)[:3]) + ")"
 
 
 def _sample(pixels: np.ndarray, u: np.ndarray, v: np.ndarray, closest: bool) -> np.ndarray:
