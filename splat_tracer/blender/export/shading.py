@@ -39,7 +39,7 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
-from . import nodes
+from . import nodes, shader_mix
 from .sockets import fmt as _fmt, live_link as _link_into
 from . import world as export_world
 
@@ -270,6 +270,13 @@ def _shader(socket, sockets: _Sockets) -> dict:
             return _combine([(1.0, first), (1.0, second)])
         factor = min(max(sockets.value(node, node.inputs[0]), 0.0), 1.0)
         return _combine([(1.0 - factor, first), (factor, second)])
+    return _shader_node(node, sockets)
+
+
+def _shader_node(node, sockets: _Sockets) -> dict:
+    """_shader's fields of one shader node, not a Mix or Add (None: nothing connected)."""
+    if node is None:
+        return dict(_BLACK, **{_IS_BSDF: False})
     reader = _SHADERS.get(node.type)
     if reader is None:
         sockets.say(f": the '{node.bl_label}' shader is not supported; using a default grey material")
@@ -394,10 +401,18 @@ def _program(shader, sockets: _Sockets, aovs=()):
     one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
     the constant path (the points' own colours; no program to run)."""
     inputs = shader.inputs if shader is not None else ()
-    direct = [s for s in inputs if s.name in ("Base Color", "Color") and _is_point_data(_upstream(s), "Color")]
-    direct += [s for s in inputs if s.name == "Alpha" and _is_point_data(_upstream(s), "Alpha")]
+    direct = [s for s in inputs if _reads_points(s)]
     try:
-        program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
+        if shader is not None and shader.type in shader_mix.MIX_SHADERS:
+            if not shader_mix.needs_program(shader, lambda s: s.node.type != "EMISSION" and _reads_points(s)):
+                return _program(None, sockets, aovs)  # a constant blend (AOVs only, if any)
+            # The shader readers' own lines are said when _shader reads the tree next; the
+            # readers here only give the constant fields the blend starts from.
+            quiet = _Sockets("material", "", shading.Report())
+            program, driven = shader_mix.compile_mix(shader, sockets.say, lambda node: _shader_node(node, quiet),
+                                                     _DEFAULTS, _IS_BSDF, aovs=aovs)
+        else:
+            program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None
@@ -407,6 +422,14 @@ def _program(shader, sockets: _Sockets, aovs=()):
 
 # --------------------------------------------------------------------------------------
 # Lamps.
+
+def _reads_points(socket) -> bool:
+    """Whether the constant path reads a shader input as the points' own colour or alpha (a
+    Color Attribute or Attribute node linked straight into a colour or an alpha)."""
+    if socket.name in ("Base Color", "Color"):
+        return _is_point_data(_upstream(socket), "Color")
+    return socket.name == "Alpha" and _is_point_data(_upstream(socket), "Alpha")
+
 
 def _unit(v) -> tuple:
     v = np.asarray(v, np.float64)
