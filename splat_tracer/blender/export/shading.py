@@ -23,9 +23,10 @@ Materials are read from their node tree, following the Material Output's Surface
 - A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
   name; through reroutes) means the points' own colours; an Alpha fed by such a node's
   Alpha output means the points' own alpha.
-Other links into the inputs of a material's one shader (not under a Mix or Add Shader) are
-compiled into a node program (export/nodes.py) the core runs at each shading point; any
-other link into a socket the engine reads falls back to that socket's default value.
+Other links into the inputs of a material's shader are compiled into a node program
+(export/nodes.py) the core runs at each shading point; under Mix and Add Shaders, with a
+Mix's linked Fac, the blend above is made there per shading point too (export/shader_mix.py).
+Any other link into a socket the engine reads falls back to that socket's default value.
 """
 from __future__ import annotations
 
