@@ -84,7 +84,7 @@ def diffuse_glossy(bpy, name, fac, link_fac, link_colour=False, transparent=Fals
     return material
 
 
-def assert_same_fields(got, want, n=1):
+def assert_same_fields(got, want):
     for name in FIELDS:
         np.testing.assert_allclose(got[name], np.broadcast_to(want[name][:1], got[name].shape), rtol=1e-5,
                                    atol=1e-6, err_msg=name)
