@@ -16,7 +16,7 @@ from typing import Callable, NamedTuple
 
 from ...render import nodes as program
 from . import nodes
-from .sockets import live_link
+from .sockets import live_link, upstream
 
 MIX_SHADERS = ("MIX_SHADER", "ADD_SHADER")
 
@@ -27,19 +27,9 @@ class _Reg(NamedTuple):
 
 
 def _upstream_node(socket):
-    """The node feeding a shader socket through reroutes and muted nodes (shading._upstream's
-    rule; its node only), None when nothing does."""
-    link = live_link(socket)
-    while link is not None:
-        node = link.from_node
-        if node.type == "REROUTE":
-            link = live_link(node.inputs[0])
-        elif node.mute:
-            passed = next((l for l in node.internal_links if l.to_socket == link.from_socket), None)
-            link = live_link(passed.from_socket) if passed is not None else None
-        else:
-            return node
-    return None
+    """The node feeding a shader socket (sockets.upstream), None when nothing does."""
+    found = upstream(socket)
+    return found[0] if found is not None else None
 
 
 class _Blender:

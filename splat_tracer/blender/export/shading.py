@@ -41,7 +41,7 @@ import numpy as np
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
 from . import nodes, shader_mix
-from .sockets import fmt as _fmt, live_link as _link_into
+from .sockets import fmt as _fmt, upstream as _upstream
 from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
@@ -86,22 +86,6 @@ def _output_node(tree, node_type: str):
         if best is None or rank > best_rank:
             best, best_rank = node, rank
     return best
-
-
-def _upstream(socket):
-    """(node, output socket) feeding an input, through reroutes and muted nodes (which pass
-    their input on); None when nothing is connected."""
-    link = _link_into(socket)
-    while link is not None:
-        node = link.from_node
-        if node.type == "REROUTE":
-            link = _link_into(node.inputs[0])
-        elif node.mute:
-            passed = next((l for l in node.internal_links if l.to_socket == link.from_socket), None)
-            link = _link_into(passed.from_socket) if passed is not None else None
-        else:
-            return node, link.from_socket
-    return None
 
 
 def _is_point_data(source, output: str) -> bool:
