@@ -705,11 +705,16 @@ def compile_shader(node, say, skip=(), aovs=()) -> tuple:
             continue
         compiler.b.output(field, compiler.input(socket, nodes.OUTPUTS[field]))
         driven.append(socket)
+    compile_aovs(compiler, aovs)
+    if not driven and not aovs:
+        return None, []
+    return compiler.b.program(), driven
+
+
+def compile_aovs(compiler: Compiler, aovs) -> None:
+    """AOV Output nodes into the compiler's program: `aovs` as compile_shader takes them."""
     for name, width, socket in aovs:
         # Cycles compiles the input the view layer's AOV type reads (Color or Value).
         reg = compiler.input(socket, width)
         colour, value = (reg, compiler.const(0.0, 1)) if width == 3 else (compiler.const((0, 0, 0), 3), reg)
         compiler.b.aov(name, colour, value)
-    if not driven and not aovs:
-        return None, []
-    return compiler.b.program(), driven

@@ -23,9 +23,10 @@ Materials are read from their node tree, following the Material Output's Surface
 - A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
   name; through reroutes) means the points' own colours; an Alpha fed by such a node's
   Alpha output means the points' own alpha.
-Other links into the inputs of a material's one shader (not under a Mix or Add Shader) are
-compiled into a node program (export/nodes.py) the core runs at each shading point; any
-other link into a socket the engine reads falls back to that socket's default value.
+Other links into the inputs of a material's shader are compiled into a node program
+(export/nodes.py) the core runs at each shading point; under Mix and Add Shaders, with a
+Mix's linked Fac, the blend above is made there per shading point too (export/shader_mix.py).
+Any other link into a socket the engine reads falls back to that socket's default value.
 """
 from __future__ import annotations
 
@@ -39,8 +40,8 @@ import numpy as np
 
 from ...render import shading
 from ...render.splats import MAX_COORDINATE
-from . import nodes
-from .sockets import fmt as _fmt, live_link as _link_into
+from . import nodes, shader_mix
+from .sockets import fmt as _fmt, upstream as _upstream
 from . import world as export_world
 
 # The output target this renderer reads (see the module docstring).
@@ -85,22 +86,6 @@ def _output_node(tree, node_type: str):
         if best is None or rank > best_rank:
             best, best_rank = node, rank
     return best
-
-
-def _upstream(socket):
-    """(node, output socket) feeding an input, through reroutes and muted nodes (which pass
-    their input on); None when nothing is connected."""
-    link = _link_into(socket)
-    while link is not None:
-        node = link.from_node
-        if node.type == "REROUTE":
-            link = _link_into(node.inputs[0])
-        elif node.mute:
-            passed = next((l for l in node.internal_links if l.to_socket == link.from_socket), None)
-            link = _link_into(passed.from_socket) if passed is not None else None
-        else:
-            return node, link.from_socket
-    return None
 
 
 def _is_point_data(source, output: str) -> bool:
@@ -270,6 +255,13 @@ def _shader(socket, sockets: _Sockets) -> dict:
             return _combine([(1.0, first), (1.0, second)])
         factor = min(max(sockets.value(node, node.inputs[0]), 0.0), 1.0)
         return _combine([(1.0 - factor, first), (factor, second)])
+    return _shader_node(node, sockets)
+
+
+def _shader_node(node, sockets: _Sockets) -> dict:
+    """_shader's fields of one shader node, not a Mix or Add (None: nothing connected)."""
+    if node is None:
+        return dict(_BLACK, **{_IS_BSDF: False})
     reader = _SHADERS.get(node.type)
     if reader is None:
         sockets.say(f": the '{node.bl_label}' shader is not supported; using a default grey material")
@@ -394,10 +386,18 @@ def _program(shader, sockets: _Sockets, aovs=()):
     one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
     the constant path (the points' own colours; no program to run)."""
     inputs = shader.inputs if shader is not None else ()
-    direct = [s for s in inputs if s.name in ("Base Color", "Color") and _is_point_data(_upstream(s), "Color")]
-    direct += [s for s in inputs if s.name == "Alpha" and _is_point_data(_upstream(s), "Alpha")]
+    direct = [s for s in inputs if _reads_points(s)]
     try:
-        program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
+        if shader is not None and shader.type in shader_mix.MIX_SHADERS:
+            if not shader_mix.needs_program(shader, lambda s: s.node.type != "EMISSION" and _reads_points(s)):
+                return _program(None, sockets, aovs)  # a constant blend (AOVs only, if any)
+            # The shader readers' own lines are said when _shader reads the tree next; the
+            # readers here only give the constant fields the blend starts from.
+            quiet = _Sockets("material", "", shading.Report())
+            program, driven = shader_mix.compile_mix(shader, sockets.say, lambda node: _shader_node(node, quiet),
+                                                     _DEFAULTS, _IS_BSDF, aovs=aovs)
+        else:
+            program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None
@@ -407,6 +407,14 @@ def _program(shader, sockets: _Sockets, aovs=()):
 
 # --------------------------------------------------------------------------------------
 # Lamps.
+
+def _reads_points(socket) -> bool:
+    """Whether the constant path reads a shader input as the points' own colour or alpha (a
+    Color Attribute or Attribute node linked straight into a colour or an alpha)."""
+    if socket.name in ("Base Color", "Color"):
+        return _is_point_data(_upstream(socket), "Color")
+    return socket.name == "Alpha" and _is_point_data(_upstream(socket), "Alpha")
+
 
 def _unit(v) -> tuple:
     v = np.asarray(v, np.float64)
