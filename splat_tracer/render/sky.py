@@ -1,4 +1,5 @@
-"""Blender's Sky Texture (Single and Multiple Scattering) evaluated from its definition, in numpy.
+"""Blender's Sky Texture evaluated from its definition, in numpy: Single and Multiple Scattering
+(`Sky`, below) and the older Preetham and Hosek-Wilkie models (`LegacySky`, at the end).
 
 Cycles renders the Sky Texture from a table of the sky's radiance (CIE XYZ) over the view
 direction's azimuth relative to the sun and its elevation, computed once per sun elevation and
