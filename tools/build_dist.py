@@ -66,7 +66,7 @@ WHEELS = [("plyfile==1.0.3", ("3.11",), True), ("laspy==2.7.0", ("3.11",), False
           ("pydantic_core==2.50.5", ("3.11", "3.13"), False), ("annotated-types==0.8.0", ("3.11",), False),
           ("typing-inspection==0.4.5", ("3.11",), False), ("typing_extensions==4.16.0", ("3.11",), False),
           ("python-neo-lzf==0.3.5", ("3.11", "3.13"), False)]
-PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "README.md"]
+PACKAGE_FILES = ["__init__.py", "blender_manifest.toml", "LICENSE", "THIRD-PARTY-NOTICES.md", "README.md"]
 PACKAGE_DIRS = ["splat_tracer", "operators", "ui"]
 # The development core (make build) is never shipped: each stage gets its platform's.
 SKIP = shutil.ignore_patterns("__pycache__", "*.pyc", "native", "_core*.so", "_core*.pyd")

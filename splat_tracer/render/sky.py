@@ -1,4 +1,5 @@
-"""Blender's Sky Texture (Single and Multiple Scattering) evaluated from its definition, in numpy.
+"""Blender's Sky Texture evaluated from its definition, in numpy: Single and Multiple Scattering
+(`Sky`, below) and the older Preetham and Hosek-Wilkie models (`LegacySky`, at the end).
 
 Cycles renders the Sky Texture from a table of the sky's radiance (CIE XYZ) over the view
 direction's azimuth relative to the sun and its elevation, computed once per sun elevation and
@@ -486,3 +487,126 @@ class Sky:
         if not self.multiple and self.elevation + self.size / 2 <= 0:
             return np.zeros(3)
         return 0.5 * (self.sun_bottom + self.sun_top) * LIMB_MEAN * self.sun_solid_angle * self.intensity
+
+
+# ------------------------------------------------------------------------------------------
+# Blender's legacy models: analytic functions of the view direction's zenith angle theta and
+# its angle gamma to the sun, no table and no sun disc; below the horizon the horizon's theta.
+
+# Cycles clamps the view's zenith angle just short of the horizon (the models' functions divide
+# by cos(theta)): the ground repeats the horizon's colour, still varying with gamma.
+LEGACY_HORIZON = math.pi / 2 - 0.001
+# Hosek-Wilkie's XYZ is in the model's physical units (W m^-2 sr^-1 per channel, Y times
+# 683 lm/W a luminance); Cycles scales it by 2 pi / 683 into its scene linear units.
+HOSEK_SCALE = 2.0 * math.pi / 683.0
+
+
+def _perez(coefficients, theta, gamma):
+    """Perez et al.'s all-weather sky luminance distribution, the five coefficients A..E."""
+    a, b, c, d, e = coefficients
+    return (1.0 + a * np.exp(b / np.cos(theta))) * (1.0 + c * np.exp(d * gamma) + e * np.cos(gamma) ** 2)
+
+
+def _preetham(turbidity: float, sun_theta: float):
+    """Preetham, Shirley and Smits' (1999) fit for turbidity T: the Perez coefficients of Y, x
+    and y, and the zenith's Y (in their kcd/m^2, times 0.06 as Cycles scales it), x and y,
+    each divided by its Perez function at the zenith so that the function times it is the sky."""
+    t, s = float(turbidity), float(sun_theta)
+    perez = (((0.1787, -1.4630), (-0.3554, 0.4275), (-0.0227, 5.3251), (0.1206, -2.5771), (-0.0670, 0.3703)),
+             ((-0.0193, -0.2592), (-0.0665, 0.0008), (-0.0004, 0.2125), (-0.0641, -0.8989), (-0.0033, 0.0452)),
+             ((-0.0167, -0.2608), (-0.0950, 0.0092), (-0.0079, 0.2102), (-0.0441, -1.6537), (-0.0109, 0.0529)))
+    coefficients = [tuple(k * t + c for k, c in row) for row in perez]
+    chi = (4.0 / 9.0 - t / 120.0) * (math.pi - 2.0 * s)
+    zenith_luminance = ((4.0453 * t - 4.9710) * math.tan(chi) - 0.2155 * t + 2.4192) * 0.06
+    # The zenith's chromaticity: cubics in the sun's zenith angle, quadratic in T.
+    s3 = np.array([s ** 3, s ** 2, s, 1.0])
+    tt = np.array([t * t, t, 1.0])
+    zx = tt @ np.array([[0.00166, -0.00375, 0.00209, 0.0], [-0.02903, 0.06377, -0.03202, 0.00394],
+                        [0.11693, -0.21196, 0.06052, 0.25886]]) @ s3
+    zy = tt @ np.array([[0.00275, -0.00610, 0.00317, 0.0], [-0.04214, 0.08970, -0.04153, 0.00516],
+                        [0.15346, -0.26756, 0.06670, 0.26688]]) @ s3
+    zenith = [z / _perez(c, 0.0, s) for z, c in zip((zenith_luminance, zx, zy), coefficients)]
+    return coefficients, zenith
+
+
+def _hosek_wilkie(turbidity: float, albedo: float, elevation: float):
+    """Hosek and Wilkie's (2012) model for a turbidity in [1, 10], a ground albedo in [0, 1] and
+    a sun elevation in [0, pi/2]: per XYZ channel, the nine coefficients of their extended Perez
+    function and the channel's radiance scale, each a quintic Bezier over the cube root of the
+    elevation's fraction of 90 degrees, interpolated linearly between the fitted integer
+    turbidities and the two albedos (as the authors' implementation cooks them)."""
+    from .hosek_wilkie_data import CONFIGS, RADIANCES
+
+    t = min(max(float(turbidity), 1.0), 10.0)
+    a = min(max(float(albedo), 0.0), 1.0)
+    x = (min(max(float(elevation), 0.0), math.pi / 2) / (math.pi / 2)) ** (1.0 / 3.0)
+    bezier = np.array([(1 - x) ** 5, 5 * (1 - x) ** 4 * x, 10 * (1 - x) ** 3 * x ** 2, 10 * (1 - x) ** 2 * x ** 3,
+                       5 * (1 - x) * x ** 4, x ** 5])
+    low = int(t)
+    rest = t - low
+    weights = {}  # (albedo index, turbidity index): weight
+    for turb, wt in ((low, 1.0 - rest), (low + 1, rest)):
+        if wt > 0.0 and turb <= 10:
+            weights[0, turb - 1] = (1.0 - a) * wt
+            weights[1, turb - 1] = a * wt
+    configs = np.array(CONFIGS).reshape(3, 2, 10, 6, 9)
+    radiances = np.array(RADIANCES).reshape(3, 2, 10, 6)
+    config = sum(w * np.einsum("k,ckj->cj", bezier, configs[:, i, j]) for (i, j), w in weights.items())
+    radiance = sum(w * radiances[:, i, j] @ bezier for (i, j), w in weights.items())
+    return config, radiance
+
+
+class LegacySky:
+    """The Sky Texture's Preetham or Hosek-Wilkie model, as Cycles evaluates it: a function of
+    the direction alone (no table, no sun disc), for a Sun Direction (Blender's world frame),
+    a Turbidity and (Hosek-Wilkie) a Ground Albedo."""
+
+    sun_disc, size = False, 0.0  # what the world bake asks of a sky with a disc
+
+    def __init__(self, kind: str, sun_direction=(0.0, 0.0, 1.0), turbidity: float = 2.2, ground_albedo: float = 0.3):
+        if kind not in ("PREETHAM", "HOSEK_WILKIE"):
+            raise ValueError(f"not a legacy sky model: {kind!r}")
+        sun = np.asarray(sun_direction, np.float64)
+        length = float(np.linalg.norm(sun))
+        self.sun_direction = sun / length if length > 0 else np.array([0.0, 0.0, 1.0])
+        self.kind = kind
+        theta = math.acos(min(max(self.sun_direction[2], -1.0), 1.0))
+        if kind == "PREETHAM":
+            self._coefficients, self._zenith = _preetham(turbidity, theta)
+        else:
+            # The sun below the horizon is the model's sun at the horizon (the fit's range).
+            theta = min(theta, math.pi / 2)
+            self._config, self._radiance = _hosek_wilkie(turbidity, ground_albedo, math.pi / 2 - theta)
+        self.sun_theta = theta
+
+    def sky(self, directions: np.ndarray) -> np.ndarray:
+        """The sky (N, 3 scene linear) along unit `directions`."""
+        d = np.asarray(directions, np.float64)
+        cos_theta = np.clip(d[:, 2], -1.0, 1.0)
+        # The angle to the sun from the directions' own (unclamped) zenith angle.
+        gamma = np.arccos(np.clip(d @ self._sun_for_gamma(), -1.0, 1.0))
+        theta = np.minimum(np.arccos(cos_theta), LEGACY_HORIZON)
+        if self.kind == "PREETHAM":
+            luminance, x, y = (z * _perez(c, theta, gamma) for z, c in zip(self._zenith, self._coefficients))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                xyz = np.stack([np.where(y != 0, x / y * luminance, 0.0), luminance,
+                                np.where((y != 0) & (luminance != 0), (1.0 - x - y) / y * luminance, 0.0)], -1)
+            return xyz_to_rgb(xyz)
+        c = self._config
+        cos_t, cos_g = np.cos(theta)[:, None], np.cos(gamma)[:, None]
+        g = gamma[:, None]
+        mie = (1.0 + cos_g ** 2) / (1.0 + c[:, 8] ** 2 - 2.0 * c[:, 8] * cos_g) ** 1.5
+        xyz = ((1.0 + c[:, 0] * np.exp(c[:, 1] / (cos_t + 0.01)))
+               * (c[:, 2] + c[:, 3] * np.exp(c[:, 4] * g) + c[:, 5] * cos_g ** 2 + c[:, 6] * mie
+                  + c[:, 7] * np.sqrt(cos_t))) * self._radiance
+        return xyz_to_rgb(xyz) * HOSEK_SCALE
+
+    def _sun_for_gamma(self) -> np.ndarray:
+        """The sun the angle gamma is measured from: its direction at the zenith angle the
+        model was set up with (Hosek-Wilkie's clamped at the horizon)."""
+        s = self.sun_direction
+        horizontal = math.hypot(s[0], s[1])
+        if horizontal == 0.0:
+            return np.array([0.0, 0.0, math.cos(self.sun_theta)])
+        k = math.sin(self.sun_theta) / horizontal
+        return np.array([s[0] * k, s[1] * k, math.cos(self.sun_theta)])

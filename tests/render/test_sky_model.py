@@ -84,3 +84,52 @@ def test_the_sky_is_brightest_towards_its_sun_and_the_sun_dims_as_it_sets():
     assert low.sun_power()[2] / low.sun_power()[0] < high.sun_power()[2] / high.sun_power()[0]
     # No disc: no sun.
     assert not sky.Sky(sun_disc=False).sun_power().any()
+
+
+def test_preetham_gives_the_zenith_its_fitted_luminance_and_chromaticity():
+    """Looking at the zenith the Perez functions cancel their normalisation: the sky there is
+    Preetham, Shirley and Smits' zenith luminance (kcd/m^2, x 0.06 as Cycles scales it) and
+    chromaticity for the turbidity and the sun's zenith angle (their appendix, written out here
+    for T = 4, sun 40 degrees from the zenith), through xyY -> XYZ -> Rec.709."""
+    t, theta = 4.0, math.radians(40.0)
+    chi = (4 / 9 - t / 120) * (math.pi - 2 * theta)
+    luminance = ((4.0453 * t - 4.9710) * math.tan(chi) - 0.2155 * t + 2.4192) * 0.06
+    x = (0.00166 * theta ** 3 - 0.00375 * theta ** 2 + 0.00209 * theta) * t * t \
+        + (-0.02903 * theta ** 3 + 0.06377 * theta ** 2 - 0.03202 * theta + 0.00394) * t \
+        + (0.11693 * theta ** 3 - 0.21196 * theta ** 2 + 0.06052 * theta + 0.25886)
+    y = (0.00275 * theta ** 3 - 0.00610 * theta ** 2 + 0.00317 * theta) * t * t \
+        + (-0.04214 * theta ** 3 + 0.08970 * theta ** 2 - 0.04153 * theta + 0.00516) * t \
+        + (0.15346 * theta ** 3 - 0.26756 * theta ** 2 + 0.06670 * theta + 0.26688)
+    xyz = np.array([x / y * luminance, luminance, (1 - x - y) / y * luminance])
+    model = sky.LegacySky("PREETHAM", (math.sin(theta), 0.0, math.cos(theta)), turbidity=t)
+    got = model.sky(np.array([[0.0, 0.0, 1.0]]))[0]
+    assert got == pytest.approx(sky.xyz_to_rgb(xyz), rel=1e-9)
+    # The sky brightens towards the sun; below the horizon it is the horizon's, not black.
+    towards, away = model.sky(np.array([[math.sin(0.6), 0, math.cos(0.6)], [-math.sin(0.6), 0, math.cos(0.6)]]))
+    assert np.all(towards > away)
+    assert np.all(model.sky(np.array([[0.0, 1.0, -0.3]]) / math.hypot(1, 0.3)) > 0.1 * away)
+
+
+def test_hosek_wilkie_cooks_its_coefficients_from_the_authors_table():
+    """At a fitted turbidity and albedo the coefficients are the table's Bezier end points at
+    the horizon and the zenith; between turbidities and albedos they are linear."""
+    from splat_tracer.render.hosek_wilkie_data import CONFIGS, RADIANCES
+
+    table = np.array(CONFIGS).reshape(3, 2, 10, 6, 9)
+    radiance = np.array(RADIANCES).reshape(3, 2, 10, 6)
+    config, rad = sky._hosek_wilkie(3.0, 0.0, 0.0)
+    assert np.allclose(config, table[:, 0, 2, 0]) and np.allclose(rad, radiance[:, 0, 2, 0])
+    config, rad = sky._hosek_wilkie(7.0, 1.0, math.pi / 2)
+    assert np.allclose(config, table[:, 1, 6, 5]) and np.allclose(rad, radiance[:, 1, 6, 5])
+    mid = sky._hosek_wilkie(3.5, 0.25, 0.7)
+    corners = [sky._hosek_wilkie(t, a, 0.7) for t in (3.0, 4.0) for a in (0.0, 1.0)]
+    weights = [0.5 * 0.75, 0.5 * 0.25, 0.5 * 0.75, 0.5 * 0.25]
+    for i in range(2):
+        assert np.allclose(mid[i], sum(w * c[i] for w, c in zip(weights, corners)))
+    d = np.array([[0.3, 0.2, 0.93], [-0.5, 0.1, 0.86], [0.0, 0.99, 0.14]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    sun = (0.2, 0.5, 0.84)
+    zero, one = (sky.LegacySky("HOSEK_WILKIE", sun, 2.5, a).sky(d) for a in (0.0, 1.0))
+    assert np.all(one > zero)  # a bright ground brightens the sky
+    with pytest.raises(ValueError):
+        sky.LegacySky("NISHITA")

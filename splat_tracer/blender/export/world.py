@@ -21,7 +21,7 @@ samples it as a light. What the bake reads:
 - Sky Texture: Single and Multiple Scattering from their physical model as Cycles computes
   them (render/sky.py: every setting of the node), the sun disc drawn, or its power spread
   over the pixels that carry it when it is smaller than a few pixels of the bake (said once);
-  Preetham and Hosek-Wilkie stood in for by Multiple Scattering (said once).
+  Preetham and Hosek-Wilkie from their analytic functions (render/sky.py: LegacySky).
 The image is as large as the largest Environment Texture image (at most MAX_WIDTH wide), so
 that an equirectangular HDRI without mapping is baked pixel for pixel; BAKE_WIDTH otherwise.
 """
@@ -200,7 +200,7 @@ class _Bake:
         vector = next((s for s in node.inputs if s.name == "Vector"), None)  # not found by key in bpy 5.0
         d = self.d if vector is None or self.upstream(vector) is None else self.vector(vector)
         d = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-30)
-        model = _sky_model(node, self.sockets)
+        model = _sky_model(node)
         out = model.sky(d)
         if not model.sun_disc or self.grid is None:
             return out
@@ -227,30 +227,30 @@ _DRAWN_SUN_TEXELS = 2.0
 _SKY_MODELS: dict = {}  # the last few Sky models by settings: one per bake, not one per block of rows
 
 
-def _sky_model(node, sockets):
-    """render.sky.Sky for a Sky Texture node's settings. Preetham and Hosek-Wilkie (Blender's
-    legacy models) are not modelled: the Multiple Scattering sky with the sun at their Sun
-    Direction's elevation stands in, said once."""
-    from ...render.sky import Sky
+def _sky_model(node):
+    """render.sky.Sky (Single and Multiple Scattering) or render.sky.LegacySky (Preetham,
+    Hosek-Wilkie) for a Sky Texture node's settings, kept for the bake's next block of rows."""
+    from ...render.sky import LegacySky, Sky
 
     kind = node.sky_type
-    if kind in ("SINGLE_SCATTERING", "MULTIPLE_SCATTERING"):
+    if kind in ("PREETHAM", "HOSEK_WILKIE"):
+        key = (kind, tuple(float(c) for c in node.sun_direction), float(node.turbidity), float(node.ground_albedo))
+
+        def make():
+            return LegacySky(kind, key[1], key[2], key[3])
+    else:
         key = (kind, float(node.sun_elevation), float(node.sun_rotation), float(node.altitude),
                float(node.air_density), float(node.aerosol_density), float(node.ozone_density),
                bool(node.sun_disc), float(node.sun_size), float(node.sun_intensity))
-    else:
-        x, y, z = (float(c) for c in node.sun_direction)
-        n = math.sqrt(x * x + y * y + z * z) or 1.0
-        key = ("MULTIPLE_SCATTERING", math.asin(max(-1.0, min(1.0, z / n))), math.atan2(x, y), 100.0, 1.0, 1.0,
-               1.0, False, 0.0, 0.0)
-        sockets.say(f": the {kind.replace('_', ' ').title()} Sky Texture '{node.name}' is not modelled; the Multiple "
-                    f"Scattering sky with the sun at its Sun Direction stands in (no sun disc)")
+
+        def make():
+            return Sky(multiple=kind == "MULTIPLE_SCATTERING", sun_elevation=key[1], sun_rotation=key[2],
+                       altitude=key[3], air=key[4], aerosol=key[5], ozone=key[6], sun_disc=key[7],
+                       sun_size=key[8], sun_intensity=key[9])
     if key not in _SKY_MODELS:
         while len(_SKY_MODELS) >= 4:
             _SKY_MODELS.pop(next(iter(_SKY_MODELS)))
-        _SKY_MODELS[key] = Sky(multiple=key[0] == "MULTIPLE_SCATTERING", sun_elevation=key[1], sun_rotation=key[2],
-                               altitude=key[3], air=key[4], aerosol=key[5], ozone=key[6], sun_disc=key[7],
-                               sun_size=key[8], sun_intensity=key[9])
+        _SKY_MODELS[key] = make()
     return _SKY_MODELS[key]
 
 
