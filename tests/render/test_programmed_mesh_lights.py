@@ -80,3 +80,26 @@ def test_light_bsdf_and_mis_converge_to_one_image_and_mis_is_less_noisy(drives):
         for b in means:
             assert abs(means[a] / means[b] - 1) < 0.02, (a, b, means)
     assert errors["MIS"] * 3 < errors["BSDF"]
+
+
+def test_a_mesh_beyond_the_estimate_budget_shares_estimates_and_stays_reachable():
+    """20,000 programmed triangles (over the 2^14 runs the estimate may take): pairs of
+    consecutive triangles share one run at the first one's centroid. Every triangle is still
+    picked with a probability > 0 (the floor), and triangles over the checker's bright
+    squares carry most of the power."""
+    n = 100
+    xs = np.linspace(-0.5, 0.5, n + 1)
+    x, y = np.meshgrid(xs, xs)
+    v = np.stack([x.ravel(), y.ravel(), np.full(x.size, 0.5)], 1)
+    i = np.arange(n * n)
+    a = (i // n) * (n + 1) + i % n
+    tris = np.concatenate([np.stack([a, a + 1, a + n + 2], 1), np.stack([a, a + n + 2, a + n + 1], 1)])
+    scene = RenderScene([Instance(Mesh(v, tris), materials=(checker_emitter(scale=2.0),))], (), BLACK)
+    picks = scene.mesh_lights()
+    assert len(picks) == len(tris)
+    p = np.array([pr for _, _, pr in sorted(picks, key=lambda t: t[1])])
+    assert p.min() > 0 and p.sum() == pytest.approx(1.0, rel=1e-6)
+    centre = v[tris].mean(axis=1)
+    cell = np.floor(centre * 2.0 * 0.999999).astype(int)  # Blender's parity, as test_nodes.py
+    bright = (cell[:, 0] % 2 == cell[:, 1] % 2) == (cell[:, 2] % 2 == 1)
+    assert p[bright].sum() > 0.9

@@ -51,10 +51,10 @@ class MeshLights {
     // emission comes from (Material::emission_sides), in instances that diffuse or glossy
     // rays can see: an emitter hidden from both lights nothing by those rays.
     MeshLights() = default;
-    // `scene`: where the programmed emitters' estimates are run (RenderScene::emitted_on_triangle);
-    // null leaves them out.
+    // `scene`: where the programmed emitters' estimates are run (RenderScene::emitted_on_triangle),
+    // on `threads` threads (0: all cores); null leaves them out.
     MeshLights(const std::vector<Instance> &instances, const std::vector<Material> &materials,
-               const RenderScene *scene = nullptr);
+               const RenderScene *scene = nullptr, int threads = 1);
 
     bool empty() const { return tris_.empty(); }
     size_t size() const { return tris_.size(); }

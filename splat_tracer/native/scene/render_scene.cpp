@@ -82,7 +82,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     }
     top_.build(boxes, threads);
     // After the bounds: a programmed emitter's estimate runs its program, which reads them.
-    if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_, this);
+    if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_, this, threads);
 }
 
 Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float b2, Vec3 wo, const Camera *camera,
