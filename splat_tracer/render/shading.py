@@ -50,7 +50,9 @@ class Material:
     emission_sampling: Cycles' Emission Sampling (EMISSION_SAMPLING): which sides of a mesh's
         emissive triangles are sampled as lights; AUTO as Cycles (both sides when the
         emission exceeds AUTO_EMISSION_THRESHOLD in a channel, else none). Clouds' emission
-        is never sampled.
+        is never sampled. Where `program` drives the emission the core picks triangles by
+        an estimate of the program's power and runs it at the sampled point (Auto reads the
+        constant `emission` here; the Blender export resolves it by Cycles' estimate).
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
     program: the node program (render/nodes.py) that drives some of the inputs above at

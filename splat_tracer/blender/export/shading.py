@@ -313,12 +313,9 @@ def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -
         return shading.Material()
     material = _surface_material(bl_material, report, aovs or {})
     sampling = _emission_sampling(bl_material)
-    if material.program is not None and material.program.drives("emission") and sampling != "NONE":
-        # The core samples emissive triangles by their constant emission: a node-driven one is
-        # found by the rays that meet it instead (unbiased, noisier for a small bright texture).
-        report.once(f"material '{bl_material.name}': emission driven by nodes is not sampled as a light "
-                    f"(found by rays only)")
-        sampling = "NONE"
+    if sampling == "AUTO" and material.program is not None and material.program.drives("emission"):
+        # The core samples it by its program's estimate (mesh_lights.h): Auto is Cycles' choice.
+        sampling = _auto_sampling_of_nodes(bl_material)
     return dataclasses.replace(material, emission_sampling=sampling, pass_index=bl_material.pass_index,
                                name=bl_material.name)
 
@@ -327,6 +324,23 @@ def _emission_sampling(bl_material) -> str:
     """Cycles' Emission Sampling of the material (AUTO where there is none to read)."""
     value = getattr(getattr(bl_material, "cycles", None), "emission_sampling", "AUTO")
     return value if value in shading.EMISSION_SAMPLING else "AUTO"
+
+
+def _auto_sampling_of_nodes(bl_material) -> str:
+    """Cycles' Auto for an emission its nodes drive (the Surface's Emission or Principled
+    BSDF, whose linked inputs compile_shader compiled): Shader::estimate_emission counts a
+    linked Color or Strength as 1 and an unlinked one as its value, and samples both sides
+    when the estimate exceeds AUTO_EMISSION_THRESHOLD in a channel, none otherwise."""
+    tree = _node_tree(bl_material)
+    output = _output_node(tree, "OUTPUT_MATERIAL") if tree is not None else None
+    source = _upstream(output.inputs["Surface"]) if output is not None else None
+    names = nodes.SHADER_INPUTS.get(source[0].type, {}).get("emission") if source is not None else None
+    if names is None:
+        return "NONE"
+    colour, strength = (source[0].inputs[n] for n in names)
+    c = 1.0 if _upstream(colour) is not None else max(abs(float(v)) for v in colour.default_value[:3])
+    k = 1.0 if _upstream(strength) is not None else abs(float(strength.default_value))
+    return "FRONT_BACK" if c * k > shading.AUTO_EMISSION_THRESHOLD else "NONE"
 
 
 def _surface_material(bl_material, report: shading.Report, aovs: dict) -> shading.Material:

@@ -3,6 +3,12 @@
 // integrator can aim shadow rays at them (next-event estimation) and weigh the emission its
 // other rays happen to meet against it (multiple importance sampling).
 //
+// An emitter whose emission (or opacity) a node program drives is weighed by an estimate of
+// its power -- the program run at a few points of each triangle when the scene is built, as
+// Cycles evaluates the shader to estimate each emissive triangle's power for its light tree
+// -- and the integrator runs the program at the point it samples (emission_on_triangle), so
+// that the estimate decides where the samples go, never what they bring.
+//
 // A CDF, not Cycles' light tree: the tree also weighs each emitter by its distance and
 // orientation from the shading point, which matters when many small emitters spread over a
 // scene; for the panels and strips that light scans, power alone is what separates them.
@@ -27,11 +33,17 @@ constexpr float kEdgeOnCosine = 1e-6f;
 struct MeshLightSample {
     Vec3 wi;             // unit, from the shading point towards the light point
     float distance = 0;  // to the light point
-    Vec3 emission;       // radiance leaving the light point towards the shading point
+    Vec3 emission;       // radiance leaving the light point towards the shading point (0 when
+                         // `programmed`: the caller runs the program there, emission_on_triangle)
     float pdf = 0;       // solid-angle density of wi (pick x area density x distance^2 / cos)
     int instance = -1;
+    int32_t tri = -1;    // the triangle and the point's barycentrics of its vertices 1 and 2
+    float b1 = 0, b2 = 0;
+    bool programmed = false;  // a node program drives the emission (or opacity) there
     bool valid = false;
 };
+
+class RenderScene;
 
 class MeshLights {
   public:
@@ -39,7 +51,10 @@ class MeshLights {
     // emission comes from (Material::emission_sides), in instances that diffuse or glossy
     // rays can see: an emitter hidden from both lights nothing by those rays.
     MeshLights() = default;
-    MeshLights(const std::vector<Instance> &instances, const std::vector<Material> &materials);
+    // `scene`: where the programmed emitters' estimates are run (RenderScene::emitted_on_triangle),
+    // on `threads` threads (0: all cores); null leaves them out.
+    MeshLights(const std::vector<Instance> &instances, const std::vector<Material> &materials,
+               const RenderScene *scene = nullptr, int threads = 1);
 
     bool empty() const { return tris_.empty(); }
     size_t size() const { return tris_.size(); }
@@ -47,9 +62,10 @@ class MeshLights {
     // u2, seen from p. Invalid when p is on a side the material does not sample, or level
     // with the triangle.
     MeshLightSample sample(Vec3 p, float u0, float u1, float u2) const;
-    // The density sample() has, per unit area, anywhere on a triangle of instance `instance`
-    // with material `m` seen from its `front` side (the winding's); 0 where it never samples.
-    float area_pdf(int instance, const Material &m, bool front) const;
+    // The density sample() has, per unit area, anywhere on triangle `tri` of instance
+    // `instance` with material `m` seen from its `front` side (the winding's); 0 where it
+    // never samples.
+    float area_pdf(int instance, int32_t tri, const Material &m, bool front) const;
     // Each sampled triangle and the probability that sample() picks it (for tests).
     struct Pick {
         int instance;
@@ -63,9 +79,10 @@ class MeshLights {
         Vec3 v0, e1, e2;  // scene frame
         Vec3 n;           // unit geometric normal, on the winding's front side (scene frame)
         float area;
-        Vec3 emission;    // the material's, times its opacity
-        float density;    // emitted_power_density of its material
+        Vec3 emission;    // the material's, times its opacity (0 when programmed)
+        float density;    // emitted_power_density of its material, or the program's estimate
         uint8_t sides;    // Material::emission_sides
+        bool programmed;
         int instance;
         int32_t tri;
     };
@@ -73,6 +90,11 @@ class MeshLights {
     std::vector<double> cdf_;              // cumulative power, cdf_[i + 1] after triangle i
     double total_ = 0;
     std::vector<uint8_t> sampled_;         // per instance: some of its triangles are here
+    // Instances with a programmed emitter: the offset of their triangles' area densities in
+    // tri_pdf_ (per triangle, as area_pdf answers); -1 for the others, which area_pdf answers
+    // from their material alone.
+    std::vector<int64_t> tri_pdf_first_;
+    std::vector<float> tri_pdf_;
 };
 
 // The weight of a material's emission in the light distribution, per unit area: luminance

@@ -52,9 +52,9 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     for (Material &m : materials_) {
         if (m.program >= int(programs_.size())) m.program = -1;
         const bool programmed_alpha = m.program >= 0 && programs_[m.program].outputs[int(Output::Alpha)] >= 0;
-        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha || programmed_alpha, any_emission_ |= m.emits();
+        any_transparent_ |= m.alpha < 1.f || m.use_point_alpha || programmed_alpha;
+        any_emission_ |= m.emits() || (m.program >= 0 && programs_[m.program].outputs[int(Output::Emission)] >= 0);
     }
-    if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_);
     std::vector<AABB> boxes(instances_.size());
     for (size_t i = 0; i < instances_.size(); ++i) {
         Instance &inst = instances_[i];
@@ -81,6 +81,25 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
         boxes[i] = world.empty() ? AABB{Vec3(0, 0, 0), Vec3(0, 0, 0)} : world;
     }
     top_.build(boxes, threads);
+    // After the bounds: a programmed emitter's estimate runs its program, which reads them.
+    if (any_emission_) mesh_lights_ = MeshLights(instances_, materials_, this, threads);
+}
+
+Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float b2, Vec3 wo, const Camera *camera,
+                                      float time) const {
+    const Instance &inst = instances_[size_t(instance)];
+    MeshHit h;
+    h.tri = tri, h.b1 = b1, h.b2 = b2;
+    SurfacePoint sp;
+    sp.t = 0.f, sp.instance = instance, sp.prim = tri, sp.b1 = b1, sp.b2 = b2;
+    sp.ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(tri)));
+    sp.ns = normalize(inst.to_object.transposed_vector(inst.mesh->shading_normal(h)));
+    sp.front = h.front = dot(sp.ng, wo) > 0.f;
+    sp.p = inst.to_world.point(inst.mesh->point(h));
+    sp.material = inst.material_of(inst.mesh->material(tri));
+    const Material &m = materials_[size_t(sp.material)];
+    const Material out = m.program >= 0 ? evaluate_program(m, sp, wo, nullptr, camera, time, nullptr) : m;
+    return out.emission * out.alpha;
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,

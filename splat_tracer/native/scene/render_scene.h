@@ -163,6 +163,19 @@ class RenderScene {
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
         return evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
     }
+    // Whether a node program drives what material `m` emits: its emission, or the opacity of a
+    // constant emission (what a ray takes away is emission x opacity).
+    bool programmed_emission(const Material &m) const {
+        if (m.program < 0) return false;
+        const NodeProgram &p = programs_[size_t(m.program)];
+        return p.outputs[int(Output::Emission)] >= 0 || (p.outputs[int(Output::Alpha)] >= 0 && m.emits());
+    }
+    // What a ray from direction `wo` (towards the viewer) takes away at the point of triangle
+    // `tri` of mesh instance `instance` with barycentrics (b1, b2) of its vertices 1 and 2:
+    // emission x opacity, its node program run there (in the frame's placement, as MeshLights
+    // places the triangles). For emitters sampled as lights (MeshLights).
+    Vec3 emitted_on_triangle(int instance, int32_t tri, float b1, float b2, Vec3 wo, const Camera *camera = nullptr,
+                             float time = 0.f) const;
     const std::vector<Light> &lights() const { return lights_; }
     const MeshLights &mesh_lights() const { return mesh_lights_; }  // emissive triangles sampled as lights
     bool any_transparent() const { return any_transparent_; }

@@ -701,7 +701,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // Shadow rays could have found this point too: the power heuristic shares it between
         // the two ways (pdfs in solid angle at the point the ray left; n shadow samples count n).
         // Met edge on, the point is one light sampling never picks (kEdgeOnCosine): all its own.
-        const float area_pdf = mesh_lights_->area_pdf(sp.instance, mat, sp.front);
+        const float area_pdf = mesh_lights_->area_pdf(sp.instance, sp.prim, mat, sp.front);
         const float cos_l = std::fabs(dot(sp.ng, ray.d));
         if (area_pdf > 0.f && cos_l > kEdgeOnCosine) {
             const Vec3 to = sp.p - st.mis_from;
@@ -1000,7 +1000,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             float u[3];
             rng.get(Sampler::kMeshLight, u, 3, uint32_t(s), uint32_t(k));
             const float u0 = u[2], u1 = u[0], u2 = u[1];  // the point from the finest pair
-            const MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
+            MeshLightSample ls = mesh_lights_->sample(sp.p, u0, u1, u2);
             if (!ls.valid) continue;
             const Instance &emitter = scene_.instance(ls.instance);
             // A catcher-only path shades the catchers as if nothing else were there: another
@@ -1009,6 +1009,11 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             if (from.catcher_only && !emitter.shadow_catcher) continue;
             const float cos_i = dot(n, ls.wi);
             if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
+            // A programmed emitter was picked by its estimate: what it really emits at the
+            // point, towards this one, is its program's (the pdf stays the estimate's).
+            if (ls.programmed)
+                ls.emission = scene_.emitted_on_triangle(ls.instance, ls.tri, ls.b1, ls.b2, ls.wi * -1.f, &camera_,
+                                                         from.time);
             // As Cycles excludes them: an emitter hidden from diffuse (glossy) rays lights no
             // diffuse (glossy) lobe -- the rays of that lobe could never meet it either.
             Vec3 f = emitter.visibility & kVisDiffuse ? diffuse : Vec3();
