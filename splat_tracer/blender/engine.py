@@ -24,8 +24,10 @@ from .export.scene import View
 _NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
 # Cycles' denoising passes (export/settings.py names them and says when each is written):
 # Blender's name -> (channels, channel ids, type), as Cycles' add-on registers them.
-_DENOISING_PASSES = {"Noisy Image": (4, "RGBA", "COLOR"), "Denoising Normal": (3, "XYZ", "VECTOR"),
-                     "Denoising Albedo": (3, "RGB", "COLOR"), "Denoising Depth": (1, "Z", "VALUE")}
+_DENOISING_PASSES = {export_settings.NOISY_IMAGE: (4, "RGBA", "COLOR"),
+                     export_settings.DENOISING_NORMAL: (3, "XYZ", "VECTOR"),
+                     export_settings.DENOISING_ALBEDO: (3, "RGB", "COLOR"),
+                     export_settings.DENOISING_DEPTH: (1, "Z", "VALUE")}
 # Blender's passes this engine writes: (view-layer switch -- dotted for an add-on's
 # property group -- the core's pass name, Blender's pass name, channels, channel ids, type).
 _PASSES = (
