@@ -152,6 +152,15 @@ struct Integrator::Lobes {
         return std::clamp(f0 * a + b * std::fmin(1.f, f0 / 0.04f), 0.f, 1.f);
     }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
+    // The glossy lobes' reflection from wo towards wi (both about n, cos_o = n . wo and
+    // cos_i = n . wi > 0): the GGX microfacet BRDF, Smith's G1 each way. Lamps, emissive
+    // triangles and the environment light all shade with it.
+    Vec3 glossy_brdf(Vec3 n, Vec3 wo, float cos_o, Vec3 wi, float cos_i) const {
+        const Vec3 h = normalize(wo + wi);
+        const float ch = std::fmax(dot(n, h), 0.f);
+        const float g = ggx_g1(cos_o, alpha) * ggx_g1(cos_i, alpha);
+        return specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, alpha) * g / (4.f * cos_o * cos_i));
+    }
     // The glossy lobes' albedo seen from cos_o: the Glossy Color pass (Cycles' is the
     // closures' albedo). Mirror-smooth, the Fresnel reflectance itself.
     Vec3 glossy_albedo(float cos_o) const {
@@ -940,24 +949,13 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     const int k = settings_.shadow_samples;
     const float share = 1.f / float(k);
     // The reflection towards wi (cos_i = n . wi > 0): the diffuse and the glossy lobe.
-    auto glossy_brdf = [&](Vec3 wi, float cos_i) {
-        const Vec3 h = normalize(wo + wi);
-        const float ch = std::fmax(dot(n, h), 0.f);
-        const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-        return lobes.specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
-    };
+    auto glossy_brdf = [&](Vec3 wi, float cos_i) { return lobes.glossy_brdf(n, wo, cos_o, wi, cos_i); };
     // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
     const bool split = st.split != nullptr;  // read once: the stores below may alias it
-    // Light passes: one source's light `all` here, of which `diffuse_part` lit the diffuse
-    // lobe (the rest the glossy one), and `added`, what the path got of it after the clamp.
     auto tap_split = [&](Vec3 all, Vec3 diffuse_part, Vec3 added, int group) {
-        const float total = luminance(all);
-        if (!(total > 0.f)) return;
-        const float scale = luminance(added) / total;  // the clamp scales all channels alike
-        tap(st, diffuse_part * scale, group, false, kLobeDiffuse);
-        tap(st, (all - diffuse_part) * scale, group, false, kLobeGlossy);
+        tap_sampled(st, all, diffuse_part, added, group);
     };
     Vec3 L;
     for (size_t i = 0; i < lights.size(); ++i) {
@@ -1069,12 +1067,7 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const float cos_i = dot(n, es.wi);
         if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
         Vec3 f = diffuse;
-        if (glossy) {
-            const Vec3 h = normalize(wo + es.wi);
-            const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-            f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
-                        (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
-        }
+        if (glossy) f = f + lobes.glossy_brdf(n, wo, cos_o, es.wi, cos_i);
         const float light_pdf = es.pdf * float(k);
         const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
                             ? 1.f
@@ -1086,14 +1079,11 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const Vec3 lit = c * through;
         const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
         L = L + added;
-        const float total = luminance(lit);
-        if (st.split && total > 0.f) {  // (0: shadowed, nothing to split)
+        if (st.split) {
             // The world's light reaching a surface is Direct light in Cycles' passes, as a
-            // lamp's: its diffuse share to Diffuse, the rest to Glossy, all to the world's group.
-            const float scale = luminance(added) / total;  // the clamp scales all channels alike
+            // lamp's, all in the world's group.
             const Vec3 diffuse_part = diffuse * es.radiance * through * (cos_i * w / light_pdf);
-            tap(st, diffuse_part * scale, settings_.light_groups.world, false, kLobeDiffuse);
-            tap(st, (lit - diffuse_part) * scale, settings_.light_groups.world, false, kLobeGlossy);
+            tap_sampled(st, lit, diffuse_part, added, settings_.light_groups.world);
         }
     }
     return L;
@@ -1160,6 +1150,18 @@ void Integrator::tap(const PathState &st, Vec3 c, int group, bool found, int lob
     if (l == kLobeNone) return;
     if (st.bounces == (found ? 1 : 0)) sums.direct[l] = sums.direct[l] + v;
     else sums.indirect[l] = sums.indirect[l] + v;
+}
+
+// Light sampled at a surface (a lamp's, emissive triangles', the world's): `all` reached it, of
+// which `diffuse_part` lit the diffuse lobe and the rest the glossy one; `added` is what the
+// path got of it after the clamp, which scales all channels alike. Nothing when all is 0
+// (shadowed: nothing to split).
+void Integrator::tap_sampled(const PathState &st, Vec3 all, Vec3 diffuse_part, Vec3 added, int group) const {
+    const float total = luminance(all);
+    if (!(total > 0.f)) return;
+    const float scale = luminance(added) / total;
+    tap(st, diffuse_part * scale, group, false, kLobeDiffuse);
+    tap(st, (all - diffuse_part) * scale, group, false, kLobeGlossy);
 }
 
 float Integrator::ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,

@@ -161,6 +161,8 @@ class Integrator {
     // sampled there), of light group `group` (-1: none); `lobe`: at the camera's own vertex,
     // the lobe that light sampled there lit.
     void tap(const PathState &st, Vec3 c, int group, bool found, int lobe = kLobeNone) const;
+    // tap() of light sampled at a surface, split between its diffuse and glossy lobes.
+    void tap_sampled(const PathState &st, Vec3 all, Vec3 diffuse_part, Vec3 added, int group) const;
     // Cycles' AO pass at the camera ray's first hit: 1 if a cosine-distributed ray from it
     // meets nothing within ao_distance, else 0.
     float ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
