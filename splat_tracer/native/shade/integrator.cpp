@@ -279,24 +279,17 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         auto put3 = [&](float *buf, Vec3 v) {
             if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
         };
-        if (catchers) {
-            write_catcher(a.catcher, inv, a.alpha * inv, p);
-        } else {
-            if (film_.combined) {
-                float *o = film_.combined + 4 * p;
-                o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
-            }
-            put3(film_.shadow_catcher, Vec3(1, 1, 1));  // no catcher: nothing to darken
+        // The sums into the film, then finished as a progressive render's are (the samples
+        // added their AOVs straight into the film).
+        if (film_.combined) {
+            float *o = film_.combined + 4 * p;
+            o[0] = a.sum.x, o[1] = a.sum.y, o[2] = a.sum.z, o[3] = a.alpha;
         }
-        put3(film_.diffcol, a.diffcol * inv);
-        put3(film_.emit, a.emit * inv);
-        put3(film_.shadow, a.shadow * inv);
-        put3(film_.environment, a.environment * inv);
-        if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
-        if (film_.aov.on()) film_.aov.scale(p, inv);  // the samples added their AOVs straight into the film
-        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
+        put3(film_.diffcol, a.diffcol), put3(film_.emit, a.emit), put3(film_.shadow, a.shadow);
+        put3(film_.environment, a.environment);
+        if (film_.mist) film_.mist[p] = a.mist;
+        finish_pixel(p, inv, a.alpha, catchers ? &a.catcher : nullptr, light_split() ? &a.light : nullptr);
         write_centre(a.centre, p);
-        if (light_split()) write_light(a.light, inv, p);
     }
 }
 
@@ -516,26 +509,35 @@ uint64_t Integrator::finish() {
     for (size_t p = 0; p < taken_.size(); ++p) {
         total += taken_[p];
         if (!taken_[p]) continue;  // never sampled: a stopped render, discarded by the caller
-        const float inv = 1.f / float(taken_[p]);
         // Until here Combined held every sample's full path, the catcher's included: the
         // adaptive check's estimate, as in Cycles, which measures the noise of Combined "as if
         // there were no catchers in the scene" (kernel/film/light_passes.h).
-        if (!catcher_.empty()) {
-            write_catcher(catcher_[p], inv, film_.combined[4 * p + 3] * inv, p);
-        } else {
-            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
-            if (film_.shadow_catcher)
-                for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
-        }
-        for (float *buf : {film_.diffcol, film_.emit, film_.shadow, film_.environment})
-            if (buf)
-                for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
-        if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
-        if (film_.aov.on()) film_.aov.scale(p, inv);
-        if (!light_.empty()) write_light(light_[p], inv, p);
-        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
+        finish_pixel(p, 1.f / float(taken_[p]), film_.combined[4 * p + 3], catcher_.empty() ? nullptr : &catcher_[p],
+                     light_.empty() ? nullptr : &light_[p]);
     }
     return total;
+}
+
+// A pixel's passes from the sums the film holds (`inv` one over the samples; alpha_sum the
+// coverage's sum), the shadow catchers' and the light passes' from theirs (null: none): the
+// means, and the passes Cycles' film forms from sums (film/read.h).
+void Integrator::finish_pixel(size_t p, float inv, float alpha_sum, const CatcherSums *catcher,
+                              const LightSums *light) const {
+    if (catcher) {
+        write_catcher(*catcher, inv, alpha_sum * inv, p);
+    } else {
+        if (film_.combined)
+            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
+        if (film_.shadow_catcher)
+            for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
+    }
+    for (float *buf : {film_.diffcol, film_.emit, film_.shadow, film_.environment})
+        if (buf)
+            for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
+    if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
+    if (film_.aov.on()) film_.aov.scale(p, inv);
+    if (light) write_light(*light, inv, p);
+    if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
 }
 
 // The passes of the pixel-centre sample (Cycles' data passes, written at its sample 0).
