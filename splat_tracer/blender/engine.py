@@ -24,8 +24,10 @@ from .export.scene import View
 _NEW_PASS_NAMES = bpy.app.version >= (5, 0, 0)
 # Cycles' denoising passes (export/settings.py names them and says when each is written):
 # Blender's name -> (channels, channel ids, type), as Cycles' add-on registers them.
-_DENOISING_PASSES = {"Noisy Image": (4, "RGBA", "COLOR"), "Denoising Normal": (3, "XYZ", "VECTOR"),
-                     "Denoising Albedo": (3, "RGB", "COLOR"), "Denoising Depth": (1, "Z", "VALUE")}
+_DENOISING_PASSES = {export_settings.NOISY_IMAGE: (4, "RGBA", "COLOR"),
+                     export_settings.DENOISING_NORMAL: (3, "XYZ", "VECTOR"),
+                     export_settings.DENOISING_ALBEDO: (3, "RGB", "COLOR"),
+                     export_settings.DENOISING_DEPTH: (1, "Z", "VALUE")}
 # Blender's passes this engine writes: (view-layer switch -- dotted for an add-on's
 # property group -- the core's pass name, Blender's pass name, channels, channel ids, type).
 _PASSES = (
@@ -174,9 +176,11 @@ class SplatTracerEngine(bpy.types.RenderEngine):
         result = self.begin_result(0, 0, w, h, layer=view_layer.name)
         layer = result.layers[0]
         for view in result.views:
-            # Each view its own render; a view Blender adds that the engine did not pick
-            # (none known) would get the first view's image rather than stay black.
-            for name, pixels in frame.views.get(view.name, frame.passes).items():
+            # Each view its own render. A view the render did not reach (stopped in an earlier
+            # one) is left unwritten -- black, as Cycles leaves the views after a cancelled one --
+            # never given another view's image.
+            passes = frame.views.get(view.name) if frame.views else frame.passes
+            for name, pixels in (passes or {}).items():
                 _set_pass(layer, view.name, name, pixels)
         if frame.metadata:
             # Cryptomatte's manifests, saved in the EXR's header: on the engine's whole result
@@ -189,14 +193,18 @@ class SplatTracerEngine(bpy.types.RenderEngine):
             self.end_result(result)
         else:
             # Stopped (Esc): the frame is incomplete and must not be saved as if finished. The
-            # error is set *before* the result is discarded: Blender then writes no file.
-            # (Discarding without the error made Blender's EXR writers crash on the empty
-            # result -- found by the hostile test; tests/test_blender.py reproduces it.)
+            # error is set before the result is ended: Blender then writes no file. (Ending
+            # without the error made Blender's EXR writers crash on the result -- found by the
+            # hostile test; tests/blender/test_import_and_render.py reproduces it.) What was
+            # rendered stays shown, as Cycles leaves a cancelled render: the views done, the
+            # stopped one's samples so far, and black in the views never reached.
+            missing = [view.name for view in result.views if frame.views and view.name not in frame.views]
             message = (f"Splat Tracer: render stopped before the end; the image of view layer '{view_layer.name}' "
-                       "is incomplete and was not saved")
+                       "is incomplete and was not saved"
+                       + (f" (not rendered: view {', '.join(repr(v) for v in missing)})" if missing else ""))
             self.report({"ERROR"}, message)
             self.error_set(message)
-            self.end_result(result, cancel=True)
+            self.end_result(result, cancel=True, merge_results=True)
             return
         s = frame.stats
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "

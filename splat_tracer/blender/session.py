@@ -153,7 +153,8 @@ def sampling_summary(settings: shading.RenderSettings, counters: dict, pixels: i
 
 
 # The core's passes the denoiser's guides are made from (Cycles' Denoising Albedo, Normal, Depth).
-_GUIDES = {"Denoising Albedo": "DiffCol", "Denoising Normal": "Normal", "Denoising Depth": "Depth"}
+_GUIDES = {export_settings.DENOISING_ALBEDO: "DiffCol", export_settings.DENOISING_NORMAL: "Normal",
+           export_settings.DENOISING_DEPTH: "Depth"}
 
 
 def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: int,
@@ -172,8 +173,8 @@ def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: 
         rotation = np.asarray(world_from_camera, dtype=np.float64)[:3, :3]
         rotation = rotation / np.maximum(np.linalg.norm(rotation, axis=0), 1e-30)
         normal = (normal.astype(np.float64) @ rotation * (1.0, 1.0, -1.0)).astype(np.float32)
-    guides = {"Denoising Albedo": passes.get("DiffCol"), "Denoising Normal": normal,
-              "Denoising Depth": passes.get("Depth")}
+    guides = {export_settings.DENOISING_ALBEDO: passes.get("DiffCol"), export_settings.DENOISING_NORMAL: normal,
+              export_settings.DENOISING_DEPTH: passes.get("Depth")}
     for name, pixels in guides.items():
         if name in wanted and pixels is not None:
             out[name] = pixels
@@ -186,8 +187,8 @@ def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: 
         report.once("Denoise: Blender's OpenImageDenoise library was not found, the image is not denoised")
         return out
     try:
-        clean = denoise.denoise(combined[..., :3], guides["Denoising Albedo"] if denoising.albedo else None,
-                                normal if denoising.normal else None, denoising.prefilter, denoising.quality, threads)
+        albedo = guides[export_settings.DENOISING_ALBEDO] if denoising.albedo else None
+        clean = denoise.denoise(combined[..., :3], albedo, normal if denoising.normal else None, denoising.prefilter, denoising.quality, threads)
     except RuntimeError as e:
         # Skip, don't refuse: the frame is kept, noisy (e.g. an older Blender's OIDN refusing
         # a setting it does not know).

@@ -23,7 +23,12 @@ NOISY_SAMPLES, REFERENCE_SAMPLES = 4, 256
 # Measured (96 x 64): RMS error against the reference 0.0905 -> 0.0336 denoised (2.7x); Cycles
 # 0.1286 -> 0.0390 (3.3x). Asked: 1.5x, well above no denoising's 1.0.
 MIN_GAIN = 1.5
-DENOISING = ("Noisy Image", "Denoising Normal", "Denoising Albedo", "Denoising Depth")
+
+
+def _names():
+    """The extension's names of the denoising passes (export/settings.py: their one spelling;
+    test_denoising_passes_have_cycles_names checks them against Cycles' render)."""
+    return extension_module("blender.export.settings")
 
 
 def _scene(bpy, scene):
@@ -77,13 +82,14 @@ def test_denoising_lowers_the_error_as_cycles(blender, empty_scene, tmp_path):
           f"({noisy / denoised:.2f}x), Cycles {c_noisy:.4f} -> {c_denoised:.4f} ({c_noisy / c_denoised:.2f}x)")
     assert noisy / denoised >= MIN_GAIN, (noisy, denoised)
     # Denoise off: the engine's own image, which the denoised render keeps as Noisy Image.
+    names = _names()
     np.testing.assert_array_equal(ours["noisy"]["ViewLayer"]["Combined"],
-                                  ours["denoised"]["ViewLayer"]["Noisy Image"])
-    assert "Noisy Image" not in ours["noisy"]["ViewLayer"]
+                                  ours["denoised"]["ViewLayer"][names.NOISY_IMAGE])
+    assert names.NOISY_IMAGE not in ours["noisy"]["ViewLayer"]
     stats = extension_module("blender.session").HISTORY
     said = [s["sampling"] for s in stats[-3:]]
-    assert sum("denoised by OpenImageDenoise (CPU) from the image, Denoising Albedo and Denoising Normal" in s
-               for s in said) == 1, said
+    inputs = f"from the image, {names.DENOISING_ALBEDO} and {names.DENOISING_NORMAL}"
+    assert sum(f"denoised by OpenImageDenoise (CPU) {inputs}" in s for s in said) == 1, said
 
 
 def test_denoising_passes_have_cycles_names(blender, empty_scene, tmp_path):
@@ -97,19 +103,23 @@ def test_denoising_passes_have_cycles_names(blender, empty_scene, tmp_path):
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"
     cycles = render(bpy, scene, tmp_path / "cycles.exr", (W, H))["ViewLayer"]
-    assert set(DENOISING) <= set(cycles), sorted(cycles)
-    assert set(DENOISING) <= set(ours), sorted(ours)
-    for name in DENOISING:
+    names = _names()
+    denoising = (names.NOISY_IMAGE, *names.DENOISING_DATA)
+    assert len(denoising) == 4
+    assert set(denoising) <= set(cycles), sorted(cycles)
+    assert set(denoising) <= set(ours), sorted(ours)
+    for name in denoising:
         assert ours[name].shape == cycles[name].shape, name
     # Camera-space normals, as Cycles': where both see the floor, the same vector.
-    floor = (np.abs(ours["Denoising Albedo"] - 0.6).max(axis=-1) < 0.05) & \
-            (np.abs(cycles["Denoising Albedo"] - 0.6).max(axis=-1) < 0.1)
+    albedo, normal = names.DENOISING_ALBEDO, names.DENOISING_NORMAL
+    floor = (np.abs(ours[albedo] - 0.6).max(axis=-1) < 0.05) & \
+            (np.abs(cycles[albedo] - 0.6).max(axis=-1) < 0.1)
     assert floor.sum() > 200, floor.sum()
-    np.testing.assert_allclose(np.median(ours["Denoising Normal"][floor], axis=0),
-                               np.median(cycles["Denoising Normal"][floor], axis=0), atol=0.05)
+    np.testing.assert_allclose(np.median(ours[normal][floor], axis=0),
+                               np.median(cycles[normal][floor], axis=0), atol=0.05)
     # The world-space Normal pass is not it (the floor's (0, 0, 1) there): the test sees the space.
     world = np.median(ours["Normal"][floor], axis=0)
-    assert np.abs(world - np.median(cycles["Denoising Normal"][floor], axis=0)).max() > 0.3, world
+    assert np.abs(world - np.median(cycles[normal][floor], axis=0)).max() > 0.3, world
 
 
 def test_denoise_off_without_passes_is_the_plain_render(blender, empty_scene):

@@ -27,6 +27,9 @@ CUBE_DEPTH, SPHERE_DEPTH = 3.0, 8.0  # the centres' distances from the camera
 # the sphere cloud's within 0.15 px (Cycles draws a cloud's points as spheres) and within
 # 0.3 px of the pinhole formula; doubling the interocular distance moves them by 2.7 to 8 px.
 DISPARITY_TOLERANCE = 0.5
+# A stopped-render test's samples: a view takes about 0.3 s (measured: 0.085 s at 64), many
+# times the core's 50 ms between progress calls.
+SLOW_SAMPLES = 256
 
 
 def _scene(bpy, scene, mode):
@@ -202,3 +205,68 @@ def test_every_view_gets_its_cryptomatte_layers(blender, empty_scene, tmp_path):
     assert len(keys) == 1, keys
     manifest = header[keys[0]]
     assert set(json.loads(manifest.decode() if isinstance(manifest, bytes) else manifest)) == {"Cube", "Ball"}
+
+
+@pytest.mark.parametrize("stopped", ["left", "right"])
+def test_a_view_stopped_or_never_reached_gets_no_other_views_image(blender, empty_scene, monkeypatch, stopped):
+    """Esc in a stereo render, as Cycles leaves a cancelled multi-view render: the views done
+    keep their image, the stopped view its samples so far, and a view never reached is left
+    unwritten (black) -- never given the first view's image, which it used to get. What the
+    engine writes into each view of the result is recorded at its _set_pass (headless
+    Blender's Render Result has no pixels to read back, and a stopped render writes no file).
+    Esc is what the engine's progress callback answers: the test's flag, raised as the
+    stopped view's render starts; a view renders SLOW_SAMPLES (several times the core's 50 ms
+    between progress calls) so that the stop lands within it."""
+    from blender_helpers import extension_module
+
+    bpy, scene = blender, empty_scene
+    _scene(bpy, scene, "OFFAXIS")
+    scene.cycles.samples = SLOW_SAMPLES
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = W, H, 100
+    scene.render.engine = "SPLAT_TRACER"
+    engine, session = extension_module("blender.engine"), extension_module("blender.session")
+    render_scene = extension_module("render.scene").RenderScene
+    written, state = {}, {"views": 0, "stop": False, "stop_at": None}
+    real_set_pass, real_frame, real_render = engine._set_pass, session.render_frame, render_scene.render
+
+    def set_pass(layer, view, name, pixels):
+        written[(view, name)] = np.array(pixels)
+        real_set_pass(layer, view, name, pixels)
+
+    def render_view(self, *args, **kw):
+        state["views"] += 1
+        state["stop"] = state["views"] == state["stop_at"]
+        return real_render(self, *args, **kw)
+
+    def render_frame(depsgraph, method, passes=("Combined",), progress=None, **kw):
+        def stop(done, total):
+            progress(done, total)
+            return state["stop"]
+        return real_frame(depsgraph, method, passes, progress=stop, **kw)
+
+    monkeypatch.setattr(engine, "_set_pass", set_pass)
+    monkeypatch.setattr(session, "render_frame", render_frame)
+    monkeypatch.setattr(render_scene, "render", render_view)
+    bpy.ops.render.render()
+    full = {view: written[(view, "Combined")] for view in ("left", "right")}
+    assert not np.array_equal(full["left"], full["right"])
+
+    written.clear()
+    state["views"], state["stop_at"] = 0, 1 if stopped == "left" else 2
+    with pytest.raises(RuntimeError, match="render stopped before the end") as error:
+        bpy.ops.render.render()
+    assert session.HISTORY[-1]["completed"] is False
+    views = {view for view, _ in written}
+    if stopped == "left":
+        # The stopped first view shows its samples so far; the right eye was never rendered.
+        assert views == {"left"}, sorted(written)
+        assert not np.array_equal(written[("left", "Combined")], full["left"])
+        assert "not rendered: view 'right'" in str(error.value)
+    else:
+        # The left eye finished: its whole image; the right stopped partway: its own samples,
+        # not the left eye's image.
+        assert views == {"left", "right"}, sorted(written)
+        np.testing.assert_array_equal(written[("left", "Combined")], full["left"])
+        assert not np.array_equal(written[("right", "Combined")], full["right"])
+        assert not np.array_equal(written[("right", "Combined")], full["left"])
+        assert "not rendered" not in str(error.value)

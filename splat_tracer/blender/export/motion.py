@@ -121,6 +121,31 @@ def _may_deform(obj) -> bool:
                for m in getattr(obj, "modifiers", ()))
 
 
+# Object types whose transforms are not blurred: lights are exported at the frame's time,
+# cameras are read by name (the cameras rendered), empties only instance other objects.
+_UNBLURRED_TYPES = ("LIGHT", "CAMERA", "EMPTY")
+
+
+def _read_transforms(depsgraph, cameras: dict, keys=None) -> tuple[dict, dict, dict]:
+    """The transforms at the depsgraph's current time, read one way for motion blur and the
+    Vector pass: the instances' world matrices by instance_key (those in `keys`; None: every
+    instance of a blurred type), the cameras' (by name) normalized world matrices and focal
+    lengths."""
+    objects = {}
+    for inst in depsgraph.object_instances:
+        if inst.object.type in _UNBLURRED_TYPES:
+            continue
+        key = instance_key(inst)
+        if keys is None or key in keys:
+            objects[key] = np.array(inst.matrix_world, np.float64)
+    views, lenses = {}, {}
+    for name, camera in cameras.items():
+        evaluated = camera.evaluated_get(depsgraph)
+        views[name] = np.array(evaluated.matrix_world.normalized(), np.float64)
+        lenses[name] = float(evaluated.data.lens)
+    return objects, views, lenses
+
+
 def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: shading.Report,
                   cameras=None) -> Optional[Motion]:
     """The cameras' and the instances' transforms at the shutter's motion steps, or None when
@@ -142,7 +167,7 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     deforming = []
     for inst in depsgraph.object_instances:
         obj = inst.object
-        if obj.type in ("LIGHT", "CAMERA", "EMPTY"):
+        if obj.type in _UNBLURRED_TYPES:
             continue
         steps = motion_steps(obj.original or obj, (inst.parent.original or inst.parent) if inst.is_instance else None)
         if steps:
@@ -165,14 +190,12 @@ def sample_motion(depsgraph, frame_set: Callable[[int, float], None], report: sh
     lens = {name: set() for name in cameras}
 
     def read(i):
-        for inst in depsgraph.object_instances:
-            key = instance_key(inst)
-            if key in objects:
-                objects[key][i] = np.array(inst.matrix_world, np.float64)
-        for name, camera in cameras.items():
-            evaluated = camera.evaluated_get(depsgraph)
-            cam[name][i] = np.array(evaluated.matrix_world.normalized(), np.float64)
-            lens[name].add(round(float(evaluated.data.lens), 6))
+        now, views, lenses = _read_transforms(depsgraph, cameras, objects)
+        for key, m in now.items():
+            objects[key][i] = m
+        for name in cameras:
+            cam[name][i] = views[name]
+            lens[name].add(round(lenses[name], 6))
 
     # The frame's own time first, while the depsgraph is still evaluated there.
     at_frame = [i for i, t in enumerate(times) if t == 0.0]
@@ -247,18 +270,12 @@ def sample_frame_motion(depsgraph, frame_set: Callable[[int, float], None], repo
     deforming = set()
 
     def read():
-        objects = {}
-        for inst in depsgraph.object_instances:
-            if inst.object.type in ("LIGHT", "CAMERA", "EMPTY"):
-                continue
-            objects[instance_key(inst)] = np.array(inst.matrix_world, np.float64)
-        return objects, {name: np.array(c.evaluated_get(depsgraph).matrix_world.normalized(), np.float64)
-                         for name, c in cameras.items()}
+        return _read_transforms(depsgraph, cameras)[:2]
 
     now = read()
     for inst in depsgraph.object_instances:
         source = inst.object.original or inst.object
-        if inst.object.type not in ("LIGHT", "CAMERA", "EMPTY") and _may_deform(source):
+        if inst.object.type not in _UNBLURRED_TYPES and _may_deform(source):
             deforming.add(source.name)
     others = []
     try:

@@ -92,8 +92,13 @@ def _stored(owner, prop: str, default):
     return default if store is None else store.get(prop, default)
 
 
+# Cycles' denoising passes, by the names Cycles gives them (the one place they are spelled:
+# the engine registers them, the session writes them, the report names the guides).
 NOISY_IMAGE = "Noisy Image"
-DENOISING_DATA = ("Denoising Normal", "Denoising Albedo", "Denoising Depth")
+DENOISING_NORMAL = "Denoising Normal"
+DENOISING_ALBEDO = "Denoising Albedo"
+DENOISING_DEPTH = "Denoising Depth"
+DENOISING_DATA = (DENOISING_NORMAL, DENOISING_ALBEDO, DENOISING_DEPTH)
 
 
 @dataclass(frozen=True)
@@ -113,8 +118,8 @@ class Denoising:
         return self.input_passes == "RGB_ALBEDO_NORMAL"
 
     def describe(self) -> str:
-        inputs = {"RGB": "the image alone", "RGB_ALBEDO": "the image and Denoising Albedo",
-                  "RGB_ALBEDO_NORMAL": "the image, Denoising Albedo and Denoising Normal"}[self.input_passes]
+        inputs = {"RGB": "the image alone", "RGB_ALBEDO": f"the image and {DENOISING_ALBEDO}",
+                  "RGB_ALBEDO_NORMAL": f"the image, {DENOISING_ALBEDO} and {DENOISING_NORMAL}"}[self.input_passes]
         return (f"denoised by OpenImageDenoise (CPU) from {inputs}, prefilter {self.prefilter.title()}, "
                 f"quality {self.quality.title()}")
 

@@ -152,6 +152,15 @@ struct Integrator::Lobes {
         return std::clamp(f0 * a + b * std::fmin(1.f, f0 / 0.04f), 0.f, 1.f);
     }
     Vec3 transmission(float c) const { return base * (glass * (1.f - fresnel_dielectric(c, eta))); }
+    // The glossy lobes' reflection from wo towards wi (both about n, cos_o = n . wo and
+    // cos_i = n . wi > 0): the GGX microfacet BRDF, Smith's G1 each way. Lamps, emissive
+    // triangles and the environment light all shade with it.
+    Vec3 glossy_brdf(Vec3 n, Vec3 wo, float cos_o, Vec3 wi, float cos_i) const {
+        const Vec3 h = normalize(wo + wi);
+        const float ch = std::fmax(dot(n, h), 0.f);
+        const float g = ggx_g1(cos_o, alpha) * ggx_g1(cos_i, alpha);
+        return specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, alpha) * g / (4.f * cos_o * cos_i));
+    }
     // The glossy lobes' albedo seen from cos_o: the Glossy Color pass (Cycles' is the
     // closures' albedo). Mirror-smooth, the Fresnel reflectance itself.
     Vec3 glossy_albedo(float cos_o) const {
@@ -270,24 +279,17 @@ void Integrator::shade_block(const int *cols, const int *rows, int n, Tally &tal
         auto put3 = [&](float *buf, Vec3 v) {
             if (buf) buf[3 * p] = v.x, buf[3 * p + 1] = v.y, buf[3 * p + 2] = v.z;
         };
-        if (catchers) {
-            write_catcher(a.catcher, inv, a.alpha * inv, p);
-        } else {
-            if (film_.combined) {
-                float *o = film_.combined + 4 * p;
-                o[0] = a.sum.x * inv, o[1] = a.sum.y * inv, o[2] = a.sum.z * inv, o[3] = a.alpha * inv;
-            }
-            put3(film_.shadow_catcher, Vec3(1, 1, 1));  // no catcher: nothing to darken
+        // The sums into the film, then finished as a progressive render's are (the samples
+        // added their AOVs straight into the film).
+        if (film_.combined) {
+            float *o = film_.combined + 4 * p;
+            o[0] = a.sum.x, o[1] = a.sum.y, o[2] = a.sum.z, o[3] = a.alpha;
         }
-        put3(film_.diffcol, a.diffcol * inv);
-        put3(film_.emit, a.emit * inv);
-        put3(film_.shadow, a.shadow * inv);
-        put3(film_.environment, a.environment * inv);
-        if (film_.mist) film_.mist[p] = 1.f - a.mist * inv;
-        if (film_.aov.on()) film_.aov.scale(p, inv);  // the samples added their AOVs straight into the film
-        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
+        put3(film_.diffcol, a.diffcol), put3(film_.emit, a.emit), put3(film_.shadow, a.shadow);
+        put3(film_.environment, a.environment);
+        if (film_.mist) film_.mist[p] = a.mist;
+        finish_pixel(p, inv, a.alpha, catchers ? &a.catcher : nullptr, light_split() ? &a.light : nullptr);
         write_centre(a.centre, p);
-        if (light_split()) write_light(a.light, inv, p);
     }
 }
 
@@ -507,26 +509,35 @@ uint64_t Integrator::finish() {
     for (size_t p = 0; p < taken_.size(); ++p) {
         total += taken_[p];
         if (!taken_[p]) continue;  // never sampled: a stopped render, discarded by the caller
-        const float inv = 1.f / float(taken_[p]);
         // Until here Combined held every sample's full path, the catcher's included: the
         // adaptive check's estimate, as in Cycles, which measures the noise of Combined "as if
         // there were no catchers in the scene" (kernel/film/light_passes.h).
-        if (!catcher_.empty()) {
-            write_catcher(catcher_[p], inv, film_.combined[4 * p + 3] * inv, p);
-        } else {
-            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
-            if (film_.shadow_catcher)
-                for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
-        }
-        for (float *buf : {film_.diffcol, film_.emit, film_.shadow, film_.environment})
-            if (buf)
-                for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
-        if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
-        if (film_.aov.on()) film_.aov.scale(p, inv);
-        if (!light_.empty()) write_light(light_[p], inv, p);
-        if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
+        finish_pixel(p, 1.f / float(taken_[p]), film_.combined[4 * p + 3], catcher_.empty() ? nullptr : &catcher_[p],
+                     light_.empty() ? nullptr : &light_[p]);
     }
     return total;
+}
+
+// A pixel's passes from the sums the film holds (`inv` one over the samples; alpha_sum the
+// coverage's sum), the shadow catchers' and the light passes' from theirs (null: none): the
+// means, and the passes Cycles' film forms from sums (film/read.h).
+void Integrator::finish_pixel(size_t p, float inv, float alpha_sum, const CatcherSums *catcher,
+                              const LightSums *light) const {
+    if (catcher) {
+        write_catcher(*catcher, inv, alpha_sum * inv, p);
+    } else {
+        if (film_.combined)
+            for (int c = 0; c < 4; ++c) film_.combined[4 * p + size_t(c)] *= inv;
+        if (film_.shadow_catcher)
+            for (int c = 0; c < 3; ++c) film_.shadow_catcher[3 * p + size_t(c)] = 1.f;  // nothing to darken
+    }
+    for (float *buf : {film_.diffcol, film_.emit, film_.shadow, film_.environment})
+        if (buf)
+            for (int c = 0; c < 3; ++c) buf[3 * p + size_t(c)] *= inv;
+    if (film_.mist) film_.mist[p] = 1.f - film_.mist[p] * inv;
+    if (film_.aov.on()) film_.aov.scale(p, inv);
+    if (light) write_light(*light, inv, p);
+    if (film_.cryptomatte.enabled()) film_.cryptomatte.finish(p, inv);
 }
 
 // The passes of the pixel-centre sample (Cycles' data passes, written at its sample 0).
@@ -940,24 +951,13 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
     const int k = settings_.shadow_samples;
     const float share = 1.f / float(k);
     // The reflection towards wi (cos_i = n . wi > 0): the diffuse and the glossy lobe.
-    auto glossy_brdf = [&](Vec3 wi, float cos_i) {
-        const Vec3 h = normalize(wo + wi);
-        const float ch = std::fmax(dot(n, h), 0.f);
-        const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-        return lobes.specular(std::fmax(dot(wo, h), 0.f)) * (ggx_d(ch, lobes.alpha) * g / (4.f * cos_o * cos_i));
-    };
+    auto glossy_brdf = [&](Vec3 wi, float cos_i) { return lobes.glossy_brdf(n, wo, cos_o, wi, cos_i); };
     // Clamped, each lamp's light here is one contribution, as each of Cycles' shadow rays is
     // (Cycles picks one lamp per shadow ray; this engine samples every lamp).
     const bool clamp = (indirect ? clamp_indirect_ : clamp_direct_) < kInfinity;
     const bool split = st.split != nullptr;  // read once: the stores below may alias it
-    // Light passes: one source's light `all` here, of which `diffuse_part` lit the diffuse
-    // lobe (the rest the glossy one), and `added`, what the path got of it after the clamp.
     auto tap_split = [&](Vec3 all, Vec3 diffuse_part, Vec3 added, int group) {
-        const float total = luminance(all);
-        if (!(total > 0.f)) return;
-        const float scale = luminance(added) / total;  // the clamp scales all channels alike
-        tap(st, diffuse_part * scale, group, false, kLobeDiffuse);
-        tap(st, (all - diffuse_part) * scale, group, false, kLobeGlossy);
+        tap_sampled(st, all, diffuse_part, added, group);
     };
     Vec3 L;
     for (size_t i = 0; i < lights.size(); ++i) {
@@ -1074,12 +1074,7 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const float cos_i = dot(n, es.wi);
         if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
         Vec3 f = diffuse;
-        if (glossy) {
-            const Vec3 h = normalize(wo + es.wi);
-            const float g = ggx_g1(cos_o, lobes.alpha) * ggx_g1(cos_i, lobes.alpha);
-            f = f + lobes.specular(std::fmax(dot(wo, h), 0.f)) *
-                        (ggx_d(std::fmax(dot(n, h), 0.f), lobes.alpha) * g / (4.f * cos_o * cos_i));
-        }
+        if (glossy) f = f + lobes.glossy_brdf(n, wo, cos_o, es.wi, cos_i);
         const float light_pdf = es.pdf * float(k);
         const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
                             ? 1.f
@@ -1091,14 +1086,11 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const Vec3 lit = c * through;
         const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
         L = L + added;
-        const float total = luminance(lit);
-        if (st.split && total > 0.f) {  // (0: shadowed, nothing to split)
+        if (st.split) {
             // The world's light reaching a surface is Direct light in Cycles' passes, as a
-            // lamp's: its diffuse share to Diffuse, the rest to Glossy, all to the world's group.
-            const float scale = luminance(added) / total;  // the clamp scales all channels alike
+            // lamp's, all in the world's group.
             const Vec3 diffuse_part = diffuse * es.radiance * through * (cos_i * w / light_pdf);
-            tap(st, diffuse_part * scale, settings_.light_groups.world, false, kLobeDiffuse);
-            tap(st, (lit - diffuse_part) * scale, settings_.light_groups.world, false, kLobeGlossy);
+            tap_sampled(st, lit, diffuse_part, added, settings_.light_groups.world);
         }
     }
     return L;
@@ -1165,6 +1157,18 @@ void Integrator::tap(const PathState &st, Vec3 c, int group, bool found, int lob
     if (l == kLobeNone) return;
     if (st.bounces == (found ? 1 : 0)) sums.direct[l] = sums.direct[l] + v;
     else sums.indirect[l] = sums.indirect[l] + v;
+}
+
+// Light sampled at a surface (a lamp's, emissive triangles', the world's): `all` reached it, of
+// which `diffuse_part` lit the diffuse lobe and the rest the glossy one; `added` is what the
+// path got of it after the clamp, which scales all channels alike. Nothing when all is 0
+// (shadowed: nothing to split).
+void Integrator::tap_sampled(const PathState &st, Vec3 all, Vec3 diffuse_part, Vec3 added, int group) const {
+    const float total = luminance(all);
+    if (!(total > 0.f)) return;
+    const float scale = luminance(added) / total;
+    tap(st, diffuse_part * scale, group, false, kLobeDiffuse);
+    tap(st, (all - diffuse_part) * scale, group, false, kLobeGlossy);
 }
 
 float Integrator::ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,

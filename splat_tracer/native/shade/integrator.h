@@ -153,6 +153,9 @@ class Integrator {
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally) const;
     Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng, Tally &tally) const;
     void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
+    // A pixel's passes finished from their sums (shade_block's and finish()'s one way).
+    void finish_pixel(size_t p, float inv, float alpha_sum, const CatcherSums *catcher,
+                      const LightSums *light) const;
     // 1 - Cycles' mist at local point p (what Cycles accumulates: the pass is 1 - the mean).
     float mist_term(Vec3 p) const;
     void write_centre(const Primary &centre, size_t p) const;
@@ -161,6 +164,8 @@ class Integrator {
     // sampled there), of light group `group` (-1: none); `lobe`: at the camera's own vertex,
     // the lobe that light sampled there lit.
     void tap(const PathState &st, Vec3 c, int group, bool found, int lobe = kLobeNone) const;
+    // tap() of light sampled at a surface, split between its diffuse and glossy lobes.
+    void tap_sampled(const PathState &st, Vec3 all, Vec3 diffuse_part, Vec3 added, int group) const;
     // Cycles' AO pass at the camera ray's first hit: 1 if a cosine-distributed ray from it
     // meets nothing within ao_distance, else 0.
     float ao_term(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
