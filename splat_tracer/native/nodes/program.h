@@ -160,10 +160,6 @@ struct NodeProgram {
 // Blender's colour helpers, shared by the nodes and their tests.
 Vec3 rgb_to_hsv(Vec3 rgb);
 Vec3 hsv_to_rgb(Vec3 hsv);
-// Blender's Perlin noise in 3-D, signed (about -1..1) and its fractal sum; Cycles' definitions.
-float perlin_signed(Vec3 p);
-float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize);
-uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
 // The Blackbody node's colour of a temperature in K: linear Rec. 709 of luminance 1 (as Cycles
 // normalises it), negative channels clamped to 0, the temperature held within 800-12000 K.
 Vec3 blackbody_rec709(float kelvin);
