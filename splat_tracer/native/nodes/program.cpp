@@ -24,6 +24,8 @@ struct Layout {
     int32_t bound[kNodeWidth - 1];  // kEnum: values 0..bound-1
 };
 
+// The Noise node's register block: NoiseParams, eight floats.
+constexpr int32_t kNoiseParams = int32_t(sizeof(NoiseParams) / sizeof(float));
 constexpr int kMathOps = 41, kVectorOps = 29, kBlends = 19;  // render/nodes.py MATH_OPS, VECTOR_OPS, BLENDS
 
 const Layout &layout(Op op) {
@@ -51,7 +53,8 @@ const Layout &layout(Op op) {
         /* Gradient */ {{kR3, kR1, kR3, kEnum}, {0, 0, 0, 7}},
         /* Fresnel */ {{kR1, kR1, kR3}, {}},
         /* LayerWeight */ {{kR1, kR1, kR1, kR3}, {}},
-        /* Noise */ {{kR1, kR3, kR3, kR5, kEnum, kEnum}, {0, 0, 0, 0, 2, 2}},
+        /* Noise (dimensions 1-4) */
+        {{kR1, kR3, kR3, kRW, kEnum, kEnum, kEnum}, {0, 0, 0, kNoiseParams, 5, int32_t(NoiseType::Count), 4}},
         /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
         /* Scale */ {{kR3, kR3, kR1}, {}},
         /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
@@ -839,20 +842,12 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 r[c[2]] = 1.f - f;
                 break;
             }
-            case Op::Noise: {
-                const float *p = r + c[4];  // scale, detail, roughness, lacunarity, distortion
-                Vec3 q = load3(r, c[3]) * p[0];
-                const float detail = std::fmin(std::fmax(p[1], 0.f), 15.f), rough = std::fmax(p[2], 0.f);
-                const float lac = p[3], dist = p[4];
-                const bool norm = c[5] != 0;
-                if (dist != 0.f)
-                    q = q + Vec3(perlin_signed(q + random_offset(0.f)), perlin_signed(q + random_offset(1.f)),
-                                 perlin_signed(q + random_offset(2.f))) * dist;
-                const float f = noise_fbm(q, detail, rough, lac, norm);
-                r[c[1]] = f;
-                if (c[6])  // the Color output is read: two more fractal sums at offset points
-                    store3(r, c[2], {f, noise_fbm(q + random_offset(3.f), detail, rough, lac, norm),
-                                     noise_fbm(q + random_offset(4.f), detail, rough, lac, norm)});
+            case Op::Noise: {  // Blender's Noise Texture node (nodes/noise.h)
+                NoiseParams q;
+                std::memcpy(&q, r + c[4], sizeof q);
+                Vec3 colour;
+                r[c[1]] = noise_texture(c[5], NoiseType(c[6]), load3(r, c[3]), q, c[7] & 1, c[7] & 2 ? &colour : nullptr);
+                if (c[7] & 2) store3(r, c[2], colour);  // the Color output is read
                 break;
             }
             case Op::WhiteNoise: {

@@ -104,8 +104,9 @@ enum class Op : int32_t {
     Gradient,       // out_colour, out_fac, vector, type
     Fresnel,        // out, ior, normal
     LayerWeight,    // out_fresnel, out_facing, blend, normal
-    Noise,          // out_fac, out_colour, vector, params (scale detail roughness lacunarity distortion), normalize,
-                    // colour (0: the Color output is not read, not computed)
+    Noise,          // out_fac, out_colour, vector, params (8: scale detail roughness lacunarity distortion w offset
+                    // gain), dimensions (1-4), NoiseType, flags (1: normalize, 2: the Color output is read --
+                    // otherwise not computed)
     WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
