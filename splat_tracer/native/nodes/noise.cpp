@@ -306,6 +306,9 @@ uint32_t hash_uint4(uint32_t kx, uint32_t ky, uint32_t kz, uint32_t kw) {
 }
 
 float perlin_signed(Vec3 p) {
+    // A non-finite input gives 0 (as the check of the result below always made it), before
+    // its cell is converted to an int (undefined for inf and NaN).
+    if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) return 0.f;
     // Blender repeats the noise every 100000 units (float precision), nudging beyond 1e6.
     for (int i = 0; i < 3; ++i) {
         const float correction = std::fabs(p[i]) >= 1000000.f ? 0.5f : 0.f;
