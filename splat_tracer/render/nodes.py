@@ -56,6 +56,10 @@ VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYSHEV", "MINKOWSKI")
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
+# Noise Texture: Blender's noise_type identifiers (native NoiseType), and the node's inputs in
+# the order of the NOISE instruction's register block (native NoiseParams).
+NOISE_TYPES = ("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN")
+NOISE_PARAMS = ("Scale", "Detail", "Roughness", "Lacunarity", "Distortion", "W", "Offset", "Gain")
 
 # The shading point as run_nodes takes it: these vec3s, then point_alpha, backfacing and
 # tangent_sign. tangent: the UV map's (unit, perpendicular to surface_normal, the surface's

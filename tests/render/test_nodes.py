@@ -433,7 +433,8 @@ def test_noise_matches_blenders_definition():
     fac, colour = b.register(), b.register(width=3)
     params = b.register((scale, detail, rough), 3)
     b.register(lac), b.register(0.0)  # lacunarity, no distortion
-    b.emit("NOISE", fac, colour, b.global_("OBJECT"), params, 1, 1)
+    b.register(0.0), b.register(0.0), b.register(0.0)  # W, offset, gain: not read by 3-D fBm
+    b.emit("NOISE", fac, colour, b.global_("OBJECT"), params, 3, nodes.NOISE_TYPES.index("FBM"), 1 | 2)
     r = nodes.run(b.program(), len(pts), object=pts)
     want = [_fbm(p * scale, detail, rough, lac) for p in pts.astype(np.float32)]
     np.testing.assert_allclose(r[:, fac], want, atol=2e-5)

@@ -530,19 +530,28 @@ class Compiler:
         return self._ids(node, {"Color": colour, "Fac": fac})
 
     def _tex_noise(self, node, stack):
-        if node.noise_dimensions != "3D":
+        dims = {"1D": 1, "2D": 2, "3D": 3, "4D": 4}.get(node.noise_dimensions)
+        kind = getattr(node, "noise_type", "FBM")
+        if dims is None:
             raise Unsupported(node, f"{node.noise_dimensions} noise")
-        if getattr(node, "noise_type", "FBM") != "FBM":
-            raise Unsupported(node, f"{node.noise_type.replace('_', ' ').lower()} noise")
-        vector = self._vector_or(node, stack)
+        if kind not in nodes.NOISE_TYPES:
+            raise Unsupported(node, f"{kind.replace('_', ' ').lower()} noise")
+        # Only the inputs this dimension and type read are compiled (the others stay 0), as in
+        # Cycles: W in 1-D and 4-D, Offset for the ridged, hybrid and hetero terrain types, Gain
+        # for ridged and hybrid; the Vector not in 1-D.
+        used = ["Scale", "Detail", "Roughness", "Lacunarity", "Distortion"]
+        used += ["W"] if dims in (1, 4) else []
+        used += ["Offset"] if kind in ("RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN") else []
+        used += ["Gain"] if kind in ("RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL") else []
+        vector = self._vector_or(node, stack) if dims > 1 else self.const((0, 0, 0), 3)
         params = self.b.register()
-        for _ in range(4):
+        for _ in nodes.NOISE_PARAMS[1:]:
             self.b.register()
-        for k, name in enumerate(("Scale", "Detail", "Roughness", "Lacunarity", "Distortion")):
-            self.b.emit("COPY", params + k, self._in(node, name, 1, stack), 1)
+        for name in used:
+            self.b.emit("COPY", params + nodes.NOISE_PARAMS.index(name), self._in(node, name, 1, stack), 1)
         fac, colour = self.b.register(), self.b.register(width=3)
-        self.b.emit("NOISE", fac, colour, vector, params, int(getattr(node, "normalize", True)),
-                    int(node.outputs["Color"].is_linked))
+        flags = int(getattr(node, "normalize", True)) | 2 * int(node.outputs["Color"].is_linked)
+        self.b.emit("NOISE", fac, colour, vector, params, dims, nodes.NOISE_TYPES.index(kind), flags)
         return self._ids(node, {"Fac": fac, "Color": colour})
 
     def _params(self, node, stack, names, extra=()):

@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include "base/errors.h"
+#include "nodes/noise.h"
 
 namespace splat {
 
@@ -23,6 +24,8 @@ struct Layout {
     int32_t bound[kNodeWidth - 1];  // kEnum: values 0..bound-1
 };
 
+// The Noise node's register block: NoiseParams, eight floats.
+constexpr int32_t kNoiseParams = int32_t(sizeof(NoiseParams) / sizeof(float));
 constexpr int kMathOps = 41, kVectorOps = 29, kBlends = 19;  // render/nodes.py MATH_OPS, VECTOR_OPS, BLENDS
 
 const Layout &layout(Op op) {
@@ -50,7 +53,8 @@ const Layout &layout(Op op) {
         /* Gradient */ {{kR3, kR1, kR3, kEnum}, {0, 0, 0, 7}},
         /* Fresnel */ {{kR1, kR1, kR3}, {}},
         /* LayerWeight */ {{kR1, kR1, kR1, kR3}, {}},
-        /* Noise */ {{kR1, kR3, kR3, kR5, kEnum, kEnum}, {0, 0, 0, 0, 2, 2}},
+        /* Noise (dimensions 1-4) */
+        {{kR1, kR3, kR3, kRW, kEnum, kEnum, kEnum}, {0, 0, 0, kNoiseParams, 5, int32_t(NoiseType::Count), 4}},
         /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
         /* Scale */ {{kR3, kR3, kR1}, {}},
         /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
@@ -374,67 +378,12 @@ float gradient(Vec3 p, int type) {
     }
 }
 
-inline uint32_t rot(uint32_t x, int k) { return (x << k) | (x >> (32 - k)); }
-inline void final_mix(uint32_t &a, uint32_t &b, uint32_t &c) {  // Bob Jenkins' lookup3 final()
-    c ^= b, c -= rot(b, 14);
-    a ^= c, a -= rot(c, 11);
-    b ^= a, b -= rot(a, 25);
-    c ^= b, c -= rot(b, 16);
-    a ^= c, a -= rot(c, 4);
-    b ^= a, b -= rot(a, 14);
-    c ^= b, c -= rot(b, 24);
-}
-inline uint32_t float_bits(float f) {
-    uint32_t u;
-    std::memcpy(&u, &f, 4);
-    return u;
-}
-// lookup3 hashes of 1-3 words, as Blender seeds them (0xdeadbeef + words * 4 + 13).
-uint32_t hash_words(int n, uint32_t x, uint32_t y, uint32_t z) {
-    uint32_t a, b, c;
-    a = b = c = 0xdeadbeefu + (uint32_t(n) << 2) + 13u;
-    if (n >= 3) c += z;
-    if (n >= 2) b += y;
-    a += x;
-    final_mix(a, b, c);
-    return c;
-}
-inline float to_unit(uint32_t h) { return float(h) * (1.f / float(0xFFFFFFFFu)); }
-
-inline float fade(float t) { return t * t * t * (t * (t * 6.f - 15.f) + 10.f); }
-inline float grad3(uint32_t hash, float x, float y, float z) {
-    const uint32_t h = hash & 15u;
-    const float u = h < 8u ? x : y;
-    const float vt = (h == 12u || h == 14u) ? x : z;
-    const float v = h < 4u ? y : vt;
-    return ((h & 1u) ? -u : u) + ((h & 2u) ? -v : v);
-}
-
-// A point offset by a fixed pseudo-random amount per seed (for Noise's distortion and colour).
-Vec3 random_offset(float seed) {
-    auto h = [&](float k) { return 100.f + to_unit(hash_words(2, float_bits(seed), float_bits(k), 0)) * 100.f; };
-    return {h(0.f), h(1.f), h(2.f)};
-}
-
 float white_noise(Vec3 p, int dims, Vec3 *colour) {
     const uint32_t x = float_bits(p.x), y = float_bits(p.y), z = float_bits(p.z);
     auto hash = [&](uint32_t extra) {  // the vector, then one more word for each colour channel
         if (dims == 1) return extra ? hash_words(2, x, extra, 0) : hash_words(1, x, 0, 0);
         if (dims == 2) return extra ? hash_words(3, x, y, extra) : hash_words(2, x, y, 0);
-        if (!extra) return hash_words(3, x, y, z);
-        // Four words: lookup3's mix() over the first three, then the fourth.
-        uint32_t a, b, c;
-        a = b = c = 0xdeadbeefu + (4u << 2) + 13u;
-        a += x, b += y, c += z;
-        a -= c, a ^= rot(c, 4), c += b;
-        b -= a, b ^= rot(a, 6), a += c;
-        c -= b, c ^= rot(b, 8), b += a;
-        a -= c, a ^= rot(c, 16), c += b;
-        b -= a, b ^= rot(a, 19), a += c;
-        c -= b, c ^= rot(b, 4), b += a;
-        a += extra;
-        final_mix(a, b, c);
-        return c;
+        return extra ? hash_uint4(x, y, z, extra) : hash_words(3, x, y, z);
     };
     // Blender's colour: the value, then the vector with 1 and 2 appended as one more word.
     const float value = to_unit(hash(0));
@@ -636,48 +585,6 @@ Vec3 blackbody_rec709(float kelvin) {
     const int i = std::min(std::max(int(f), 0), kRows - 2);
     const Vec3 c = lerp(table.rows[i], table.rows[i + 1], std::fmin(std::fmax(f - float(i), 0.f), 1.f));
     return vmax(c, Vec3());
-}
-
-uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
-
-float perlin_signed(Vec3 p) {
-    // Blender repeats the noise every 100000 units (float precision), nudging beyond 1e6.
-    for (int i = 0; i < 3; ++i) {
-        const float correction = std::fabs(p[i]) >= 1000000.f ? 0.5f : 0.f;
-        p[i] = std::fmod(p[i], 100000.f) + correction;
-    }
-    const int X = int(std::floor(p.x)), Y = int(std::floor(p.y)), Z = int(std::floor(p.z));
-    const float fx = p.x - float(X), fy = p.y - float(Y), fz = p.z - float(Z);
-    const float u = fade(fx), v = fade(fy), w = fade(fz);
-    auto g = [&](int dx, int dy, int dz) {
-        return grad3(hash_words(3, uint32_t(X + dx), uint32_t(Y + dy), uint32_t(Z + dz)), fx - float(dx),
-                     fy - float(dy), fz - float(dz));
-    };
-    auto bimix = [](float v0, float v1, float v2, float v3, float x, float y) {
-        const float x1 = 1.f - x;
-        return (1.f - y) * (v0 * x1 + v1 * x) + y * (v2 * x1 + v3 * x);
-    };
-    const float r = (1.f - w) * bimix(g(0, 0, 0), g(1, 0, 0), g(0, 1, 0), g(1, 1, 0), u, v) +
-                    w * bimix(g(0, 0, 1), g(1, 0, 1), g(0, 1, 1), g(1, 1, 1), u, v);
-    // Blender's scale for 3-D Perlin noise (about -1..1), and 0 for a non-finite input.
-    return std::isfinite(r) ? 0.9820f * r : 0.f;
-}
-
-float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize) {
-    float scale = 1.f, amp = 1.f, max_amp = 0.f, sum = 0.f;
-    for (int i = 0; i <= int(detail); ++i) {
-        sum += perlin_signed(p * scale) * amp;
-        max_amp += amp;
-        amp *= roughness;
-        scale *= lacunarity;
-    }
-    const float rest = detail - std::floor(detail);
-    if (rest != 0.f) {
-        const float sum2 = sum + perlin_signed(p * scale) * amp;
-        return normalize ? lerp(0.5f * sum / max_amp + 0.5f, 0.5f * sum2 / (max_amp + amp) + 0.5f, rest)
-                         : lerp(sum, sum2, rest);
-    }
-    return normalize ? 0.5f * sum / max_amp + 0.5f : sum;
 }
 
 Vec3 rgb_to_hsv(Vec3 rgb) {
@@ -935,20 +842,12 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 r[c[2]] = 1.f - f;
                 break;
             }
-            case Op::Noise: {
-                const float *p = r + c[4];  // scale, detail, roughness, lacunarity, distortion
-                Vec3 q = load3(r, c[3]) * p[0];
-                const float detail = std::fmin(std::fmax(p[1], 0.f), 15.f), rough = std::fmax(p[2], 0.f);
-                const float lac = p[3], dist = p[4];
-                const bool norm = c[5] != 0;
-                if (dist != 0.f)
-                    q = q + Vec3(perlin_signed(q + random_offset(0.f)), perlin_signed(q + random_offset(1.f)),
-                                 perlin_signed(q + random_offset(2.f))) * dist;
-                const float f = noise_fbm(q, detail, rough, lac, norm);
-                r[c[1]] = f;
-                if (c[6])  // the Color output is read: two more fractal sums at offset points
-                    store3(r, c[2], {f, noise_fbm(q + random_offset(3.f), detail, rough, lac, norm),
-                                     noise_fbm(q + random_offset(4.f), detail, rough, lac, norm)});
+            case Op::Noise: {  // Blender's Noise Texture node (nodes/noise.h)
+                NoiseParams q;
+                std::memcpy(&q, r + c[4], sizeof q);
+                Vec3 colour;
+                r[c[1]] = noise_texture(c[5], NoiseType(c[6]), load3(r, c[3]), q, c[7] & 1, c[7] & 2 ? &colour : nullptr);
+                if (c[7] & 2) store3(r, c[2], colour);  // the Color output is read
                 break;
             }
             case Op::WhiteNoise: {

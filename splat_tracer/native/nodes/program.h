@@ -104,8 +104,9 @@ enum class Op : int32_t {
     Gradient,       // out_colour, out_fac, vector, type
     Fresnel,        // out, ior, normal
     LayerWeight,    // out_fresnel, out_facing, blend, normal
-    Noise,          // out_fac, out_colour, vector, params (scale detail roughness lacunarity distortion), normalize,
-                    // colour (0: the Color output is not read, not computed)
+    Noise,          // out_fac, out_colour, vector, params (8: scale detail roughness lacunarity distortion w offset
+                    // gain), dimensions (1-4), NoiseType, flags (1: normalize, 2: the Color output is read --
+                    // otherwise not computed)
     WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
@@ -160,10 +161,6 @@ struct NodeProgram {
 // Blender's colour helpers, shared by the nodes and their tests.
 Vec3 rgb_to_hsv(Vec3 rgb);
 Vec3 hsv_to_rgb(Vec3 hsv);
-// Blender's Perlin noise in 3-D, signed (about -1..1) and its fractal sum; Cycles' definitions.
-float perlin_signed(Vec3 p);
-float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize);
-uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
 // The Blackbody node's colour of a temperature in K: linear Rec. 709 of luminance 1 (as Cycles
 // normalises it), negative channels clamped to 0, the temperature held within 800-12000 K.
 Vec3 blackbody_rec709(float kelvin);
