@@ -225,9 +225,7 @@ class Compiler:
         if getattr(node, "object", None) is not None:
             raise Unsupported(node, "Object from another object")
         out = {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV", "Object": "OBJECT",
-               "Reflection": "REFLECTION", "Camera": "CAMERA"}
-        if node.outputs["Window"].is_linked:
-            raise Unsupported(node, "its Window output")
+               "Reflection": "REFLECTION", "Camera": "CAMERA", "Window": "WINDOW"}
         return self._lazy(node, out)
 
     def _lazy(self, node, names: dict):
@@ -495,13 +493,12 @@ class Compiler:
     # Textures
     def _tex_image(self, node, stack):
         image = node.image
-        if node.projection != "FLAT":
-            raise Unsupported(node, f"{node.projection.lower()} projection")
-        if image is not None and image.source not in ("FILE", "GENERATED"):
+        if image is not None and image.source not in ("FILE", "GENERATED", "TILED"):
             raise Unsupported(node, f"{image.source.lower()} images")
         colour, alpha = self.b.register(width=3), self.b.register()
-        texture = _image_pixels(image, self.say) if image is not None else None
-        if texture is None:
+        tiles = _tile_pixels(image, self.say) if image is not None and image.source == "TILED" else None
+        texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
+        if texture is None and not tiles:
             what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
             self.say(f": {what}; rendered magenta, as Cycles does")
             self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
@@ -512,8 +509,27 @@ class Compiler:
             self.say(": an Image Texture's Smart interpolation is rendered as Cubic")
             interpolation = "Cubic"
         vector = self._vector_or(node, stack, "UV")
-        self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), nodes.INTERPOLATIONS.index(interpolation),
-                    nodes.EXTENSIONS.index(node.extension))
+        modes = (nodes.INTERPOLATIONS.index(interpolation), nodes.EXTENSIONS.index(node.extension))
+        if node.projection == "BOX":
+            if tiles:  # Cycles' box projection reads the image's first tile alone
+                texture = next((t for number, t in tiles if number == 1001 and t is not None), None)
+                if texture is None:
+                    self.say(f": image '{image.name}' has no tile 1001 loaded; rendered magenta, as Cycles does")
+                    self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
+                    self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
+                    return self._ids(node, {"Color": colour, "Alpha": alpha})
+            blend = self.const(float(node.projection_blend), 1)
+            self.b.emit("IMAGE_BOX", colour, alpha, vector, self.b.image(texture), *modes, blend)
+            return self._ids(node, {"Color": colour, "Alpha": alpha})
+        if node.projection in nodes.IMAGE_PROJECTIONS:
+            projected = self.b.register(width=3)
+            self.b.emit("IMAGE_PROJECT", projected, vector, nodes.IMAGE_PROJECTIONS.index(node.projection))
+            vector = projected
+        if tiles:
+            rows = [(number, self.b.image(t) if t is not None else -1) for number, t in tiles]
+            self.b.emit("IMAGE_TILES", colour, alpha, vector, self.b.table(rows), len(rows), *modes)
+        else:
+            self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), *modes)
         return self._ids(node, {"Color": colour, "Alpha": alpha})
 
     def _tex_checker(self, node, stack):
@@ -652,6 +668,63 @@ def _image_pixels(image, say):
         del _IMAGES[old]
     _IMAGES[key] = texture
     return texture
+
+
+# UDIM tiles read from their files (see _tile_pixels), by what identifies their pixels.
+_TILES: dict = {}
+
+
+def _tile_pixels(image, say) -> list:
+    """A UDIM (tiled) image's tiles as [(tile number, nodes.Image or None)]: the first tile
+    from the image's own pixels (what Blender holds, painted or packed alike), the others
+    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read
+    through a temporary image in the same colour space and alpha mode. A tile that cannot
+    be read (not saved, packed, missing) is None: magenta, as Cycles renders a tile it
+    cannot load -- said once. Tiles are read once and kept while their file is unchanged."""
+    import os
+
+    import bpy
+
+    out, missing = [], []
+    for k, tile in enumerate(image.tiles):
+        number = int(tile.number)
+        if k == 0:
+            if not image.has_data:
+                _try_load(image)
+            out.append((number, _image_pixels(image, say)))
+            if out[-1][1] is None:
+                missing.append(number)
+            continue
+        u, v = (number - 1001) % 10, (number - 1001) // 10
+        path = image.filepath_raw.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
+        path = bpy.path.abspath(path, library=image.library)
+        if path == bpy.path.abspath(image.filepath_raw, library=image.library) or not os.path.isfile(path):
+            out.append((number, None))
+            missing.append(number)
+            continue
+        settings = image.colorspace_settings.name
+        key = (image.name_full, number, path, os.path.getmtime(path), settings, image.alpha_mode)
+        if key not in _TILES:
+            texture = None
+            temp = bpy.data.images.load(path, check_existing=False)
+            try:
+                temp.colorspace_settings.name = settings
+                temp.alpha_mode = image.alpha_mode
+                texture = _image_pixels(temp, say)
+                for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
+                    del _IMAGES[old]  # the temporary image's pixels live on here, not there
+            finally:
+                bpy.data.images.remove(temp)
+            for old in [k for k in _TILES if k[:2] == key[:2]]:
+                del _TILES[old]
+            _TILES[key] = texture
+        if _TILES[key] is None:
+            missing.append(number)
+        out.append((number, _TILES[key]))
+    if missing:
+        say(f": image '{image.name}' tile{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} "
+            f"could not be read (not saved to a file?); rendered magenta, as Cycles does")
+    return out
 
 
 def _try_load(image) -> bool:

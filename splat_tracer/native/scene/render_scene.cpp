@@ -116,7 +116,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     // is where it is at the ray's time.
     double moved[12];
     const double *c = nullptr;
-    if (camera && prog.uses_camera) {
+    if (camera && (prog.uses_camera || prog.uses_window)) {
         if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
         c = camera->moves() ? moved : camera->local_from_camera;
     }
@@ -132,6 +132,30 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         return out;
     };
     if (camera && prog.uses_camera) sg.camera = camera_space(sp.p, false);
+    // Window: Cycles' camera_world_to_ndc, 0..1 over the camera's whole frame (its shift
+    // included, a border not: the frustum is the full frame's), z 0. A planar camera projects
+    // the point onto its frame (divided by the depth, as Cycles' perspective divide is, 0 at
+    // depth 0); a panorama gives its own coordinates of the direction to the point.
+    auto window = [&](Vec3 p) {
+        const Vec3 q = camera_space(p, false);
+        const double *f = camera->frustum;
+        double u, v;
+        if (camera->panoramic()) {
+            const double len = std::sqrt(double(q.x) * q.x + double(q.y) * q.y + double(q.z) * q.z);
+            if (!(len > 0.0)) return Vec3();
+            const double d[3] = {q.x / len, q.y / len, -q.z / len};  // back to looking down -Z
+            camera->panorama_uv(d, &u, &v);
+            return Vec3(float(u), float(v), 0.f);
+        }
+        if (camera->orthographic) {
+            u = q.x, v = q.y;
+        } else {
+            if (q.z == 0.f) return Vec3();
+            u = double(q.x) / q.z, v = double(q.y) / q.z;
+        }
+        return Vec3(float((u - f[0]) / (f[1] - f[0])), float((v - f[2]) / (f[3] - f[2])), 0.f);
+    };
+    if (camera && prog.uses_window) sg.window = window(sp.p);
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
         for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
@@ -192,6 +216,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
                 }
             }
             if (camera && prog.uses_camera) d.camera = camera_space(d.P, true);
+            if (camera && prog.uses_window) d.window = window(sp.p + d.P) - sg.window;
         }
     }
     float r[kMaxNodeRegisters];

@@ -1,0 +1,232 @@
+"""Texture coordinates and image projections (issue 24) through Blender, side by side with Cycles.
+
+Scenes and helpers are test_node_materials.py's (80x80 px, 16 samples, black world, no
+bounces). Tolerances (measured with bpy 5.0.1; each test also shows a wrong render fails):
+- WINDOW_ATOL = 0.01: mean absolute difference per channel of an emissive floor whose colour
+  is the Window coordinates (x red, y green) and a checker over them (blue), seen by a
+  perspective camera with its lens shifted; the checker's anti-aliased edges are most of it.
+  The same floor without the shift (Window as if the frame were not shifted) is > 5x further.
+- TEXTURE_CORRELATION (0.95, the issue's bar) for the box, sphere and tube projections and
+  for a UDIM image, as test_node_materials measures it.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from test_node_materials import SIZE, TEXTURE_CORRELATION, _both, _grid_image, _material, _setup, correlation, plane
+from test_scene_export import cube, mesh_object, render, stats, uv_sphere
+
+WINDOW_ATOL = 0.01
+
+
+def _said(report, name):
+    """The report's lines about material `name`, but for the one every emissive node tree
+    gets (its emission is found by rays, not sampled as a light: these floors light nothing)."""
+    return [line for line in report if name in line and "not sampled as a light" not in line]
+
+
+def _emission(bpy, name):
+    m = bpy.data.materials.new(name)
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    emission = nodes.new("ShaderNodeEmission")
+    links.new(emission.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
+    return m, nodes, links, emission
+
+
+def _window_floor(bpy, scene):
+    m, nodes, links, emission = _emission(bpy, "Window")
+    coords, separate, checker, combine = (nodes.new(t) for t in (
+        "ShaderNodeTexCoord", "ShaderNodeSeparateXYZ", "ShaderNodeTexChecker", "ShaderNodeCombineXYZ"))
+    checker.inputs["Scale"].default_value = 3.0
+    links.new(coords.outputs["Window"], separate.inputs["Vector"])
+    links.new(coords.outputs["Window"], checker.inputs["Vector"])
+    links.new(separate.outputs["X"], combine.inputs["X"])
+    links.new(separate.outputs["Y"], combine.inputs["Y"])
+    links.new(checker.outputs["Fac"], combine.inputs["Z"])
+    links.new(combine.outputs["Vector"], emission.inputs["Color"])
+    plane(bpy, "Floor", 12.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    cam = scene.camera
+    cam.data.type, cam.data.lens = "PERSP", 35.0
+    cam.data.shift_x, cam.data.shift_y = 0.3, -0.15
+    cam.location, cam.rotation_euler = (0.5, -3.5, 2.5), (math.radians(60), 0, math.radians(8))
+    bpy.context.view_layer.update()
+    return cam
+
+
+def test_window_coordinates_match_cycles(blender, empty_scene, tmp_path):
+    """Texture Coordinate > Window on a floor seen in perspective with a shifted lens: the
+    coordinates (red, green) and a checker over them (blue) as Cycles renders them."""
+    bpy, scene = blender, empty_scene
+    cam = _window_floor(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "window")
+    diff = np.abs(ours - theirs).mean(axis=(0, 1))
+    print("window: mean abs difference", diff, "correlation", correlation(ours, theirs))
+    assert (diff <= WINDOW_ATOL).all(), diff
+    assert correlation(ours, theirs) >= TEXTURE_CORRELATION
+    assert not _said(report, "Window"), report
+    # Window spans the frame: red runs 0..1 left to right, green 0..1 bottom to top.
+    assert ours[SIZE // 2, 2, 0] < 0.1 and ours[SIZE // 2, -3, 0] > 0.9, ours[SIZE // 2, [2, -3], 0]
+    assert ours[-3, SIZE // 2, 1] < 0.1
+    # The frame's centre is (0.5, 0.5) whatever the shift (pixel SIZE // 2's centre: + 0.5 / SIZE).
+    np.testing.assert_allclose(ours[SIZE // 2 - 1, SIZE // 2, :2], 0.5 + 0.5 / SIZE, atol=0.01)
+    # Without the shift Cycles' Window would be the unshifted frame's: a wrong render fails.
+    cam.data.shift_x, cam.data.shift_y = 0.0, 0.0
+    scene.render.engine = "CYCLES"
+    unshifted = render(bpy, scene, tmp_path / "window_unshifted.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert (np.abs(ours - unshifted).mean(axis=(0, 1))[:2] > 5 * WINDOW_ATOL).any()
+
+
+def _image_node(nodes, links, shader, image, projection, vector=None, blend=0.0):
+    tex = nodes.new("ShaderNodeTexImage")
+    tex.image, tex.projection, tex.projection_blend, tex.interpolation = image, projection, blend, "Linear"
+    if vector is not None:
+        links.new(vector, tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], shader.inputs["Color" if "Color" in shader.inputs else "Base Color"])
+    return tex
+
+
+def _look_from(scene, location, rotation_deg, ortho_scale):
+    cam = scene.camera
+    cam.location, cam.rotation_euler = location, tuple(math.radians(a) for a in rotation_deg)
+    cam.data.ortho_scale = ortho_scale
+    import bpy
+
+    bpy.context.view_layer.update()
+
+
+@pytest.mark.parametrize("blend", [0.0, 0.3])
+def test_box_projection_on_a_rotated_cube_matches_cycles(blender, empty_scene, tmp_path, blend):
+    """An image box-projected (Object coordinates) on a cube and a smooth ball, both turned
+    about all three axes, seen from above at an angle so that three faces show; with and
+    without blending (the ball's normals between the axes show it). The flat projection of
+    the same image fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "Box")
+    coords = nodes.new("ShaderNodeTexCoord")
+    tex = _image_node(nodes, links, emission, _grid_image(bpy, tmp_path, "disk"), "BOX", coords.outputs["Object"],
+                      blend)
+    obj = cube(bpy, "Cube", 1.0, (-0.6, 0.6, 0), m)
+    obj.rotation_euler = tuple(math.radians(a) for a in (25, 35, 15))
+    ball = uv_sphere(bpy, "Ball", 0.6, (0.6, -0.6, 0), m)  # every normal: the blend shows
+    ball.rotation_euler = tuple(math.radians(a) for a in (-20, 10, 30))
+    _setup(bpy, scene)
+    _look_from(scene, (2.5, -2.5, 3.0), (50, 0, 45), 2.6)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"box_{blend}")
+    r = correlation(ours, theirs)
+    print("correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, "Box"), report
+    tex.projection = "FLAT"
+    flat = render(bpy, scene, tmp_path / "box_flat.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert correlation(flat, theirs) < TEXTURE_CORRELATION
+
+
+@pytest.mark.parametrize("projection", ["SPHERE", "TUBE"])
+def test_sphere_and_tube_projections_match_cycles(blender, empty_scene, tmp_path, projection):
+    """An image projected by Generated coordinates on a UV sphere seen from the side and
+    above. A wrong projection fails: the other one is more than 3x as far from Cycles (mean
+    absolute difference), and the flat one falls below the correlation."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, projection)
+    coords = nodes.new("ShaderNodeTexCoord")
+    tex = _image_node(nodes, links, emission, _grid_image(bpy, tmp_path, "disk"), projection,
+                      coords.outputs["Generated"])
+    uv_sphere(bpy, "Ball", 1.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    _look_from(scene, (0, -4.0, 2.5), (58, 0, 0), 2.4)
+    ours, theirs, report = _both(bpy, scene, tmp_path, projection.lower())
+    r = correlation(ours, theirs)
+    print("correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, projection), report
+    tex.projection = "TUBE" if projection == "SPHERE" else "SPHERE"
+    other = render(bpy, scene, tmp_path / "other.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    near, far = np.abs(ours - theirs).mean(), np.abs(other - theirs).mean()
+    print("mean abs difference", near, "the other projection's", far)
+    assert far > 3 * near, (near, far)
+    tex.projection = "FLAT"
+    flat = render(bpy, scene, tmp_path / "flat.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert correlation(flat, theirs) < TEXTURE_CORRELATION
+
+
+UDIM_COLOURS = {1001: (0.9, 0.3, 0.1), 1002: (0.1, 0.4, 0.9)}
+
+
+def _linear(colour):
+    """A byte sRGB image's colour as it renders (the sRGB standard's decoding)."""
+    c = np.asarray(colour, np.float64)
+    return np.where(c < 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def _udim_image(bpy, tmp_path):
+    """A two-tile UDIM made here: each tile a 4x4 image of one colour (tile 1002 with a
+    lighter corner, so that the tile's own coordinates show), saved as tile files and loaded
+    back as one tiled image (Blender finds the tiles from the <UDIM> token)."""
+    for number, colour in UDIM_COLOURS.items():
+        image = bpy.data.images.new(f"tile{number}", 4, 4)
+        pixels = np.tile(np.float32([*colour, 1.0]), (4, 4, 1))
+        if number == 1002:
+            pixels[2:, 2:, :3] = 1.0  # top-right quarter white
+        image.pixels.foreach_set(pixels.ravel())
+        image.filepath_raw, image.file_format = str(tmp_path / f"udim.{number}.png"), "PNG"
+        image.save()
+        bpy.data.images.remove(image)
+    tiled = bpy.data.images.load(str(tmp_path / "udim.1001.png"))
+    tiled.source = "TILED"
+    assert [t.number for t in tiled.tiles] == [1001, 1002] and "<UDIM>" in tiled.filepath_raw
+    return tiled
+
+
+def _udim_floor(bpy, material):
+    """A 2x2 m floor whose UVs run 0..2 across (x) and 0..1.25 up (y): both tiles, and above
+    them tiles the image lacks (1011, 1012: magenta, as in Cycles)."""
+    import bmesh
+
+    def build(bm):
+        uv = bm.loops.layers.uv.new("UVMap")
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=1.0)
+        for face in bm.faces:
+            for loop in face.loops:
+                x, y = loop.vert.co.x, loop.vert.co.y
+                loop[uv].uv = (x + 1.0, (y + 1.0) * 0.625)
+
+    return mesh_object(bpy, "Floor", build, (0, 0, 0), [material])
+
+
+def test_udim_tiles_match_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "Udim")
+    _image_node(nodes, links, emission, _udim_image(bpy, tmp_path), "FLAT")
+    _udim_floor(bpy, m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "udim")
+    r = correlation(ours, theirs)
+    print("correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, "Udim"), report
+    # Pixels at UV (u, v): row (1.25 - v) / 1.25 * SIZE from the top, column u / 2 * SIZE.
+    at = {"1001": (60, 20), "1002": (60, 50), "1002 white": (35, 68), "no tile": (7, 40)}
+    expected = {"1001": _linear(UDIM_COLOURS[1001]), "1002": _linear(UDIM_COLOURS[1002]), "1002 white": (1, 1, 1),
+                "no tile": (1, 0, 1)}
+    for name, (row, column) in at.items():
+        np.testing.assert_allclose(ours[row, column], expected[name], atol=0.03, err_msg=name)
+        np.testing.assert_allclose(theirs[row, column], expected[name], atol=0.03, err_msg=name + " (Cycles)")
+
+
+def test_a_udim_tile_missing_on_disk_is_magenta_and_said(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "UdimMissing")
+    image = _udim_image(bpy, tmp_path)
+    (tmp_path / "udim.1002.png").unlink()
+    _image_node(nodes, links, emission, image, "FLAT")
+    _udim_floor(bpy, m)
+    _setup(bpy, scene)
+    ours = render(bpy, scene, tmp_path / "missing.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    np.testing.assert_allclose(ours[60, 20], _linear(UDIM_COLOURS[1001]), atol=0.03)
+    np.testing.assert_allclose(ours[60, 50], (1, 0, 1), atol=0.03)
+    assert [line for line in stats()["report"] if "1002" in line and "magenta" in line], stats()["report"]
