@@ -230,3 +230,30 @@ def test_a_udim_tile_missing_on_disk_is_magenta_and_said(blender, empty_scene, t
     np.testing.assert_allclose(ours[60, 20], _linear(UDIM_COLOURS[1001]), atol=0.03)
     np.testing.assert_allclose(ours[60, 50], (1, 0, 1), atol=0.03)
     assert [line for line in stats()["report"] if "1002" in line and "magenta" in line], stats()["report"]
+
+
+def test_object_coordinates_of_another_object_match_cycles(blender, empty_scene, tmp_path):
+    """Texture Coordinate > Object with an Empty chosen (moved, turned and scaled): a checker
+    over the floor in the Empty's space, as Cycles renders it. The floor's own object space
+    (the node without its object) fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "OtherObject")
+    coords = nodes.new("ShaderNodeTexCoord")
+    checker = nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 1.0
+    links.new(coords.outputs["Object"], checker.inputs["Vector"])
+    links.new(checker.outputs["Color"], emission.inputs["Color"])
+    empty = bpy.data.objects.new("Handle", None)
+    scene.collection.objects.link(empty)
+    empty.location, empty.rotation_euler, empty.scale = (0.3, -0.2, 0.1), (0.2, -0.1, 0.6), (0.4, 0.6, 1.0)
+    coords.object = empty
+    plane(bpy, "Floor", 2.0, (0.1, 0.0, 0.0), m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "other_object")
+    r = correlation(ours, theirs)
+    print("correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, "OtherObject"), report
+    coords.object = None
+    own = render(bpy, scene, tmp_path / "own.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert correlation(own, theirs) < TEXTURE_CORRELATION

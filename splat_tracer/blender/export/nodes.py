@@ -44,11 +44,14 @@ class Unsupported(Exception):
 
 
 class Compiler:
-    """Compiles one material's node inputs into one Program. `say(text)`: a report line."""
+    """Compiles one material's node inputs into one Program. `say(text)`: a report line.
+    object_space(obj): the 4x4 map from the render's local frame into a Blender object's
+    space at the frame's time (None: not known here, e.g. a lamp's tree)."""
 
-    def __init__(self, say):
+    def __init__(self, say, object_space=None):
         self.b = Builder()
         self.say = say
+        self.object_space = object_space
         self.memo: dict = {}
         self.consts: dict = {}
         self.bump_depth = 0  # Bump nodes being compiled within one another
@@ -222,11 +225,28 @@ class Compiler:
         return self._ids(node, {"Color": self.b.register(tuple(node.outputs[0].default_value[:3]), 3)})
 
     def _tex_coord(self, node, stack):
-        if getattr(node, "object", None) is not None:
-            raise Unsupported(node, "Object from another object")
+        other = getattr(node, "object", None)
+        if other is not None and node.outputs["Object"].is_linked:
+            result = self._tex_coord_of(node, other)
+            rest = self._lazy(node, {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV",
+                                     "Reflection": "REFLECTION", "Camera": "CAMERA", "Window": "WINDOW"})
+            return {**rest, **result}
         out = {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV", "Object": "OBJECT",
                "Reflection": "REFLECTION", "Camera": "CAMERA", "Window": "WINDOW"}
         return self._lazy(node, out)
+
+    def _tex_coord_of(self, node, other):
+        """Texture Coordinate's Object output with another object chosen: the point in that
+        object's space, as Cycles gives it (the object where it is at the frame's time: Cycles'
+        node holds that one transform, motion blur or not)."""
+        if self.object_space is None:
+            raise Unsupported(node, f"Object from '{other.name}' here")
+        matrix = np.asarray(self.object_space(other), np.float64)
+        if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+            raise Unsupported(node, f"Object from '{other.name}': its transform cannot be inverted")
+        out = self.b.register(width=3)
+        self.b.emit("TRANSFORM", out, self.b.global_("POSITION"), self.b.table(matrix[:3]))
+        return {node.outputs["Object"].identifier: out}
 
     def _lazy(self, node, names: dict):
         """Globals for the node's outputs that something reads (unread ones cost nothing)."""
@@ -751,14 +771,15 @@ SHADER_INPUTS = {
 }
 
 
-def compile_shader(node, say, skip=(), aovs=()) -> tuple:
+def compile_shader(node, say, skip=(), aovs=(), object_space=None) -> tuple:
     """(Program or None, the input sockets it drives) for a shader node's linked inputs
     (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads)
     and for AOV Output nodes: `aovs`, (AOV name, width, the node's Color or Value socket)
     each. None when nothing needs a program: such a material costs nothing more to render.
-    node: None when nothing feeds the Material Output (AOVs only)."""
+    node: None when nothing feeds the Material Output (AOVs only). object_space: see
+    Compiler."""
     fields = SHADER_INPUTS.get(node.type, {}) if node is not None else {}
-    compiler = Compiler(say)
+    compiler = Compiler(say, object_space)
     driven = []
     for field, names in fields.items():
         if isinstance(names, tuple):  # emission: colour x strength

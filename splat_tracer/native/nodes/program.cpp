@@ -73,6 +73,7 @@ const Layout &layout(Op op) {
         /* ImageTiles (table checked apart; image indices at run time) */
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
+        /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
     };
     return table[int(op)];
 }
@@ -1058,6 +1059,13 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 const RGBA t = images[size_t(c[4])]->sample(uv.x, uv.y, ImageInterpolation(c[5]), ImageExtension(c[6]));
                 store3(r, c[1], {t.r, t.g, t.b});
                 r[c[2]] = t.a;
+                break;
+            }
+            case Op::Transform: {
+                const Vec3 p = load3(r, c[2]);
+                const float *m = r + c[3];
+                store3(r, c[1], {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                                 m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]});
                 break;
             }
             case Op::ImageProject: store3(r, c[1], image_projection(load3(r, c[2]), c[3])); break;

@@ -132,6 +132,8 @@ enum class Op : int32_t {
     ImageTiles,     // out_colour, out_alpha, vector, table, count, ImageInterpolation, ImageExtension: a UDIM
                     // image, `count` rows (tile number, image index; index -1: not loaded) from `table`;
                     // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
+    Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
+                    // as a point (Texture Coordinate's Object output with another object chosen)
     Count
 };
 
