@@ -257,3 +257,46 @@ def test_object_coordinates_of_another_object_match_cycles(blender, empty_scene,
     coords.object = None
     own = render(bpy, scene, tmp_path / "own.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     assert correlation(own, theirs) < TEXTURE_CORRELATION
+
+
+@pytest.mark.parametrize("kind", ["EQUIRECTANGULAR", "FISHEYE_EQUIDISTANT", "FISHEYE_EQUISOLID", "MIRRORBALL"])
+def test_window_coordinates_of_a_panorama_match_cycles(blender, empty_scene, tmp_path, kind):
+    """Window seen by a panoramic camera (its lens shifted, which Cycles' panorama Window
+    does not follow) over a floor: the panorama's own coordinates of the direction to each
+    point, as Cycles' direction_to_panorama gives them. Swapping red and green fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "PanoWindow")
+    coords = nodes.new("ShaderNodeTexCoord")
+    links.new(coords.outputs["Window"], emission.inputs["Color"])
+    plane(bpy, "Floor", 30.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    cam = scene.camera
+    cam.data.type, cam.data.panorama_type = "PANO", kind
+    cam.data.fisheye_fov, cam.data.fisheye_lens, cam.data.sensor_width = math.radians(200), 8.0, 32.0
+    cam.data.shift_x = 0.05
+    cam.location, cam.rotation_euler = (0.0, 0.0, 1.0), (math.radians(60), 0, math.radians(-15))
+    bpy.context.view_layer.update()
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"pano_window_{kind.lower()}")
+    diff = np.abs(ours - theirs).mean(axis=(0, 1))
+    print(kind, "mean abs difference", diff, "correlation", correlation(ours, theirs))
+    assert (diff <= WINDOW_ATOL).all(), diff
+    assert not _said(report, "PanoWindow"), report
+    swapped = ours[..., [1, 0, 2]]
+    assert (np.abs(swapped - theirs).mean(axis=(0, 1))[:2] > 5 * WINDOW_ATOL).any()
+
+
+def test_window_coordinates_within_a_border_are_the_whole_frames(blender, empty_scene, tmp_path):
+    """A render border does not change Window: 0..1 stays the whole frame's, in both engines
+    (the border's pixels as Cycles renders them, and as the full frame has them)."""
+    bpy, scene = blender, empty_scene
+    _window_floor(bpy, scene)
+    full = render(bpy, scene, tmp_path / "full.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    r = scene.render
+    r.use_border, r.use_crop_to_border = True, False
+    r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = 0.25, 0.75, 0.2, 0.6
+    ours, theirs, _ = _both(bpy, scene, tmp_path, "window_border")
+    inside = (slice(SIZE - 48, SIZE - 16), slice(20, 60))  # rows from the top, columns
+    for image in (ours, theirs):
+        assert np.abs(image[inside] - full[inside]).mean(axis=(0, 1)).max() <= WINDOW_ATOL
+    assert ours[inside][..., :2].max() > 0.3  # the floor is in the border
+    assert full[:, :15].max() > 0.1 and ours[:, :15].max() == 0  # and the border was rendered alone
