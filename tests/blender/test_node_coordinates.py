@@ -300,3 +300,28 @@ def test_window_coordinates_within_a_border_are_the_whole_frames(blender, empty_
         assert np.abs(image[inside] - full[inside]).mean(axis=(0, 1)).max() <= WINDOW_ATOL
     assert ours[inside][..., :2].max() > 0.3  # the floor is in the border
     assert full[:, :15].max() > 0.1 and ours[:, :15].max() == 0  # and the border was rendered alone
+
+
+def test_geometry_position_is_in_world_space_as_cycles(blender, empty_scene, tmp_path):
+    """Geometry > Position is the world position (Cycles' P), with the camera (and so the
+    render's local frame) far from the world's origin: the floor at z = 0 seen from z = 5,
+    red and green the position x 0.4 + 0.5, blue its z + 0.5. The local frame's position
+    (z = -5, blue 0) fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "WorldPosition")
+    geometry, mapping = nodes.new("ShaderNodeNewGeometry"), nodes.new("ShaderNodeMapping")
+    mapping.inputs["Location"].default_value = (0.5, 0.5, 0.5)
+    mapping.inputs["Scale"].default_value = (0.4, 0.4, 1.0)
+    links.new(geometry.outputs["Position"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], emission.inputs["Color"])
+    plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    _setup(bpy, scene)
+    scene.camera.location = (0.3, -0.2, 5.0)
+    bpy.context.view_layer.update()
+    ours, theirs, report = _both(bpy, scene, tmp_path, "world_position")
+    diff = np.abs(ours - theirs).mean(axis=(0, 1))
+    print("position: mean abs difference", diff)
+    assert (diff <= WINDOW_ATOL).all(), diff
+    assert not _said(report, "WorldPosition"), report
+    floor = theirs.sum(axis=-1) > 0.1
+    assert abs(float(ours[floor][:, 2].mean()) - 0.5) < 0.02  # z = 0: the local frame's -5 would be black

@@ -45,8 +45,10 @@ class Unsupported(Exception):
 
 class Compiler:
     """Compiles one material's node inputs into one Program. `say(text)`: a report line.
-    object_space(obj): the 4x4 map from the render's local frame into a Blender object's
-    space at the frame's time (None: not known here, e.g. a lamp's tree)."""
+    object_space(obj): the 4x4 map from the render's local frame (scene.py: world space
+    less a float64 origin) into a Blender object's space at the frame's time, or for None
+    into world space; object_space itself None where it is not known (a lamp's tree: its
+    positions are read in the local frame)."""
 
     def __init__(self, say, object_space=None):
         self.b = Builder()
@@ -244,9 +246,21 @@ class Compiler:
         matrix = np.asarray(self.object_space(other), np.float64)
         if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
             raise Unsupported(node, f"Object from '{other.name}': its transform cannot be inverted")
+        return {node.outputs["Object"].identifier: self._position_in(matrix)}
+
+    def _position_in(self, matrix) -> int:
+        """The shading position mapped by a 4x4 affine `matrix` from the local frame."""
         out = self.b.register(width=3)
-        self.b.emit("TRANSFORM", out, self.b.global_("POSITION"), self.b.table(matrix[:3]))
-        return {node.outputs["Object"].identifier: out}
+        self.b.emit("TRANSFORM", out, self.b.global_("POSITION"), self.b.table(np.asarray(matrix)[:3]))
+        return out
+
+    def _world_position(self) -> int:
+        """The shading position in world space, as Cycles' P is (the local frame's origin
+        added back: nothing to add when it is the world's)."""
+        to_world = np.asarray(self.object_space(None), np.float64) if self.object_space is not None else None
+        if to_world is None or np.array_equal(to_world, np.eye(4)):
+            return self.b.global_("POSITION")
+        return self._position_in(to_world)
 
     def _lazy(self, node, names: dict):
         """Globals for the node's outputs that something reads (unread ones cost nothing)."""
@@ -257,8 +271,9 @@ class Compiler:
         return result
 
     def _new_geometry(self, node, stack):
-        result = self._lazy(node, {"Position": "POSITION", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL",
-                                   "Incoming": "INCOMING"})
+        result = self._lazy(node, {"Normal": "NORMAL", "True Normal": "TRUE_NORMAL", "Incoming": "INCOMING"})
+        if node.outputs["Position"].is_linked:
+            result[node.outputs["Position"].identifier] = self._world_position()
         if node.outputs["Backfacing"].is_linked:
             result[node.outputs["Backfacing"].identifier] = self.b.global_("BACKFACING")
         return result

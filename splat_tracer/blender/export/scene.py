@@ -479,9 +479,13 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
 def _object_space(depsgraph, origin):
     """obj -> the 4x4 map from the local frame at `origin` into the object's space, the
     object as this depsgraph evaluates it (at the frame's time); NaN where its transform
-    cannot be inverted (scaled to 0)."""
+    cannot be inverted (scaled to 0). None -> the map into world space (nodes.Compiler)."""
 
     def object_space(obj):
+        if obj is None:
+            to_world = np.eye(4)
+            to_world[:3, 3] = origin
+            return to_world
         world = np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64)
         world[:3, 3] -= origin
         try:
