@@ -53,7 +53,9 @@ GRADIENTS = ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "RADIAL", "QUADRATIC_S
 MAPPINGS = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
 INTERPOLATIONS = ("Closest", "Linear", "Cubic")  # Image Texture (native ImageInterpolation)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")  # Image Texture (native ImageExtension)
-IMAGE_PROJECTIONS = ("SPHERE", "TUBE")  # Image Texture's projections that remap the vector (IMAGE_PROJECT)
+# IMAGE_PROJECT's kinds: Image Texture's projections that remap the vector, then Environment
+# Texture's (of the vector's direction).
+IMAGE_PROJECTIONS = ("SPHERE", "TUBE", "EQUIRECTANGULAR", "MIRROR_BALL")
 VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYSHEV", "MINKOWSKI")
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")

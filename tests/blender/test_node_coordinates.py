@@ -325,3 +325,34 @@ def test_geometry_position_is_in_world_space_as_cycles(blender, empty_scene, tmp
     assert not _said(report, "WorldPosition"), report
     floor = theirs.sum(axis=-1) > 0.1
     assert abs(float(ours[floor][:, 2].mean()) - 0.5) < 0.02  # z = 0: the local frame's -5 would be black
+
+
+@pytest.mark.parametrize("projection", ["EQUIRECTANGULAR", "MIRROR_BALL"])
+@pytest.mark.parametrize("vector", ["Normal", None])
+def test_environment_texture_in_a_material_matches_cycles(blender, empty_scene, tmp_path, projection, vector):
+    """An Environment Texture inside a material, a ball's emission: by the Geometry's normal,
+    or unlinked (the world position: the ball away from the origin sees it from aside). The
+    image turned half a turn (Mapping about Z) fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "EnvMaterial")
+    env = nodes.new("ShaderNodeTexEnvironment")
+    env.image, env.projection, env.interpolation = _grid_image(bpy, tmp_path, "disk"), projection, "Linear"
+    mapping = None
+    if vector is not None:
+        geometry, mapping = nodes.new("ShaderNodeNewGeometry"), nodes.new("ShaderNodeMapping")
+        mapping.vector_type = "VECTOR"
+        links.new(geometry.outputs[vector], mapping.inputs["Vector"])
+        links.new(mapping.outputs["Vector"], env.inputs["Vector"])
+    links.new(env.outputs["Color"], emission.inputs["Color"])
+    uv_sphere(bpy, "Ball", 1.0, (0.4, 0.3, 1.2) if vector is None else (0, 0, 0), m)
+    _setup(bpy, scene)
+    _look_from(scene, (0.4, -4.0, 3.0) if vector is None else (0, -4.0, 2.5), (55, 0, 0), 2.6)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"env_{projection}_{vector}")
+    r = correlation(ours, theirs)
+    print(projection, vector, "correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, "EnvMaterial"), report
+    if mapping is not None:
+        mapping.inputs["Rotation"].default_value = (0, 0, math.pi)
+        turned = render(bpy, scene, tmp_path / "turned.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+        assert correlation(turned, theirs) < TEXTURE_CORRELATION

@@ -535,24 +535,14 @@ class Compiler:
         texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
         if texture is None and not tiles:
             what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
-            self.say(f": {what}; rendered magenta, as Cycles does")
-            self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
-            self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
-            return self._ids(node, {"Color": colour, "Alpha": alpha})
-        interpolation = node.interpolation
-        if interpolation == "Smart":
-            self.say(": an Image Texture's Smart interpolation is rendered as Cubic")
-            interpolation = "Cubic"
+            return self._missing_image(node, what, colour, alpha)
         vector = self._vector_or(node, stack, "UV")
-        modes = (nodes.INTERPOLATIONS.index(interpolation), nodes.EXTENSIONS.index(node.extension))
+        modes = (self._interpolation(node), nodes.EXTENSIONS.index(node.extension))
         if node.projection == "BOX":
             if tiles:  # Cycles' box projection reads the image's first tile alone
                 texture = next((t for number, t in tiles if number == 1001 and t is not None), None)
                 if texture is None:
-                    self.say(f": image '{image.name}' has no tile 1001 loaded; rendered magenta, as Cycles does")
-                    self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
-                    self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
-                    return self._ids(node, {"Color": colour, "Alpha": alpha})
+                    return self._missing_image(node, f"image '{image.name}' has no tile 1001 loaded", colour, alpha)
             blend = self.const(float(node.projection_blend), 1)
             self.b.emit("IMAGE_BOX", colour, alpha, vector, self.b.image(texture), *modes, blend)
             return self._ids(node, {"Color": colour, "Alpha": alpha})
@@ -565,6 +555,41 @@ class Compiler:
             self.b.emit("IMAGE_TILES", colour, alpha, vector, self.b.table(rows), len(rows), *modes)
         else:
             self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), *modes)
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _missing_image(self, node, what: str, colour: int, alpha: int) -> dict:
+        """An image node's outputs where there is no image to read: magenta, said."""
+        self.say(f": {what}; rendered magenta, as Cycles does")
+        self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
+        self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _interpolation(self, node) -> int:
+        """An image node's interpolation (nodes.INTERPOLATIONS index); Smart is Cubic, said."""
+        if node.interpolation == "Smart":
+            self.say(f": the {node.bl_label}'s Smart interpolation is rendered as Cubic")
+            return nodes.INTERPOLATIONS.index("Cubic")
+        return nodes.INTERPOLATIONS.index(node.interpolation)
+
+    def _tex_environment(self, node, stack):
+        """Environment Texture in a material: the image at the direction of its Vector --
+        unlinked, the world position (Cycles' default for it), as seen from the world's
+        origin. Read with Repeat, as Cycles reads an environment image."""
+        image = node.image
+        if image is not None and image.source not in ("FILE", "GENERATED"):
+            raise Unsupported(node, f"{image.source.lower()} images")
+        colour, alpha = self.b.register(width=3), self.b.register()
+        texture = _image_pixels(image, self.say) if image is not None else None
+        if texture is None:
+            what = (f"image '{image.name}' could not be loaded" if image is not None
+                    else "an Environment Texture has no image")
+            return self._missing_image(node, what, colour, alpha)
+        socket = node.inputs["Vector"]
+        vector = self.input(socket, 3, stack) if self.source(socket, stack) is not None else self._world_position()
+        uv = self.b.register(width=3)
+        self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index(node.projection))
+        self.b.emit("IMAGE", colour, alpha, uv, self.b.image(texture), self._interpolation(node),
+                    nodes.EXTENSIONS.index("REPEAT"))
         return self._ids(node, {"Color": colour, "Alpha": alpha})
 
     def _tex_checker(self, node, stack):

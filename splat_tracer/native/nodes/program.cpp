@@ -66,7 +66,7 @@ const Layout &layout(Op op) {
         /* Bump (first row checked apart) */ {{kR3, kR1, kR1, kR1, kR3, kNone, kEnum}, {0, 0, 0, 0, 0, 0, 2}},
         /* Attribute (width checked apart; column kMaxPointAttributes: never carried, reads 0) */
         {{kR3, kR1, kEnum, kEnum}, {0, 0, kMaxPointAttributes + 1, 4}},
-        /* ImageProject */ {{kR3, kR3, kEnum}, {0, 0, 2}},
+        /* ImageProject */ {{kR3, kR3, kEnum}, {0, 0, 4}},
         /* ImageBox (image checked apart) */
         {{kR3, kR1, kR3, kNone, kEnum, kEnum, kR1}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                      int32_t(ImageExtension::Count)}},
@@ -792,8 +792,24 @@ namespace {
 
 // An Image Texture's sphere (kind 0) and tube (1) projections: the vector, taken from the
 // texture space's 0..1 box to -1..1, mapped to (u, v) as Cycles' map_to_sphere and map_to_tube
-// define them (u around the Z axis, starting behind -Y; v up the sphere or along Z).
+// define them (u around the Z axis, starting behind -Y; v up the sphere or along Z). An
+// Environment Texture's equirectangular (2) and mirror ball (3) projections of the vector's
+// direction, as Cycles' direction_to_equirectangular and direction_to_mirrorball.
 Vec3 image_projection(Vec3 co, int kind) {
+    if (kind >= 2) {
+        const float len = length(co);
+        if (!(len > 0.f)) return Vec3();  // Cycles' safe_normalize: the zero vector stays
+        const Vec3 d = co * (1.f / len);
+        if (kind == 2)  // u: a full turn about Z from -X (0) through -Y, +X (0.5), +Y; v: from -Z up
+            return {0.5f - std::atan2(d.y, d.x) * (0.5f / kPi),
+                    1.f - std::acos(std::fmin(std::fmax(d.z, -1.f), 1.f)) * (1.f / kPi), 0.f};
+        // A unit ball seen along +Y reflects the view towards d where its normal is along
+        // d - (0, 1, 0); that normal's (x, z) is the point of the ball's image, 0..1 across.
+        Vec3 b = d - Vec3(0.f, 1.f, 0.f);
+        const float div = 2.f * std::sqrt(std::fmax(-0.5f * b.y, 0.f));
+        if (div > 0.f) b = b * (1.f / div);
+        return {0.5f * (b.x + 1.f), 0.5f * (b.z + 1.f), 0.f};
+    }
     const Vec3 p = (co - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
     if (kind == 0) {
         const float l = dot(p, p);

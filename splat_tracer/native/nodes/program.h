@@ -125,8 +125,9 @@ enum class Op : int32_t {
                     // offset points of ShaderGlobals::bump)
     Attribute,      // out_colour, out_fac, first (column of ShaderGlobals::attributes), width (1: float, 3: vector
                     // or colour): Cycles' Attribute node (a float fills the colour; Fac averages a vector)
-    ImageProject,   // out, vector, kind (0 sphere, 1 tube): an Image Texture's sphere or tube projection of
-                    // the vector to (u, v, 0), Cycles' map_to_sphere / map_to_tube of the vector in -1..1
+    ImageProject,   // out, vector, kind: the vector to an image's (u, v, 0) -- 0 sphere, 1 tube (an Image
+                    // Texture's projections: Cycles' map_to_sphere / map_to_tube of the vector in -1..1),
+                    // 2 equirectangular, 3 mirror ball (an Environment Texture's, of the vector's direction)
     ImageBox,       // out_colour, out_alpha, vector, image, ImageInterpolation, ImageExtension, blend: the box
                     // projection, three lookups blended by the object-space normal (Cycles' tex_image_box)
     ImageTiles,     // out_colour, out_alpha, vector, table, count, ImageInterpolation, ImageExtension: a UDIM
