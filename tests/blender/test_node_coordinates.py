@@ -356,3 +356,33 @@ def test_environment_texture_in_a_material_matches_cycles(blender, empty_scene, 
         mapping.inputs["Rotation"].default_value = (0, 0, math.pi)
         turned = render(bpy, scene, tmp_path / "turned.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
         assert correlation(turned, theirs) < TEXTURE_CORRELATION
+
+
+def test_a_uv_map_node_naming_another_map_matches_cycles(blender, empty_scene, tmp_path):
+    """A UV Map node naming the floor's second UV map (turned and scaled against the first,
+    the active render one) into a checker: Cycles' checker of that map. The active map's
+    checker fails."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "SecondMap")
+    uvmap = nodes.new("ShaderNodeUVMap")
+    checker = nodes.new("ShaderNodeTexChecker")
+    checker.inputs["Scale"].default_value = 3.0
+    links.new(uvmap.outputs["UV"], checker.inputs["Vector"])
+    links.new(checker.outputs["Color"], emission.inputs["Color"])
+    floor = plane(bpy, "Floor", 2.0, (0, 0, 0), m)
+    second = floor.data.uv_layers.new(name="Second")
+    first = floor.data.uv_layers["UVMap"]
+    first.active_render = True
+    for loop_uv, base in zip(second.uv, first.uv):
+        u, v = base.vector
+        loop_uv.vector = (0.8 * v + 0.1, 0.6 * (1 - u) + 0.3)
+    uvmap.uv_map = "Second"
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "second_map")
+    r = correlation(ours, theirs)
+    print("correlation with Cycles", r)
+    assert r >= TEXTURE_CORRELATION, r
+    assert not _said(report, "SecondMap"), report
+    uvmap.uv_map = ""
+    active = render(bpy, scene, tmp_path / "active.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert correlation(active, theirs) < TEXTURE_CORRELATION

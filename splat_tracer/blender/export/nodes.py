@@ -279,7 +279,14 @@ class Compiler:
         return result
 
     def _uvmap(self, node, stack):
-        return self._ids(node, {"UV": self.b.global_("UV")})
+        if getattr(node, "from_instancer", False):
+            raise Unsupported(node, "From Instancer")
+        if not node.uv_map:  # the active render map, which meshes carry
+            return self._ids(node, {"UV": self.b.global_("UV")})
+        # Another map: read by name as the geometry's (corner-domain, 2-D) attribute it is,
+        # (u, v, 0); a geometry without it reads 0, as Cycles reads a missing map.
+        uv, _ = self.b.attribute(node.uv_map, 3)
+        return self._ids(node, {"UV": uv})
 
     def _point_data(self, node, fac: bool):
         colour = self.b.global_("POINT_COLOUR")
