@@ -37,7 +37,7 @@ def _emission(bpy, name):
     return m, nodes, links, emission
 
 
-def _window_floor(bpy, scene):
+def _window_floor(bpy, scene, kind="PERSP"):
     m, nodes, links, emission = _emission(bpy, "Window")
     coords, separate, checker, combine = (nodes.new(t) for t in (
         "ShaderNodeTexCoord", "ShaderNodeSeparateXYZ", "ShaderNodeTexChecker", "ShaderNodeCombineXYZ"))
@@ -51,21 +51,23 @@ def _window_floor(bpy, scene):
     plane(bpy, "Floor", 12.0, (0, 0, 0), m)
     _setup(bpy, scene)
     cam = scene.camera
-    cam.data.type, cam.data.lens = "PERSP", 35.0
+    cam.data.type, cam.data.lens, cam.data.ortho_scale = kind, 35.0, 6.0
     cam.data.shift_x, cam.data.shift_y = 0.3, -0.15
     cam.location, cam.rotation_euler = (0.5, -3.5, 2.5), (math.radians(60), 0, math.radians(8))
     bpy.context.view_layer.update()
     return cam
 
 
-def test_window_coordinates_match_cycles(blender, empty_scene, tmp_path):
-    """Texture Coordinate > Window on a floor seen in perspective with a shifted lens: the
-    coordinates (red, green) and a checker over them (blue) as Cycles renders them."""
+@pytest.mark.parametrize("kind", ["PERSP", "ORTHO"])
+def test_window_coordinates_match_cycles(blender, empty_scene, tmp_path, kind):
+    """Texture Coordinate > Window on a floor seen in perspective or orthographic with a
+    shifted lens: the coordinates (red, green) and a checker over them (blue) as Cycles
+    renders them."""
     bpy, scene = blender, empty_scene
-    cam = _window_floor(bpy, scene)
-    ours, theirs, report = _both(bpy, scene, tmp_path, "window")
+    cam = _window_floor(bpy, scene, kind)
+    ours, theirs, report = _both(bpy, scene, tmp_path, f"window_{kind.lower()}")
     diff = np.abs(ours - theirs).mean(axis=(0, 1))
-    print("window: mean abs difference", diff, "correlation", correlation(ours, theirs))
+    print(kind, "window: mean abs difference", diff, "correlation", correlation(ours, theirs))
     assert (diff <= WINDOW_ATOL).all(), diff
     assert correlation(ours, theirs) >= TEXTURE_CORRELATION
     assert not _said(report, "Window"), report
