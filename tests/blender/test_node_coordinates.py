@@ -388,3 +388,18 @@ def test_a_uv_map_node_naming_another_map_matches_cycles(blender, empty_scene, t
     uvmap.uv_map = ""
     active = render(bpy, scene, tmp_path / "active.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     assert correlation(active, theirs) < TEXTURE_CORRELATION
+
+
+def test_a_udim_tile_that_cannot_be_read_is_magenta_and_said(blender, empty_scene, tmp_path):
+    """A tile file that is not an image: that tile magenta (said), the frame renders."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "UdimBroken")
+    image = _udim_image(bpy, tmp_path)
+    (tmp_path / "udim.1002.png").write_bytes(b"not a png")
+    _image_node(nodes, links, emission, image, "FLAT")
+    _udim_floor(bpy, m)
+    _setup(bpy, scene)
+    ours = render(bpy, scene, tmp_path / "broken.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    np.testing.assert_allclose(ours[60, 20], _linear(UDIM_COLOURS[1001]), atol=0.03)
+    np.testing.assert_allclose(ours[60, 50], (1, 0, 1), atol=0.03)
+    assert [line for line in stats()["report"] if "1002" in line and "magenta" in line], stats()["report"]

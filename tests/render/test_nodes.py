@@ -746,6 +746,21 @@ def test_udim_tiles_pick_the_tile_as_cycles():
     np.testing.assert_allclose(got, want, atol=1e-6)
 
 
+def test_transform_maps_a_point_by_an_affine_matrix():
+    m = np.vstack([RNG.normal(size=(3, 4)), [0, 0, 0, 1]])
+    b = nodes.Builder()
+    out = b.register(width=3)
+    b.emit("TRANSFORM", out, b.global_("POSITION"), b.table(m[:3]))
+    p = RNG.uniform(-3, 3, (20, 3))
+    got = nodes.run(b.program(), len(p), P=p)[:, out:out + 3]
+    np.testing.assert_allclose(got, p @ m[:3, :3].T + m[:3, 3], rtol=1e-5, atol=1e-5)
+    bad = nodes.Builder()
+    o = bad.register(width=3)
+    bad.emit("TRANSFORM", o, o, 0)  # 12 registers from 0: past the 3 there are
+    with pytest.raises(ValueError, match="register out of range"):
+        nodes.run(bad.program())
+
+
 def test_a_bad_tile_table_is_refused():
     b = nodes.Builder()
     colour, alpha = b.register(width=3), b.register()

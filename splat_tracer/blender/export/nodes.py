@@ -773,15 +773,19 @@ def _tile_pixels(image, say) -> list:
         key = (image.name_full, number, path, os.path.getmtime(path), settings, image.alpha_mode)
         if key not in _TILES:
             texture = None
-            temp = bpy.data.images.load(path, check_existing=False)
             try:
-                temp.colorspace_settings.name = settings
-                temp.alpha_mode = image.alpha_mode
-                texture = _image_pixels(temp, say)
-                for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
-                    del _IMAGES[old]  # the temporary image's pixels live on here, not there
-            finally:
-                bpy.data.images.remove(temp)
+                temp = bpy.data.images.load(path, check_existing=False)
+            except RuntimeError:  # a file Blender cannot read: the tile is missing
+                temp = None
+            if temp is not None:
+                try:
+                    temp.colorspace_settings.name = settings
+                    temp.alpha_mode = image.alpha_mode
+                    texture = _image_pixels(temp, say)
+                    for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
+                        del _IMAGES[old]  # the temporary image's pixels live on here, not there
+                finally:
+                    bpy.data.images.remove(temp)
             for old in [k for k in _TILES if k[:2] == key[:2]]:
                 del _TILES[old]
             _TILES[key] = texture
