@@ -403,3 +403,30 @@ def test_a_udim_tile_that_cannot_be_read_is_magenta_and_said(blender, empty_scen
     np.testing.assert_allclose(ours[60, 20], _linear(UDIM_COLOURS[1001]), atol=0.03)
     np.testing.assert_allclose(ours[60, 50], (1, 0, 1), atol=0.03)
     assert [line for line in stats()["report"] if "1002" in line and "magenta" in line], stats()["report"]
+
+
+def test_window_with_a_moving_camera_is_the_frames_as_in_cycles(blender, empty_scene, tmp_path):
+    """With motion blur and the camera sliding sideways, Cycles' Window is the camera's at the
+    frame's time (one transform): the checker over Window stays fixed to the floor and blurs
+    with the camera's motion. Ours too: the blurred checker beside Cycles' (the blue channel)."""
+    from test_motion_blur import _animate_x
+
+    bpy, scene = blender, empty_scene
+    cam = _window_floor(bpy, scene, "ORTHO")
+    cam.data.shift_x = cam.data.shift_y = 0.0
+    cam.location, cam.rotation_euler = (0, 0, 5), (0, 0, 0)
+    _animate_x(cam, 0.0, 1.0)  # 1 m a frame: a checker cell (2 m) blurs over half of itself
+    scene.frame_set(5)  # test_motion_blur's FRAME, between _animate_x's keys
+    r = scene.render
+    r.use_motion_blur, r.motion_blur_shutter = True, 1.0
+    scene.cycles.samples = 256  # the blur's noise well below the tolerance
+    ours, theirs, _ = _both(bpy, scene, tmp_path, "window_moving")
+    diff = np.abs(ours - theirs).mean(axis=(0, 1))
+    print("moving camera: mean abs difference", diff, "grey fractions",
+          ((ours[..., 2] > 0.1) & (ours[..., 2] < 0.9)).mean(), ((theirs[..., 2] > 0.1) & (theirs[..., 2] < 0.9)).mean())
+    assert (diff <= WINDOW_ATOL).all(), diff
+    # The blur shows: blue between its two values over a band at each cell edge (a Window
+    # following the camera at the ray's time would keep the checker sharp: grey only where
+    # the pixels' edges cut a cell's, about a tenth of them).
+    grey = ((theirs[..., 2] > 0.1) & (theirs[..., 2] < 0.9)).mean()
+    assert grey > 0.3 and abs(((ours[..., 2] > 0.1) & (ours[..., 2] < 0.9)).mean() - grey) < 0.05
