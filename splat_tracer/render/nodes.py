@@ -25,13 +25,14 @@ MAX_BUMP_DEPTH = 3   # native kMaxBumpDepth: Bump nodes within a Bump's height, 
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
-       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE")
+       "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
+       "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
-           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA")
+           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
            "emission": 3, "specular_level": 1, "normal": 3}
@@ -52,6 +53,9 @@ GRADIENTS = ("LINEAR", "QUADRATIC", "EASING", "DIAGONAL", "RADIAL", "QUADRATIC_S
 MAPPINGS = ("POINT", "TEXTURE", "VECTOR", "NORMAL")
 INTERPOLATIONS = ("Closest", "Linear", "Cubic")  # Image Texture (native ImageInterpolation)
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")  # Image Texture (native ImageExtension)
+# IMAGE_PROJECT's kinds: Image Texture's projections that remap the vector, then Environment
+# Texture's (of the vector's direction).
+IMAGE_PROJECTIONS = ("SPHERE", "TUBE", "EQUIRECTANGULAR", "MIRROR_BALL")
 VORONOI_METRICS = ("EUCLIDEAN", "MANHATTAN", "CHEBYSHEV", "MINKOWSKI")
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")

@@ -634,6 +634,142 @@ def test_an_image_index_out_of_range_is_refused():
         nodes.run(b.program())
 
 
+def _project_reference(co, kind):
+    """Blender's manual's sphere and tube projections: the texture space's 0..1 box taken to
+    -1..1; u the angle about Z from behind (-Y), a full turn over 0..1 (towards +X first);
+    v the latitude from the south pole (sphere) or Z itself (tube)."""
+    x, y, z = (2 * c - 1 for c in co)
+    u = (math.atan2(x, -y) / (2 * math.pi)) % 1.0 if (x or y) else 0.0
+    if kind == "SPHERE":
+        return u, math.acos(-z / math.sqrt(x * x + y * y + z * z)) / math.pi
+    return (u, (z + 1) / 2) if (x or y) else (0.0, 0.0)  # on the tube's axis: (0, 0), as Cycles
+
+
+@pytest.mark.parametrize("kind", ["SPHERE", "TUBE"])
+def test_sphere_and_tube_projections(kind):
+    b = nodes.Builder()
+    out = b.register(width=3)
+    b.emit("IMAGE_PROJECT", out, b.global_("GENERATED"), nodes.IMAGE_PROJECTIONS.index(kind))
+    co = np.vstack([RNG.uniform(0, 1, (50, 3)), [[0.5, 0.0, 0.5], [1.0, 0.5, 0.5], [0.5, 0.5, 1.0], [0.5, 1.0, 0.2]]])
+    got = nodes.run(b.program(), len(co), generated=co)[:, out:out + 3]
+    want = np.array([_project_reference(c, kind) for c in co])
+    # u is periodic: compare on the circle (its seam behind the object may read 0 or 1).
+    du = (got[:, 0] - want[:, 0] + 0.5) % 1.0 - 0.5
+    np.testing.assert_allclose(du, 0, atol=2e-6)
+    np.testing.assert_allclose(got[:, 1], want[:, 1], atol=2e-6)
+    np.testing.assert_array_equal(got[:, 2], 0)
+    np.testing.assert_allclose(got[-4:-1, 0] % 1.0, [0.0, 0.25, 0.0], atol=1e-6)  # behind, +X, a pole
+
+
+def test_environment_projections():
+    """An Environment Texture's mappings of a direction: equirectangular (longitude about Z
+    from -X, latitude from -Z) and mirror ball (the ball seen along +Y: a direction maps to
+    where the ball's normal bisects it and the reversed view), each checked by mapping back."""
+    d = RNG.normal(size=(50, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.vstack([d, [[-1, 0, 0], [1, 0, 0], [0, 0, 1], [0, -1, 0]]])
+    b = nodes.Builder()
+    eq, mb = b.register(width=3), b.register(width=3)
+    b.emit("IMAGE_PROJECT", eq, b.global_("INCOMING"), nodes.IMAGE_PROJECTIONS.index("EQUIRECTANGULAR"))
+    b.emit("IMAGE_PROJECT", mb, b.global_("INCOMING"), nodes.IMAGE_PROJECTIONS.index("MIRROR_BALL"))
+    r = nodes.run(b.program(), len(d), I=d * 3.0)  # any length: the direction counts
+    u, v = r[:, eq].astype(np.float64), r[:, eq + 1].astype(np.float64)
+    lon, lat = np.pi - 2 * np.pi * u, np.pi * v - np.pi / 2  # longitude from +X, latitude from the equator
+    back = np.column_stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    np.testing.assert_allclose(back, d, atol=3e-6)
+    np.testing.assert_allclose(r[-4:, eq:eq + 2], [[0.0, 0.5], [0.5, 0.5], [0.5, 1.0], [0.75, 0.5]], atol=1e-6)  # -X: the seam
+    x, z = 2 * r[:, mb] - 1, 2 * r[:, mb + 1] - 1  # the ball's normal, its y towards the viewer (-Y)
+    n = np.column_stack([x, -np.sqrt(np.maximum(1 - x * x - z * z, 0)), z])
+    view = np.array([0.0, 1.0, 0.0])
+    reflected = view - 2 * (n @ view)[:, None] * n
+    ok = d[:, 1] > -0.999  # straight back at the viewer the ball's rim is a circle: any point of it
+    np.testing.assert_allclose(reflected[ok], d[ok], atol=3e-4)
+
+
+def _box_weights(n, blend):
+    """The box projection's weights of the three axes' faces for normal n, written from
+    Blender's manual: one face where the normal is within the blend of an axis, a linear ramp
+    between two faces, a barycentric mix of three at the corners."""
+    a = np.abs(n) / np.abs(n).sum()
+    limit = 0.5 * (1 + blend)
+    w = np.zeros(3)
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        if a[i] > limit * (a[i] + a[j]) and a[i] > limit * (a[i] + a[k]):
+            w[i] = 1
+            return w
+    if blend <= 0:
+        w[0] = 1
+        return w
+    for i, j, k in ((0, 1, 2), (1, 2, 0), (0, 2, 1)):  # the two-face zones, in Cycles' order
+        if a[k] < (1 - limit) * (a[i] + a[j]):
+            w[i] = np.clip((a[i] / (a[i] + a[j]) - 0.5 * (1 - blend)) / blend, 0, 1)
+            w[j] = 1 - w[i]
+            return w
+    return ((2 - limit) * a + (limit - 1)) / (2 * limit - 1)
+
+
+@pytest.mark.parametrize("blend", [0.0, 0.25, 1.0])
+def test_box_projection(blend):
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    b.emit("IMAGE_BOX", colour, alpha, b.global_("OBJECT"), b.image(nodes.Image(IMG)), nodes.INTERPOLATIONS.index("Linear"),
+           nodes.EXTENSIONS.index("REPEAT"), b.register(blend))
+    n = np.vstack([RNG.normal(size=(60, 3)), np.eye(3), -np.eye(3), [[1, 1, 0.01], [1, 1, 1]]])
+    co = RNG.uniform(-0.5, 1.5, (len(n), 3))
+    r = nodes.run(b.program(), len(n), object=co, object_normal=n / np.linalg.norm(n, axis=1, keepdims=True))
+    got = np.column_stack([r[:, colour:colour + 3], r[:, alpha]])
+    img = IMG.astype(np.float64)
+    for g, c, normal in zip(got, co, n):
+        w = _box_weights(normal, blend)
+        faces = [(1 - c[1] if normal[0] < 0 else c[1], c[2]), (1 - c[0] if normal[1] > 0 else c[0], c[2]),
+                 (1 - c[1] if normal[2] > 0 else c[1], c[0])]  # each face seen unmirrored
+        want = sum(wi * image_reference(img, u, v, "Linear", "REPEAT") for wi, (u, v) in zip(w, faces) if wi > 0)
+        np.testing.assert_allclose(g, want, atol=2e-5)
+
+
+def test_udim_tiles_pick_the_tile_as_cycles():
+    a, c = np.zeros((2, 2, 4), np.float32), np.zeros((2, 2, 4), np.float32)
+    a[...] = (0.2, 0.4, 0.6, 1.0)
+    c[...] = (0.9, 0.1, 0.3, 0.5)
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    table = b.table([(1001, b.image(nodes.Image(a))), (1002, b.image(nodes.Image(c))), (1011, -1)])
+    b.emit("IMAGE_TILES", colour, alpha, b.global_("UV"), table, 3, nodes.INTERPOLATIONS.index("Closest"),
+           nodes.EXTENSIONS.index("REPEAT"))
+    uvs = np.array([[0.5, 0.5], [1.5, 0.5], [0.5, 1.5], [-0.5, 0.5], [2.5, 0.5], [10.5, 0.5], [1.25, -0.5]])
+    r = nodes.run(b.program(), len(uvs), uv=np.column_stack([uvs, np.zeros(len(uvs))]))
+    got = np.column_stack([r[:, colour:colour + 3], r[:, alpha]])
+    magenta = (1, 0, 1, 1)
+    # 1001, 1002; 1011 not loaded; -0.5 truncates to tile 1001 (Cycles' int cast); no 1003;
+    # u beyond 10 is no tile; a v in (-1, 0) truncates to row 0 (tile 1002).
+    want = [a[0, 0], c[0, 0], magenta, a[0, 0], magenta, magenta, c[0, 0]]
+    np.testing.assert_allclose(got, want, atol=1e-6)
+
+
+def test_transform_maps_a_point_by_an_affine_matrix():
+    m = np.vstack([RNG.normal(size=(3, 4)), [0, 0, 0, 1]])
+    b = nodes.Builder()
+    out = b.register(width=3)
+    b.emit("TRANSFORM", out, b.global_("POSITION"), b.table(m[:3]))
+    p = RNG.uniform(-3, 3, (20, 3))
+    got = nodes.run(b.program(), len(p), P=p)[:, out:out + 3]
+    np.testing.assert_allclose(got, p @ m[:3, :3].T + m[:3, 3], rtol=1e-5, atol=1e-5)
+    bad = nodes.Builder()
+    o = bad.register(width=3)
+    bad.emit("TRANSFORM", o, o, 0)  # 12 registers from 0: past the 3 there are
+    with pytest.raises(ValueError, match="register out of range"):
+        nodes.run(bad.program())
+
+
+def test_a_bad_tile_table_is_refused():
+    b = nodes.Builder()
+    colour, alpha = b.register(width=3), b.register()
+    b.emit("IMAGE_TILES", colour, alpha, colour, len(b.data) - 1, 2, 0, 0)  # past the registers
+    with pytest.raises(ValueError, match="bad tile table"):
+        nodes.run(b.program())
+
+
 # Voronoi F1 (3-D): a port of Blender's definition, its cells hashed by the PCG 3-D hash
 # (Jarzynski and Olano 2020) on signed 32-bit integers.
 def _pcg3(x, y, z):

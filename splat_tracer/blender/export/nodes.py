@@ -44,11 +44,16 @@ class Unsupported(Exception):
 
 
 class Compiler:
-    """Compiles one material's node inputs into one Program. `say(text)`: a report line."""
+    """Compiles one material's node inputs into one Program. `say(text)`: a report line.
+    object_space(obj): the 4x4 map from the render's local frame (scene.py: world space
+    less a float64 origin) into a Blender object's space at the frame's time, or for None
+    into world space; object_space itself None where it is not known (a lamp's tree: its
+    positions are read in the local frame)."""
 
-    def __init__(self, say):
+    def __init__(self, say, object_space=None):
         self.b = Builder()
         self.say = say
+        self.object_space = object_space
         self.memo: dict = {}
         self.consts: dict = {}
         self.bump_depth = 0  # Bump nodes being compiled within one another
@@ -222,13 +227,40 @@ class Compiler:
         return self._ids(node, {"Color": self.b.register(tuple(node.outputs[0].default_value[:3]), 3)})
 
     def _tex_coord(self, node, stack):
-        if getattr(node, "object", None) is not None:
-            raise Unsupported(node, "Object from another object")
+        other = getattr(node, "object", None)
+        if other is not None and node.outputs["Object"].is_linked:
+            result = self._tex_coord_of(node, other)
+            rest = self._lazy(node, {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV",
+                                     "Reflection": "REFLECTION", "Camera": "CAMERA", "Window": "WINDOW"})
+            return {**rest, **result}
         out = {"Generated": "GENERATED", "Normal": "OBJECT_NORMAL", "UV": "UV", "Object": "OBJECT",
-               "Reflection": "REFLECTION", "Camera": "CAMERA"}
-        if node.outputs["Window"].is_linked:
-            raise Unsupported(node, "its Window output")
+               "Reflection": "REFLECTION", "Camera": "CAMERA", "Window": "WINDOW"}
         return self._lazy(node, out)
+
+    def _tex_coord_of(self, node, other):
+        """Texture Coordinate's Object output with another object chosen: the point in that
+        object's space, as Cycles gives it (the object where it is at the frame's time: Cycles'
+        node holds that one transform, motion blur or not)."""
+        if self.object_space is None:
+            raise Unsupported(node, f"Object from '{other.name}' here")
+        matrix = np.asarray(self.object_space(other), np.float64)
+        if matrix.shape != (4, 4) or not np.isfinite(matrix).all():
+            raise Unsupported(node, f"Object from '{other.name}': its transform cannot be inverted")
+        return {node.outputs["Object"].identifier: self._position_in(matrix)}
+
+    def _position_in(self, matrix) -> int:
+        """The shading position mapped by a 4x4 affine `matrix` from the local frame."""
+        out = self.b.register(width=3)
+        self.b.emit("TRANSFORM", out, self.b.global_("POSITION"), self.b.table(np.asarray(matrix)[:3]))
+        return out
+
+    def _world_position(self) -> int:
+        """The shading position in world space, as Cycles' P is (the local frame's origin
+        added back: nothing to add when it is the world's)."""
+        to_world = np.asarray(self.object_space(None), np.float64) if self.object_space is not None else None
+        if to_world is None or np.array_equal(to_world, np.eye(4)):
+            return self.b.global_("POSITION")
+        return self._position_in(to_world)
 
     def _lazy(self, node, names: dict):
         """Globals for the node's outputs that something reads (unread ones cost nothing)."""
@@ -239,14 +271,22 @@ class Compiler:
         return result
 
     def _new_geometry(self, node, stack):
-        result = self._lazy(node, {"Position": "POSITION", "Normal": "NORMAL", "True Normal": "TRUE_NORMAL",
-                                   "Incoming": "INCOMING"})
+        result = self._lazy(node, {"Normal": "NORMAL", "True Normal": "TRUE_NORMAL", "Incoming": "INCOMING"})
+        if node.outputs["Position"].is_linked:
+            result[node.outputs["Position"].identifier] = self._world_position()
         if node.outputs["Backfacing"].is_linked:
             result[node.outputs["Backfacing"].identifier] = self.b.global_("BACKFACING")
         return result
 
     def _uvmap(self, node, stack):
-        return self._ids(node, {"UV": self.b.global_("UV")})
+        if getattr(node, "from_instancer", False):
+            raise Unsupported(node, "From Instancer")
+        if not node.uv_map:  # the active render map, which meshes carry
+            return self._ids(node, {"UV": self.b.global_("UV")})
+        # Another map: read by name as the geometry's (corner-domain, 2-D) attribute it is,
+        # (u, v, 0); a geometry without it reads 0, as Cycles reads a missing map.
+        uv, _ = self.b.attribute(node.uv_map, 3)
+        return self._ids(node, {"UV": uv})
 
     def _point_data(self, node, fac: bool):
         colour = self.b.global_("POINT_COLOUR")
@@ -495,25 +535,68 @@ class Compiler:
     # Textures
     def _tex_image(self, node, stack):
         image = node.image
-        if node.projection != "FLAT":
-            raise Unsupported(node, f"{node.projection.lower()} projection")
+        if image is not None and image.source not in ("FILE", "GENERATED", "TILED"):
+            raise Unsupported(node, f"{image.source.lower()} images")
+        colour, alpha = self.b.register(width=3), self.b.register()
+        tiles = _tile_pixels(image, self.say) if image is not None and image.source == "TILED" else None
+        texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
+        if texture is None and not tiles:
+            what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
+            return self._missing_image(node, what, colour, alpha)
+        vector = self._vector_or(node, stack, "UV")
+        modes = (self._interpolation(node), nodes.EXTENSIONS.index(node.extension))
+        if node.projection == "BOX":
+            if tiles:  # Cycles' box projection reads the image's first tile alone
+                texture = next((t for number, t in tiles if number == 1001 and t is not None), None)
+                if texture is None:
+                    return self._missing_image(node, f"image '{image.name}' has no tile 1001 loaded", colour, alpha)
+            blend = self.const(float(node.projection_blend), 1)
+            self.b.emit("IMAGE_BOX", colour, alpha, vector, self.b.image(texture), *modes, blend)
+            return self._ids(node, {"Color": colour, "Alpha": alpha})
+        if node.projection in nodes.IMAGE_PROJECTIONS:
+            projected = self.b.register(width=3)
+            self.b.emit("IMAGE_PROJECT", projected, vector, nodes.IMAGE_PROJECTIONS.index(node.projection))
+            vector = projected
+        if tiles:
+            rows = [(number, self.b.image(t) if t is not None else -1) for number, t in tiles]
+            self.b.emit("IMAGE_TILES", colour, alpha, vector, self.b.table(rows), len(rows), *modes)
+        else:
+            self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), *modes)
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _missing_image(self, node, what: str, colour: int, alpha: int) -> dict:
+        """An image node's outputs where there is no image to read: magenta, said."""
+        self.say(f": {what}; rendered magenta, as Cycles does")
+        self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
+        self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
+        return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _interpolation(self, node) -> int:
+        """An image node's interpolation (nodes.INTERPOLATIONS index); Smart is Cubic, said."""
+        if node.interpolation == "Smart":
+            self.say(f": the {node.bl_label}'s Smart interpolation is rendered as Cubic")
+            return nodes.INTERPOLATIONS.index("Cubic")
+        return nodes.INTERPOLATIONS.index(node.interpolation)
+
+    def _tex_environment(self, node, stack):
+        """Environment Texture in a material: the image at the direction of its Vector --
+        unlinked, the world position (Cycles' default for it), as seen from the world's
+        origin. Read with Repeat, as Cycles reads an environment image."""
+        image = node.image
         if image is not None and image.source not in ("FILE", "GENERATED"):
             raise Unsupported(node, f"{image.source.lower()} images")
         colour, alpha = self.b.register(width=3), self.b.register()
         texture = _image_pixels(image, self.say) if image is not None else None
         if texture is None:
-            what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
-            self.say(f": {what}; rendered magenta, as Cycles does")
-            self.b.emit("COPY", colour, self.const(MISSING_IMAGE, 3), 3)
-            self.b.emit("COPY", alpha, self.const(1.0, 1), 1)
-            return self._ids(node, {"Color": colour, "Alpha": alpha})
-        interpolation = node.interpolation
-        if interpolation == "Smart":
-            self.say(": an Image Texture's Smart interpolation is rendered as Cubic")
-            interpolation = "Cubic"
-        vector = self._vector_or(node, stack, "UV")
-        self.b.emit("IMAGE", colour, alpha, vector, self.b.image(texture), nodes.INTERPOLATIONS.index(interpolation),
-                    nodes.EXTENSIONS.index(node.extension))
+            what = (f"image '{image.name}' could not be loaded" if image is not None
+                    else "an Environment Texture has no image")
+            return self._missing_image(node, what, colour, alpha)
+        socket = node.inputs["Vector"]
+        vector = self.input(socket, 3, stack) if self.source(socket, stack) is not None else self._world_position()
+        uv = self.b.register(width=3)
+        self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index(node.projection))
+        self.b.emit("IMAGE", colour, alpha, uv, self.b.image(texture), self._interpolation(node),
+                    nodes.EXTENSIONS.index("REPEAT"))
         return self._ids(node, {"Color": colour, "Alpha": alpha})
 
     def _tex_checker(self, node, stack):
@@ -663,6 +746,67 @@ def _image_pixels(image, say):
     return texture
 
 
+# UDIM tiles read from their files (see _tile_pixels), by what identifies their pixels.
+_TILES: dict = {}
+
+
+def _tile_pixels(image, say) -> list:
+    """A UDIM (tiled) image's tiles as [(tile number, nodes.Image or None)]: the first tile
+    from the image's own pixels (what Blender holds, painted or packed alike), the others
+    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read
+    through a temporary image in the same colour space and alpha mode. A tile that cannot
+    be read (not saved, packed, missing) is None: magenta, as Cycles renders a tile it
+    cannot load -- said once. Tiles are read once and kept while their file is unchanged."""
+    import os
+
+    import bpy
+
+    out, missing = [], []
+    for k, tile in enumerate(image.tiles):
+        number = int(tile.number)
+        if k == 0:
+            if not image.has_data:
+                _try_load(image)
+            out.append((number, _image_pixels(image, say)))
+            if out[-1][1] is None:
+                missing.append(number)
+            continue
+        u, v = (number - 1001) % 10, (number - 1001) // 10
+        path = image.filepath_raw.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
+        path = bpy.path.abspath(path, library=image.library)
+        if path == bpy.path.abspath(image.filepath_raw, library=image.library) or not os.path.isfile(path):
+            out.append((number, None))
+            missing.append(number)
+            continue
+        settings = image.colorspace_settings.name
+        key = (image.name_full, number, path, os.path.getmtime(path), settings, image.alpha_mode)
+        if key not in _TILES:
+            texture = None
+            try:
+                temp = bpy.data.images.load(path, check_existing=False)
+            except RuntimeError:  # a file Blender cannot read: the tile is missing
+                temp = None
+            if temp is not None:
+                try:
+                    temp.colorspace_settings.name = settings
+                    temp.alpha_mode = image.alpha_mode
+                    texture = _image_pixels(temp, say)
+                    for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
+                        del _IMAGES[old]  # the temporary image's pixels live on here, not there
+                finally:
+                    bpy.data.images.remove(temp)
+            for old in [k for k in _TILES if k[:2] == key[:2]]:
+                del _TILES[old]
+            _TILES[key] = texture
+        if _TILES[key] is None:
+            missing.append(number)
+        out.append((number, _TILES[key]))
+    if missing:
+        say(f": image '{image.name}' tile{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} "
+            f"could not be read (not saved to a file?); rendered magenta, as Cycles does")
+    return out
+
+
 def _try_load(image) -> bool:
     """Asks Blender to load the image (from disk or its packed copy); whether it has pixels."""
     try:
@@ -687,14 +831,15 @@ SHADER_INPUTS = {
 }
 
 
-def compile_shader(node, say, skip=(), aovs=()) -> tuple:
+def compile_shader(node, say, skip=(), aovs=(), object_space=None) -> tuple:
     """(Program or None, the input sockets it drives) for a shader node's linked inputs
     (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads)
     and for AOV Output nodes: `aovs`, (AOV name, width, the node's Color or Value socket)
     each. None when nothing needs a program: such a material costs nothing more to render.
-    node: None when nothing feeds the Material Output (AOVs only)."""
+    node: None when nothing feeds the Material Output (AOVs only). object_space: see
+    Compiler."""
     fields = SHADER_INPUTS.get(node.type, {}) if node is not None else {}
-    compiler = Compiler(say)
+    compiler = Compiler(say, object_space)
     driven = []
     for field, names in fields.items():
         if isinstance(names, tuple):  # emission: colour x strength

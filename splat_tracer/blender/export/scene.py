@@ -234,14 +234,15 @@ def _mesh_arrays(mesh: bpy.types.Mesh):
     return verts.reshape(nv, 3), tris.reshape(nt, 3), normals, mats, uv
 
 
-def _materials(slots: list, cache: dict, report: shading.Report, aovs: dict) -> tuple:
+def _materials(slots: list, cache: dict, report: shading.Report, aovs: dict, object_space=None) -> tuple:
     """Blender materials (an object's slots, see _slot_materials) as shading.Material (one
-    default for none). aovs: the view layer's (export_shading.view_layer_aovs)."""
+    default for none). aovs: the view layer's (export_shading.view_layer_aovs);
+    object_space: _object_space's."""
     out = []
     for m in slots or [None]:
         key = m.name_full if m is not None else None
         if key not in cache:
-            cache[key] = export_shading.material_of(m, report, aovs)
+            cache[key] = export_shading.material_of(m, report, aovs, object_space)
         out.append(cache[key])
     return tuple(out)
 
@@ -274,6 +275,7 @@ class _Frame:
         self.splats = self.triangles = 0
         self.want_uv = False   # the UV pass is on (meshes always carry their UV map: node programs read it)
         self.attribute_layout = ()  # the point attributes the materials read (nodes.attribute_layout)
+        self.object_space = None  # _object_space: for node trees naming another object
 
     def cloud(self, obj, attrs, n: int):
         """The splat geometry of a cloud object (built once per content)."""
@@ -408,6 +410,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     frame.want_uv = bool(getattr(view_layer, "use_pass_uv", False))
     instances, lights, keys = [], [], []
     counts = {"cloud": 0, "mesh": 0, "closed": 0}
+    frame.object_space = _object_space(depsgraph, origin)
     frame.attribute_layout = _attribute_layout(depsgraph, frame, report, aovs)
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -436,7 +439,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         parent = inst.parent if inst.is_instance else None
         vis = export_shading.object_visibility(obj, view_layer, parent)
         slots = _slot_materials(obj)
-        materials = _materials(slots, frame.materials, report, aovs)
+        materials = _materials(slots, frame.materials, report, aovs, frame.object_space)
         if kind == "cloud" and all(m is None for m in slots) and geometry_has_colours(obj):
             # A cloud without any material (imported before clouds got one): its own colours.
             materials = (shading.Material(use_point_colour=True),)
@@ -473,6 +476,26 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
                          frame.splats, frame.triangles, len(lights), emission, report, keys)
 
 
+def _object_space(depsgraph, origin):
+    """obj -> the 4x4 map from the local frame at `origin` into the object's space, the
+    object as this depsgraph evaluates it (at the frame's time); NaN where its transform
+    cannot be inverted (scaled to 0). None -> the map into world space (nodes.Compiler)."""
+
+    def object_space(obj):
+        if obj is None:
+            to_world = np.eye(4)
+            to_world[:3, 3] = origin
+            return to_world
+        world = np.array(obj.evaluated_get(depsgraph).matrix_world, np.float64)
+        world[:3, 3] -= origin
+        try:
+            return np.linalg.inv(world)
+        except np.linalg.LinAlgError:
+            return np.full((4, 4), np.nan)
+
+    return object_space
+
+
 def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: dict) -> tuple:
     """The attributes the materials of the scene's clouds and meshes read
     (nodes.attribute_layout), which every cloud and mesh then carries: only those (none
@@ -486,7 +509,8 @@ def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: di
         key = (obj.name, obj.type, obj.data.as_pointer() if obj.data is not None else 0)
         if (obj.type == "POINTCLOUD" or obj.type in _MESH_LIKE) and key not in seen:
             seen.add(key)
-            programs += [m.program for m in _materials(_slot_materials(obj), frame.materials, report, aovs)]
+            programs += [m.program for m in _materials(_slot_materials(obj), frame.materials, report, aovs,
+                                                       frame.object_space)]
     layout = nodes.attribute_layout(programs)
     left_out = sorted(set(nodes.attributes_read(programs)) - {name for name, _ in layout})
     if left_out:

@@ -299,10 +299,13 @@ def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
                          roughness=bl_material.roughness), sockets)
 
 
-def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -> shading.Material:
+def material_of(bl_material, report: shading.Report, aovs: dict | None = None,
+                object_space=None) -> shading.Material:
     """The engine's Material for a Blender material (None, an empty slot: default grey).
     aovs: the view layer's shader AOVs to write, name -> "COLOR" or "VALUE" (view_layer_aovs):
     the material's AOV Output nodes naming one are compiled, the others cost nothing.
+    object_space(obj): the local frame into an object's space, for a Texture Coordinate
+    node naming another object (nodes.Compiler; None: such a node is said and left out).
 
     Reads the node tree Cycles would render (see the module docstring for what maps to
     what). Without an output for Cycles, or with nothing in its Surface, the material is
@@ -311,7 +314,7 @@ def material_of(bl_material, report: shading.Report, aovs: dict | None = None) -
     once in `report`. Emission Sampling (Material > Settings) is read where Cycles keeps it."""
     if bl_material is None:
         return shading.Material()
-    material = _surface_material(bl_material, report, aovs or {})
+    material = _surface_material(bl_material, report, aovs or {}, object_space)
     sampling = _emission_sampling(bl_material)
     if sampling == "AUTO" and material.program is not None and material.program.drives("emission"):
         # The core samples it by its program's estimate (mesh_lights.h): Auto is Cycles' choice.
@@ -343,7 +346,7 @@ def _auto_sampling_of_nodes(bl_material) -> str:
     return "FRONT_BACK" if c * k > shading.AUTO_EMISSION_THRESHOLD else "NONE"
 
 
-def _surface_material(bl_material, report: shading.Report, aovs: dict) -> shading.Material:
+def _surface_material(bl_material, report: shading.Report, aovs: dict, object_space=None) -> shading.Material:
     """material_of's reading of the node tree (or the viewport settings)."""
     sockets = _Sockets("material", bl_material.name, report)
     tree = _node_tree(bl_material)
@@ -366,7 +369,8 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict) -> shadin
         return _clamped(dict(_BLACK, alpha=0.0), sockets)
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
-    program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets))
+    program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets),
+                       object_space)
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
     return dataclasses.replace(material, program=program) if program is not None else material
 
@@ -394,7 +398,7 @@ def _aov_outputs(tree, aovs: dict, sockets: _Sockets) -> list:
     return found
 
 
-def _program(shader, sockets: _Sockets, aovs=()):
+def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
     """The node program for the linked inputs of the material's shader (None: nothing feeds
     the Material Output) and its AOV Output nodes (_aov_outputs), or None (nothing needs
     one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
@@ -409,9 +413,10 @@ def _program(shader, sockets: _Sockets, aovs=()):
             # readers here only give the constant fields the blend starts from.
             quiet = _Sockets("material", "", shading.Report())
             program, driven = shader_mix.compile_mix(shader, sockets.say, lambda node: _shader_node(node, quiet),
-                                                     _DEFAULTS, _IS_BSDF, aovs=aovs)
+                                                     _DEFAULTS, _IS_BSDF, aovs=aovs, object_space=object_space)
         else:
-            program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs)
+            program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs,
+                                                   object_space=object_space)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None

@@ -70,6 +70,14 @@ const Layout &layout(Op op) {
         /* Bump (first row checked apart) */ {{kR3, kR1, kR1, kR1, kR3, kNone, kEnum}, {0, 0, 0, 0, 0, 0, 2}},
         /* Attribute (width checked apart; column kMaxPointAttributes: never carried, reads 0) */
         {{kR3, kR1, kEnum, kEnum}, {0, 0, kMaxPointAttributes + 1, 4}},
+        /* ImageProject */ {{kR3, kR3, kEnum}, {0, 0, 4}},
+        /* ImageBox (image checked apart) */
+        {{kR3, kR1, kR3, kNone, kEnum, kEnum, kR1}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
+                                                     int32_t(ImageExtension::Count)}},
+        /* ImageTiles (table checked apart; image indices at run time) */
+        {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
+                                                       int32_t(ImageExtension::Count)}},
+        /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
     };
     return table[int(op)];
 }
@@ -666,6 +674,11 @@ void NodeProgram::validate() {
             uses_bump = true;
         }
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
+        if (op == Op::Global && c[2] == int32_t(Global::Window)) uses_window = true;
+        if (op == Op::ImageTiles && (c[5] < 1 || c[4] < 0 || int64_t(c[4]) + 2 * int64_t(c[5]) > n))
+            fail("bad tile table");
+        if (op == Op::ImageBox && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
+            fail("image out of range");
         if (op == Op::Image && (c[4] < 0 || size_t(c[4]) >= images.size() || !images[size_t(c[4])]))
             fail("image out of range");
         if (op == Op::Curves && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n || int64_t(c[6]) + 2 > n))
@@ -683,6 +696,88 @@ void NodeProgram::validate() {
 }
 
 namespace {
+
+// An Image Texture's sphere (kind 0) and tube (1) projections: the vector, taken from the
+// texture space's 0..1 box to -1..1, mapped to (u, v) as Cycles' map_to_sphere and map_to_tube
+// define them (u around the Z axis, starting behind -Y; v up the sphere or along Z). An
+// Environment Texture's equirectangular (2) and mirror ball (3) projections of the vector's
+// direction, as Cycles' direction_to_equirectangular and direction_to_mirrorball.
+Vec3 image_projection(Vec3 co, int kind) {
+    if (kind >= 2) {
+        const float len = length(co);
+        if (!(len > 0.f)) return Vec3();  // Cycles' safe_normalize: the zero vector stays
+        const Vec3 d = co * (1.f / len);
+        if (kind == 2)  // u: a full turn about Z from -X (0) through -Y, +X (0.5), +Y; v: from -Z up
+            return {0.5f - std::atan2(d.y, d.x) * (0.5f / kPi),
+                    1.f - std::acos(std::fmin(std::fmax(d.z, -1.f), 1.f)) * (1.f / kPi), 0.f};
+        // A unit ball seen along +Y reflects the view towards d where its normal is along
+        // d - (0, 1, 0); that normal's (x, z) is the point of the ball's image, 0..1 across.
+        Vec3 b = d - Vec3(0.f, 1.f, 0.f);
+        const float div = 2.f * std::sqrt(std::fmax(-0.5f * b.y, 0.f));
+        if (div > 0.f) b = b * (1.f / div);
+        return {0.5f * (b.x + 1.f), 0.5f * (b.z + 1.f), 0.f};
+    }
+    const Vec3 p = (co - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
+    if (kind == 0) {
+        const float l = dot(p, p);
+        if (!(l > 0.f)) return Vec3();
+        const float u = (p.x == 0.f && p.y == 0.f) ? 0.f : 0.5f - std::atan2(p.x, p.y) * (0.5f / kPi);
+        const float v = 1.f - std::acos(std::fmin(std::fmax(p.z / std::sqrt(l), -1.f), 1.f)) * (1.f / kPi);
+        return {u, v, 0.f};
+    }
+    const float len = std::sqrt(p.x * p.x + p.y * p.y);
+    if (!(len > 0.f)) return Vec3();
+    return {(1.f - std::atan2(p.x / len, p.y / len) / kPi) * 0.5f, (p.z + 1.f) * 0.5f, 0.f};
+}
+
+// The box projection (Cycles' svm_node_tex_image_box): the object-space normal, as
+// barycentric weights over the three axes' faces, picks one face's lookup near an axis and
+// blends two or three within `blend` of the edges (seven zones of the triangle).
+RGBA image_box(const TextureImage &image, Vec3 co, Vec3 signed_n, float blend, ImageInterpolation interpolation,
+               ImageExtension extension) {
+    Vec3 n = vabs(signed_n);
+    const float sum = n.x + n.y + n.z;
+    if (!(sum > 0.f)) n = Vec3(1.f, 0.f, 0.f);
+    else n = n * (1.f / sum);
+    blend = saturate(blend);
+    const float limit = 0.5f * (1.f + blend);
+    Vec3 w;
+    if (n.x > limit * (n.x + n.y) && n.x > limit * (n.x + n.z)) {
+        w.x = 1.f;
+    } else if (n.y > limit * (n.x + n.y) && n.y > limit * (n.y + n.z)) {
+        w.y = 1.f;
+    } else if (n.z > limit * (n.x + n.z) && n.z > limit * (n.y + n.z)) {
+        w.z = 1.f;
+    } else if (blend > 0.f) {
+        if (n.z < (1.f - limit) * (n.y + n.x)) {  // between two faces: X and Y
+            w.x = saturate((n.x / (n.x + n.y) - 0.5f * (1.f - blend)) / blend);
+            w.y = 1.f - w.x;
+        } else if (n.x < (1.f - limit) * (n.y + n.z)) {  // Y and Z
+            w.y = saturate((n.y / (n.y + n.z) - 0.5f * (1.f - blend)) / blend);
+            w.z = 1.f - w.y;
+        } else if (n.y < (1.f - limit) * (n.x + n.z)) {  // X and Z
+            w.x = saturate((n.x / (n.x + n.z) - 0.5f * (1.f - blend)) / blend);
+            w.z = 1.f - w.x;
+        } else {  // all three
+            const float k = 1.f / (2.f * limit - 1.f);
+            w = Vec3(((2.f - limit) * n.x + (limit - 1.f)) * k, ((2.f - limit) * n.y + (limit - 1.f)) * k,
+                     ((2.f - limit) * n.z + (limit - 1.f)) * k);
+        }
+    } else {
+        w.x = 1.f;  // exactly on an edge without blending: one face, as Cycles falls back
+    }
+    RGBA out;
+    auto add = [&](float weight, float u, float v) {
+        if (!(weight > 0.f)) return;
+        const RGBA t = image.sample(u, v, interpolation, extension);
+        out.r += weight * t.r, out.g += weight * t.g, out.b += weight * t.b, out.a += weight * t.a;
+    };
+    // Each face's (u, v) turned so that no face's image is mirrored (Cycles' orientation).
+    add(w.x, signed_n.x < 0.f ? 1.f - co.y : co.y, co.z);
+    add(w.y, signed_n.y > 0.f ? 1.f - co.x : co.x, co.z);
+    add(w.z, signed_n.z > 0.f ? 1.f - co.y : co.y, co.x);
+    return out;
+}
 
 // A table of `size` RGBA rows sampled evenly over 0..1, read at f (linearly between rows when
 // `interpolate`); outside 0..1 it holds its ends.
@@ -722,6 +817,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                     case Global::PointAlpha: v = Vec3(sg.point_alpha, sg.point_alpha, sg.point_alpha); break;
                     case Global::Reflection: v = sg.N * (2.f * dot(sg.N, sg.I)) - sg.I; break;
                     case Global::Camera: v = sg.camera; break;
+                    case Global::Window: v = sg.window; break;
                     default: v = Vec3(sg.backfacing, sg.backfacing, sg.backfacing); break;
                 }
                 store3(r, c[1], v);
@@ -876,6 +972,43 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
             case Op::Image: {
                 const Vec3 uv = load3(r, c[3]);
                 const RGBA t = images[size_t(c[4])]->sample(uv.x, uv.y, ImageInterpolation(c[5]), ImageExtension(c[6]));
+                store3(r, c[1], {t.r, t.g, t.b});
+                r[c[2]] = t.a;
+                break;
+            }
+            case Op::Transform: {
+                const Vec3 p = load3(r, c[2]);
+                const float *m = r + c[3];
+                store3(r, c[1], {m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3], m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                                 m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]});
+                break;
+            }
+            case Op::ImageProject: store3(r, c[1], image_projection(load3(r, c[2]), c[3])); break;
+            case Op::ImageBox: {
+                const RGBA t = image_box(*images[size_t(c[4])], load3(r, c[3]), sg.object_normal, r[c[7]],
+                                         ImageInterpolation(c[5]), ImageExtension(c[6]));
+                store3(r, c[1], {t.r, t.g, t.b});
+                r[c[2]] = t.a;
+                break;
+            }
+            case Op::ImageTiles: {
+                const Vec3 uv = load3(r, c[3]);
+                // Cycles' choice: the integer parts truncated towards zero, tiles 1001 + 10 v + u
+                // for u in 0..9; the coordinates then relative to the tile found.
+                RGBA t{1.f, 0.f, 1.f, 1.f};  // magenta: no such tile, or not loaded (Cycles' missing image)
+                const float tx = std::trunc(uv.x), ty = std::trunc(uv.y);
+                if (tx >= 0.f && ty >= 0.f && tx < 10.f && ty < 1e6f) {
+                    const float tile = 1001.f + 10.f * ty + tx;
+                    const float *table = r + c[4];
+                    for (int i = 0; i < c[5]; ++i) {
+                        if (table[2 * i] != tile) continue;
+                        const float index = table[2 * i + 1];
+                        if (index >= 0.f && index < float(images.size()) && images[size_t(index)])
+                            t = images[size_t(index)]->sample(uv.x - tx, uv.y - ty, ImageInterpolation(c[6]),
+                                                              ImageExtension(c[7]));
+                        break;
+                    }
+                }
                 store3(r, c[1], {t.r, t.g, t.b});
                 r[c[2]] = t.a;
                 break;

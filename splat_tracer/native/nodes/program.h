@@ -48,19 +48,20 @@ struct ShaderGlobals {
     float tangent_sign = 1.f;  // the bitangent is tangent_sign x (normal x tangent)
     Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
     Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
+    Vec3 window;             // Cycles' Window coordinates (0..1 over the camera's frame, z 0), 0 without a camera
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     // The Bump node's two nearby shading points: for each, how far every position-dependent
     // global moves from this point (all zero when the program has no Bump node).
     struct Offset {
-        Vec3 P, object, generated, uv, camera;
+        Vec3 P, object, generated, uv, camera, window;
     };
     Offset bump[2];
     ShaderGlobals offset(int k) const {
         ShaderGlobals s = *this;
         const Offset &d = bump[k];
         s.P = P + d.P, s.object = object + d.object, s.generated = generated + d.generated, s.uv = uv + d.uv;
-        s.camera = camera + d.camera;
+        s.camera = camera + d.camera, s.window = window + d.window;
         return s;
     }
     Vec3 object_to_world_normal(Vec3 n) const {
@@ -72,7 +73,7 @@ struct ShaderGlobals {
 
 enum class Global : int32_t {
     Position = 0, Normal, TrueNormal, Incoming, Object, ObjectNormal, Generated, UV, PointColour, PointAlpha,
-    Reflection, Backfacing, Camera, Count
+    Reflection, Backfacing, Camera, Window, Count
 };
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
@@ -125,6 +126,16 @@ enum class Op : int32_t {
                     // offset points of ShaderGlobals::bump)
     Attribute,      // out_colour, out_fac, first (column of ShaderGlobals::attributes), width (1: float, 3: vector
                     // or colour): Cycles' Attribute node (a float fills the colour; Fac averages a vector)
+    ImageProject,   // out, vector, kind: the vector to an image's (u, v, 0) -- 0 sphere, 1 tube (an Image
+                    // Texture's projections: Cycles' map_to_sphere / map_to_tube of the vector in -1..1),
+                    // 2 equirectangular, 3 mirror ball (an Environment Texture's, of the vector's direction)
+    ImageBox,       // out_colour, out_alpha, vector, image, ImageInterpolation, ImageExtension, blend: the box
+                    // projection, three lookups blended by the object-space normal (Cycles' tex_image_box)
+    ImageTiles,     // out_colour, out_alpha, vector, table, count, ImageInterpolation, ImageExtension: a UDIM
+                    // image, `count` rows (tile number, image index; index -1: not loaded) from `table`;
+                    // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
+    Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
+                    // as a point (Texture Coordinate's Object output with another object chosen)
     Count
 };
 
@@ -143,6 +154,7 @@ struct NodeProgram {
     std::vector<std::shared_ptr<const TextureImage>> images;  // shared between programs of a scene
     bool uses_tangent = false;  // a Normal Map reads the UV map's tangent (set by validate)
     bool uses_camera = false;   // a Texture Coordinate reads the camera's space (set by validate)
+    bool uses_window = false;   // a Texture Coordinate reads Window (set by validate)
     bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
     bool uses_bump = false;     // a Bump node needs ShaderGlobals::bump (set by validate)
     std::string name;           // the material's, for errors

@@ -253,7 +253,7 @@ PyObject *run_nodes(PyObject *, PyObject *args) {
         // space and UV map, so every position-dependent global moves alike.
         for (int k = 0; k < 2; ++k) {
             const Vec3 d(x[33 + 3 * k], x[34 + 3 * k], x[35 + 3 * k]);
-            s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d};
+            s.bump[k] = {d, d, d, Vec3(d.x, d.y, 0.f), d, Vec3()};  // no camera: Window stays 0
         }
         s.point_alpha = x[39], s.backfacing = x[40], s.tangent_sign = x[41];
         if (attr.held) s.attributes = attr.data<float>() + i * attr.dim(1), s.attribute_count = int(attr.dim(1));

@@ -124,6 +124,45 @@ struct Camera {
         }
     }
 
+    // The inverse of panorama_direction: the panorama coordinates (u, v) of a camera-space
+    // direction d (unit), as Cycles' direction_to_panorama gives them (its Window texture
+    // coordinates): unclamped, so that a direction the panorama does not see lies outside
+    // 0..1 as Cycles' does.
+    void panorama_uv(const double d[3], double *u, double *v) const {
+        *u = *v = 0.0;
+        switch (projection) {
+            case kEquirectangular: {
+                const double lon = std::atan2(d[0], -d[2]), lat = std::asin(std::min(std::max(d[1], -1.0), 1.0));
+                if (pano[1] != pano[0]) *u = (lon - pano[0]) / (pano[1] - pano[0]);
+                if (pano[3] != pano[2]) *v = (lat - pano[2]) / (pano[3] - pano[2]);
+                return;
+            }
+            case kFisheyeEquidistant:
+            case kFisheyeEquisolid: {
+                const double theta = std::acos(std::min(std::max(-d[2], -1.0), 1.0)), phi = std::atan2(d[1], d[0]);
+                if (projection == kFisheyeEquidistant) {
+                    const double r = pano[0] > 0.0 ? theta / pano[0] : 0.0;
+                    *u = r * std::cos(phi) + 0.5, *v = r * std::sin(phi) + 0.5;
+                } else {
+                    const double r = 2.0 * pano[0] * std::sin(theta * 0.5);
+                    *u = pano[2] > 0.0 ? r * std::cos(phi) / pano[2] + 0.5 : 0.5;
+                    *v = pano[3] > 0.0 ? r * std::sin(phi) / pano[3] + 0.5 : 0.5;
+                }
+                return;
+            }
+            case kMirrorball: {
+                // d = 2 z (x, y, z) - (0, 0, 1) for the ball's normal (x, y, z): z from d's last
+                // component, then x and y.
+                const double z = std::sqrt(std::max(0.5 * (1.0 - d[2]), 0.0));
+                const double x = z > 0.0 ? d[0] / (2.0 * z) : 0.0, y = z > 0.0 ? d[1] / (2.0 * z) : 0.0;
+                *u = 0.5 * (x + 1.0), *v = 0.5 * (y + 1.0);
+                return;
+            }
+            default:
+                return;
+        }
+    }
+
     // position and forward from local_from_camera; false when its view axis has no length.
     bool derive_axes() {
         const double *m = local_from_camera;

@@ -135,22 +135,49 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     // is where it is at the ray's time.
     double moved[12];
     const double *c = nullptr;
-    if (camera && prog.uses_camera) {
+    if (camera && (prog.uses_camera || prog.uses_window)) {
         if (camera->moves()) motion::at(camera->motion, camera->motion_steps, time, moved);
         c = camera->moves() ? moved : camera->local_from_camera;
     }
-    auto camera_space = [c](Vec3 p, bool direction) {
-        const double d[3] = {double(p.x) - (direction ? 0.0 : c[3]), double(p.y) - (direction ? 0.0 : c[7]),
-                             double(p.z) - (direction ? 0.0 : c[11])};
+    auto camera_space_of = [](const double *m, Vec3 p, bool direction) {
+        const double d[3] = {double(p.x) - (direction ? 0.0 : m[3]), double(p.y) - (direction ? 0.0 : m[7]),
+                             double(p.z) - (direction ? 0.0 : m[11])};
         Vec3 out;
         for (int k = 0; k < 3; ++k) {
-            const double len = std::sqrt(c[k] * c[k] + c[4 + k] * c[4 + k] + c[8 + k] * c[8 + k]);
-            const double v = (c[k] * d[0] + c[4 + k] * d[1] + c[8 + k] * d[2]) / (len > 0 ? len : 1.0);
+            const double len = std::sqrt(m[k] * m[k] + m[4 + k] * m[4 + k] + m[8 + k] * m[8 + k]);
+            const double v = (m[k] * d[0] + m[4 + k] * d[1] + m[8 + k] * d[2]) / (len > 0 ? len : 1.0);
             out[k] = float(k == 2 ? -v : v);
         }
         return out;
     };
+    auto camera_space = [&](Vec3 p, bool direction) { return camera_space_of(c, p, direction); };
     if (camera && prog.uses_camera) sg.camera = camera_space(sp.p, false);
+    // Window: Cycles' camera_world_to_ndc, 0..1 over the camera's whole frame (its shift
+    // included, a border not: the frustum is the full frame's), z 0. A planar camera projects
+    // the point onto its frame (divided by the depth, as Cycles' perspective divide is, 0 at
+    // depth 0); a panorama gives its own coordinates of the direction to the point. The
+    // camera where it is at the frame's time, motion blur or not: Cycles' one world-to-NDC
+    // transform.
+    auto window = [&](Vec3 p) {
+        const Vec3 q = camera_space_of(camera->local_from_camera, p, false);
+        const double *f = camera->frustum;
+        double u, v;
+        if (camera->panoramic()) {
+            const double len = std::sqrt(double(q.x) * q.x + double(q.y) * q.y + double(q.z) * q.z);
+            if (!(len > 0.0)) return Vec3();
+            const double d[3] = {q.x / len, q.y / len, -q.z / len};  // back to looking down -Z
+            camera->panorama_uv(d, &u, &v);
+            return Vec3(float(u), float(v), 0.f);
+        }
+        if (camera->orthographic) {
+            u = q.x, v = q.y;
+        } else {
+            if (q.z == 0.f) return Vec3();
+            u = double(q.x) / q.z, v = double(q.y) / q.z;
+        }
+        return Vec3(float((u - f[0]) / (f[1] - f[0])), float((v - f[2]) / (f[3] - f[2])), 0.f);
+    };
+    if (camera && prog.uses_window) sg.window = window(sp.p);
     for (int row = 0; row < 3; ++row)  // to_object^T: object-space normals into the scene frame
         for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
@@ -211,6 +238,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
                 }
             }
             if (camera && prog.uses_camera) d.camera = camera_space(d.P, true);
+            if (camera && prog.uses_window) d.window = window(sp.p + d.P) - sg.window;
         }
     }
     float r[kMaxNodeRegisters];
