@@ -569,15 +569,15 @@ def test_camera_coordinates_match_cycles(blender, empty_scene, tmp_path):
     assert theirs[..., 0].mean() > 0.05  # the depth shows: negated, it would be all 0
 
 
-# A lamp's colour from its node tree against Cycles': the Blackbody node's stated accuracy
-# (1 % per channel from 3000 K) plus the renders' noise.
-LAMP_COLOUR_RTOL = 0.03
+# A lamp's colour from its node tree against Cycles': the Blackbody node's accuracy (0.4 %
+# per channel, tests/render/test_nodes.py) plus the renders' noise (measured: 0.07 % off).
+LAMP_COLOUR_RTOL = 0.01
 
 
 @pytest.mark.parametrize("panel", [False, True])
 def test_a_lamp_with_a_blackbody_node_lights_as_in_cycles(blender, empty_scene, tmp_path, panel):
     """A sun whose tree is Blackbody (3000 K) -> Emission (strength from Value x Math) lights
-    a grey floor: the floor's mean colour as Cycles' within 3 %; `panel`: with the light
+    a grey floor: the floor's mean colour as Cycles' within 1 %; `panel`: with the light
     panel's Temperature (8000 K) and Exposure (-0.5) as well, which multiply in. The same sun
     without its tree (white) is far outside (fails)."""
     bpy, scene = blender, empty_scene
@@ -635,9 +635,9 @@ def test_a_volume_only_card_is_transparent(blender, empty_scene, tmp_path):
 
 def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     """An Emission floor whose colour is a Blackbody of a temperature varying across it (a
-    Gradient through Map Range: 3000-9000 K): per-pixel red/blue correlation >= 0.95 and the
-    mean colour within 3 % of Cycles' (the node's stated 1 % plus noise). A constant 6500 K
-    (no gradient) fails the colour."""
+    Gradient through Map Range: 800-12000 K, Cycles' whole range): per-pixel red/blue
+    correlation >= 0.95 and the mean colour within 1 % of Cycles'. A constant 6500 K (no
+    gradient) fails the colour."""
     bpy, scene = blender, empty_scene
     m = bpy.data.materials.new("Glow")
     nodes, links = m.node_tree.nodes, m.node_tree.links
@@ -645,7 +645,7 @@ def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     coords, gradient, to_kelvin, blackbody, emission = (nodes.new(t) for t in (
         "ShaderNodeTexCoord", "ShaderNodeTexGradient", "ShaderNodeMapRange", "ShaderNodeBlackbody",
         "ShaderNodeEmission"))
-    to_kelvin.inputs["To Min"].default_value, to_kelvin.inputs["To Max"].default_value = 3000.0, 9000.0
+    to_kelvin.inputs["To Min"].default_value, to_kelvin.inputs["To Max"].default_value = 800.0, 12000.0
     links.new(coords.outputs["UV"], gradient.inputs["Vector"])
     links.new(gradient.outputs["Fac"], to_kelvin.inputs["Value"])
     links.new(to_kelvin.outputs["Result"], blackbody.inputs["Temperature"])
