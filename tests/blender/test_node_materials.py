@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from blender_helpers import add_camera
+from blender_helpers import add_camera, extension_module
 from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, stats
 
 SIZE = 80
@@ -664,3 +664,99 @@ def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     blackbody.inputs["Temperature"].default_value = 6500.0
     flat = render(bpy, scene, tmp_path / "flat.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     assert np.abs(flat.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max() > 3 * LAMP_COLOUR_RTOL
+
+
+def _float_srgb_image(bpy, tmp_path):
+    """An 8x4 16-bit PNG (Blender loads it as a float image tagged sRGB, decoded to scene
+    linear) of greys and colours from dark to bright."""
+    values = np.linspace(0.02, 1.0, 32).reshape(4, 8)
+    pixels = np.ones((4, 8, 4), np.float32)
+    pixels[..., 0], pixels[..., 1], pixels[..., 2] = values, values[::-1, ::-1], values ** 2
+    source = bpy.data.images.new("Source", 8, 4, float_buffer=True)
+    source.colorspace_settings.name = "Non-Color"  # written as its values
+    source.pixels.foreach_set(pixels.ravel())
+    source.filepath_raw, source.file_format = str(tmp_path / "sixteen.png"), "PNG"
+    settings = bpy.context.scene.render.image_settings
+    settings.file_format, settings.color_depth = "PNG", "16"
+    source.save()
+    image = bpy.data.images.load(str(tmp_path / "sixteen.png"))
+    assert image.is_float and image.colorspace_settings.name == "sRGB"
+    return image
+
+
+def _decoding_twice(read):
+    """images.read with the rule the node compiler had: a float sRGB image decoded again."""
+    from splat_tracer.util.colour import srgb_to_linear
+
+    def wrong(image, say):
+        got = read(image, say)
+        if got is None or not image.is_float or not got.srgb:
+            return got
+        values = got.values.copy()
+        values[..., :3] = srgb_to_linear(srgb_to_linear(values[..., :3]))
+        return type(got)(values, False)
+    return wrong
+
+
+# A float image tagged sRGB against Cycles (Linear interpolation, magnified 10-12x): mean
+# colour per channel (measured: see docs/nodes.md) and the pixels' correlation.
+FLOAT_SRGB_RTOL = 0.01
+
+
+def test_a_float_srgb_image_reads_as_in_cycles_in_a_material_and_a_world(blender, empty_scene, tmp_path,
+                                                                          monkeypatch):
+    """A 16-bit PNG (float, tagged sRGB) as an Emission floor's Image Texture and as the
+    world's Environment Texture (seen by an equirectangular camera): Blender's pixels are
+    scene linear, interpolated sRGB-encoded as Cycles does. The rule the node compiler had
+    (decoding them again) is far outside."""
+    images, compiler, baked = (extension_module(f"blender.export.{name}") for name in ("images", "nodes", "world"))
+
+    bpy, scene = blender, empty_scene
+    image = _float_srgb_image(bpy, tmp_path)
+    m = bpy.data.materials.new("FloatSRGB")
+    tree = m.node_tree
+    output = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
+    tex, emission = tree.nodes.new("ShaderNodeTexImage"), tree.nodes.new("ShaderNodeEmission")
+    tex.image, tex.interpolation, tex.extension = image, "Linear", "EXTEND"
+    tree.links.new(tex.outputs["Color"], emission.inputs["Color"])
+    tree.links.new(emission.outputs[0], output.inputs["Surface"])
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, "float_srgb_material")
+    wrong = {}
+
+    def render_wrong(name, size):
+        """Our render with the float image decoded twice, then the rule restored."""
+        monkeypatch.setattr(images, "read", _decoding_twice(images.read))
+        compiler._IMAGES.clear(), baked._cache.clear()
+        wrong[name] = render(bpy, scene, tmp_path / f"{name}_wrong.exr", size)["ViewLayer"]["Combined"][..., :3]
+        monkeypatch.undo()
+        compiler._IMAGES.clear(), baked._cache.clear()
+
+    render_wrong("material", (SIZE, SIZE))
+    world = bpy.data.worlds.new("FloatSRGBWorld")
+    env = world.node_tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image, env.interpolation = image, "Linear"
+    world.node_tree.links.new(env.outputs["Color"], world.node_tree.nodes["Background"].inputs["Color"])
+    scene.world = world
+    bpy.data.objects.remove(bpy.data.objects["Floor"])
+    camera = scene.camera
+    camera.data.type, camera.data.panorama_type = "PANO", "EQUIRECTANGULAR"
+    camera.rotation_euler = (math.pi / 2, 0, 0)
+    size = (96, 48)
+    sky_ours = render(bpy, scene, tmp_path / "sky_ours.exr", size)["ViewLayer"]["Combined"][..., :3]
+    scene.render.engine = "CYCLES"
+    try:
+        sky_theirs = render(bpy, scene, tmp_path / "sky_cycles.exr", size)["ViewLayer"]["Combined"][..., :3]
+    finally:
+        scene.render.engine = "SPLAT_TRACER"
+    for what, a, b in (("material", ours, theirs), ("world", sky_ours, sky_theirs)):
+        off = np.abs(a.reshape(-1, 3).mean(0) / b.reshape(-1, 3).mean(0) - 1).max()
+        print(f"float sRGB image, {what}: mean colour {off:.4f} off, correlation {correlation(a, b):.4f}")
+        np.testing.assert_allclose(a.reshape(-1, 3).mean(0), b.reshape(-1, 3).mean(0), rtol=FLOAT_SRGB_RTOL)
+        assert correlation(a, b) >= 0.99
+    assert [line for line in report if "FloatSRGB" in line or "sixteen" in line] == [  # nothing of the image
+        "material 'FloatSRGB': emission driven by nodes is not sampled as a light (found by rays only)"], report
+    render_wrong("world", size)
+    for what, b in (("material", theirs), ("world", sky_theirs)):
+        off = np.abs(wrong[what].reshape(-1, 3).mean(0) / b.reshape(-1, 3).mean(0) - 1).max()
+        print(f"float sRGB image decoded twice, {what}: mean colour {off:.4f} off")
+        assert off > 10 * FLOAT_SRGB_RTOL
