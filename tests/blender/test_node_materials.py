@@ -679,21 +679,24 @@ def test_blackbody_over_a_floor_matches_cycles(blender, empty_scene, tmp_path):
     assert np.abs(flat.reshape(-1, 3).mean(0) / theirs.reshape(-1, 3).mean(0) - 1).max() > 3 * LAMP_COLOUR_RTOL
 
 
-def _float_srgb_image(bpy, tmp_path):
-    """An 8x4 16-bit PNG (Blender loads it as a float image tagged sRGB, decoded to scene
-    linear) of greys and colours from dark to bright."""
+def _float_srgb_image(bpy, tmp_path, kind="PNG"):
+    """An 8x4 float image tagged sRGB of greys and colours from dark to bright: a 16-bit PNG
+    (Blender loads it as a float image tagged sRGB, decoded to scene linear), or an EXR
+    tagged sRGB by hand (Blender decodes its floats too)."""
     values = np.linspace(0.02, 1.0, 32).reshape(4, 8)
     pixels = np.ones((4, 8, 4), np.float32)
     pixels[..., 0], pixels[..., 1], pixels[..., 2] = values, values[::-1, ::-1], values ** 2
     source = bpy.data.images.new("Source", 8, 4, float_buffer=True)
     source.colorspace_settings.name = "Non-Color"  # written as its values
     source.pixels.foreach_set(pixels.ravel())
-    source.filepath_raw, source.file_format = str(tmp_path / "sixteen.png"), "PNG"
+    path = tmp_path / ("sixteen.png" if kind == "PNG" else "float.exr")
+    source.filepath_raw, source.file_format = str(path), "PNG" if kind == "PNG" else "OPEN_EXR"
     settings = bpy.context.scene.render.image_settings
     settings.file_format, settings.color_depth = "PNG", "16"
     source.save()
-    image = bpy.data.images.load(str(tmp_path / "sixteen.png"))
-    assert image.is_float and image.colorspace_settings.name == "sRGB"
+    image = bpy.data.images.load(str(path))
+    image.colorspace_settings.name = "sRGB"
+    assert image.is_float
     return image
 
 
@@ -716,8 +719,9 @@ def _decoding_twice(read):
 FLOAT_SRGB_RTOL = 0.01
 
 
+@pytest.mark.parametrize("kind", ["PNG", "EXR"])
 def test_a_float_srgb_image_reads_as_in_cycles_in_a_material_and_a_world(blender, empty_scene, tmp_path,
-                                                                          monkeypatch):
+                                                                          monkeypatch, kind):
     """A 16-bit PNG (float, tagged sRGB) as an Emission floor's Image Texture and as the
     world's Environment Texture (seen by an equirectangular camera): Blender's pixels are
     scene linear, interpolated sRGB-encoded as Cycles does. The rule the node compiler had
@@ -725,7 +729,7 @@ def test_a_float_srgb_image_reads_as_in_cycles_in_a_material_and_a_world(blender
     images, compiler, baked = (extension_module(f"blender.export.{name}") for name in ("images", "nodes", "world"))
 
     bpy, scene = blender, empty_scene
-    image = _float_srgb_image(bpy, tmp_path)
+    image = _float_srgb_image(bpy, tmp_path, kind)
     m = bpy.data.materials.new("FloatSRGB")
     tree = m.node_tree
     output = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
