@@ -994,13 +994,20 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
             case Op::NormalMap: {
                 // Blender's Normal Map node: colour (0..1) -> a vector in -1..1 in the chosen space.
                 const Vec3 c3 = load3(r, c[2]);
-                const Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
+                Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
                 const bool back = sg.backfacing != 0.f;
+                const float strength = r[c[3]];
                 Vec3 n;
                 if (c[4] == 0) {  // tangent space: the UV map's frame about the surface's own normal
                     if (dot(sg.tangent, sg.tangent) == 0.f) {
                         n = sg.N;
                     } else {
+                        // Strength in the tangent frame, as Cycles 5 applies it there: the
+                        // sideways part scaled, the normal part blended from 1.
+                        if (strength != 1.f) {  // (at 1, v as it was, to the bit)
+                            v.x *= strength, v.y *= strength;
+                            v.z = 1.f + (v.z - 1.f) * std::fmin(std::fmax(strength, 0.f), 1.f);
+                        }
                         const Vec3 b = cross(sg.surface_normal, sg.tangent) * sg.tangent_sign;
                         n = normalize(sg.tangent * v.x + b * v.y + sg.surface_normal * v.z);
                         if (back) n = n * -1.f;  // as the normal the viewer sees is turned
@@ -1008,9 +1015,9 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 } else {  // object space (through the transform sg.to_world_normal), or world
                     n = normalize(c[4] == 1 ? sg.object_to_world_normal(v) : v);
                     if (back) n = n * -1.f;
+                    // Strength: a blend from the shading normal (no frame to apply it in).
+                    if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * std::fmax(strength, 0.f));
                 }
-                const float strength = std::fmax(r[c[3]], 0.f);
-                if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * strength);
                 if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
                 store3(r, c[1], n);
                 break;
