@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import _core
 from ..util.columns import compress, finite_rows, in_blocks, kept_rows
+from ..util.colour import srgb_to_linear  # noqa: F401 (file colours are sRGB; the readers take it from here)
 from .neighbours import first_of_duplicates
 
 # Largest radius the renderer accepts (native/base/ray.h): the import drops points beyond
@@ -124,12 +125,6 @@ def shared_row(a: Optional[np.ndarray]) -> Optional[np.ndarray]:
     if a is None or a.ndim != 2 or len(a) == 0 or a.strides[0] != 0:
         return None
     return a[0]
-
-
-def srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 transfer function: file colours are display (sRGB) values."""
-    c = np.asarray(c, dtype=np.float32)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
 @functools.lru_cache(maxsize=2)

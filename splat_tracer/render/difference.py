@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..util import matrices
+from ..util.colour import linear_to_srgb, srgb_to_linear
 
 # ΔE breakpoints and the ramp's colour at each (display sRGB). Chosen to be read at a
 # glance: black = identical; dark blue = below the ~1 of a just-visible patch difference;
@@ -38,13 +39,12 @@ _WHITE = np.array([0.95047, 1.0, 1.08883])
 
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """The sRGB transfer function (Blender's *Standard* view transform), clipped to 0..1."""
-    x = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return linear_to_srgb(np.clip(np.asarray(linear, np.float64), 0.0, 1.0), np.float64)
 
 
 def srgb_decode(encoded: np.ndarray) -> np.ndarray:
-    x = np.clip(np.asarray(encoded, np.float64), 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
+    """Display sRGB values (clipped to 0..1) -> linear, in float64."""
+    return srgb_to_linear(np.clip(np.asarray(encoded, np.float64), 0.0, 1.0), np.float64)
 
 
 def standard_display(rgba_linear: np.ndarray, exposure: float = 0.0, gamma: float = 1.0) -> np.ndarray:

@@ -77,10 +77,10 @@ _GLOBAL_FLOATS = 3 * len(GLOBAL_FIELDS) + 3
 
 class Image:
     """An image's pixels for the core: (height, width, 4) RGBA, bottom row first (Blender's
-    order). uint8: colour bytes, sRGB-encoded when `srgb` (decoded to scene linear after
-    interpolation, as Cycles does with byte sRGB images), else linear values x 255;
-    float32: scene-linear values. Compared by identity: one Image is held once by the core
-    however many programs use it."""
+    order): uint8 colour bytes or float32 values, sRGB-encoded when `srgb` (decoded to scene
+    linear after interpolation, as Cycles does with sRGB images, byte or float), else linear
+    (bytes: values x 255). Compared by identity: one Image is held once by the core however
+    many programs use it."""
 
     def __init__(self, pixels, srgb: bool = False):
         p = np.ascontiguousarray(pixels)

@@ -262,9 +262,11 @@ ENTRIES = (
     Entry("material.cycles", ("homogeneous_volume",), U, "Volumes are not rendered", before=(5, 0)),
     Entry("material.cycles", ("emission_sampling",), C,
           "How Cycles samples emissive meshes: changes noise, not what it converges to"),
-    Entry("material.cycles", ("use_bump_map_correction", "volume_sampling", "volume_interpolation",
-                              "volume_step_rate"), U,
-          "Displacement-as-bump correction and volumes: not rendered"),
+    Entry("material.cycles", ("use_bump_map_correction",), U,
+          "Off is not honoured: Cycles' bump shadowing term is applied as with it on (said when off where nodes "
+          "drive the normal); its bending of normals whose reflection would leave the surface is not done"),
+    Entry("material.cycles", ("volume_sampling", "volume_interpolation", "volume_step_rate"), U,
+          "Volumes are not rendered"),
     # -- cameras -------------------------------------------------------------------------
     Entry("camera", ("name", "use_fake_user", "use_extra_user", "is_runtime_data", "tag", "passepartout_alpha",
                      "display_size", "show_*", "lens_unit"), V,

@@ -15,16 +15,13 @@ import numpy as np
 
 from ...render import nodes
 from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised through compile_shader)
+from . import images
 from .sockets import live_link as _live_link
 
 # Cycles bakes Color Ramps and RGB Curves into tables of this many rows (its RAMP_TABLE_SIZE),
 # read linearly between rows: baking the same table reads the ramp exactly as Cycles does.
 _TABLE_ROWS = 256
 _VECTORS = ("VECTOR", "RGBA")  # socket types held in three registers (colours drop alpha)
-# Image colour spaces read exactly: sRGB-encoded bytes (decoded after interpolation, as Cycles
-# does) and the linear ones that are the scene's linear space (Blender's default, Rec. 709).
-_SRGB = ("sRGB",)
-_LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
 # Attribute names read as the points' own colour: the importer's, and the usual names of a
 # colour attribute. Another name (a scan's intensity, classification, ...) is read from the
 # geometry as a point attribute (Compiler._attribute).
@@ -711,34 +708,24 @@ class Compiler:
 
 
 def _image_pixels(image, say):
-    """An image's pixels as a nodes.Image (None when Blender cannot load it), read once and
-    kept while its identity, size, colour space and alpha mode stay (re-read every frame
-    while it has unsaved changes: being painted)."""
+    """An image's pixels as a nodes.Image (None when Blender cannot load it), read by
+    images.read's rule once and kept while its identity, size, colour space and alpha mode
+    stay (re-read every frame while it has unsaved changes: being painted)."""
     settings = image.colorspace_settings.name
     key = (image.name_full, image.as_pointer(), tuple(image.size), image.is_float, settings, image.alpha_mode,
            image.filepath_raw, image.packed_file is not None)
     if key in _IMAGES and not image.is_dirty:
         return _IMAGES[key]
-    w, h = image.size
-    if not w or not h or (image.source == "FILE" and not image.has_data and not _try_load(image)):
+    read = images.read(image, say)
+    if read is None:
         return None
-    w, h = image.size
-    flat = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(flat)
-    pixels = flat.reshape(h, w, 4)
+    pixels = read.values
     if image.alpha_mode == "NONE":  # Cycles ignores the image's alpha
         pixels[..., 3] = 1.0
-    if settings not in _SRGB + _LINEAR:
-        say(f": image '{image.name}' is in the '{settings}' colour space, read as "
-            f"{'sRGB' if not image.is_float else 'scene linear'}")
     if image.is_float:
-        if settings in _SRGB:  # a float image holding sRGB-encoded values: decode them
-            rgb = pixels[..., :3]
-            pixels[..., :3] = np.where(rgb < 0.04045, rgb / 12.92, ((np.maximum(rgb, 0) + 0.055) / 1.055) ** 2.4)
-        texture = nodes.Image(pixels)
-    else:
-        data = np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8)
-        texture = nodes.Image(data, srgb=settings not in _LINEAR)
+        texture = nodes.Image(pixels, srgb=read.srgb)
+    else:  # kept as the bytes they are (a quarter of the floats)
+        texture = nodes.Image(np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8), srgb=read.srgb)
     # Keep only the current version of each image (its old pixels are garbage).
     for old in [k for k in _IMAGES if k[:2] == key[:2]]:
         del _IMAGES[old]

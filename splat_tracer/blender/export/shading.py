@@ -371,6 +371,7 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict, object_sp
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets),
                        object_space)
+    _report_bump_correction(bl_material, sockets)
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
     return dataclasses.replace(material, program=program) if program is not None else material
 
@@ -396,6 +397,15 @@ def _aov_outputs(tree, aovs: dict, sockets: _Sockets) -> list:
                 n.type == "OUTPUT_AOV" for n in node.node_tree.nodes):
             sockets.say(f": the AOV Output nodes inside the node group '{node.node_tree.name}' are not evaluated")
     return found
+
+
+def _report_bump_correction(bl_material, sockets: _Sockets) -> None:
+    """The core always applies Cycles' bump shadowing term where nodes drive the normal
+    (Cycles' default, Material > Settings > Bump Map Correction): said when it is off there."""
+    if getattr(getattr(bl_material, "cycles", None), "use_bump_map_correction", True):
+        return
+    if any(socket.name == "Normal" for socket in sockets.compiled):
+        sockets.say(": Bump Map Correction off is ignored (the bump shadowing term is applied, as with it on)")
 
 
 def _program(shader, sockets: _Sockets, aovs=(), object_space=None):

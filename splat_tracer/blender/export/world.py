@@ -7,9 +7,8 @@ samples it as a light. What the bake reads:
 - Background and Emission (Color x Strength), Mix Shader (its Factor), Add Shader.
 - Environment Texture: Equirectangular and Mirror Ball; Closest, and Linear for the other
   interpolations (Cubic and Smart are approximated by Linear, said once); its image read
-  through bpy (the float buffer of an HDR/EXR, or the bytes of an 8-bit image converted from
-  sRGB), into scene linear when its colour space is sRGB or linear (another one is used as
-  if linear, said once).
+  as material images are (images.py: one rule for colour spaces; sRGB decoded after
+  interpolation, as Cycles does).
 - Vectors: Texture Coordinate (Generated, Object without an object, Normal: the direction,
   as Cycles gives them in a world), Mapping (Point, Texture, Vector, Normal with Location,
   Euler XYZ Rotation and Scale), unlinked: the direction.
@@ -33,6 +32,7 @@ from typing import Optional
 
 import numpy as np
 
+from . import images as _images
 from .sockets import fmt as _fmt
 
 BAKE_WIDTH = 1024  # a procedural world's image: 1024 x 512, ~0.35 degree a pixel
@@ -52,10 +52,6 @@ def _unit_directions(width: int, height: int, rows: range = None) -> np.ndarray:
     elevation = (v - 0.5)[:, None] * np.pi
     c = np.cos(elevation)
     return np.stack(np.broadcast_arrays(c * np.cos(phi), c * np.sin(phi), np.sin(elevation) + 0 * phi), axis=-1)
-
-
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
 def _euler_xyz(rotation) -> np.ndarray:
@@ -186,7 +182,8 @@ class _Bake:
         else:
             u = 0.5 - np.arctan2(d[:, 1], d[:, 0]) / (2.0 * np.pi)
             w = 0.5 + np.arctan2(d[:, 2], np.hypot(d[:, 0], d[:, 1])) / np.pi
-        rgba = _sample(pixels, u, w, node.interpolation == "Closest")
+        rgba = _sample(pixels.values, u, w, node.interpolation == "Closest")
+        rgba[:, :3] = _images.decode(rgba[:, :3], pixels.srgb)
         if node.interpolation in ("Cubic", "Smart"):
             self.sockets.say(f": the Environment Texture '{node.name}' uses {node.interpolation} interpolation; "
                              f"baked with Linear")
@@ -268,7 +265,9 @@ def _sun_pixels(grid, sun, radius):
 
 def _sample(pixels: np.ndarray, u: np.ndarray, v: np.ndarray, closest: bool) -> np.ndarray:
     """An image (height, width, 4; row 0 at the bottom, as Blender's) at texture coordinates
-    (u, v): Closest, or Linear between pixel centres; wrapping in u, clamped in v."""
+    (u, v): Closest (clamped in v), or Linear between pixel centres; wrapping in u, and in v
+    too when Linear, as Cycles' Environment Texture does (its images repeat: within half a
+    pixel of a pole it blends the top and bottom rows)."""
     h, w = pixels.shape[:2]
     if closest:
         x = np.floor(u * w).astype(np.int64) % w
@@ -279,37 +278,10 @@ def _sample(pixels: np.ndarray, u: np.ndarray, v: np.ndarray, closest: bool) -> 
     tx, ty = (fx - x0)[:, None], (fy - y0)[:, None]
     x0 = x0.astype(np.int64) % w
     x1 = (x0 + 1) % w
-    y1 = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
-    y0 = np.clip(y0.astype(np.int64), 0, h - 1)
+    y1 = (y0.astype(np.int64) + 1) % h
+    y0 = y0.astype(np.int64) % h
     return ((pixels[y0, x0] * (1 - tx) + pixels[y0, x1] * tx) * (1 - ty)
             + (pixels[y1, x0] * (1 - tx) + pixels[y1, x1] * tx) * ty)
-
-
-def _image_pixels(image, sockets) -> Optional[np.ndarray]:
-    """An image's pixels (height, width, 4) in scene linear, or None when it has none."""
-    n = len(image.pixels)  # loads the image
-    w, h = image.size
-    if n == 0 or w * h * image.channels != n:
-        return None
-    flat = np.empty(n, np.float32)
-    image.pixels.foreach_get(flat)
-    px = flat.reshape(h, w, image.channels)
-    if image.channels < 4:
-        px = np.concatenate([px[..., :1].repeat(3, -1) if image.channels == 1 else px[..., :3],
-                             np.ones((h, w, 1), np.float32)], axis=-1)
-    space = image.colorspace_settings.name
-    # A float image's buffer is scene linear already (Blender converts it on load); a byte
-    # image's values are in its colour space.
-    if not image.is_float and space == "sRGB":
-        px[..., :3] = _srgb_to_linear(px[..., :3])
-    elif space not in ("Linear Rec.709", "Non-Color", "Linear", "Raw") and not (image.is_float and space == "sRGB"):
-        sockets.say(f": the colour space '{space}' of image '{image.name}' is read as linear")
-    elif image.is_float and space == "sRGB":
-        # Cycles stores such an image sRGB-encoded and interpolates the encoded values: between
-        # texels it is darker than a linear interpolation (a 2-pixel sun: 2/3 of the power).
-        sockets.say(f": the float image '{image.name}' is tagged sRGB; interpolated in scene linear "
-                    f"(Cycles interpolates it sRGB-encoded: darker between pixels)")
-    return px
 
 
 # Node properties (not sockets) that change what a bake gives.
@@ -397,13 +369,18 @@ def _bake(tree, output, sockets, upstream, env_nodes, images) -> dict:
         return dict(colour=tuple(max(float(c), 0.0) for c in colour))
     pixels = {}
     for image in images:
-        px = _image_pixels(image, sockets)
+        px = _images.read(image, sockets.say)
         if px is None:
             sockets.say(f": image '{image.name}' has no pixels; rendered as Cycles' missing-image pink")
-            px = np.tile(np.array([1.0, 0.0, 1.0, 1.0]), (2, 2, 1))
+            px = _images.Pixels(np.tile(np.array([1.0, 0.0, 1.0, 1.0], np.float32), (2, 2, 1)), False)
         pixels[image.name] = px
     sky = any(n.type == "TEX_SKY" for n in env_nodes)
-    width = max([px.shape[1] for px in pixels.values()] + [BAKE_WIDTH if sky else 8])
+    # An sRGB image interpolated is a curve between its pixels (Cycles decodes after
+    # interpolating): baked finely, not pixel for pixel, so that the core's own linear
+    # interpolation of the bake follows it.
+    encoded = any(n.type == "TEX_ENVIRONMENT" and n.image is not None and n.interpolation != "Closest"
+                  and pixels[n.image.name].srgb for n in env_nodes)
+    width = max([px.values.shape[1] for px in pixels.values()] + [BAKE_WIDTH if sky or encoded else 8])
     if width > MAX_WIDTH:
         sockets.say(f": an image {width} pixels wide is baked at {MAX_WIDTH} (point-sampled: a sun a pixel wide "
                     f"may lose some of its light)")

@@ -19,7 +19,8 @@ TextureImage::TextureImage(int width, int height, const uint8_t *bytes, bool srg
     bytes_.assign(bytes, bytes + size_t(width) * size_t(height) * 4);
 }
 
-TextureImage::TextureImage(int width, int height, const float *floats) : width_(width), height_(height) {
+TextureImage::TextureImage(int width, int height, const float *floats, bool srgb)
+    : width_(width), height_(height), srgb_(srgb) {
     if (width < 1 || height < 1) throw InputError("an image has no pixels");
     floats_.assign(floats, floats + size_t(width) * size_t(height) * 4);
     for (float &f : floats_)

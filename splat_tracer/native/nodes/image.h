@@ -17,12 +17,12 @@ struct RGBA {
 
 class TextureImage {
   public:
-    // `width` x `height` RGBA pixels, bottom row first (Blender's order). Bytes are sRGB-encoded
-    // colour (`srgb`: turned into scene linear after interpolation, as Cycles does with byte
-    // sRGB images) or linear values / 255; floats are used as they are. Throws InputError on
-    // a size of 0 or a non-finite float.
+    // `width` x `height` RGBA pixels, bottom row first (Blender's order). With `srgb` the colour
+    // is sRGB-encoded and turned into scene linear after interpolation, as Cycles does with
+    // sRGB images (bytes, and floats tagged sRGB); else bytes are linear values / 255 and
+    // floats are used as they are. Throws InputError on a size of 0.
     TextureImage(int width, int height, const uint8_t *bytes, bool srgb);
-    TextureImage(int width, int height, const float *floats);
+    TextureImage(int width, int height, const float *floats, bool srgb = false);
 
     int width() const { return width_; }
     int height() const { return height_; }

@@ -8,6 +8,7 @@
 
 #include "base/errors.h"
 #include "nodes/noise.h"
+#include "nodes/cie1931.h"
 
 namespace splat {
 
@@ -541,30 +542,17 @@ void brick(Vec3 p, const float *q, int offset_frequency, int squash_frequency, f
     }
 }
 
-// The CIE 1931 2-degree observer's colour-matching functions at a wavelength in nm, by the
-// multi-lobe Gaussian fit of Wyman, Sloan and Shirley, "Simple Analytic Approximations to the
-// CIE XYZ Color Matching Functions" (JCGT 2013): a blackbody's colour without a table of the
-// observer (see docs/nodes.md for how close this comes to Blender's own blackbody).
-Vec3 cie_xyz(float nm) {
-    auto g = [nm](float mu, float below, float above) {
-        const float t = (nm - mu) / (nm < mu ? below : above);
-        return std::exp(-0.5f * t * t);
-    };
-    return {1.056f * g(599.8f, 37.9f, 31.0f) + 0.362f * g(442.0f, 16.0f, 26.7f) - 0.065f * g(501.1f, 20.4f, 26.2f),
-            0.821f * g(568.8f, 46.9f, 40.5f) + 0.286f * g(530.9f, 16.3f, 31.1f),
-            1.217f * g(437.0f, 11.8f, 36.0f) + 0.681f * g(459.0f, 26.0f, 13.8f)};
-}
-
-// Planck's law integrated against the observer, in linear Rec. 709 (its XYZ matrix, D65
-// white) scaled to luminance 1; before the clamp of negative channels.
+// Planck's law weighted by the CIE 1931 2-degree observer's tabulated colour-matching
+// functions (cie1931.h, 5 nm steps), in linear Rec. 709 (its XYZ matrix, D65 white) scaled
+// to luminance 1; before the clamp of negative channels. This is the definition Blender's
+// blackbody is a fit of (within 0.4 % per channel over 800-12000 K, measured: docs/nodes.md).
 Vec3 planck_rec709(double kelvin) {
     constexpr double kC2 = 1.438776877e-2;  // second radiation constant h c / k (m K)
     double xyz[3] = {0, 0, 0};
-    for (int nm = 360; nm <= 830; ++nm) {  // the observer's range, 1 nm steps
-        const double l = nm * 1e-9;
-        const double radiance = 1.0 / (l * l * l * l * l * (std::exp(kC2 / (l * kelvin)) - 1.0));
-        const Vec3 w = cie_xyz(float(nm));
-        xyz[0] += radiance * w.x, xyz[1] += radiance * w.y, xyz[2] += radiance * w.z;
+    for (int i = 0; i < kCieRows; ++i) {
+        const double l = (kCieFirstNm + kCieStepNm * i) * 1e-9;
+        const double radiance = 1.0 / (l * l * l * l * l * std::expm1(kC2 / (l * kelvin)));
+        for (int k = 0; k < 3; ++k) xyz[k] += radiance * kCie1931[i][k];
     }
     const double x = xyz[0] / xyz[1], z = xyz[2] / xyz[1];
     return {float(3.2404542 * x - 1.5371385 - 0.4985314 * z), float(-0.9692660 * x + 1.8760108 + 0.0415560 * z),
@@ -1038,13 +1026,20 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
             case Op::NormalMap: {
                 // Blender's Normal Map node: colour (0..1) -> a vector in -1..1 in the chosen space.
                 const Vec3 c3 = load3(r, c[2]);
-                const Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
+                Vec3 v = (c3 - Vec3(0.5f, 0.5f, 0.5f)) * 2.f;
                 const bool back = sg.backfacing != 0.f;
+                const float strength = r[c[3]];
                 Vec3 n;
                 if (c[4] == 0) {  // tangent space: the UV map's frame about the surface's own normal
                     if (dot(sg.tangent, sg.tangent) == 0.f) {
                         n = sg.N;
                     } else {
+                        // Strength in the tangent frame, as Cycles 5 applies it there: the
+                        // sideways part scaled, the normal part blended from 1.
+                        if (strength != 1.f) {  // (at 1, v as it was, to the bit)
+                            v.x *= strength, v.y *= strength;
+                            v.z = 1.f + (v.z - 1.f) * std::fmin(std::fmax(strength, 0.f), 1.f);
+                        }
                         const Vec3 b = cross(sg.surface_normal, sg.tangent) * sg.tangent_sign;
                         n = normalize(sg.tangent * v.x + b * v.y + sg.surface_normal * v.z);
                         if (back) n = n * -1.f;  // as the normal the viewer sees is turned
@@ -1052,9 +1047,9 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 } else {  // object space (through the transform sg.to_world_normal), or world
                     n = normalize(c[4] == 1 ? sg.object_to_world_normal(v) : v);
                     if (back) n = n * -1.f;
+                    // Strength: a blend from the shading normal (no frame to apply it in).
+                    if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * std::fmax(strength, 0.f));
                 }
-                const float strength = std::fmax(r[c[3]], 0.f);
-                if (strength != 1.f) n = normalize(sg.N + (n - sg.N) * strength);
                 if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
                 store3(r, c[1], n);
                 break;

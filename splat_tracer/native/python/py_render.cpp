@@ -151,7 +151,7 @@ std::shared_ptr<const TextureImage> parse_image(PyObject *obj, ImageTable &table
         if (is_bytes)
             image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<uint8_t>(), srgb != 0);
         else
-            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<float>());
+            image = std::make_shared<TextureImage>(int(pix.dim(1)), int(pix.dim(0)), pix.data<float>(), srgb != 0);
     } catch (const InputError &e) {
         PyErr_SetString(PyExc_ValueError, e.what());
         return nullptr;

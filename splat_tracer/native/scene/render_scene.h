@@ -122,6 +122,10 @@ struct SurfacePoint {
     int32_t prim = -1;   // splat or triangle id within the instance's geometry
     bool front = false;  // the side the normal points to faces the ray
     Vec3 p, ng, ns;      // point, geometric and shading normal (scene frame, unit)
+    // Whether a node program replaced ns (Bump, Normal Map), and the surface's own shading
+    // normal it replaced (Cycles' sd->N): what the bump shadowing term compares them by.
+    bool bumped = false;
+    Vec3 ns_surface;
     float offset = 0;    // how far a secondary ray must start off the surface (triangles always;
                          // splats only without wrong-hit elimination, see the integrator)
     float radius = 0;    // splats: the chosen splat's radius in the scene frame
@@ -161,7 +165,11 @@ class RenderScene {
         const Material &m = materials_[sp.material];
         // A program written for its AOVs alone runs only where they are written.
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
-        return evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
+        const Vec3 surface = sp.ns;
+        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
+        sp.bumped = sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z;
+        sp.ns_surface = surface;
+        return out;
     }
     // Whether a node program drives what material `m` emits: its emission, or the opacity of a
     // constant emission (what a ray takes away is emission x opacity).

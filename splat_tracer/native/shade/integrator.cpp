@@ -72,6 +72,23 @@ struct Integrator::Pixel {
 
 namespace {
 
+// Cycles' bump shadowing term (its bsdf.h, after Conty Estevez, Lecocq and Stein, "A
+// Microfacet-Based Shadowing Function to Solve the Bump Terminator Problem", Ray Tracing Gems
+// 2019): where a node program tilted the shading normal (Bump, Normal Map), the diffuse
+// reflection towards wi is attenuated by the Smith G1 of a GGX whose alpha^2 is tan^2 of the
+// tilt / 8, at the angle between wi and the surface's own normal -- the light grazing the
+// surface fades as on a rough one instead of lighting the tilted facets in full. 1 where
+// nothing was tilted (the multiplication by 1 leaves unbumped surfaces bit for bit).
+float bump_shadowing(const SurfacePoint &sp, Vec3 wi) {
+    if (!sp.bumped) return 1.f;
+    const float cos_i = std::fabs(dot(sp.ns_surface, wi)), cos_d = std::fabs(dot(sp.ns_surface, sp.ns));
+    if (cos_d >= 1.f || cos_i >= 1.f) return 1.f;
+    if (cos_i < 1e-6f) return 0.f;  // grazing exactly: none (and no division by 0 below)
+    const float alpha2 = std::fmin(std::fmax(0.125f * (1.f / (cos_d * cos_d) - 1.f), 0.f), 1.f);
+    const float tan2_i = 1.f / (cos_i * cos_i) - 1.f;
+    return 2.f / (1.f + std::sqrt(1.f + alpha2 * tan2_i));
+}
+
 Vec3 reflect(Vec3 wo, Vec3 n) { return n * (2.f * dot(wo, n)) - wo; }
 
 // Refraction of wo (pointing away from the surface, on n's side) with eta = n_t / n_i.
@@ -886,7 +903,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             const Vec3 wi = sample_cosine(n, u1, u2);
             if (dot(wi, ng) > 0.f) {
                 densities(wi);
-                follow(wi, diffuse_albedo * (w_sum / w_diffuse), kVisDiffuse, &PathState::diffuse, st.from.inside,
+                follow(wi, diffuse_albedo * (w_sum / w_diffuse * bump_shadowing(sp, wi)), kVisDiffuse,
+                       &PathState::diffuse, st.from.inside,
                        &Tally::diffuse, false, pdf, mis_pdf, kSampled);
             }
         } else if ((u -= w_diffuse) < w_glossy) {
@@ -971,7 +989,8 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             if (!ls.valid) continue;
             const float cos_i = dot(n, ls.wi);
             if (cos_i <= 0.f || dot(ng, ls.wi) <= 0.f) continue;  // below the surface
-            Vec3 f = diffuse;
+            const Vec3 shadowed = diffuse * bump_shadowing(sp, ls.wi);
+            Vec3 f = shadowed;
             if (glossy) f = f + glossy_brdf(ls.wi, cos_i);
             const Vec3 c = f * ls.irradiance * (cos_i * share);
             if (!(luminance(c) > 0.f)) continue;
@@ -984,7 +1003,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             else L = L + c * visible;
             if (split) {
                 if (!clamp) lamp = lamp + c * visible;
-                lamp_diffuse = lamp_diffuse + diffuse * ls.irradiance * visible * (cos_i * share);
+                lamp_diffuse = lamp_diffuse + shadowed * ls.irradiance * visible * (cos_i * share);
             }
             if (primary) primary->unshadowed += luminance(c), primary->lit += luminance(c * visible);
         }
@@ -1016,7 +1035,8 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
                                                          from.time);
             // As Cycles excludes them: an emitter hidden from diffuse (glossy) rays lights no
             // diffuse (glossy) lobe -- the rays of that lobe could never meet it either.
-            Vec3 f = emitter.visibility & kVisDiffuse ? diffuse : Vec3();
+            const Vec3 shadowed = emitter.visibility & kVisDiffuse ? diffuse * bump_shadowing(sp, ls.wi) : Vec3();
+            Vec3 f = shadowed;
             if (glossy && (emitter.visibility & kVisGlossy)) f = f + glossy_brdf(ls.wi, cos_i);
             const float light_pdf = ls.pdf * float(k);
             const float w =
@@ -1033,8 +1053,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
             L = L + added;
             if (split) {
-                const Vec3 diffuse_part = (emitter.visibility & kVisDiffuse ? diffuse : Vec3()) * ls.emission *
-                                          through * (cos_i * w / light_pdf);
+                const Vec3 diffuse_part = shadowed * ls.emission * through * (cos_i * w / light_pdf);
                 tap_split(lit, diffuse_part, added, settings_.light_groups.of_instance(ls.instance));
             }
         }
@@ -1073,7 +1092,8 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         if (!es.valid) continue;
         const float cos_i = dot(n, es.wi);
         if (cos_i <= 0.f || dot(ng, es.wi) <= 0.f) continue;  // below the surface
-        Vec3 f = diffuse;
+        const Vec3 shadowed = diffuse * bump_shadowing(sp, es.wi);
+        Vec3 f = shadowed;
         if (glossy) f = f + lobes.glossy_brdf(n, wo, cos_o, es.wi, cos_i);
         const float light_pdf = es.pdf * float(k);
         const float w = settings_.mesh_light_strategy == IntegratorSettings::kLightOnly
@@ -1089,7 +1109,7 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         if (st.split) {
             // The world's light reaching a surface is Direct light in Cycles' passes, as a
             // lamp's, all in the world's group.
-            const Vec3 diffuse_part = diffuse * es.radiance * through * (cos_i * w / light_pdf);
+            const Vec3 diffuse_part = shadowed * es.radiance * through * (cos_i * w / light_pdf);
             tap_sampled(st, lit, diffuse_part, added, settings_.light_groups.world);
         }
     }
