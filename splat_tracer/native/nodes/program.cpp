@@ -58,7 +58,9 @@ const Layout &layout(Op op) {
         /* Image (image checked apart) */
         {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                 int32_t(ImageExtension::Count)}},
-        /* Voronoi */ {{kR1, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
+        /* Voronoi */
+        {{kRW, kR3, kR1, kRW, kEnum, kEnum, kEnum},
+         {9, 0, 0, 8, int32_t(VoronoiMetric::Count), int32_t(VoronoiFeature::Count), 4}},
         /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
         /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
         /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
@@ -591,6 +593,8 @@ Vec3 blackbody_rec709(float kelvin) {
     return vmax(c, Vec3());
 }
 
+uint32_t hash_uint(uint32_t kx) { return hash_words(1, kx, 0, 0); }
+uint32_t hash_uint2(uint32_t kx, uint32_t ky) { return hash_words(2, kx, ky, 0); }
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
 
 float perlin_signed(Vec3 p) {
@@ -935,14 +939,15 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::Voronoi: {
-                const Vec3 q = load3(r, c[5]);  // scale, exponent, randomness
-                float distance;
-                Vec3 colour, position;
-                voronoi_f1(load3(r, c[4]) * q.x, q.y, std::fmin(std::fmax(q.z, 0.f), 1.f), c[6], &distance, &colour,
-                           &position);
-                r[c[1]] = distance;
-                store3(r, c[2], colour);
-                store3(r, c[3], q.x != 0.f ? position * (1.f / q.x) : Vec3());
+                const float *q = r + c[4];  // scale detail roughness lacunarity smoothness exponent randomness normalize
+                const VoronoiOutputs o =
+                    voronoi_texture(load3(r, c[2]), r[c[3]], c[7] + 1, VoronoiFeature(c[6]), VoronoiMetric(c[5]),
+                                    {q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7] != 0.f});
+                r[c[1]] = o.distance;
+                store3(r, c[1] + 1, o.colour);
+                store3(r, c[1] + 4, o.position);
+                r[c[1] + 7] = o.w;
+                r[c[1] + 8] = o.radius;
                 break;
             }
             case Op::Wave: {

@@ -110,7 +110,9 @@ enum class Op : int32_t {
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
     Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
-    Voronoi,        // out_distance, out_colour, out_position, vector, params (scale exponent randomness), metric
+    Voronoi,        // out (9: distance, colour, position, w, radius), vector, w, params (8: scale detail roughness
+                    // lacunarity smoothness exponent randomness normalize), VoronoiMetric, VoronoiFeature,
+                    // dimensions - 1 (nodes/voronoi.h)
     Wave,           // out_fac, vector, params (scale distortion detail detail_scale detail_roughness), phase, kind, profile
                     // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
     Magic,          // out_colour, out_fac, vector, scale, distortion, depth
@@ -163,6 +165,9 @@ Vec3 hsv_to_rgb(Vec3 hsv);
 // Blender's Perlin noise in 3-D, signed (about -1..1) and its fractal sum; Cycles' definitions.
 float perlin_signed(Vec3 p);
 float noise_fbm(Vec3 p, float detail, float roughness, float lacunarity, bool normalize);
+// Jenkins' lookup3 hashes of 1-3 words, as Blender seeds them (Noise, White Noise, 1-D Voronoi).
+uint32_t hash_uint(uint32_t kx);
+uint32_t hash_uint2(uint32_t kx, uint32_t ky);
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
 // The Blackbody node's colour of a temperature in K: linear Rec. 709 of luminance 1 (as Cycles
 // normalises it), negative channels clamped to 0, the temperature held within 800-12000 K.
