@@ -28,6 +28,14 @@ template <int N> float dot(const V<N> &a, const V<N> &b) {
     for (int i = 1; i < N; ++i) s += a[i] * b[i];
     return s;
 }
+// An offset between cells (passed by value: it stays in registers).
+template <int N>
+struct Off {
+    int v[N];
+    int &operator[](int i) { return v[i]; }
+    int operator[](int i) const { return v[i]; }
+};
+
 // Cycles' mix(a, b, t) = a + t (b - a) (not (1 - t) a + t b: the rounding differs).
 inline float mix(float a, float b, float t) { return a + t * (b - a); }
 inline Vec3 mix(Vec3 a, Vec3 b, float t) { return a + (b - a) * t; }
@@ -54,14 +62,14 @@ inline uint32_t xorshift16(uint32_t c) { return c ^ uint32_t(int32_t(c) >> 16); 
 constexpr float kPcgUnit = 1.f / float(0x7FFFFFFF);
 inline float pcg_unit(uint32_t c) { return float(c & 0x7FFFFFFFu) * kPcgUnit; }
 
-V<2> pcg2(const int32_t *k) {
+inline V<2> pcg2(const int32_t *k) {
     uint32_t x = uint32_t(k[0]) * kLcgMul + kLcgAdd, y = uint32_t(k[1]) * kLcgMul + kLcgAdd;
     x += y * kLcgMul, y += x * kLcgMul;
     x = xorshift16(x), y = xorshift16(y);
     x += y * kLcgMul, y += x * kLcgMul;
     return {{pcg_unit(x), pcg_unit(y)}};
 }
-V<3> pcg3(const int32_t *k) {
+inline V<3> pcg3(const int32_t *k) {
     uint32_t v[3] = {uint32_t(k[0]), uint32_t(k[1]), uint32_t(k[2])};
     for (uint32_t &c : v) c = c * kLcgMul + kLcgAdd;
     auto step = [&] { v[0] += v[1] * v[2], v[1] += v[2] * v[0], v[2] += v[0] * v[1]; };
@@ -70,7 +78,7 @@ V<3> pcg3(const int32_t *k) {
     step();
     return {{pcg_unit(v[0]), pcg_unit(v[1]), pcg_unit(v[2])}};
 }
-V<4> pcg4(const int32_t *k) {
+inline V<4> pcg4(const int32_t *k) {
     uint32_t v[4] = {uint32_t(k[0]), uint32_t(k[1]), uint32_t(k[2]), uint32_t(k[3])};
     for (uint32_t &c : v) c = c * kLcgMul + kLcgAdd;
     auto step = [&] { v[0] += v[1] * v[3], v[1] += v[2] * v[0], v[2] += v[0] * v[1], v[3] += v[1] * v[2]; };
@@ -100,7 +108,7 @@ struct Grid {
     }
     // The random point of the cell at `offset` from this one, relative to this cell, and
     // that cell's colour.
-    V<N> point(const int *offset, float randomness) const {
+    V<N> point(const Off<N> &offset, float randomness) const {
         V<N> h;
         if constexpr (N == 1) {
             h[0] = to_unit_incl(hash_uint(float_bits(cell[0] + float(offset[0]))));
@@ -115,7 +123,7 @@ struct Grid {
         for (int a = 0; a < N; ++a) p[a] = float(offset[a]) + h[a] * randomness;
         return p;
     }
-    Vec3 colour(const int *offset) const {
+    Vec3 colour(const Off<N> &offset) const {
         if constexpr (N == 1) {
             const uint32_t k = float_bits(cell[0] + float(offset[0]));
             return {to_unit_incl(hash_uint(k)), to_unit_incl(hash_uint2(k, float_bits(1.f))),
@@ -136,16 +144,17 @@ struct Grid {
 
 // Visits the cells of the (2 reach + 1)^N window about a cell, the first axis fastest (as
 // Cycles' nested loops do: the order decides between equal distances).
-template <int N, typename F>
-void each_offset(int reach, F &&visit) {
-    const int side = 2 * reach + 1;
-    int count = 1;
-    for (int a = 0; a < N; ++a) count *= side;
-    int offset[N];
-    for (int n = 0; n < count; ++n) {
-        for (int a = 0, m = n; a < N; ++a, m /= side) offset[a] = m % side - reach;
-        visit(static_cast<const int *>(offset));
+template <int N, int Axis = N - 1, typename F>
+inline void each_offset_from(int reach, Off<N> offset, F &visit) {
+    for (int i = -reach; i <= reach; ++i) {
+        offset[Axis] = i;
+        if constexpr (Axis == 0) visit(static_cast<const Off<N> &>(offset));
+        else each_offset_from<N, Axis - 1>(reach, offset, visit);
     }
+}
+template <int N, typename F>
+inline void each_offset(int reach, F &&visit) {
+    each_offset_from<N>(reach, Off<N>{}, visit);
 }
 
 struct Metric {
@@ -194,6 +203,11 @@ float distance_bound(const V<N> &a, const V<N> &b, Metric m) {
     return distance(a, b, m);
 }
 
+// The search loops inline everything they call (hash, point, distance): left to the
+// compiler's heuristics, 3-D F1 ran about 20 % slower than the hand-written loop it replaced;
+// flattened, about 3x faster (0.3 against 0.9 us a point).
+#define VORONOI_FLAT __attribute__((flatten))
+
 template <int N>
 struct Octave {
     float distance = 0.f;
@@ -202,24 +216,24 @@ struct Octave {
 };
 
 template <int N>
-Octave<N> f1(const Grid<N> &g, Metric m, float randomness) {
+VORONOI_FLAT Octave<N> f1(const Grid<N> &g, Metric m, float randomness) {
     float best = FLT_MAX;
-    int target[N] = {};
+    Off<N> target{};
     V<N> target_point{};
-    each_offset<N>(1, [&](const int *o) {
+    each_offset<N>(1, [&](const Off<N> &o) {
         const V<N> p = g.point(o, randomness);
         const float d = distance_bound(p, g.local, m);
-        if (d < best) best = d, target_point = p, std::memcpy(target, o, sizeof target);
+        if (d < best) best = d, target_point = p, target = o;
     });
     return {distance(target_point, g.local, m), g.colour(target), target_point + g.cell};
 }
 
 template <int N>
-Octave<N> smooth_f1(const Grid<N> &g, Metric m, float randomness, float smoothness) {
+VORONOI_FLAT Octave<N> smooth_f1(const Grid<N> &g, Metric m, float randomness, float smoothness) {
     Octave<N> o;
     V<N> position{};
     bool first = true;
-    each_offset<N>(2, [&](const int *off) {
+    each_offset<N>(2, [&](const Off<N> &off) {
         const V<N> p = g.point(off, randomness);
         const float d = distance(p, g.local, m);
         const float h = first ? 1.f : smoothstep01(0.5f + 0.5f * (o.distance - d) / smoothness);
@@ -237,18 +251,18 @@ Octave<N> smooth_f1(const Grid<N> &g, Metric m, float randomness, float smoothne
 }
 
 template <int N>
-Octave<N> f2(const Grid<N> &g, Metric m, float randomness) {
+VORONOI_FLAT Octave<N> f2(const Grid<N> &g, Metric m, float randomness) {
     float d1 = FLT_MAX, d2 = FLT_MAX;
-    int off1[N] = {}, off2[N] = {};
+    Off<N> off1{}, off2{};
     V<N> p1{}, p2{};
-    each_offset<N>(1, [&](const int *o) {
+    each_offset<N>(1, [&](const Off<N> &o) {
         const V<N> p = g.point(o, randomness);
         const float d = distance(p, g.local, m);
         if (d < d1) {
-            d2 = d1, p2 = p1, std::memcpy(off2, off1, sizeof off2);
-            d1 = d, p1 = p, std::memcpy(off1, o, sizeof off1);
+            d2 = d1, p2 = p1, off2 = off1;
+            d1 = d, p1 = p, off1 = o;
         } else if (d < d2) {
-            d2 = d, p2 = p, std::memcpy(off2, o, sizeof off2);
+            d2 = d, p2 = p, off2 = o;
         }
     });
     return {d2, g.colour(off2), p2 + g.cell};
@@ -256,22 +270,21 @@ Octave<N> f2(const Grid<N> &g, Metric m, float randomness) {
 
 // The distance to the nearest cell's edge (Euclidean whatever the metric, as Cycles has it).
 template <int N>
-float distance_to_edge(const Grid<N> &g, float randomness) {
+VORONOI_FLAT float distance_to_edge(const Grid<N> &g, float randomness) {
     if constexpr (N == 1) {
-        const int left = -1, mid = 0, right = 1;
-        const float m = g.point(&mid, randomness)[0], l = g.point(&left, randomness)[0],
-                    r = g.point(&right, randomness)[0];
+        const float m = g.point(Off<1>{{0}}, randomness)[0], l = g.point(Off<1>{{-1}}, randomness)[0],
+                    r = g.point(Off<1>{{1}}, randomness)[0];
         return std::fmin(std::fabs((m + l) / 2.f - g.local[0]), std::fabs((m + r) / 2.f - g.local[0]));
     } else {
         V<N> to_closest{};
         float best = FLT_MAX;
-        each_offset<N>(1, [&](const int *o) {
+        each_offset<N>(1, [&](const Off<N> &o) {
             const V<N> v = g.point(o, randomness) - g.local;
             const float d = dot(v, v);
             if (d < best) best = d, to_closest = v;
         });
         best = FLT_MAX;
-        each_offset<N>(1, [&](const int *o) {
+        each_offset<N>(1, [&](const Off<N> &o) {
             const V<N> v = g.point(o, randomness) - g.local;
             const V<N> across = v - to_closest;
             const float len2 = dot(across, across);
@@ -289,21 +302,21 @@ float distance_to_edge(const Grid<N> &g, float randomness) {
 
 // Half the distance from the nearest point to its own nearest neighbour (Euclidean).
 template <int N>
-float n_sphere_radius(const Grid<N> &g, float randomness) {
+VORONOI_FLAT float n_sphere_radius(const Grid<N> &g, float randomness) {
     const Metric euclid{VoronoiMetric::Euclidean, 2.f};
     V<N> closest{};
-    int closest_offset[N] = {};
+    Off<N> closest_offset{};
     float best = FLT_MAX;
-    each_offset<N>(1, [&](const int *o) {
+    each_offset<N>(1, [&](const Off<N> &o) {
         const V<N> p = g.point(o, randomness);
         const float d = N == 1 ? std::fabs(p[0] - g.local[0]) : distance_bound(p, g.local, euclid);
-        if (d < best) best = d, closest = p, std::memcpy(closest_offset, o, sizeof closest_offset);
+        if (d < best) best = d, closest = p, closest_offset = o;
     });
     best = FLT_MAX;
     V<N> neighbour{};
-    each_offset<N>(1, [&](const int *o) {
+    each_offset<N>(1, [&](const Off<N> &o) {
         bool centre = true;
-        int off[N];
+        Off<N> off;
         for (int a = 0; a < N; ++a) centre &= o[a] == 0, off[a] = o[a] + closest_offset[a];
         if (centre) return;
         const V<N> p = g.point(off, randomness);
