@@ -559,9 +559,9 @@ class Compiler:
 
     def _tex_voronoi(self, node, stack):
         dimensions = int(node.voronoi_dimensions[0])  # "1D" .. "4D"
-        # 1-D reads only W; the vector is then a constant nobody reads.
+        # 1-D reads only W, 2-D and 3-D only the vector: what is not read is a constant.
         vector = self.b.register((0.0, 0.0, 0.0), 3) if dimensions == 1 else self._vector_or(node, stack)
-        w = self._in(node, "W", 1, stack)
+        w = self._in(node, "W", 1, stack) if dimensions in (1, 4) else self.b.register(0.0)
         params = self._params(node, stack, ("Scale", "Detail", "Roughness", "Lacunarity", "Smoothness", "Exponent",
                                             "Randomness"), extra=(float(bool(getattr(node, "normalize", False))),))
         out = self.b.register(width=9)  # distance, colour, position, w, radius (native Voronoi)

@@ -309,7 +309,7 @@ VORONOI_FLAT float n_sphere_radius(const Grid<N> &g, float randomness) {
     float best = FLT_MAX;
     each_offset<N>(1, [&](const Off<N> &o) {
         const V<N> p = g.point(o, randomness);
-        const float d = N == 1 ? std::fabs(p[0] - g.local[0]) : distance_bound(p, g.local, euclid);
+        const float d = distance_bound(p, g.local, euclid);  // 1-D: |p - local|
         if (d < best) best = d, closest = p, closest_offset = o;
     });
     best = FLT_MAX;
@@ -320,7 +320,7 @@ VORONOI_FLAT float n_sphere_radius(const Grid<N> &g, float randomness) {
         for (int a = 0; a < N; ++a) centre &= o[a] == 0, off[a] = o[a] + closest_offset[a];
         if (centre) return;
         const V<N> p = g.point(off, randomness);
-        const float d = N == 1 ? std::fabs(closest[0] - p[0]) : distance_bound(closest, p, euclid);
+        const float d = distance_bound(closest, p, euclid);
         if (d < best) best = d, neighbour = p;
     });
     return distance(neighbour, closest, euclid) / 2.f;
