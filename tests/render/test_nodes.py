@@ -809,9 +809,11 @@ def test_voronoi_f1(metric):
     pts = RNG.uniform(-3, 3, (25, 3))
     scale, randomness = 1.3, 0.8
     b = nodes.Builder()
-    d, col, pos = b.register(), b.register(width=3), b.register(width=3)
-    b.emit("VORONOI", d, col, pos, b.global_("OBJECT"), b.register((scale, 1.0, randomness), 3),
-           nodes.VORONOI_METRICS.index(metric))
+    out = b.register(width=9)
+    d, col, pos = out, out + 1, out + 4
+    params = b.register((scale, 0.0, 0.5, 2.0, 1.0, 1.0, randomness, 0.0), 8)  # detail 0: one octave
+    b.emit("VORONOI", out, b.global_("OBJECT"), b.register(0.0), params, nodes.VORONOI_METRICS.index(metric),
+           nodes.VORONOI_FEATURES.index("F1"), 2)
     r = nodes.run(b.program(), len(pts), object=pts)
     for p, row in zip(pts.astype(np.float32).astype(np.float64), r):
         dist, colour, position = _voronoi(p * scale, metric, randomness)

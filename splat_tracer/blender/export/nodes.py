@@ -647,21 +647,17 @@ class Compiler:
         return first
 
     def _tex_voronoi(self, node, stack):
-        if node.voronoi_dimensions != "3D":
-            raise Unsupported(node, f"{node.voronoi_dimensions} Voronoi")
-        if node.feature != "F1":
-            raise Unsupported(node, f"its {node.feature.replace('_', ' ').title()} feature")
-        detail = node.inputs.get("Detail")
-        if detail is not None and (self.source(detail, stack) is not None or detail.default_value != 0):
-            raise Unsupported(node, "fractal Detail")
-        if getattr(node, "normalize", False):
-            raise Unsupported(node, "Normalize")
-        vector = self._vector_or(node, stack)
-        params = self._params(node, stack, ("Scale", "Exponent", "Randomness"))
-        distance, colour, position = self.b.register(), self.b.register(width=3), self.b.register(width=3)
-        self.b.emit("VORONOI", distance, colour, position, vector, params,
-                    nodes.VORONOI_METRICS.index(node.distance))
-        return self._ids(node, {"Distance": distance, "Color": colour, "Position": position})
+        dimensions = int(node.voronoi_dimensions[0])  # "1D" .. "4D"
+        # 1-D reads only W, 2-D and 3-D only the vector: what is not read is a constant.
+        vector = self.b.register((0.0, 0.0, 0.0), 3) if dimensions == 1 else self._vector_or(node, stack)
+        w = self._in(node, "W", 1, stack) if dimensions in (1, 4) else self.b.register(0.0)
+        params = self._params(node, stack, ("Scale", "Detail", "Roughness", "Lacunarity", "Smoothness", "Exponent",
+                                            "Randomness"), extra=(float(bool(getattr(node, "normalize", False))),))
+        out = self.b.register(width=9)  # distance, colour, position, w, radius (native Voronoi)
+        self.b.emit("VORONOI", out, vector, w, params, nodes.VORONOI_METRICS.index(node.distance),
+                    nodes.VORONOI_FEATURES.index(node.feature), dimensions - 1)
+        return self._ids(node, {"Distance": out, "Color": out + 1, "Position": out + 4, "W": out + 7,
+                                "Radius": out + 8})
 
     def _tex_wave(self, node, stack):
         if node.wave_type == "BANDS":

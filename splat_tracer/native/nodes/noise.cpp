@@ -288,6 +288,8 @@ uint32_t hash_words(int n, uint32_t x, uint32_t y, uint32_t z) {
     return c;
 }
 
+uint32_t hash_uint(uint32_t kx) { return hash_words(1, kx, 0, 0); }
+uint32_t hash_uint2(uint32_t kx, uint32_t ky) { return hash_words(2, kx, ky, 0); }
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz) { return hash_words(3, kx, ky, kz); }
 
 uint32_t hash_uint4(uint32_t kx, uint32_t ky, uint32_t kz, uint32_t kw) {

@@ -14,6 +14,8 @@ namespace splat {
 
 // lookup3 hashes of 1-3 words, as Blender seeds them (0xdeadbeef + words * 4 + 13).
 uint32_t hash_words(int n, uint32_t x, uint32_t y, uint32_t z);
+uint32_t hash_uint(uint32_t kx);
+uint32_t hash_uint2(uint32_t kx, uint32_t ky);
 uint32_t hash_uint3(uint32_t kx, uint32_t ky, uint32_t kz);
 // Four words: lookup3's mix() over the first three, then the fourth (Blender's hash_uint4).
 uint32_t hash_uint4(uint32_t kx, uint32_t ky, uint32_t kz, uint32_t kw);

@@ -1,6 +1,7 @@
 // The shader-node interpreter. Node definitions follow Blender's manual and Cycles' SVM (read
 // to learn them; this is a separate implementation): each case's comment names the node.
 #include "nodes/program.h"
+#include "nodes/voronoi.h"
 
 #include <algorithm>
 #include <cmath>
@@ -62,7 +63,9 @@ const Layout &layout(Op op) {
         /* Image (image checked apart) */
         {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                 int32_t(ImageExtension::Count)}},
-        /* Voronoi */ {{kR1, kR3, kR3, kR3, kR3, kEnum}, {0, 0, 0, 0, 0, 4}},
+        /* Voronoi */
+        {{kRW, kR3, kR1, kRW, kEnum, kEnum, kEnum},
+         {9, 0, 0, 8, int32_t(VoronoiMetric::Count), int32_t(VoronoiFeature::Count), 4}},
         /* Wave */ {{kR1, kR3, kR5, kR1, kEnum, kEnum}, {0, 0, 0, 0, 8, 3}},
         /* Magic */ {{kR3, kR1, kR3, kR1, kR1, kEnum}, {0, 0, 0, 0, 0, 11}},
         /* NormalMap */ {{kR3, kR3, kR1, kEnum}, {0, 0, 0, 3}},
@@ -398,54 +401,6 @@ float white_noise(Vec3 p, int dims, Vec3 *colour) {
     const float value = to_unit(hash(0));
     *colour = {value, to_unit(hash(float_bits(1.f))), to_unit(hash(float_bits(2.f)))};
     return value;
-}
-
-float voronoi_distance(Vec3 a, Vec3 b, int metric, float exponent) {
-    const Vec3 d = vabs(a - b);
-    switch (metric) {
-        case 0: return length(a - b);                                   // EUCLIDEAN
-        case 1: return d.x + d.y + d.z;                                 // MANHATTAN
-        case 2: return std::fmax(d.x, std::fmax(d.y, d.z));             // CHEBYSHEV
-        default:                                                        // MINKOWSKI
-            return std::pow(std::pow(d.x, exponent) + std::pow(d.y, exponent) + std::pow(d.z, exponent),
-                            1.f / exponent);
-    }
-}
-
-// Blender's hash of an integer cell to three numbers in 0..1 (the PCG 3-D hash of Jarzynski
-// and Olano, "Hash Functions for GPU Rendering", 2020, on signed integers as Blender runs it:
-// wrapping products, an arithmetic shift).
-Vec3 hash_cell(int32_t x, int32_t y, int32_t z) {
-    uint32_t v[3] = {uint32_t(x), uint32_t(y), uint32_t(z)};
-    for (uint32_t &c : v) c = c * 1664525u + 1013904223u;
-    auto mix = [&] { v[0] += v[1] * v[2], v[1] += v[2] * v[0], v[2] += v[0] * v[1]; };
-    mix();
-    for (uint32_t &c : v) c ^= uint32_t(int32_t(c) >> 16);
-    mix();
-    constexpr float k = 1.f / float(0x7FFFFFFF);
-    return {float(v[0] & 0x7FFFFFFFu) * k, float(v[1] & 0x7FFFFFFFu) * k, float(v[2] & 0x7FFFFFFFu) * k};
-}
-
-// Voronoi F1 in 3-D: the nearest of the points scattered one per unit cell (offset by the
-// cell's hash x randomness): its distance, its cell's colour and its position.
-void voronoi_f1(Vec3 p, float exponent, float randomness, int metric, float *distance, Vec3 *colour, Vec3 *position) {
-    // Cells beyond int range would overflow: far coordinates are held where they still resolve.
-    for (int a = 0; a < 3; ++a) p[a] = std::fmin(std::fmax(p[a], -1e9f), 1e9f);
-    const int32_t cx = int32_t(std::floor(p.x)), cy = int32_t(std::floor(p.y)), cz = int32_t(std::floor(p.z));
-    const Vec3 local = p - Vec3(float(cx), float(cy), float(cz));
-    float best = 3.4e38f;
-    int32_t bi = 0, bj = 0, bk = 0;
-    Vec3 best_point;
-    for (int32_t k = -1; k <= 1; ++k)
-        for (int32_t j = -1; j <= 1; ++j)
-            for (int32_t i = -1; i <= 1; ++i) {
-                const Vec3 point = Vec3(float(i), float(j), float(k)) + hash_cell(cx + i, cy + j, cz + k) * randomness;
-                const float d = voronoi_distance(point, local, metric, exponent);
-                if (d < best) best = d, bi = i, bj = j, bk = k, best_point = point;
-            }
-    *distance = best;
-    *colour = hash_cell(cx + bi, cy + bj, cz + bk);
-    *position = best_point + Vec3(float(cx), float(cy), float(cz));
 }
 
 float wave(Vec3 p, const float *q, float phase, int kind, int profile) {
@@ -1002,14 +957,15 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::Voronoi: {
-                const Vec3 q = load3(r, c[5]);  // scale, exponent, randomness
-                float distance;
-                Vec3 colour, position;
-                voronoi_f1(load3(r, c[4]) * q.x, q.y, std::fmin(std::fmax(q.z, 0.f), 1.f), c[6], &distance, &colour,
-                           &position);
-                r[c[1]] = distance;
-                store3(r, c[2], colour);
-                store3(r, c[3], q.x != 0.f ? position * (1.f / q.x) : Vec3());
+                const float *q = r + c[4];  // scale detail roughness lacunarity smoothness exponent randomness normalize
+                const VoronoiOutputs o =
+                    voronoi_texture(load3(r, c[2]), r[c[3]], c[7] + 1, VoronoiFeature(c[6]), VoronoiMetric(c[5]),
+                                    {q[0], q[1], q[2], q[3], q[4], q[5], q[6], q[7] != 0.f});
+                r[c[1]] = o.distance;
+                store3(r, c[1] + 1, o.colour);
+                store3(r, c[1] + 4, o.position);
+                r[c[1] + 7] = o.w;
+                r[c[1] + 8] = o.radius;
                 break;
             }
             case Op::Wave: {

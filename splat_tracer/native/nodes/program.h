@@ -112,7 +112,9 @@ enum class Op : int32_t {
     Scale,          // out, vector, factor (vec3 x float)
     Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
     Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
-    Voronoi,        // out_distance, out_colour, out_position, vector, params (scale exponent randomness), metric
+    Voronoi,        // out (9: distance, colour, position, w, radius), vector, w, params (8: scale detail roughness
+                    // lacunarity smoothness exponent randomness normalize), VoronoiMetric, VoronoiFeature,
+                    // dimensions - 1 (nodes/voronoi.h)
     Wave,           // out_fac, vector, params (scale distortion detail detail_scale detail_roughness), phase, kind, profile
                     // (kind: 0-3 bands X Y Z diagonal, 4-7 rings X Y Z spherical)
     Magic,          // out_colour, out_fac, vector, scale, distortion, depth
