@@ -204,7 +204,7 @@ class SplatTracerEngine(bpy.types.RenderEngine):
                        + (f" (not rendered: view {', '.join(repr(v) for v in missing)})" if missing else ""))
             self.report({"ERROR"}, message)
             self.error_set(message)
-            self.end_result(result, cancel=True, merge_results=True)
+            self.end_result(result, cancel=True, do_merge_results=True)
             return
         s = frame.stats
         self.report({"INFO"}, f"Splat Tracer: {s['instances']} instances, built {s['built']} and reused "
