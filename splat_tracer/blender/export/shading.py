@@ -418,7 +418,7 @@ def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
     try:
         if shader is not None and shader.type in shader_mix.MIX_SHADERS:
             if not shader_mix.needs_program(shader, lambda s: s.node.type != "EMISSION" and _reads_points(s)):
-                return _program(None, sockets, aovs)  # a constant blend (AOVs only, if any)
+                return _program(None, sockets, aovs, object_space)  # a constant blend (AOVs only, if any)
             # The shader readers' own lines are said when _shader reads the tree next; the
             # readers here only give the constant fields the blend starts from.
             quiet = _Sockets("material", "", shading.Report())
