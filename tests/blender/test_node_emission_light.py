@@ -141,3 +141,34 @@ def test_auto_emission_sampling_of_node_driven_emission_is_cycles_estimate(blend
     for setting in ("FRONT", "BACK", "FRONT_BACK", "NONE"):
         glow.cycles.emission_sampling = setting
         assert sampling() == setting
+
+
+def test_auto_emission_sampling_under_mix_and_add_shaders_is_cycles_estimate(blender, empty_scene):
+    """Under a Mix Shader (Cycles' output_estimate_emission): a constant Fac weighs the two
+    shaders' estimates, a linked Fac sums them; an Add Shader sums them. (It was NONE for
+    every mix: the estimate only looked at the Surface's own node.)"""
+    from splat_tracer.blender.export import shading as export_shading
+    from splat_tracer.render import shading
+
+    bpy = blender
+    glow, checker, emission = _scene(bpy, bpy.context.scene)
+    tree = glow.node_tree
+    output = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+    tree.links.new(transparent.outputs[0], mix.inputs[1])
+    tree.links.new(emission.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], output.inputs["Surface"])
+    sampling = lambda: export_shading.material_of(glow, shading.Report()).emission_sampling  # noqa: E731
+    tree.links.new(checker.outputs["Fac"], mix.inputs[0])
+    assert sampling() == "FRONT_BACK"                        # linked Fac: 0 + 1 x 8
+    tree.links.remove(mix.inputs[0].links[0])
+    mix.inputs[0].default_value = 0.05
+    assert sampling() == "NONE"                              # 0.05 x 8 = 0.4
+    mix.inputs[0].default_value = 0.1
+    assert sampling() == "FRONT_BACK"                        # 0.1 x 8 = 0.8
+    add = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(transparent.outputs[0], add.inputs[0])
+    tree.links.new(mix.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], output.inputs["Surface"])
+    assert sampling() == "FRONT_BACK"                        # the mix's 0.8 added to nothing

@@ -330,20 +330,38 @@ def _emission_sampling(bl_material) -> str:
 
 
 def _auto_sampling_of_nodes(bl_material) -> str:
-    """Cycles' Auto for an emission its nodes drive (the Surface's Emission or Principled
-    BSDF, whose linked inputs compile_shader compiled): Shader::estimate_emission counts a
-    linked Color or Strength as 1 and an unlinked one as its value, and samples both sides
-    when the estimate exceeds AUTO_EMISSION_THRESHOLD in a channel, none otherwise."""
+    """Cycles' Auto for an emission its nodes drive: Shader::estimate_emission's estimate of
+    what feeds the Surface (_emission_estimate), both sides sampled when it exceeds
+    AUTO_EMISSION_THRESHOLD in a channel, none otherwise."""
     tree = _node_tree(bl_material)
     output = _output_node(tree, "OUTPUT_MATERIAL") if tree is not None else None
-    source = _upstream(output.inputs["Surface"]) if output is not None else None
-    names = nodes.SHADER_INPUTS.get(source[0].type, {}).get("emission") if source is not None else None
+    estimate = _emission_estimate(output.inputs["Surface"]) if output is not None else (0.0,) * 3
+    return "FRONT_BACK" if max(estimate) > shading.AUTO_EMISSION_THRESHOLD else "NONE"
+
+
+def _emission_estimate(socket) -> tuple:
+    """Cycles' estimate of the emission of what feeds a shader socket, per channel: an
+    Emission's or Principled BSDF's colour x strength, a linked input counting as 1; an Add
+    Shader sums its two; a Mix Shader weighs them by a constant Fac and sums them when the
+    Fac is linked (a texture may pick either)."""
+    source = _upstream(socket)
+    if source is None:
+        return (0.0,) * 3
+    node = source[0]
+    if node.type in ("MIX_SHADER", "ADD_SHADER"):
+        first, second = (_emission_estimate(s) for s in node.inputs if s.type == "SHADER")
+        weights = (1.0, 1.0)
+        if node.type == "MIX_SHADER" and _upstream(node.inputs[0]) is None:
+            fac = min(max(float(node.inputs[0].default_value), 0.0), 1.0)
+            weights = (1.0 - fac, fac)
+        return tuple(weights[0] * a + weights[1] * b for a, b in zip(first, second))
+    names = nodes.SHADER_INPUTS.get(node.type, {}).get("emission")
     if names is None:
-        return "NONE"
-    colour, strength = (source[0].inputs[n] for n in names)
-    c = 1.0 if _upstream(colour) is not None else max(abs(float(v)) for v in colour.default_value[:3])
+        return (0.0,) * 3
+    colour, strength = (node.inputs[n] for n in names)
+    c = (1.0,) * 3 if _upstream(colour) is not None else tuple(abs(float(v)) for v in colour.default_value[:3])
     k = 1.0 if _upstream(strength) is not None else abs(float(strength.default_value))
-    return "FRONT_BACK" if c * k > shading.AUTO_EMISSION_THRESHOLD else "NONE"
+    return tuple(v * k for v in c)
 
 
 def _surface_material(bl_material, report: shading.Report, aovs: dict, object_space=None) -> shading.Material:
