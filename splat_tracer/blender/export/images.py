@@ -61,8 +61,10 @@ def read(image, say) -> Optional[Pixels]:
 
 
 def decode(rgb: np.ndarray, srgb: bool) -> np.ndarray:
-    """Colour looked up in Pixels.values (interpolated or not) -> scene linear."""
-    return srgb_to_linear(rgb) if srgb else rgb
+    """Colour looked up in Pixels.values (interpolated or not) -> scene linear. A negative
+    encoded value (a float image's) decodes to 0, as Cycles' color_srgb_to_linear and the
+    core's decoder (nodes/image.cpp) give it."""
+    return srgb_to_linear(np.maximum(rgb, 0.0)) if srgb else rgb
 
 
 def _loaded(image) -> bool:
