@@ -173,8 +173,8 @@ def denoise_passes(passes: dict, wanted, denoising, world_from_camera, threads: 
         rotation = np.asarray(world_from_camera, dtype=np.float64)[:3, :3]
         rotation = rotation / np.maximum(np.linalg.norm(rotation, axis=0), 1e-30)
         normal = (normal.astype(np.float64) @ rotation * (1.0, 1.0, -1.0)).astype(np.float32)
-    guides = {export_settings.DENOISING_ALBEDO: passes.get("DiffCol"), export_settings.DENOISING_NORMAL: normal,
-              export_settings.DENOISING_DEPTH: passes.get("Depth")}
+    # Each guide from its core pass (_GUIDES), the Normal turned into Cycles' camera space.
+    guides = {name: normal if source == "Normal" else passes.get(source) for name, source in _GUIDES.items()}
     for name, pixels in guides.items():
         if name in wanted and pixels is not None:
             out[name] = pixels
