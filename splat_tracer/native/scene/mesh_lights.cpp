@@ -106,8 +106,9 @@ MeshLights::MeshLights(const std::vector<Instance> &instances, const std::vector
             e.density = estimate[i / stride];
             sum += double(e.density) * double(e.area), area += double(e.area);
         }
-        // Programs estimated dark everywhere are left to the rays that meet them (MIS gives
-        // those rays their whole emission where area_pdf is 0); the others get the floor.
+        // The floor is the scene's mean: only when every programmed triangle is estimated
+        // dark (floor 0) are they left to the rays that meet them (MIS gives those rays their
+        // whole emission where area_pdf is 0); otherwise each gets at least the floor.
         const float floor = float(kEstimateFloor * (area > 0 ? sum / area : 0.0));
         tris_.erase(std::remove_if(tris_.begin(), tris_.end(), [&](Emitter &e) {
                         if (e.programmed) e.density = std::fmax(e.density, floor);
