@@ -126,6 +126,31 @@ def test_an_unsupported_texture_falls_back_to_the_default_with_one_report_line(b
         "material 'Floor': the 'Sky Texture' node is not supported; Base Color uses its unlinked value (0.8, 0.8, 0.8)"]
 
 
+def test_what_a_bump_or_normal_map_cannot_read_is_said(blender, empty_scene, es, report):
+    """A Bump's nearby points move the position-dependent globals only: a height from an
+    attribute has no slope there, said; a Normal Map's own UV map is not read, said. A
+    height from a texture says nothing."""
+    material, principled = new_material(blender, "Bumpy", "ShaderNodeBsdfPrincipled")
+    tree = material.node_tree
+    bump, noise = tree.nodes.new("ShaderNodeBump"), tree.nodes.new("ShaderNodeTexNoise")
+    tree.links.new(noise.outputs["Fac"], bump.inputs["Height"])
+    tree.links.new(bump.outputs["Normal"], principled.inputs["Normal"])
+    assert es.material_of(material, report).program is not None and report.lines == []
+    attribute = tree.nodes.new("ShaderNodeAttribute")
+    attribute.attribute_name = "height"
+    tree.links.new(attribute.outputs["Fac"], bump.inputs["Height"])
+    es.material_of(material, report)
+    assert report.lines == ["material 'Bumpy': the Bump's height reads an attribute (an Attribute or a named UV Map "
+                            "node), which is not offset along the surface: it adds no slope"]
+    normal_map = tree.nodes.new("ShaderNodeNormalMap")
+    normal_map.uv_map = "Second"
+    tree.links.new(noise.outputs["Color"], normal_map.inputs["Color"])
+    tree.links.new(normal_map.outputs["Normal"], principled.inputs["Normal"])
+    es.material_of(material, report)
+    assert report.lines[1:] == ["material 'Bumpy': the Normal Map's UV map 'Second' is not read; its tangents are "
+                                "the active render UV map's"]
+
+
 def test_an_image_texture_without_an_image_is_magenta_as_in_cycles(blender, empty_scene, es, report):
     material, principled = new_material(blender, "Floor", "ShaderNodeBsdfPrincipled")
     texture = material.node_tree.nodes.new("ShaderNodeTexImage")

@@ -497,6 +497,9 @@ class Compiler:
     def _normal_map(self, node, stack):
         if node.space not in nodes.NORMAL_MAP_SPACES:
             raise Unsupported(node, f"{node.space.replace('_', ' ').lower()} space")
+        if node.space == "TANGENT" and node.uv_map:
+            self.say(f": the Normal Map's UV map '{node.uv_map}' is not read; its tangents are the active render "
+                     f"UV map's")
         out = self.b.register(width=3)
         self.b.emit("NORMAL_MAP", out, self._in(node, "Color", 3, stack), self._in(node, "Strength", 1, stack),
                     nodes.NORMAL_MAP_SPACES.index(node.space))
@@ -521,6 +524,10 @@ class Compiler:
             h = self.input(height, 1, stack)
         finally:
             self.memo, self.bump_depth = outer, self.bump_depth - 1
+        if any(row[0] == nodes.OPS.index("ATTRIBUTE") for row in self.b.code[first:]):
+            # The two nearby points move the position-dependent globals only (ShaderGlobals::bump).
+            self.say(f": the Bump's height reads an attribute (an Attribute or a named UV Map node), which "
+                     f"is not offset along the surface: it adds no slope")
         self.b.emit("BUMP", out, h, strength, distance, normal, first, int(node.invert))
         return {node.outputs[0].identifier: out}
 
