@@ -715,13 +715,7 @@ def _image_pixels(image, say):
     read = images.read(image, say)
     if read is None:
         return None
-    pixels = read.values
-    if image.alpha_mode == "NONE":  # Cycles ignores the image's alpha
-        pixels[..., 3] = 1.0
-    if image.is_float:
-        texture = nodes.Image(pixels, srgb=read.srgb)
-    else:  # kept as the bytes they are (a quarter of the floats)
-        texture = nodes.Image(np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8), srgb=read.srgb)
+    texture = _texture(read, image.is_float, image.alpha_mode)
     # Keep only the current version of each image (its old pixels are garbage).
     for old in [k for k in _IMAGES if k[:2] == key[:2]]:
         del _IMAGES[old]
@@ -729,19 +723,48 @@ def _image_pixels(image, say):
     return texture
 
 
-# UDIM tiles read from their files (see _tile_pixels), by what identifies their pixels.
-_TILES: dict = {}
+def _texture(read: images.Pixels, is_float: bool, alpha_mode: str):
+    """images.Pixels as the core's nodes.Image, in the image's Alpha mode."""
+    pixels = read.values
+    if alpha_mode == "NONE":  # Cycles ignores the image's alpha
+        pixels[..., 3] = 1.0
+    if is_float:
+        return nodes.Image(pixels, srgb=read.srgb)
+    # kept as the bytes they are (a quarter of the floats)
+    return nodes.Image(np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8), srgb=read.srgb)
+
+
+# Images read from files rather than from Blender's image (UDIM tiles after the first, the
+# frames of sequences: _file_pixels), by what identifies their pixels.
+_FILES: dict = {}
+
+
+def _file_pixels(image, slot, path: str, say):
+    """The nodes.Image of the file at `path` read for `image` (its colour space and alpha
+    mode; images.read_file, which creates no Blender image: safe within a render), or None
+    when it cannot be read. Kept while the file is unchanged; one file per (image, slot) is
+    kept: a tile number, or "frame" for a sequence's current frame."""
+    import os
+
+    try:
+        stamp = (os.path.getmtime(path), os.path.getsize(path))
+    except OSError:
+        return None
+    key = (image.name_full, slot, path, stamp, image.colorspace_settings.name, image.alpha_mode)
+    if key not in _FILES:
+        read = images.read_file(path, image.colorspace_settings.name, image.name, say)
+        for old in [k for k in _FILES if k[:2] == key[:2]]:
+            del _FILES[old]
+        _FILES[key] = _texture(read, read.is_float, image.alpha_mode) if read is not None else None
+    return _FILES[key]
 
 
 def _tile_pixels(image, say) -> list:
     """A UDIM (tiled) image's tiles as [(tile number, nodes.Image or None)]: the first tile
     from the image's own pixels (what Blender holds, painted or packed alike), the others
-    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read
-    through a temporary image in the same colour space and alpha mode. A tile that cannot
-    be read (not saved, packed, missing) is None: magenta, as Cycles renders a tile it
-    cannot load -- said once. Tiles are read once and kept while their file is unchanged."""
-    import os
-
+    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read as
+    Blender would load them (_file_pixels). A tile that cannot be read (not saved, packed,
+    missing) is None: magenta, as Cycles renders a tile it cannot load -- said once."""
     import bpy
 
     out, missing = [], []
@@ -757,33 +780,12 @@ def _tile_pixels(image, say) -> list:
         u, v = (number - 1001) % 10, (number - 1001) // 10
         path = image.filepath_raw.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
         path = bpy.path.abspath(path, library=image.library)
-        if path == bpy.path.abspath(image.filepath_raw, library=image.library) or not os.path.isfile(path):
-            out.append((number, None))
+        texture = None
+        if path != bpy.path.abspath(image.filepath_raw, library=image.library):
+            texture = _file_pixels(image, number, path, say)
+        if texture is None:
             missing.append(number)
-            continue
-        settings = image.colorspace_settings.name
-        key = (image.name_full, number, path, os.path.getmtime(path), settings, image.alpha_mode)
-        if key not in _TILES:
-            texture = None
-            try:
-                temp = bpy.data.images.load(path, check_existing=False)
-            except RuntimeError:  # a file Blender cannot read: the tile is missing
-                temp = None
-            if temp is not None:
-                try:
-                    temp.colorspace_settings.name = settings
-                    temp.alpha_mode = image.alpha_mode
-                    texture = _image_pixels(temp, say)
-                    for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
-                        del _IMAGES[old]  # the temporary image's pixels live on here, not there
-                finally:
-                    bpy.data.images.remove(temp)
-            for old in [k for k in _TILES if k[:2] == key[:2]]:
-                del _TILES[old]
-            _TILES[key] = texture
-        if _TILES[key] is None:
-            missing.append(number)
-        out.append((number, _TILES[key]))
+        out.append((number, texture))
     if missing:
         say(f": image '{image.name}' tile{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} "
             f"could not be read (not saved to a file?); rendered magenta, as Cycles does")
