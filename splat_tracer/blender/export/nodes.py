@@ -11,6 +11,9 @@ default value), said once in the report naming the material and the node.
 """
 from __future__ import annotations
 
+import contextvars
+import os
+
 import numpy as np
 
 from ...render import nodes
@@ -30,6 +33,16 @@ COLOUR_ATTRIBUTE_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", 
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 # Images read from Blender, by what identifies their pixels (see _image_pixels).
 _IMAGES: dict = {}
+# The scene frame being exported (export_at), which picks an image sequence's frame; None
+# before any export. A context variable: the viewport and a final render export in their own
+# threads, each at its own frame.
+_FRAME: contextvars.ContextVar = contextvars.ContextVar("splat_tracer_frame", default=None)
+
+
+def export_at(frame: int) -> None:
+    """Node trees compiled from now on in this thread are read at scene frame `frame`
+    (image sequences); the scene export calls it first."""
+    _FRAME.set(int(frame))
 
 
 class Unsupported(Exception):
@@ -532,11 +545,17 @@ class Compiler:
     # Textures
     def _tex_image(self, node, stack):
         image = node.image
-        if image is not None and image.source not in ("FILE", "GENERATED", "TILED"):
+        if image is not None and image.source not in ("FILE", "GENERATED", "TILED", "SEQUENCE"):
             raise Unsupported(node, f"{image.source.lower()} images")
         colour, alpha = self.b.register(width=3), self.b.register()
         tiles = _tile_pixels(image, self.say) if image is not None and image.source == "TILED" else None
-        texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
+        if image is not None and image.source == "SEQUENCE":
+            number, texture = _sequence_pixels(node, image, self.say)
+            if texture is None:
+                what = f"image sequence '{image.name}' has no readable frame {number}"
+                return self._missing_image(node, what, colour, alpha)
+        else:
+            texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
         if texture is None and not tiles:
             what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
             return self._missing_image(node, what, colour, alpha)
@@ -743,9 +762,7 @@ def _file_pixels(image, slot, path: str, say):
     """The nodes.Image of the file at `path` read for `image` (its colour space and alpha
     mode; images.read_file, which creates no Blender image: safe within a render), or None
     when it cannot be read. Kept while the file is unchanged; one file per (image, slot) is
-    kept: a tile number, or "frame" for a sequence's current frame."""
-    import os
-
+    kept: a tile number, or a sequence node's current frame."""
     try:
         stamp = (os.path.getmtime(path), os.path.getsize(path))
     except OSError:
@@ -790,6 +807,57 @@ def _tile_pixels(image, say) -> list:
         say(f": image '{image.name}' tile{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} "
             f"could not be read (not saved to a file?); rendered magenta, as Cycles does")
     return out
+
+
+def _sequence_pixels(node, image, say) -> tuple:
+    """(frame number, nodes.Image or None) of an image sequence at the frame being exported:
+    the frame Cycles renders (sequence_frame of the node's Image User at the scene frame; Blender's
+    own frame_current outside an export), read from its file (_file_pixels). A packed sequence
+    is not read (None)."""
+    import bpy
+
+    user, frame = node.image_user, _FRAME.get()
+    number = sequence_frame(user, frame) if frame is not None else int(user.frame_current)
+    if image.packed_file is not None or len(image.packed_files):
+        say(f": image sequence '{image.name}' is packed; its frames are read from files only")
+        return number, None
+    path = bpy.path.abspath(sequence_path(image.filepath_raw, number), library=image.library)
+    # One frame kept per node (each Image User picks its own frame).
+    return number, _file_pixels(image, ("frame", node.id_data.name_full, node.name), path, say)
+
+
+def sequence_frame(user, frame: int) -> int:
+    """The frame of an image sequence an Image User shows at scene frame `frame`, by Blender's
+    rule (BKE_image_user_frame_get): counted from Start Frame (the user's first is 1),
+    wrapped over Frames when Cyclic, else held at 0 before it and at Frames after, then
+    moved by Offset. Frames 0: frame 0, as Blender."""
+    count = int(user.frame_duration)
+    if count <= 0:
+        return 0
+    n = int(frame) - int(user.frame_start) + 1
+    if user.use_cyclic:
+        n = n % count or count  # 1..count
+    return min(max(n, 0), count) + int(user.frame_offset)
+
+
+def sequence_path(path: str, number: int) -> str:
+    """An image sequence's path at frame `number`, as Blender numbers it (BLI_path_sequence_*):
+    the last run of digits in the file name before its extension holds the frame, padded to
+    as many digits; a name without digits gets the number before its extension."""
+    cut = max(path.rfind("/"), path.rfind("\\")) + 1
+    name = path[cut:]
+    dot = name.rfind(".")
+    end = dot if dot > 0 else len(name)
+    last = end
+    while last > 0 and not name[last - 1].isdigit():
+        last -= 1
+    first = last
+    while first > 0 and name[first - 1].isdigit():
+        first -= 1
+    if first == last:  # no digits: Blender writes the number unpadded ("" for 0, as C's %.0d)
+        first = last = end
+    digits = str(abs(number)).zfill(last - first) if (number or last > first) else ""
+    return path[:cut] + name[:first] + ("-" if number < 0 else "") + digits + name[last:]
 
 
 def _try_load(image) -> bool:
