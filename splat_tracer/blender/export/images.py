@@ -82,6 +82,7 @@ def read_file(path: str, space: str, name: str, say) -> Optional[Pixels]:
     space (Non-Color), where the values are left as stored."""
     oiio = _oiio()
     if oiio is None:
+        say(f": image '{name}': Blender's OpenImageIO module is not available to read '{path}'")
         return None
     config = oiio.ImageSpec()
     config.attribute("oiio:UnassociatedAlpha", 1)  # the values as stored, as Blender takes them
