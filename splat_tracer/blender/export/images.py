@@ -26,13 +26,16 @@ from ...util.colour import linear_to_srgb, srgb_to_linear
 # space (Blender's default, Rec. 709) or data.
 SRGB = ("sRGB",)
 LINEAR = ("Linear Rec.709", "Linear", "Non-Color", "Raw", "Generic Data", "Linear Rec.709 (sRGB)")
+DATA = ("Non-Color", "Raw", "Generic Data")  # of LINEAR: values, not colours
 
 
 class Pixels(NamedTuple):
     """(height, width, 4) float32 RGBA, bottom row first (Blender's order); the colour
-    sRGB-encoded when `srgb` (to be decoded after interpolation, decode()), else scene linear."""
+    sRGB-encoded when `srgb` (to be decoded after interpolation, decode()), else scene linear.
+    `is_float`: a float image (else bytes / 255)."""
     values: np.ndarray
     srgb: bool
+    is_float: bool = False
 
 
 def read(image, say) -> Optional[Pixels]:
@@ -44,20 +47,114 @@ def read(image, say) -> Optional[Pixels]:
     channels = image.channels
     flat = np.empty(w * h * channels, np.float32)
     image.pixels.foreach_get(flat)
-    px = flat.reshape(h, w, channels)
+    return _by_rule(flat.reshape(h, w, channels), image.is_float, image.colorspace_settings.name, image.name, say)
+
+
+def _by_rule(px: np.ndarray, is_float: bool, space: str, name: str, say) -> Pixels:
+    """Pixels as Blender holds them ((h, w, channels), bottom row first) -> Pixels."""
+    h, w, channels = px.shape
     if channels != 4:  # Blender's grey or RGB buffers: as RGBA, opaque
         rgb = px[..., :1].repeat(3, -1) if channels == 1 else px[..., :3]
         px = np.concatenate([rgb, np.ones((h, w, 1), np.float32)], axis=-1)
-    space = image.colorspace_settings.name
     if space not in SRGB + LINEAR:
-        say(f": image '{image.name}' is in the '{space}' colour space, read as "
-            f"{'scene linear' if image.is_float else 'sRGB'}")
-    if image.is_float:
+        say(f": image '{name}' is in the '{space}' colour space, read as "
+            f"{'scene linear' if is_float else 'sRGB'}")
+    if is_float:
         if space in SRGB:  # interpolated encoded, as Cycles does
             px[..., :3] = linear_to_srgb(px[..., :3])
-            return Pixels(px, True)
-        return Pixels(px, False)
+            return Pixels(px, True, True)
+        return Pixels(px, False, True)
     return Pixels(px, space not in LINEAR)
+
+
+def read_file(path: str, space: str, name: str, say) -> Optional[Pixels]:
+    """The image file at `path` (a UDIM tile, a frame of a sequence) read as Blender would
+    load it into an image in colour space `space`, then by the rule above -- without
+    creating a Blender image: this runs inside a render, where adding and removing IDs is not
+    thread-safe. Read with OpenImageIO, which Blender ships (and loads these files with);
+    None when the file cannot be read or OpenImageIO is not there.
+
+    What Blender's load does, measured with Blender 5.0.1 (its `pixels` beside these, for
+    8-bit PNG, JPEG and Targa, 16-bit PNG and TIFF, float EXR): an 8-bit file gives its
+    stored bytes, alpha straight; a deeper one becomes floats converted from `space` to
+    scene linear with alpha premultiplied (a straight-alpha file's colour decoded then
+    multiplied by alpha; a premultiplied one's divided by alpha first), except in a data
+    space (Non-Color), where the values are left as stored."""
+    oiio = _oiio()
+    if oiio is None:
+        say(f": image '{name}': Blender's OpenImageIO module is not available to read '{path}'")
+        return None
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # the values as stored, as Blender takes them
+    source = oiio.ImageInput.open(path, config)
+    if source is None:
+        oiio.geterror()  # taken, so that OpenImageIO does not print it at exit: the caller says it
+        return None
+    try:
+        spec = source.spec()
+        channels = min(spec.nchannels, 4)
+        is_float = spec.format != oiio.TypeDesc("uint8")
+        px = source.read_image(0, 0, 0, channels, "float")
+        if px is None:
+            source.geterror()
+    finally:
+        source.close()
+    if px is None or getattr(px, "ndim", 0) != 3 or not px.size:
+        return None
+    px = np.ascontiguousarray(px[::-1], np.float32)  # bottom row first, as Blender holds it
+    if channels == 2:  # grey and alpha
+        px = np.concatenate([px[..., :1].repeat(3, -1), px[..., 1:]], axis=-1)
+    if is_float and px.shape[2] == 4:
+        alpha = px[..., 3:]
+        straight = bool(spec.get_int_attribute("oiio:UnassociatedAlpha", 0))
+        if space in SRGB:
+            if not straight:  # premultiplied in the file: the colour apart from alpha first
+                px[..., :3] = np.divide(px[..., :3], alpha, out=np.zeros_like(px[..., :3]), where=alpha > 0)
+            px[..., :3] = srgb_to_linear(px[..., :3]) * alpha
+        elif straight and space not in DATA:  # Blender leaves data (non-colour) values alone
+            px[..., :3] *= alpha
+    elif is_float and space in SRGB:
+        px[..., :3] = srgb_to_linear(px[..., :3])
+    return _by_rule(px, is_float, space, name, say)
+
+
+_OIIO: list = []  # [module or None], once imported
+
+
+def _oiio():
+    """Blender's OpenImageIO module, or None. Blender's Python has it on its path; Blender as
+    a Python module (bpy from PyPI) keeps it in the same place, off the path: imported from
+    there by file, so that nothing else there is put on the path."""
+    if _OIIO:
+        return _OIIO[0]
+    module = None
+    try:
+        import OpenImageIO as module  # noqa: N813
+    except ImportError:
+        import importlib.util
+        import os
+        import sys
+
+        import bpy
+
+        version = f"python{sys.version_info.major}.{sys.version_info.minor}"
+        base = os.path.join(bpy.utils.resource_path("LOCAL"), "python")
+        for lib in (os.path.join(base, "lib", version), os.path.join(base, "lib")):
+            init = os.path.join(lib, "site-packages", "OpenImageIO", "__init__.py")
+            if not os.path.isfile(init):
+                continue
+            spec = importlib.util.spec_from_file_location("OpenImageIO", init,
+                                                      submodule_search_locations=[os.path.dirname(init)])
+            try:
+                module = importlib.util.module_from_spec(spec)
+                sys.modules["OpenImageIO"] = module
+                spec.loader.exec_module(module)
+            except ImportError:
+                sys.modules.pop("OpenImageIO", None)
+                module = None
+            break
+    _OIIO.append(module)
+    return module
 
 
 def decode(rgb: np.ndarray, srgb: bool) -> np.ndarray:

@@ -11,6 +11,9 @@ default value), said once in the report naming the material and the node.
 """
 from __future__ import annotations
 
+import contextvars
+import os
+
 import numpy as np
 
 from ...render import nodes
@@ -30,6 +33,16 @@ COLOUR_ATTRIBUTE_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", 
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 # Images read from Blender, by what identifies their pixels (see _image_pixels).
 _IMAGES: dict = {}
+# The scene frame being exported (export_at), which picks an image sequence's frame; None
+# before any export. A context variable: the viewport and a final render export in their own
+# threads, each at its own frame.
+_FRAME: contextvars.ContextVar = contextvars.ContextVar("splat_tracer_frame", default=None)
+
+
+def export_at(frame: int) -> None:
+    """Node trees compiled from now on in this thread are read at scene frame `frame`
+    (image sequences); the scene export calls it first."""
+    _FRAME.set(int(frame))
 
 
 class Unsupported(Exception):
@@ -539,11 +552,17 @@ class Compiler:
     # Textures
     def _tex_image(self, node, stack):
         image = node.image
-        if image is not None and image.source not in ("FILE", "GENERATED", "TILED"):
+        if image is not None and image.source not in ("FILE", "GENERATED", "TILED", "SEQUENCE"):
             raise Unsupported(node, f"{image.source.lower()} images")
         colour, alpha = self.b.register(width=3), self.b.register()
         tiles = _tile_pixels(image, self.say) if image is not None and image.source == "TILED" else None
-        texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
+        if image is not None and image.source == "SEQUENCE":
+            number, texture = _sequence_pixels(node, image, self.say)
+            if texture is None:
+                what = f"image sequence '{image.name}' has no readable frame {number}"
+                return self._missing_image(node, what, colour, alpha)
+        else:
+            texture = _image_pixels(image, self.say) if image is not None and tiles is None else None
         if texture is None and not tiles:
             what = f"image '{image.name}' could not be loaded" if image is not None else "an Image Texture has no image"
             return self._missing_image(node, what, colour, alpha)
@@ -722,13 +741,7 @@ def _image_pixels(image, say):
     read = images.read(image, say)
     if read is None:
         return None
-    pixels = read.values
-    if image.alpha_mode == "NONE":  # Cycles ignores the image's alpha
-        pixels[..., 3] = 1.0
-    if image.is_float:
-        texture = nodes.Image(pixels, srgb=read.srgb)
-    else:  # kept as the bytes they are (a quarter of the floats)
-        texture = nodes.Image(np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8), srgb=read.srgb)
+    texture = _texture(read, image.is_float, image.alpha_mode)
     # Keep only the current version of each image (its old pixels are garbage).
     for old in [k for k in _IMAGES if k[:2] == key[:2]]:
         del _IMAGES[old]
@@ -736,19 +749,46 @@ def _image_pixels(image, say):
     return texture
 
 
-# UDIM tiles read from their files (see _tile_pixels), by what identifies their pixels.
-_TILES: dict = {}
+def _texture(read: images.Pixels, is_float: bool, alpha_mode: str):
+    """images.Pixels as the core's nodes.Image, in the image's Alpha mode."""
+    pixels = read.values
+    if alpha_mode == "NONE":  # Cycles ignores the image's alpha
+        pixels[..., 3] = 1.0
+    if is_float:
+        return nodes.Image(pixels, srgb=read.srgb)
+    # kept as the bytes they are (a quarter of the floats)
+    return nodes.Image(np.clip(np.rint(pixels * 255.0), 0, 255).astype(np.uint8), srgb=read.srgb)
+
+
+# Images read from files rather than from Blender's image (UDIM tiles after the first, the
+# frames of sequences: _file_pixels), by what identifies their pixels.
+_FILES: dict = {}
+
+
+def _file_pixels(image, slot, path: str, say):
+    """The nodes.Image of the file at `path` read for `image` (its colour space and alpha
+    mode; images.read_file, which creates no Blender image: safe within a render), or None
+    when it cannot be read. Kept while the file is unchanged; one file per (image, slot) is
+    kept: a tile number, or a sequence node's current frame."""
+    try:
+        stamp = (os.path.getmtime(path), os.path.getsize(path))
+    except OSError:
+        return None
+    key = (image.name_full, slot, path, stamp, image.colorspace_settings.name, image.alpha_mode)
+    if key not in _FILES:
+        read = images.read_file(path, image.colorspace_settings.name, image.name, say)
+        for old in [k for k in _FILES if k[:2] == key[:2]]:
+            del _FILES[old]
+        _FILES[key] = _texture(read, read.is_float, image.alpha_mode) if read is not None else None
+    return _FILES[key]
 
 
 def _tile_pixels(image, say) -> list:
     """A UDIM (tiled) image's tiles as [(tile number, nodes.Image or None)]: the first tile
     from the image's own pixels (what Blender holds, painted or packed alike), the others
-    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read
-    through a temporary image in the same colour space and alpha mode. A tile that cannot
-    be read (not saved, packed, missing) is None: magenta, as Cycles renders a tile it
-    cannot load -- said once. Tiles are read once and kept while their file is unchanged."""
-    import os
-
+    from their files (the image's path with its <UDIM> or <UVTILE> token filled), read as
+    Blender would load them (_file_pixels). A tile that cannot be read (not saved, packed,
+    missing) is None: magenta, as Cycles renders a tile it cannot load -- said once."""
     import bpy
 
     out, missing = [], []
@@ -764,37 +804,67 @@ def _tile_pixels(image, say) -> list:
         u, v = (number - 1001) % 10, (number - 1001) // 10
         path = image.filepath_raw.replace("<UDIM>", str(number)).replace("<UVTILE>", f"u{u + 1}_v{v + 1}")
         path = bpy.path.abspath(path, library=image.library)
-        if path == bpy.path.abspath(image.filepath_raw, library=image.library) or not os.path.isfile(path):
-            out.append((number, None))
+        texture = None
+        if path != bpy.path.abspath(image.filepath_raw, library=image.library):
+            texture = _file_pixels(image, number, path, say)
+        if texture is None:
             missing.append(number)
-            continue
-        settings = image.colorspace_settings.name
-        key = (image.name_full, number, path, os.path.getmtime(path), settings, image.alpha_mode)
-        if key not in _TILES:
-            texture = None
-            try:
-                temp = bpy.data.images.load(path, check_existing=False)
-            except RuntimeError:  # a file Blender cannot read: the tile is missing
-                temp = None
-            if temp is not None:
-                try:
-                    temp.colorspace_settings.name = settings
-                    temp.alpha_mode = image.alpha_mode
-                    texture = _image_pixels(temp, say)
-                    for old in [k for k in _IMAGES if k[:2] == (temp.name_full, temp.as_pointer())]:
-                        del _IMAGES[old]  # the temporary image's pixels live on here, not there
-                finally:
-                    bpy.data.images.remove(temp)
-            for old in [k for k in _TILES if k[:2] == key[:2]]:
-                del _TILES[old]
-            _TILES[key] = texture
-        if _TILES[key] is None:
-            missing.append(number)
-        out.append((number, _TILES[key]))
+        out.append((number, texture))
     if missing:
         say(f": image '{image.name}' tile{'s' if len(missing) > 1 else ''} {', '.join(map(str, missing))} "
             f"could not be read (not saved to a file?); rendered magenta, as Cycles does")
     return out
+
+
+def _sequence_pixels(node, image, say) -> tuple:
+    """(frame number, nodes.Image or None) of an image sequence at the frame being exported:
+    the frame Cycles renders (sequence_frame of the node's Image User at the scene frame; Blender's
+    own frame_current outside an export), read from its file (_file_pixels). A packed sequence
+    is not read (None)."""
+    import bpy
+
+    user, frame = node.image_user, _FRAME.get()
+    number = sequence_frame(user, frame) if frame is not None else int(user.frame_current)
+    if image.packed_file is not None or len(image.packed_files):
+        say(f": image sequence '{image.name}' is packed; its frames are read from files only")
+        return number, None
+    path = bpy.path.abspath(sequence_path(image.filepath_raw, number), library=image.library)
+    # One frame kept per node (each Image User picks its own frame).
+    return number, _file_pixels(image, ("frame", node.id_data.name_full, node.name), path, say)
+
+
+def sequence_frame(user, frame: int) -> int:
+    """The frame of an image sequence an Image User shows at scene frame `frame`, by Blender's
+    rule (BKE_image_user_frame_get): counted from Start Frame (the user's first is 1),
+    wrapped over Frames when Cyclic, else held at 0 before it and at Frames after, then
+    moved by Offset. Frames 0: frame 0, as Blender."""
+    count = int(user.frame_duration)
+    if count <= 0:
+        return 0
+    n = int(frame) - int(user.frame_start) + 1
+    if user.use_cyclic:
+        n = n % count or count  # 1..count
+    return min(max(n, 0), count) + int(user.frame_offset)
+
+
+def sequence_path(path: str, number: int) -> str:
+    """An image sequence's path at frame `number`, as Blender numbers it (BLI_path_sequence_*):
+    the last run of digits in the file name before its extension holds the frame, padded to
+    as many digits; a name without digits gets the number before its extension."""
+    cut = max(path.rfind("/"), path.rfind("\\")) + 1
+    name = path[cut:]
+    dot = name.rfind(".")
+    end = dot if dot > 0 else len(name)
+    last = end
+    while last > 0 and not name[last - 1].isdigit():
+        last -= 1
+    first = last
+    while first > 0 and name[first - 1].isdigit():
+        first -= 1
+    if first == last:  # no digits: Blender writes the number unpadded ("" for 0, as C's %.0d)
+        first = last = end
+    digits = str(abs(number)).zfill(last - first) if (number or last > first) else ""
+    return path[:cut] + name[:first] + ("-" if number < 0 else "") + digits + name[last:]
 
 
 def _try_load(image) -> bool:

@@ -29,6 +29,7 @@ from ...util import matrices, resources
 from ...util.columns import finite_rows, nonzero_rows, rows_within
 from .motion import instance_key
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
+from . import nodes as export_nodes
 from . import shading as export_shading
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -404,6 +405,7 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
     the transforms over the shutter (export/motion.py's Motion), or None (no motion blur)."""
     report = report if report is not None else shading.Report()
     origin = np.asarray(origin, np.float64)
+    export_nodes.export_at(depsgraph.scene.frame_current)  # image sequences show this frame's image
     frame = _Frame(geometry_cache, radius_factor, threads, report)
     view_layer = depsgraph.view_layer
     aovs = export_shading.view_layer_aovs(view_layer)
