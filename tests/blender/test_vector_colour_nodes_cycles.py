@@ -160,3 +160,42 @@ def test_rgb_curves_beyond_their_points_extrapolate_as_in_cycles(blender, empty_
     r_held, off_held = _measure(held, theirs)
     print(f"held at the ends: correlation {r_held:.4f}, mean colour {off_held:.4f} off")
     assert off_held > COLOUR_RTOL or r_held < TEXTURE_CORRELATION
+
+
+def _gabor_floor(bpy, kind):
+    m, nodes, links, shader = _material(bpy, "Gabor")
+    coords, gabor, ramp = (nodes.new(t) for t in ("ShaderNodeTexCoord", "ShaderNodeTexGabor", "ShaderNodeValToRGB"))
+    gabor.gabor_type = kind
+    gabor.inputs["Scale"].default_value = 4.0
+    gabor.inputs["Frequency"].default_value = 2.5
+    gabor.inputs["Anisotropy"].default_value = 0.7
+    angle, direction = (next(s for s in gabor.inputs if s.name == "Orientation" and s.type == t)
+                        for t in ("VALUE", "VECTOR"))
+    angle.default_value, direction.default_value = 0.5, (0.3, 0.8, 0.5)
+    ramp.color_ramp.elements[0].color = (0.05, 0.1, 0.4, 1)
+    ramp.color_ramp.elements[1].color = (1.0, 0.8, 0.3, 1)
+    links.new(coords.outputs["Object"], gabor.inputs["Vector"])
+    links.new(gabor.outputs["Value"], ramp.inputs["Fac"])
+    links.new(ramp.outputs["Color"], shader.inputs["Base Color"])
+    return m, gabor
+
+
+import pytest  # noqa: E402
+
+
+@pytest.mark.parametrize("kind", ["2D", "3D"])
+def test_gabor_texture_matches_cycles(blender, empty_scene, tmp_path, kind):
+    """Gabor Texture (anisotropy 0.7, frequency 2.5) through a Color Ramp on object
+    coordinates; its Phase output instead fails."""
+    bpy, scene = blender, empty_scene
+    m, gabor = _gabor_floor(bpy, kind)
+    ours, theirs, report = _floor_both(bpy, scene, tmp_path, m, f"gabor_{kind}")
+    r, off = _measure(ours, theirs)
+    print(f"gabor {kind}: correlation {r:.4f}, mean colour {off:.4f} off")
+    assert r >= TEXTURE_CORRELATION and off <= COLOUR_RTOL
+    assert not [line for line in report if "Gabor" in line], report
+    links = m.node_tree.links
+    links.new(gabor.outputs["Phase"], m.node_tree.nodes["Color Ramp"].inputs["Fac"])
+    wrong = render(bpy, scene, tmp_path / "wrong.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    print(f"gabor {kind} phase instead: correlation {correlation(wrong, theirs):.4f}")
+    assert correlation(wrong, theirs) < TEXTURE_CORRELATION

@@ -211,3 +211,76 @@ def test_object_space_moves_points_not_vectors():
     np.testing.assert_allclose(run_op("OBJECT_SPACE", [(v, 3)], [3], 1, P=P, object=obj)[0][0], v, atol=1e-6)
     np.testing.assert_allclose(run_op("OBJECT_SPACE", [(v, 3)], [3], 2, P=P, object=obj)[0][0],
                                v / np.linalg.norm(v), atol=1e-6)
+
+
+# ---------------------------------------------------------------- Gabor Texture
+
+def _h(*words):
+    """Blender's hash of float words to 0..1 (lookup3 of their bits: test_noise_nodes' port)."""
+    from test_noise_nodes import _hash, _unit
+    return float(_unit(_hash(*(np.float32(w).view(np.uint32) for w in words))))
+
+
+def _gabor_reference(co, scale, frequency, anisotropy, angle, direction, three_d):
+    """Cycles 5's Gabor noise written out in float64 from its definition (svm/gabor.h)."""
+    c = np.asarray(co, np.float64) * scale
+    iso = 1 - min(max(anisotropy, 0), 1)
+    frequency = max(0.001, frequency)
+    n = 3 if three_d else 2
+    base, local = np.floor(c[:n]), c[:n] - np.floor(c[:n])
+    o3 = np.asarray(direction, np.float64) / np.linalg.norm(direction)
+    total = 0j
+    for offset in np.ndindex(*(3,) * n):
+        off = np.array(offset[::-1], np.float64) - 1  # x fastest, as the loops nest
+        cell, p = base + off, local - off
+        cell32 = [np.float32(v) for v in cell]
+        for i in range(8):
+            k = np.float32(3 * i)
+            if three_d:
+                x, y, z = cell32
+                if iso == 0:
+                    o = o3
+                else:
+                    inc, az = math.acos(o3[2]), math.copysign(1, o3[1] if o3[1] != 0 else 1) * math.acos(
+                        o3[0] / math.hypot(o3[0], o3[1]))
+                    inc += _h(x, y, z, k) * math.pi * iso
+                    az += _h(z, x, k, y) * math.pi * iso
+                    o = np.array([math.sin(inc) * math.cos(az), math.sin(inc) * math.sin(az), math.cos(inc)])
+                k1 = k + 1
+                centre = np.array([_h(x, y, z, k1), _h(z, x, k1, y), _h(k1, z, y, x)])
+                weight = -1 if _h(x, y, z, k + 2) < 0.5 else 1
+                fvec = frequency * o
+            else:
+                x, y = cell32
+                a = angle + (_h(x, y, k) - 0.5) * math.pi * iso
+                centre = np.array([_h(x, y, k + 1), _h(k + 1, x, y)])
+                weight = -1 if _h(x, y, k + 2) < 0.5 else 1
+                fvec = frequency * np.array([math.cos(a), math.sin(a)])
+            d = p - centre
+            r2 = float(d @ d)
+            if r2 >= 1:
+                continue
+            envelope = math.exp(-math.pi * r2) * (0.5 + 0.5 * math.cos(math.pi * r2))
+            total += weight * envelope * np.exp(2j * math.pi * float(d @ fvec))
+    deviation = math.sqrt(8 * 0.5 * (1 / (4 * math.sqrt(2)) if three_d else 0.25))
+    norm = 6 * deviation
+    return total.imag / norm * 0.5 + 0.5, (math.atan2(total.imag, total.real) + math.pi) / (2 * math.pi), abs(total) / norm
+
+
+@pytest.mark.parametrize("three_d", [False, True])
+@pytest.mark.parametrize("anisotropy", [0.0, 0.6, 1.0])
+def test_gabor_matches_its_definition(three_d, anisotropy):
+    for _ in range(6):
+        co = RNG.uniform(-3, 3, 3)
+        scale, frequency, angle = float(RNG.uniform(0.5, 4)), float(RNG.uniform(0.3, 4)), float(RNG.uniform(-3, 3))
+        direction = RNG.uniform(-1, 1, 3)
+        b = nodes.Builder()
+        out = b.register(width=3)
+        params = b.table([scale, frequency, anisotropy, angle])
+        b.emit("GABOR", out, b.register(co, 3), params, b.register(direction, 3), int(three_d))
+        got = nodes.run(b.program())[0, out:out + 3]
+        want = _gabor_reference(co, scale, frequency, anisotropy, angle, direction, three_d)
+        assert abs(got[0] - want[0]) < 2e-4 and abs(got[2] - want[2]) < 2e-4
+        if want[2] > 1e-3:  # the phase is defined where the intensity is not 0
+            assert abs((got[1] - want[1] + 0.5) % 1 - 0.5) < 2e-3
+        assert 0 <= got[1] <= 1

@@ -834,6 +834,23 @@ class Compiler:
                     min(max(int(node.squash_frequency), 0), 99))
         return self._ids(node, {"Color": colour, "Fac": fac})
 
+    def _tex_gabor(self, node, stack):
+        """Gabor Texture, 2-D or 3-D (native nodes/gabor.h); unlinked Vector: Generated."""
+        vector = self._vector_or(node, stack)
+        # Two inputs are named Orientation: an angle (2-D) and a direction (3-D); each type reads one.
+        params = self._params(node, stack, ("Scale", "Frequency", "Anisotropy"), extra=(0.0,))
+        three_d = node.gabor_type == "3D"
+        angle, direction = (next(s for s in node.inputs if s.name == "Orientation" and s.type == t)
+                            for t in ("VALUE", "VECTOR"))
+        if three_d:
+            orientation = self.input(direction, 3, stack)
+        else:
+            orientation = self.const((0, 0, 1), 3)
+            self.b.emit("COPY", params + 3, self.input(angle, 1, stack), 1)
+        out = self.b.register(width=3)  # value, phase, intensity
+        self.b.emit("GABOR", out, vector, params, orientation, int(three_d))
+        return self._ids(node, {"Value": out, "Phase": out + 1, "Intensity": out + 2})
+
     def _tex_white_noise(self, node, stack):
         dims = {"1D": 1, "2D": 2, "3D": 3}.get(node.noise_dimensions)
         if dims is None:

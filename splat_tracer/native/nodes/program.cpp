@@ -10,6 +10,7 @@
 #include "base/errors.h"
 #include "nodes/noise.h"
 #include "nodes/cie1931.h"
+#include "nodes/gabor.h"
 
 namespace splat {
 
@@ -88,6 +89,7 @@ const Layout &layout(Op op) {
         /* Wavelength */ {{kR3, kR1}, {}},
         /* ObjectSpace */ {{kR3, kR3, kEnum}, {0, 0, 6}},
         /* VectorMapRange */ {{kR3, kR3, kRW, kEnum, kEnum}, {0, 0, 15, 4, 2}},
+        /* Gabor */ {{kR3, kR3, kRW, kR3, kEnum}, {0, 0, 4, 0, 2}},
     };
     return table[int(op)];
 }
@@ -1192,6 +1194,12 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 Vec3 out;
                 for (int i = 0; i < 3; ++i) out[i] = vector_map_range(v[i], r + c[3] + i, c[4], c[5] != 0);
                 store3(r, c[1], out);
+                break;
+            }
+            case Op::Gabor: {
+                const float *p = r + c[3];
+                const GaborOutputs g = gabor_texture(load3(r, c[2]), p[0], p[1], p[2], p[3], load3(r, c[4]), c[5] != 0);
+                store3(r, c[1], {g.value, g.phase, g.intensity});
                 break;
             }
             default: break;  // unreachable: validate() refused it

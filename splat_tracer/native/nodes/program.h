@@ -147,6 +147,8 @@ enum class Op : int32_t {
     ObjectSpace,    // out, vector, kind + 3 x to_world (kind: 0 point, 1 vector, 2 normal): the vector between the
                     // render's frame and the shaded object's space (ShaderGlobals object, normal_matrix)
     VectorMapRange, // out, vector, params (15: from_min from_max to_min to_max steps, vec3 each), mode, clamp
+    Gabor,          // out (3: value, phase, intensity), vector, params (4: scale frequency anisotropy orientation_2d),
+                    // orientation_3d, dimensions (0: 2-D, 1: 3-D) (nodes/gabor.h)
     Count
 };
 
