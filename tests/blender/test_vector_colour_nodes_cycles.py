@@ -199,3 +199,54 @@ def test_gabor_texture_matches_cycles(blender, empty_scene, tmp_path, kind):
     wrong = render(bpy, scene, tmp_path / "wrong.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     print(f"gabor {kind} phase instead: correlation {correlation(wrong, theirs):.4f}")
     assert correlation(wrong, theirs) < TEXTURE_CORRELATION
+
+
+TRANSFORMS = [("WORLD", "OBJECT"), ("OBJECT", "WORLD"), ("WORLD", "CAMERA"), ("CAMERA", "OBJECT"),
+              ("OBJECT", "CAMERA")]
+TRANSFORM_ATOL = 0.01  # mean absolute difference per channel (Cycles' 16 samples filter the edges)
+
+
+def test_vector_transform_spaces_match_cycles(blender, empty_scene, tmp_path):
+    """Every kind (point, vector, normal) between world, object and camera space, of the
+    world position, on a turned, unevenly scaled, moved floor under a turned camera: Emission of the result's
+    absolute value x 0.5, beside Cycles; mean absolute difference per channel within
+    TRANSFORM_ATOL, and each differs from the untransformed position by more."""
+    bpy, scene = blender, empty_scene
+    from test_node_materials import plane, _setup
+    m = bpy.data.materials.new("Spaces")
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
+    geometry, transform, absolute, emission = (nodes.new(t) for t in (
+        "ShaderNodeNewGeometry", "ShaderNodeVectorTransform", "ShaderNodeVectorMath", "ShaderNodeEmission"))
+    absolute.operation = "ABSOLUTE"
+    emission.inputs["Strength"].default_value = 0.5
+    links.new(geometry.outputs["Position"], transform.inputs["Vector"])
+    links.new(transform.outputs["Vector"], absolute.inputs[0])
+    links.new(absolute.outputs["Vector"], emission.inputs["Color"])
+    links.new(emission.outputs[0], output.inputs["Surface"])
+    floor = plane(bpy, "Floor", 2.0, (0.2, -0.1, 0.3), m)
+    floor.rotation_euler = (0.3, -0.2, math.radians(35))
+    floor.scale = (1.7, 1.2, 0.6)
+    _setup(bpy, scene)
+    scene.camera.rotation_euler = (0.1, -0.05, 0.7)  # turned about its view, so camera space is no mere flip
+    size = (48, 48)
+    worst = 0.0
+    for kind in ("POINT", "VECTOR", "NORMAL"):
+        for src, dst in TRANSFORMS:
+            transform.vector_type, transform.convert_from, transform.convert_to = kind, src, dst
+            ours = render(bpy, scene, tmp_path / "ours.exr", size)["ViewLayer"]["Combined"][..., :3]
+            scene.render.engine = "CYCLES"
+            try:
+                theirs = render(bpy, scene, tmp_path / "cycles.exr", size)["ViewLayer"]["Combined"][..., :3]
+            finally:
+                scene.render.engine = "SPLAT_TRACER"
+            diff = np.abs(ours - theirs).reshape(-1, 3).mean(0).max()
+            worst = max(worst, diff)
+            print(f"vector transform {kind} {src}->{dst}: mean |difference| {diff:.4f}")
+            assert diff <= TRANSFORM_ATOL, (kind, src, dst)
+            untouched = links.new(geometry.outputs["Position"], absolute.inputs[0])
+            plain = render(bpy, scene, tmp_path / "plain.exr", size)["ViewLayer"]["Combined"][..., :3]
+            links.remove(untouched)
+            links.new(transform.outputs["Vector"], absolute.inputs[0])
+            assert np.abs(plain - theirs).reshape(-1, 3).mean(0).max() > 3 * TRANSFORM_ATOL, (kind, src, dst)
+    print(f"vector transform: worst mean |difference| {worst:.4f}")
