@@ -1,7 +1,7 @@
 """Vector Rotate, Map Range (vector), Vector and Float Curves, Separate/Combine Color (HSL),
-Wavelength, Vector Transform and the Normal node (issue 24) through Blender, side by side with
-Cycles on test_node_materials' floor (80x80 px, orthographic, sun 30 degrees off the vertical,
-16 samples).
+Wavelength, Vector Transform, the Normal node and the Gabor Texture (issue 24) through
+Blender, side by side with Cycles on test_node_materials' floor (80x80 px, orthographic, sun
+30 degrees off the vertical, 16 samples).
 
 Tolerances: correlation >= TEXTURE_CORRELATION (0.95, the issue's bar) of the luminance per
 pixel and the mean colour within COLOUR_RTOL (5 %); measured values are printed. Each test
@@ -13,9 +13,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
-from test_node_materials import (COLOUR_RTOL, TEXTURE_CORRELATION, _floor_both, _material, correlation, render,
-                                 SIZE)
+from test_node_materials import (COLOUR_RTOL, SIZE, TEXTURE_CORRELATION, _both, _floor_both, _material, _setup,
+                                 correlation, plane, render)
 
 
 def _rotated_checker(bpy):
@@ -116,7 +117,6 @@ def _spectrum(bpy, floor_space):
 def test_wavelength_over_an_object_space_floor_matches_cycles(blender, empty_scene, tmp_path):
     bpy, scene = blender, empty_scene
     m, to_object = _spectrum(bpy, "OBJECT")
-    from test_node_materials import plane, _setup, _both
     floor = plane(bpy, "Floor", 2.0, (0.1, -0.05, 0), m)
     floor.rotation_euler = (0, 0, math.radians(25))
     floor.scale = (1.6, 1.3, 1.0)
@@ -180,8 +180,6 @@ def _gabor_floor(bpy, kind):
     return m, gabor
 
 
-import pytest  # noqa: E402
-
 
 @pytest.mark.parametrize("kind", ["2D", "3D"])
 def test_gabor_texture_matches_cycles(blender, empty_scene, tmp_path, kind):
@@ -212,7 +210,6 @@ def test_vector_transform_spaces_match_cycles(blender, empty_scene, tmp_path):
     absolute value x 0.5, beside Cycles; mean absolute difference per channel within
     TRANSFORM_ATOL, and each differs from the untransformed position by more."""
     bpy, scene = blender, empty_scene
-    from test_node_materials import plane, _setup
     m = bpy.data.materials.new("Spaces")
     nodes, links = m.node_tree.nodes, m.node_tree.links
     output = next(n for n in nodes if n.type == "OUTPUT_MATERIAL")
