@@ -26,7 +26,8 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
-       "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM")
+       "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM", "VECTOR_ROTATE", "RGB_TO_HSL", "HSL_TO_RGB",
+       "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12
@@ -61,6 +62,10 @@ VORONOI_FEATURES = ("F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIU
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
+# Vector Rotate's rotation_type (native VectorRotate kind; + 5 when inverted).
+VECTOR_ROTATE_TYPES = ("AXIS_ANGLE", "X_AXIS", "Y_AXIS", "Z_AXIS", "EULER_XYZ")
+# Vector Transform's vector_type (native ObjectSpace kind; + 3 towards the render's frame).
+VECTOR_TRANSFORM_TYPES = ("POINT", "VECTOR", "NORMAL")
 # Noise Texture: Blender's noise_type identifiers (native NoiseType), and the node's inputs in
 # the order of the NOISE instruction's register block (native NoiseParams).
 NOISE_TYPES = ("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN")

@@ -368,8 +368,10 @@ class Compiler:
         return {node.outputs[0].identifier: out}
 
     def _map_range(self, node, stack):
+        if node.data_type == "FLOAT_VECTOR":
+            return self._map_range_vector(node, stack)
         if node.data_type != "FLOAT":
-            raise Unsupported(node, "vector mapping")
+            raise Unsupported(node, f"{node.data_type.lower()} mapping")
         value = self._in(node, "Value", 1, stack)
         params = self.b.register(width=1)  # five consecutive registers: from/to min/max, steps
         for _ in range(4):
@@ -383,6 +385,22 @@ class Compiler:
         self.b.emit("MAP_RANGE", out, value, params, nodes.MAP_RANGE_MODES.index(node.interpolation_type),
                     int(node.clamp))
         return {next(s for s in node.outputs if s.name == "Result" and s.type == "VALUE").identifier: out}
+
+    def _map_range_vector(self, node, stack):
+        """Map Range in vector mode: per component (native VECTOR_MAP_RANGE, Cycles'
+        svm_node_vector_map_range, which divides safely and clamps only linear and stepped)."""
+        vectors = [s for s in node.inputs if s.type == "VECTOR"]
+        value = self.input(next(s for s in vectors if s.name == "Vector"), 3, stack)
+        params = self.b.register(width=3)  # 15 consecutive registers
+        for _ in range(4):
+            self.b.register(width=3)
+        for k, name in enumerate(("From Min", "From Max", "To Min", "To Max", "Steps")):
+            socket = next(s for s in vectors if s.name == name)
+            self.b.emit("COPY", params + 3 * k, self.input(socket, 3, stack), 3)
+        out = self.b.register(width=3)
+        self.b.emit("VECTOR_MAP_RANGE", out, value, params, nodes.MAP_RANGE_MODES.index(node.interpolation_type),
+                    int(node.clamp))
+        return {next(s for s in node.outputs if s.name == "Vector" and s.type == "VECTOR").identifier: out}
 
     def _clamp(self, node, stack):
         v, lo, hi = (self._in(node, n, 1, stack) for n in ("Value", "Min", "Max"))
@@ -400,21 +418,10 @@ class Compiler:
         return self._ids(node, {"Color": colour, "Alpha": alpha})
 
     def _curve_rgb(self, node, stack):
-        mapping = node.mapping
-        mapping.initialize()
-        lo, hi = float(mapping.clip_min_x), float(mapping.clip_max_x)
-        if not mapping.use_clip:
-            lo, hi = 0.0, 1.0
-        curves = mapping.curves  # R, G, B, and the combined curve, which each channel's curve follows
-        rows = []
-        for i in range(_TABLE_ROWS):
-            x = lo + (hi - lo) * i / (_TABLE_ROWS - 1)
-            rows.append([mapping.evaluate(curves[k], mapping.evaluate(curves[3], x)) for k in range(3)] + [0.0])
-        table = self.b.table(rows)
-        span = self.b.register((lo, hi, 0.0), 3)
+        table, span, extrapolate = self._curve_table(node.mapping, True)
         fac, colour = self._in(node, "Fac", 1, stack), self._in(node, "Color", 3, stack)
         out = self.b.register(width=3)
-        self.b.emit("CURVES", out, fac, colour, table, _TABLE_ROWS, span)
+        self.b.emit("CURVES", out, fac, colour, table, _TABLE_ROWS, span, extrapolate)
         return {node.outputs[0].identifier: out}
 
     def _hue_sat(self, node, stack):
@@ -447,9 +454,9 @@ class Compiler:
 
     def _separate(self, node, stack, name, mode="RGB"):
         v = self._in(node, name, 3, stack)
-        if mode == "HSV":
+        if mode in ("HSV", "HSL"):
             hsv = self.b.register(width=3)
-            self.b.emit("RGB_TO_HSV", hsv, v)
+            self.b.emit(f"RGB_TO_{mode}", hsv, v)
             v = hsv
         elif mode != "RGB":
             raise Unsupported(node, f"{mode} mode")
@@ -460,9 +467,9 @@ class Compiler:
         x, y, z = (self.input(node.inputs[k], 1, stack) for k in range(3))
         out = self.b.register(width=3)
         self.b.emit("COMBINE", out, x, y, z)
-        if mode == "HSV":
+        if mode in ("HSV", "HSL"):
             rgb = self.b.register(width=3)
-            self.b.emit("HSV_TO_RGB", rgb, out)
+            self.b.emit(f"{mode}_TO_RGB", rgb, out)
             out = rgb
         elif mode != "RGB":
             raise Unsupported(node, f"{mode} mode")
@@ -548,6 +555,141 @@ class Compiler:
         out = self.b.register(width=3)
         self.b.emit("BLACKBODY", out, self._in(node, "Temperature", 1, stack))
         return {node.outputs[0].identifier: out}
+
+    def _curve_table(self, mapping, combined: bool):
+        """A curve mapping baked as Cycles bakes it: _TABLE_ROWS rows (r, g, b, 0) over the
+        range of the curves' points (x from the lowest point to the highest, across curves),
+        each channel its curve -- for RGB Curves (`combined`) after the combined curve. Returns
+        (table register, range register (min, max), extrapolate): beyond the range Cycles goes
+        on along the end rows' slope when the mapping's extension is Extrapolated, else holds."""
+        mapping.initialize()
+        curves = mapping.curves
+        used = list(curves)[:4 if combined else 3]
+        xs = [float(p.location[0]) for c in used for p in c.points]
+        lo, hi = (min(xs), max(xs)) if xs else (0.0, 1.0)
+        rows = []
+        for i in range(_TABLE_ROWS):
+            x = lo + (hi - lo) * i / (_TABLE_ROWS - 1)
+            if combined:
+                x = mapping.evaluate(curves[3], x)
+            # One curve (Float Curve): the same in all three channels.
+            rows.append([mapping.evaluate(used[min(k, len(used) - 1)], x) for k in range(3)] + [0.0])
+        return self.b.table(rows), self.b.register((lo, hi, 0.0), 3), int(mapping.extend == "EXTRAPOLATED")
+
+    def _curve_float(self, node, stack):
+        """Float Curve: the value through the curve, mixed by Factor (Cycles' svm_node_curve)."""
+        table, span, extrapolate = self._curve_table(node.mapping, False)
+        fac, value = self._in(node, "Factor", 1, stack), self._in(node, "Value", 1, stack)
+        vector, out = self.b.register(width=3), self.b.register(width=3)
+        self.b.emit("COMBINE", vector, value, value, value)
+        self.b.emit("CURVES", out, fac, vector, table, _TABLE_ROWS, span, extrapolate)
+        return {node.outputs[0].identifier: out}
+
+    def _curve_vec(self, node, stack):
+        """Vector Curves: each component through its curve (X, Y, Z), mixed by Fac."""
+        table, span, extrapolate = self._curve_table(node.mapping, False)
+        out = self.b.register(width=3)
+        self.b.emit("CURVES", out, self._in(node, "Fac", 1, stack), self._in(node, "Vector", 3, stack), table,
+                    _TABLE_ROWS, span, extrapolate)
+        return {node.outputs[0].identifier: out}
+
+    def _vector_rotate(self, node, stack):
+        kind = nodes.VECTOR_ROTATE_TYPES.index(node.rotation_type)
+        euler = kind == nodes.VECTOR_ROTATE_TYPES.index("EULER_XYZ")
+        zero, out = self.const((0, 0, 0), 3), self.b.register(width=3)
+        vector, center = self._in(node, "Vector", 3, stack), self._in(node, "Center", 3, stack)
+        axis = self._in(node, "Axis", 3, stack) if node.rotation_type == "AXIS_ANGLE" else zero
+        angle = self.const(0.0, 1) if euler else self._in(node, "Angle", 1, stack)
+        rotation = self._in(node, "Rotation", 3, stack) if euler else zero
+        self.b.emit("VECTOR_ROTATE", out, vector, center, axis, angle, rotation, kind + 5 * int(node.invert))
+        return {node.outputs[0].identifier: out}
+
+    def _normal(self, node, stack):
+        """Normal node: its own direction (normalised) and the dot product with the input's
+        normalised direction (Cycles' svm_node_normal)."""
+        d = np.asarray(node.outputs["Normal"].default_value, np.float64)[:3]
+        length = float(np.linalg.norm(d))
+        direction = self.const(d / length if length > 0 else d, 3)
+        result = {node.outputs["Normal"].identifier: direction}
+        if node.outputs["Dot"].is_linked:
+            n, unused, dot = self.b.register(width=3), self.b.register(), self.b.register()
+            one = self.const(1.0, 1)
+            self.b.emit("VECTOR_MATH", n, unused, self._in(node, "Normal", 3, stack), n, n, one,
+                        nodes.VECTOR_OPS.index("NORMALIZE"))
+            self.b.emit("VECTOR_MATH", self.b.register(width=3), dot, direction, n, n, one,
+                        nodes.VECTOR_OPS.index("DOT_PRODUCT"))
+            result[node.outputs["Dot"].identifier] = dot
+        return result
+
+    def _wavelength(self, node, stack):
+        out = self.b.register(width=3)
+        self.b.emit("WAVELENGTH", out, self._in(node, "Wavelength", 1, stack))
+        return {node.outputs[0].identifier: out}
+
+    def _vect_transform(self, node, stack):
+        """Vector Transform between world, object and camera space, as Cycles' (a normal by
+        the inverse transpose, normalised; a vector without translation). Object space is
+        the shaded object's, at the shading point (native OBJECT_SPACE); world space is
+        reached from the render's local frame through object_space(None); camera space is
+        Cycles' (+Z along the view) of the scene's camera."""
+        kind = nodes.VECTOR_TRANSFORM_TYPES.index(node.vector_type)
+        v = self._in(node, "Vector", 3, stack)
+        src, dst = node.convert_from, node.convert_to
+        if src == dst:
+            return {node.outputs[0].identifier: v}
+        to_world = np.asarray(self.object_space(None), np.float64) if self.object_space is not None else np.eye(4)
+        camera = None
+        if "CAMERA" in (src, dst):
+            cam = getattr(self.object_space, "camera", None)
+            if cam is None:
+                raise Unsupported(node, "camera space without a scene camera")
+            camera = self._camera_to_world(cam)
+        # Cycles goes through world space: from the source to world, then to the target.
+        if src == "CAMERA":
+            v = self._affine(v, camera, kind)
+        elif src == "OBJECT":
+            v = self._object_space(v, kind, True)
+            v = self._affine(v, to_world, kind)
+        if dst == "CAMERA":
+            v = self._affine(v, np.linalg.inv(camera), kind)
+        elif dst == "OBJECT":
+            v = self._affine(v, np.linalg.inv(to_world), kind)
+            v = self._object_space(v, kind, False)
+        return {node.outputs[0].identifier: v}
+
+    def _camera_to_world(self, cam):
+        """Cycles' camera-to-world matrix of a camera object: its world matrix without scale,
+        Z flipped (Cycles' camera space looks along +Z)."""
+        m = np.array(cam.matrix_world, np.float64)
+        norms = np.linalg.norm(m[:3, :3], axis=0)
+        m[:3, :3] /= np.where(norms > 0, norms, 1.0)
+        return m @ np.diag((1.0, 1.0, -1.0, 1.0))
+
+    def _affine(self, v: int, matrix, kind: int) -> int:
+        """A point, vector or normal (kind, VECTOR_TRANSFORM_TYPES) through a 4x4 affine map;
+        nothing emitted for the identity."""
+        m = np.asarray(matrix, np.float64)
+        if kind == 2:  # a normal: the inverse transpose, no translation, normalised
+            m = np.eye(4)
+            m[:3, :3] = np.linalg.inv(np.asarray(matrix, np.float64)[:3, :3]).T
+        elif kind == 1:
+            m = m.copy()
+            m[:3, 3] = 0.0
+        if np.allclose(m, np.eye(4), rtol=0, atol=1e-12):
+            return v
+        out = self.b.register(width=3)
+        self.b.emit("TRANSFORM", out, v, self.b.table(m[:3]))
+        if kind == 2:
+            unit = self.b.register(width=3)
+            self.b.emit("VECTOR_MATH", unit, self.b.register(), out, out, out, self.const(1.0, 1),
+                        nodes.VECTOR_OPS.index("NORMALIZE"))
+            return unit
+        return out
+
+    def _object_space(self, v: int, kind: int, to_world: bool) -> int:
+        out = self.b.register(width=3)
+        self.b.emit("OBJECT_SPACE", out, v, kind + 3 * int(to_world))
+        return out
 
     # Textures
     def _tex_image(self, node, stack):
@@ -717,6 +859,23 @@ class Compiler:
         self.b.emit("BRICK", colour, fac, vector, colours, params, min(max(int(node.offset_frequency), 0), 99),
                     min(max(int(node.squash_frequency), 0), 99))
         return self._ids(node, {"Color": colour, "Fac": fac})
+
+    def _tex_gabor(self, node, stack):
+        """Gabor Texture, 2-D or 3-D (native nodes/gabor.h); unlinked Vector: Generated."""
+        vector = self._vector_or(node, stack)
+        # Two inputs are named Orientation: an angle (2-D) and a direction (3-D); each type reads one.
+        params = self._params(node, stack, ("Scale", "Frequency", "Anisotropy"), extra=(0.0,))
+        three_d = node.gabor_type == "3D"
+        angle, direction = (next(s for s in node.inputs if s.name == "Orientation" and s.type == t)
+                            for t in ("VALUE", "VECTOR"))
+        if three_d:
+            orientation = self.input(direction, 3, stack)
+        else:
+            orientation = self.const((0, 0, 1), 3)
+            self.b.emit("COPY", params + 3, self.input(angle, 1, stack), 1)
+        out = self.b.register(width=3)  # value, phase, intensity
+        self.b.emit("GABOR", out, vector, params, orientation, int(three_d))
+        return self._ids(node, {"Value": out, "Phase": out + 1, "Intensity": out + 2})
 
     def _tex_white_noise(self, node, stack):
         dims = {"1D": 1, "2D": 2, "3D": 3}.get(node.noise_dimensions)

@@ -495,6 +495,9 @@ def _object_space(depsgraph, origin):
         except np.linalg.LinAlgError:
             return np.full((4, 4), np.nan)
 
+    # The scene's camera as evaluated (Vector Transform's camera space), None without one.
+    camera = depsgraph.scene.camera
+    object_space.camera = camera.evaluated_get(depsgraph) if camera is not None else None
     return object_space
 
 

@@ -10,6 +10,7 @@
 #include "base/errors.h"
 #include "nodes/noise.h"
 #include "nodes/cie1931.h"
+#include "nodes/gabor.h"
 
 namespace splat {
 
@@ -59,7 +60,7 @@ const Layout &layout(Op op) {
         {{kR1, kR3, kR3, kRW, kEnum, kEnum, kEnum}, {0, 0, 0, kNoiseParams, 5, int32_t(NoiseType::Count), 4}},
         /* WhiteNoise */ {{kR1, kR3, kR3, kEnum}, {0, 0, 0, 4}},
         /* Scale */ {{kR3, kR3, kR1}, {}},
-        /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1}, {}},
+        /* Curves (checked apart) */ {{kR3, kR1, kR3, kNone, kNone, kR1, kEnum}, {0, 0, 0, 0, 0, 0, 2}},
         /* Image (image checked apart) */
         {{kR3, kR1, kR3, kNone, kEnum, kEnum}, {0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                 int32_t(ImageExtension::Count)}},
@@ -82,6 +83,13 @@ const Layout &layout(Op op) {
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
+        /* VectorRotate */ {{kR3, kR3, kR3, kR3, kR1, kR3, kEnum}, {0, 0, 0, 0, 0, 0, 10}},
+        /* RGBToHSL */ {{kR3, kR3}, {}},
+        /* HSLToRGB */ {{kR3, kR3}, {}},
+        /* Wavelength */ {{kR3, kR1}, {}},
+        /* ObjectSpace */ {{kR3, kR3, kEnum}, {0, 0, 6}},
+        /* VectorMapRange */ {{kR3, kR3, kRW, kEnum, kEnum}, {0, 0, 15, 4, 2}},
+        /* Gabor */ {{kR3, kR3, kRW, kR3, kEnum}, {0, 0, 4, 0, 2}},
     };
     return table[int(op)];
 }
@@ -734,6 +742,117 @@ void table_lookup(const float *t, int size, float f, bool interpolate, float *rg
     }
 }
 
+// A curve's baked table (RGB, Vector, Float Curves) at f (0..1 over the table's range): as
+// table_lookup within it; beyond it, when `extrapolate`, on along the slope of the two end rows
+// (Cycles' rgb_ramp_lookup with a curve mapping's Extrapolated extension), else held.
+float curve_lookup(const float *t, int size, float f, int channel, bool extrapolate) {
+    if (extrapolate && (f < 0.f || f > 1.f)) {
+        const float end = f < 0.f ? t[channel] : t[4 * (size - 1) + channel];
+        const float next = f < 0.f ? t[4 + channel] : t[4 * (size - 2) + channel];
+        return end + (end - next) * (f < 0.f ? -f : f - 1.f) * float(size - 1);
+    }
+    float rgba[4];
+    table_lookup(t, size, f, true, rgba);
+    return rgba[channel];
+}
+
+// Rotation of p about a unit axis by angle (right-handed: Rodrigues' formula).
+Vec3 rotate_about(Vec3 p, Vec3 axis, float angle) {
+    const float c = std::cos(angle), s = std::sin(angle);
+    return p * c + cross(axis, p) * s + axis * (dot(axis, p) * (1.f - c));
+}
+
+// Blender's Vector Rotate node; kind 0 axis-angle, 1-3 the X, Y, Z axis, 4 Euler XYZ.
+Vec3 vector_rotate(Vec3 v, Vec3 center, Vec3 axis, float angle, Vec3 euler, int kind, bool invert) {
+    if (kind == 4) return rotate_xyz(v - center, euler, invert) + center;
+    if (kind >= 1) axis = Vec3(kind == 1 ? 1.f : 0.f, kind == 2 ? 1.f : 0.f, kind == 3 ? 1.f : 0.f);
+    const float len = length(axis);
+    if (len == 0.f) return v;  // no axis: unrotated, as Cycles
+    return rotate_about(v - center, axis * (1.f / len), invert ? -angle : angle) + center;
+}
+
+// Blender's HSL (Separate/Combine Color): hue 0..1, lightness capped at 1 as Blender caps it.
+Vec3 rgb_to_hsl(Vec3 c) {
+    const float hi = std::fmax(c.x, std::fmax(c.y, c.z)), lo = std::fmin(c.x, std::fmin(c.y, c.z));
+    const float l = std::fmin(1.f, 0.5f * (hi + lo));
+    if (hi == lo) return {0.f, 0.f, l};
+    const float d = hi - lo;
+    const float s = l > 0.5f ? d / (2.f - hi - lo) : d / (hi + lo);
+    float h;
+    if (hi == c.x) h = (c.y - c.z) / d + (c.y < c.z ? 6.f : 0.f);
+    else if (hi == c.y) h = (c.z - c.x) / d + 2.f;
+    else h = (c.x - c.y) / d + 4.f;
+    return {h / 6.f, s, l};
+}
+Vec3 hsl_to_rgb(Vec3 hsl) {
+    // Each channel's hue ramp (a trapezoid over the hue circle, unwrapped), scaled by chroma
+    // about the lightness.
+    const float h6 = hsl.x * 6.f;
+    const Vec3 ramp = vsaturate({std::fabs(h6 - 3.f) - 1.f, 2.f - std::fabs(h6 - 2.f), 2.f - std::fabs(h6 - 4.f)});
+    const float chroma = (1.f - std::fabs(2.f * hsl.z - 1.f)) * hsl.y;
+    return (ramp - Vec3(0.5f, 0.5f, 0.5f)) * chroma + Vec3(hsl.z, hsl.z, hsl.z);
+}
+
+// Blender's Wavelength node: the CIE 1931 colour-matching functions (cie1931.h, the table
+// Cycles rounds to 4 decimals) linearly between 5 nm rows over 380-780 nm (black outside), in
+// linear Rec. 709 (its XYZ matrix, D65 white: Blender's XYZ role), scaled by 1 / 2.52 (Cycles'
+// scale keeping every component of the spectrum locus <= 1), negative channels clamped to 0.
+Vec3 wavelength_rec709(float nm) {
+    constexpr float kFirst = 380.f, kLastRow = 80.f;  // rows 380 .. 780 nm (Cycles: 780 itself is black)
+    const float f = (nm - kFirst) / float(kCieStepNm);
+    if (!(f >= 0.f) || !(f < kLastRow)) return Vec3();
+    const int i = int(f), base = (int(kFirst) - kCieFirstNm) / kCieStepNm + i;
+    const float t = f - float(i);
+    float xyz[3];
+    for (int k = 0; k < 3; ++k) xyz[k] = (1.f - t) * kCie1931[base][k] + t * kCie1931[base + 1][k];
+    const Vec3 rgb(3.2404542f * xyz[0] - 1.5371385f * xyz[1] - 0.4985314f * xyz[2],
+                   -0.9692660f * xyz[0] + 1.8760108f * xyz[1] + 0.0415560f * xyz[2],
+                   0.0556434f * xyz[0] - 0.2040259f * xyz[1] + 1.0572252f * xyz[2]);
+    return vmax(rgb * (1.f / 2.52f), Vec3());
+}
+
+// A vector between the render's frame and the shaded object's space (Vector Transform).
+// normal_matrix is the transpose of the world-to-object linear map W; a point goes through
+// the shading point's pair (P, object); a normal by the inverse transpose, normalised.
+Vec3 object_space(const ShaderGlobals &sg, Vec3 v, int kind, bool to_world) {
+    const float *m = sg.normal_matrix;
+    auto by_w = [m](Vec3 a) {  // W a
+        return Vec3(m[0] * a.x + m[3] * a.y + m[6] * a.z, m[1] * a.x + m[4] * a.y + m[7] * a.z,
+                    m[2] * a.x + m[5] * a.y + m[8] * a.z);
+    };
+    // W^-1 b, or W^-T b: a matrix with columns a0..a2 has as inverse the rows (a1 x a2, a2 x a0,
+    // a0 x a1) / det. W's columns are (m0 m1 m2), (m3 m4 m5), (m6 m7 m8); W^T's are W's rows.
+    auto solve_w = [m](Vec3 b, bool transposed) {
+        Vec3 a0(m[0], m[1], m[2]), a1(m[3], m[4], m[5]), a2(m[6], m[7], m[8]);
+        if (transposed) a0 = Vec3(m[0], m[3], m[6]), a1 = Vec3(m[1], m[4], m[7]), a2 = Vec3(m[2], m[5], m[8]);
+        const float det = dot(a0, cross(a1, a2));
+        if (!(std::fabs(det) > 0.f)) return b;  // a degenerate object: left as it is
+        return Vec3(dot(b, cross(a1, a2)), dot(b, cross(a2, a0)), dot(b, cross(a0, a1))) * (1.f / det);
+    };
+    Vec3 out;
+    if (kind == 0) out = to_world ? sg.P + solve_w(v - sg.object, false) : sg.object + by_w(v - sg.P);
+    else if (kind == 1) out = to_world ? solve_w(v, false) : by_w(v);
+    else {
+        out = to_world ? sg.object_to_world_normal(v) : solve_w(v, true);
+        const float len = length(out);
+        out = len > 0.f ? out * (1.f / len) : out;
+    }
+    return out;
+}
+
+// Map Range in vector mode, one component: unlike the float mode, Cycles divides safely (a
+// zero source range maps to To Min), and its smooth steps are of the clamped factor, unclamped.
+float vector_map_range(float v, const float *p, int mode, bool clamp) {
+    const float from_min = p[0], from_max = p[3], to_min = p[6], to_max = p[9], steps = p[12];
+    float f = safe_divide(v - from_min, from_max - from_min);
+    if (mode == 1) f = steps > 0.f ? std::floor(f * (steps + 1.f)) / steps : 0.f;
+    else if (mode == 2) f = saturate(f), f = (3.f - 2.f * f) * f * f;
+    else if (mode == 3) f = saturate(f), f = f * f * f * (f * (f * 6.f - 15.f) + 10.f);
+    const float result = to_min + f * (to_max - to_min);
+    if (!clamp || mode >= 2) return result;
+    return to_min > to_max ? std::fmin(std::fmax(result, to_max), to_min) : std::fmin(std::fmax(result, to_min), to_max);
+}
+
 }  // namespace
 
 void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
@@ -903,11 +1022,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 const float scale = hi > lo ? 1.f / (hi - lo) : 1.f;
                 const Vec3 in = load3(r, c[3]);
                 Vec3 out;
-                for (int i = 0; i < 3; ++i) {
-                    float rgba[4];
-                    table_lookup(r + c[4], c[5], (in[i] - lo) * scale, true, rgba);
-                    out[i] = rgba[i];
-                }
+                for (int i = 0; i < 3; ++i) out[i] = curve_lookup(r + c[4], c[5], (in[i] - lo) * scale, i, c[7] != 0);
                 const float fac = r[c[2]];
                 store3(r, c[1], lerp(in, out, fac));
                 break;
@@ -1064,6 +1179,27 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 else n = n_in;
                 if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
                 store3(r, c[1], n);
+                break;
+            }
+            case Op::VectorRotate:
+                store3(r, c[1], vector_rotate(load3(r, c[2]), load3(r, c[3]), load3(r, c[4]), r[c[5]], load3(r, c[6]),
+                                              c[7] % 5, c[7] >= 5));
+                break;
+            case Op::RGBToHSL: store3(r, c[1], rgb_to_hsl(load3(r, c[2]))); break;
+            case Op::HSLToRGB: store3(r, c[1], hsl_to_rgb(load3(r, c[2]))); break;
+            case Op::Wavelength: store3(r, c[1], wavelength_rec709(r[c[2]])); break;
+            case Op::ObjectSpace: store3(r, c[1], object_space(sg, load3(r, c[2]), c[3] % 3, c[3] >= 3)); break;
+            case Op::VectorMapRange: {
+                const Vec3 v = load3(r, c[2]);
+                Vec3 out;
+                for (int i = 0; i < 3; ++i) out[i] = vector_map_range(v[i], r + c[3] + i, c[4], c[5] != 0);
+                store3(r, c[1], out);
+                break;
+            }
+            case Op::Gabor: {
+                const float *p = r + c[3];
+                const GaborOutputs g = gabor_texture(load3(r, c[2]), p[0], p[1], p[2], p[3], load3(r, c[4]), c[5] != 0);
+                store3(r, c[1], {g.value, g.phase, g.intensity});
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -110,7 +110,8 @@ enum class Op : int32_t {
                     // otherwise not computed)
     WhiteNoise,     // out_value, out_colour, vector, dimensions (1-3: the vector's first components)
     Scale,          // out, vector, factor (vec3 x float)
-    Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs)
+    Curves,         // out, fac, colour, table, size (r g b combined tables; RGB Curves), range (min, max regs),
+                    // extrapolate (1: beyond the range, on along the end rows' slope, as Cycles; 0: held)
     Image,          // out_colour, out_alpha, vector, image (index in images), ImageInterpolation, ImageExtension
     Voronoi,        // out (9: distance, colour, position, w, radius), vector, w, params (8: scale detail roughness
                     // lacunarity smoothness exponent randomness normalize), VoronoiMetric, VoronoiFeature,
@@ -138,6 +139,16 @@ enum class Op : int32_t {
                     // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
     Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
                     // as a point (Texture Coordinate's Object output with another object chosen)
+    VectorRotate,   // out, vector, center, axis, angle, rotation (Euler XYZ), kind + 5 x invert (kind: 0 axis-angle,
+                    // 1-3 X Y Z axis, 4 Euler XYZ): Cycles' Vector Rotate
+    RGBToHSL,       // out, colour
+    HSLToRGB,       // out, colour (h, s, l)
+    Wavelength,     // out, wavelength (nm): Cycles' Wavelength node, linear Rec. 709
+    ObjectSpace,    // out, vector, kind + 3 x to_world (kind: 0 point, 1 vector, 2 normal): the vector between the
+                    // render's frame and the shaded object's space (ShaderGlobals object, normal_matrix)
+    VectorMapRange, // out, vector, params (15: from_min from_max to_min to_max steps, vec3 each), mode, clamp
+    Gabor,          // out (3: value, phase, intensity), vector, params (4: scale frequency anisotropy orientation_2d),
+                    // orientation_3d, dimensions (0: 2-D, 1: 3-D) (nodes/gabor.h)
     Count
 };
 
