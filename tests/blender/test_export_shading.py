@@ -153,17 +153,19 @@ def test_mix_shader_blends_the_parameters_and_reports_once(blender, empty_scene,
     links.new(glossy.outputs[0], mix.inputs[2])
     links.new(mix.outputs[0], output.inputs["Surface"])
     m = es.material_of(material, report)
-    assert m.base_colour == approx((0.75, 0.0, 0.25))
+    # The two closures' lobes kept apart: the diffuse share of its colour, without specular,
+    # the glossy share (metallic) of the Glossy's colour and roughness.
+    assert m.base_colour == approx((1.0, 0.0, 0.0)) and m.metal_colour == approx((0.0, 0.0, 1.0))
     assert m.metallic == approx(0.25)  # the glossy share
-    assert m.roughness == approx(0.75 * 0.5 + 0.25 * 0.2)
-    assert m.specular_level == approx(0.75 * 0.0 + 0.25 * 0.5)
+    assert m.roughness == approx(0.2)
+    assert m.specular_level == 0.0
     assert report.lines == ["material 'Blend': Mix and Add Shaders are approximated by blending their shaders' "
                             "parameters"]
     # Transparent mixed in: alpha is the opaque share, the surface colour stays the BSDF's.
     transparent = nodes.new("ShaderNodeBsdfTransparent")
     links.new(transparent.outputs[0], mix.inputs[2])
     m = es.material_of(material, report)
-    assert m.alpha == approx(0.75) and m.base_colour == approx((1.0, 0.0, 0.0))
+    assert m.alpha == approx(0.75) and m.base_colour == approx((1.0, 0.0, 0.0)) and m.metal_colour is None
     assert len(report.lines) == 1
     # Add Shader: emission adds to the surface, which stays whole.
     emission, add = nodes.new("ShaderNodeEmission"), nodes.new("ShaderNodeAddShader")
