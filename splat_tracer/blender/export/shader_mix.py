@@ -2,11 +2,12 @@
 
 shading.py blends a Mix or Add Shader's branches into one set of material parameters
 (`shading._combine`: alpha-weighted sums, opacity-weighted means over the reflecting branches,
-summed emission). When a Fac or an input of a branch is linked, that blend cannot be done once
-at export: here the branches' linked inputs are compiled (export/nodes.py) and the very same
-blend is written as Math, Vector Math, Mix and Scale rows, run at every shading point. Values
-that are constant (unlinked sockets) are folded here, so a field that no link reaches keeps
-the constant path (the material's own value, no output row).
+summed emission; the lobes kept apart where the branches' metallic differ). When a Fac or an
+input of a branch is linked, that blend cannot be done once at export: here the branches'
+linked inputs are compiled (export/nodes.py) and the very same blend is written as Math,
+Vector Math, Mix and Scale rows, run at every shading point. Values that are constant
+(unlinked sockets) are folded here, so a field that no link reaches keeps the constant path
+(the material's own value, no output row).
 
 A value is a constant (a float, or a 3-tuple) or a _Reg (a register of the program).
 """

@@ -20,6 +20,8 @@ Materials are read from their node tree, following the Material Output's Surface
   branch (a black surface) darkens them, a Transparent one does not count, and Add adds
   the reflectances. Metallic, roughness, IOR and transmission are the k-weighted mean over
   the branches that are BSDFs. The point-colour flags are on when a weighted branch has them.
+  Where the BSDFs' metallic differ (a Diffuse and a Glossy) the lobes are kept apart as
+  Cycles sums the closures (_split_lobes): the metallic lobe gets its own colour.
 - A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
   name; through reroutes) means the points' own colours; an Alpha fed by such a node's
   Alpha output means the points' own alpha.
