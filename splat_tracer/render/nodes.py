@@ -36,7 +36,8 @@ GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NO
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
-           "emission": 3, "specular_level": 1, "normal": 3}
+           "emission": 3, "specular_level": 1, "normal": 3,
+           "metal_colour": 3}
 # Blender's identifiers, in the order the core numbers them.
 MATH_OPS = ("ADD", "SUBTRACT", "MULTIPLY", "DIVIDE", "MULTIPLY_ADD", "POWER", "LOGARITHM", "SQRT", "INVERSE_SQRT",
             "ABSOLUTE", "EXPONENT", "MINIMUM", "MAXIMUM", "LESS_THAN", "GREATER_THAN", "SIGN", "COMPARE",

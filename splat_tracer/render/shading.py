@@ -24,7 +24,7 @@ import numpy as np
 MATERIAL_FIELDS = (
     "base_r", "base_g", "base_b", "metallic", "roughness", "ior", "transmission", "alpha",
     "emission_r", "emission_g", "emission_b", "specular_level", "use_point_colour", "use_point_alpha",
-    "emission_sides", "pass_index",
+    "emission_sides", "pass_index", "metal_r", "metal_g", "metal_b", "bump_correction",
 )
 
 # Cycles' Emission Sampling (Material > Settings), with its identifiers: which sides of a
@@ -55,6 +55,12 @@ class Material:
         constant `emission` here; the Blender export resolves it by Cycles' estimate).
     use_point_alpha: multiply alpha by the points' own alpha (4th colour channel).
     pass_index: Blender's material pass index, the Material Index pass's value.
+    metal_colour: the metallic lobe's own colour, or None: the base colour's (every single
+        shader). A Mix Shader of a diffuse and a glossy sets it (export/shading.py _combine):
+        Cycles sums the two closures, the diffuse of its colour and the glossy of its own, so
+        the diffuse share keeps `base_colour` and the metallic share this. Packed as -1s.
+    bump_correction: Cycles' Bump Map Correction (Material > Settings): the bump shadowing
+        term on the diffuse lobe where a node program tilts the normal; off: left out.
     program: the node program (render/nodes.py) that drives some of the inputs above at
         each shading point, or None (the constant values are the material). The inputs it
         does not drive keep their constant values.
@@ -74,6 +80,8 @@ class Material:
     emission_sampling: str = "AUTO"
     pass_index: int = 0
     program: Optional[object] = None
+    metal_colour: Optional[Sequence[float]] = None
+    bump_correction: bool = True
     name: str = "default_surface"  # cryptomatte.DEFAULT_MATERIAL: Cycles' name for no material
 
     def __post_init__(self):
@@ -88,15 +96,19 @@ class Material:
             raise ValueError(f"material ior must be a positive number, got {self.ior!r}")
         if not (math.isfinite(self.specular_level) and self.specular_level >= 0):
             raise ValueError(f"material specular_level must be >= 0, got {self.specular_level!r}")
-        for name in ("base_colour", "emission"):
+        for name in ("base_colour", "emission", "metal_colour"):
             v = getattr(self, name)
+            if v is None and name == "metal_colour":
+                continue
             if len(v) != 3 or not all(math.isfinite(c) and c >= 0 for c in v):
                 raise ValueError(f"material {name} must be three non-negative numbers, got {v!r}")
 
     def pack(self) -> np.ndarray:
         return np.array([*self.base_colour, self.metallic, self.roughness, self.ior, self.transmission, self.alpha,
                          *self.emission, self.specular_level, float(self.use_point_colour),
-                         float(self.use_point_alpha), float(self.emission_sides), float(self.pass_index)], np.float32)
+                         float(self.use_point_alpha), float(self.emission_sides), float(self.pass_index),
+                         *(self.metal_colour if self.metal_colour is not None else (-1.0, -1.0, -1.0)),
+                         float(self.bump_correction)], np.float32)
 
     @property
     def emission_sides(self) -> int:

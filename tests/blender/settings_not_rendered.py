@@ -262,9 +262,10 @@ ENTRIES = (
     Entry("material.cycles", ("homogeneous_volume",), U, "Volumes are not rendered", before=(5, 0)),
     Entry("material.cycles", ("emission_sampling",), C,
           "How Cycles samples emissive meshes: changes noise, not what it converges to"),
-    Entry("material.cycles", ("use_bump_map_correction",), U,
-          "Off is not honoured: Cycles' bump shadowing term is applied as with it on (said when off where nodes "
-          "drive the normal); its bending of normals whose reflection would leave the surface is not done"),
+    Entry("material.cycles", ("use_bump_map_correction",), D,
+          "Cycles' bump shadowing term where nodes drive the normal (Bump, Normal Map), left out when off as in "
+          "Cycles; the audit's material has no such node. Its bending of normals whose reflection would leave "
+          "the surface is not done"),
     Entry("material.cycles", ("volume_sampling", "volume_interpolation", "volume_step_rate"), U,
           "Volumes are not rendered"),
     # -- cameras -------------------------------------------------------------------------

@@ -164,6 +164,50 @@ def test_an_image_texture_without_an_image_is_magenta_as_in_cycles(blender, empt
     assert report.lines == ["material 'Floor': an Image Texture has no image; rendered magenta, as Cycles does"]
 
 
+def test_a_diffuse_mixed_with_a_glossy_by_a_fresnel_keeps_the_lobes_apart_per_point(blender, empty_scene, es, report):
+    """The classic material: the Fac a Fresnel's, per shading point. The program gives the
+    diffuse's colour, the Glossy's own colour and roughness, metallic = the Fresnel."""
+    from splat_tracer.render import nodes as program
+
+    material = blender.data.materials.new("Classic")
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    diffuse, glossy = nodes.new("ShaderNodeBsdfDiffuse"), nodes.new("ShaderNodeBsdfGlossy")
+    diffuse.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
+    glossy.inputs["Color"].default_value = (0.0, 0.0, 1.0, 1.0)
+    glossy.inputs["Roughness"].default_value = 0.2
+    mix, output, fresnel = (nodes.new(t) for t in ("ShaderNodeMixShader", "ShaderNodeOutputMaterial",
+                                                   "ShaderNodeFresnel"))
+    fresnel.inputs["IOR"].default_value = 1.5
+    links.new(fresnel.outputs["Fac"], mix.inputs[0])
+    links.new(diffuse.outputs[0], mix.inputs[1])
+    links.new(glossy.outputs[0], mix.inputs[2])
+    links.new(mix.outputs[0], output.inputs["Surface"])
+    m = es.material_of(material, report)
+    for name in ("base_colour", "metal_colour", "metallic", "roughness", "specular_level"):
+        assert m.program.drives(name) or getattr(m, name) is not None, name
+    # Head-on (the view along the normal) and at 80 degrees: the dielectric Fresnel of IOR 1.5.
+    cosines = np.array([1.0, math.cos(math.radians(80))])
+    incoming = np.stack([np.sqrt(1 - cosines ** 2), np.zeros(2), cosines], axis=1)
+    regs = program.run(m.program, n=2, N=(0, 0, 1), Ng=(0, 0, 1), I=incoming)
+
+    def out(name, width):
+        if not m.program.drives(name):
+            return np.broadcast_to(np.asarray(getattr(m, name), float), (2, width))
+        i = m.program.outputs[list(program.OUTPUTS).index(name)]
+        return regs[:, i:i + width]
+
+    def fresnel_dielectric(c, eta):  # the exact dielectric Fresnel, unpolarised
+        g = np.sqrt(eta ** 2 - 1 + c ** 2)
+        return 0.5 * ((g - c) / (g + c)) ** 2 * (1 + ((c * (g + c) - 1) / (c * (g - c) + 1)) ** 2)
+
+    assert out("metallic", 1)[:, 0] == approx(fresnel_dielectric(cosines, 1.5), rel=1e-4)
+    assert out("base_colour", 3) == approx(np.array([[1.0, 0.0, 0.0]] * 2), rel=1e-5)
+    assert out("metal_colour", 3) == approx(np.array([[0.0, 0.0, 1.0]] * 2), rel=1e-5)
+    assert out("roughness", 1)[:, 0] == approx([0.2, 0.2], rel=1e-5)
+    assert out("specular_level", 1)[:, 0] == approx([0.0, 0.0])
+
+
 def test_mix_shader_blends_the_parameters_and_reports_once(blender, empty_scene, es, report):
     material = blender.data.materials.new("Blend")
     nodes, links = material.node_tree.nodes, material.node_tree.links
@@ -178,17 +222,19 @@ def test_mix_shader_blends_the_parameters_and_reports_once(blender, empty_scene,
     links.new(glossy.outputs[0], mix.inputs[2])
     links.new(mix.outputs[0], output.inputs["Surface"])
     m = es.material_of(material, report)
-    assert m.base_colour == approx((0.75, 0.0, 0.25))
+    # The two closures' lobes kept apart: the diffuse share of its colour, without specular,
+    # the glossy share (metallic) of the Glossy's colour and roughness.
+    assert m.base_colour == approx((1.0, 0.0, 0.0)) and m.metal_colour == approx((0.0, 0.0, 1.0))
     assert m.metallic == approx(0.25)  # the glossy share
-    assert m.roughness == approx(0.75 * 0.5 + 0.25 * 0.2)
-    assert m.specular_level == approx(0.75 * 0.0 + 0.25 * 0.5)
+    assert m.roughness == approx(0.2)
+    assert m.specular_level == 0.0
     assert report.lines == ["material 'Blend': Mix and Add Shaders are approximated by blending their shaders' "
                             "parameters"]
     # Transparent mixed in: alpha is the opaque share, the surface colour stays the BSDF's.
     transparent = nodes.new("ShaderNodeBsdfTransparent")
     links.new(transparent.outputs[0], mix.inputs[2])
     m = es.material_of(material, report)
-    assert m.alpha == approx(0.75) and m.base_colour == approx((1.0, 0.0, 0.0))
+    assert m.alpha == approx(0.75) and m.base_colour == approx((1.0, 0.0, 0.0)) and m.metal_colour is None
     assert len(report.lines) == 1
     # Add Shader: emission adds to the surface, which stays whole.
     emission, add = nodes.new("ShaderNodeEmission"), nodes.new("ShaderNodeAddShader")

@@ -2,11 +2,12 @@
 
 shading.py blends a Mix or Add Shader's branches into one set of material parameters
 (`shading._combine`: alpha-weighted sums, opacity-weighted means over the reflecting branches,
-summed emission). When a Fac or an input of a branch is linked, that blend cannot be done once
-at export: here the branches' linked inputs are compiled (export/nodes.py) and the very same
-blend is written as Math, Vector Math, Mix and Scale rows, run at every shading point. Values
-that are constant (unlinked sockets) are folded here, so a field that no link reaches keeps
-the constant path (the material's own value, no output row).
+summed emission; the lobes kept apart where the branches' metallic differ). When a Fac or an
+input of a branch is linked, that blend cannot be done once at export: here the branches'
+linked inputs are compiled (export/nodes.py) and the very same blend is written as Math,
+Vector Math, Mix and Scale rows, run at every shading point. Values that are constant
+(unlinked sockets) are folded here, so a field that no link reaches keeps the constant path
+(the material's own value, no output row).
 
 A value is a constant (a float, or a 3-tuple) or a _Reg (a register of the program).
 """
@@ -17,6 +18,12 @@ from typing import Callable, NamedTuple
 from ...render import nodes as program
 from . import nodes
 from .sockets import live_link, upstream
+
+
+def specular_strength(*args, **kw):
+    """shading.specular_strength (imported late: shading.py imports this module)."""
+    from .shading import specular_strength as strength
+    return strength(*args, **kw)
 
 MIX_SHADERS = ("MIX_SHADER", "ADD_SHADER")
 
@@ -207,6 +214,7 @@ class _Blender:
             total = self.weigh(weights, [self.mul(f[key], r) for r, f in zip(share, fields)], total_weight)
             # The normals are weighed alike; their sum is the normal (the core normalises it).
             out[key] = total if key == "normal" else self.ratio_or(total, weight, d[key])
+        self._split_lobes(weights, fields, total_weight, alpha, share, out)
         # A blend reflects where a branch of positive weight does. The weights are never all 0.
         flags = [f[bsdf] for f in fields]
         if all(not isinstance(x, _Reg) and x == flags[0] for x in flags):
@@ -220,6 +228,48 @@ class _Blender:
                 else:
                     out[bsdf] = max(out[bsdf], here)
         return out
+
+    def _arith(self, op: str, a, b):
+        """a op b for scalars (constants folded): the ops shading.specular_strength takes."""
+        if not isinstance(a, _Reg) and not isinstance(b, _Reg):
+            return {"ADD": a + b, "SUBTRACT": a - b, "MULTIPLY": a * b, "DIVIDE": a / b if b else 0.0}[op]
+        return self.mul(a, b) if op == "MULTIPLY" else self.add(a, b) if op == "ADD" else self._math(op, a, b)
+
+    def _split_lobes(self, weights, fields, total_weight: float, alpha, share, out: dict) -> None:
+        """shading._split_lobes, per shading point: where the branches' metallic are not one
+        constant (a diffuse and a glossy), the metallic share's own colour, the dielectric
+        share's colour, specular level, IOR and transmission, and the roughness weighed by
+        specular strength, replacing `out`'s one-lobe blend."""
+        metals = [f["metallic"] for f in fields]
+        if all(not isinstance(m, _Reg) and m == metals[0] for m in metals) and all(
+                f.get("metal_colour") is None for f in fields):
+            return
+        if any(f.get("use_point_colour") and (isinstance(f["metallic"], _Reg) or f["metallic"] > 0) for f in fields):
+            return
+        metal = out["metallic"]
+        own = [f["metal_colour"] if f.get("metal_colour") is not None else f["base_colour"] for f in fields]
+        # A reflecting branch's metallic share, opaque share x metallic.
+        metal_share = [self.mul(r, f["metallic"]) for r, f in zip(share, fields)]
+        total = self.weigh(weights, [self.mul(c, k) for c, k in zip(own, metal_share)], total_weight)
+        blended_base = out["base_colour"]
+        out["metal_colour"] = self.ratio_or(total, self.mul(alpha, metal), blended_base)
+        # The dielectric share: the opaque share less the metallic one (black branches count).
+        dielectric = [self._arith("SUBTRACT", f["alpha"], k) for f, k in zip(fields, metal_share)]
+        rest = self.mul(alpha, self._arith("SUBTRACT", 1.0, metal))
+        for key in ("base_colour", "specular_level"):
+            total = self.weigh(weights, [self.mul(f[key], d) for f, d in zip(fields, dielectric)], total_weight)
+            out[key] = self.ratio_or(total, rest, out[key])
+        reflecting = [self._arith("SUBTRACT", r, k) for r, k in zip(share, metal_share)]
+        weight = self.weigh(weights, reflecting, total_weight)
+        for key in ("ior", "transmission"):
+            total = self.weigh(weights, [self.mul(f[key], d) for f, d in zip(fields, reflecting)], total_weight)
+            out[key] = self.ratio_or(total, weight, out[key])
+        ops = tuple(lambda a, b, op=op: self._arith(op, a, b) for op in ("MULTIPLY", "ADD", "SUBTRACT", "DIVIDE"))
+        strength = [self.mul(r, specular_strength(f["metallic"], f["transmission"], f["ior"], f["specular_level"],
+                                                  ops)) for r, f in zip(share, fields)]
+        weight = self.weigh(weights, strength, total_weight)
+        total = self.weigh(weights, [self.mul(f["roughness"], k) for f, k in zip(fields, strength)], total_weight)
+        out["roughness"] = self.ratio_or(total, weight, out["roughness"])
 
 
 def _leaves(node):

@@ -20,6 +20,8 @@ Materials are read from their node tree, following the Material Output's Surface
   branch (a black surface) darkens them, a Transparent one does not count, and Add adds
   the reflectances. Metallic, roughness, IOR and transmission are the k-weighted mean over
   the branches that are BSDFs. The point-colour flags are on when a weighted branch has them.
+  Where the BSDFs' metallic differ (a Diffuse and a Glossy) the lobes are kept apart as
+  Cycles sums the closures (_split_lobes): the metallic lobe gets its own colour.
 - A Base Color (or a BSDF's Color) fed by a Color Attribute or an Attribute node (any
   name; through reroutes) means the points' own colours; an Alpha fed by such a node's
   Alpha output means the points' own alpha.
@@ -239,6 +241,59 @@ def _combine(branches) -> dict:
         out[key] = sum(k * f[key] for k, f in reflecting) / weight if weight > 0 else _DEFAULTS[key]
     for key in ("use_point_colour", "use_point_alpha"):
         out[key] = any(f[key] for _, f in branches)
+    out.update(_split_lobes(opaque, branches, alpha, out))
+    return out
+
+
+def specular_strength(metallic, transmission, ior, specular_level, ops=None):
+    """How much a shader's specular lobes reflect at normal incidence: the metallic share (1),
+    the glass share (its Fresnel, taken as 1: glass is all specular) and the opaque dielectric's
+    f0 (the IOR's, times 2 x Specular IOR Level, as the core's Lobes). `ops`: (mul, add, sub,
+    div) for values that may be program registers (shader_mix.py), else plain arithmetic."""
+    mul, add, sub, div = ops or (lambda a, b: a * b, lambda a, b: a + b, lambda a, b: a - b, lambda a, b: a / b)
+    r = div(sub(ior, 1.0), add(ior, 1.0))
+    f0 = mul(mul(r, r), mul(specular_level, 2.0))
+    dielectric = add(transmission, mul(sub(1.0, transmission), f0))
+    return add(metallic, mul(sub(1.0, metallic), dielectric))
+
+
+def _split_lobes(opaque, branches, alpha: float, blended: dict) -> dict:
+    """Where the reflecting branches' metallic differ (a diffuse and a glossy), the fields that
+    keep their lobes apart, as Cycles sums the closures: the metallic share's own colour
+    (metal_colour) and the dielectric share's (base_colour, and its specular level, IOR and
+    transmission), each weighed by its branches' share, so that alpha x metallic x
+    metal_colour and alpha x (1 - metallic) x base_colour are the branches' sums. The one
+    roughness is weighed by each branch's specular strength: a diffuse (no specular) leaves
+    the glossy's own. {} (the one blended lobe, every other material) otherwise, or where a
+    metallic branch reads the points' colours (they replace the base colour only). A branch
+    that is such a split already (a nested Mix) is split again, keeping its metal colour."""
+    reflecting = [(k, f) for k, (_, f) in zip(opaque, branches) if f[_IS_BSDF] and k > 0]
+    if len({f["metallic"] for _, f in reflecting}) < 2 and all(f.get("metal_colour") is None for _, f in branches):
+        return {}
+    if any(f["use_point_colour"] and f["metallic"] > 0 for _, f in reflecting):
+        return {}
+    metal = blended["metallic"]
+    out = {}
+    own = lambda f: f["metal_colour"] if f.get("metal_colour") is not None else f["base_colour"]  # noqa: E731
+    if alpha * metal > 0:
+        total = sum(k * f["metallic"] * np.asarray(own(f), np.float64) for k, f in reflecting)
+        out["metal_colour"] = tuple(float(c) for c in total / (alpha * metal))
+    # Emission and unlinked branches (black, not BSDFs) count in the dielectric share as before.
+    dielectric = [(k * (1.0 - (f["metallic"] if f[_IS_BSDF] else 0.0)), f) for k, (_, f) in zip(opaque, branches)]
+    if alpha * (1.0 - metal) > 0:
+        for key in ("base_colour", "specular_level"):
+            total = sum(d * np.asarray(f[key], np.float64) for d, f in dielectric)
+            value = total / (alpha * (1.0 - metal))
+            out[key] = tuple(float(c) for c in value) if value.ndim else float(value)
+    weight = sum(d for d, f in dielectric if f[_IS_BSDF])
+    if weight > 0:
+        for key in ("ior", "transmission"):
+            out[key] = sum(d * f[key] for d, f in dielectric if f[_IS_BSDF]) / weight
+    strengths = [(k * specular_strength(f["metallic"], f["transmission"], f["ior"], f["specular_level"]), f)
+                 for k, f in reflecting]
+    weight = sum(s for s, _ in strengths)
+    if weight > 0:
+        out["roughness"] = sum(s * f["roughness"] for s, f in strengths) / weight
     return out
 
 
@@ -276,6 +331,8 @@ def _clamped(fields: dict, sockets: _Sockets) -> shading.Material:
     material never fails the frame."""
     f = {**_DEFAULTS, **fields}
     for key, value in f.items():
+        if value is None:  # metal_colour: the base colour's
+            continue
         if not isinstance(value, bool) and not all(math.isfinite(float(c)) for c in np.ravel(value)):
             sockets.say(f": {key.replace('_', ' ')} {_fmt(value)} is not finite; using {_fmt(_DEFAULTS[key])}")
             f[key] = _DEFAULTS[key]
@@ -289,7 +346,8 @@ def _clamped(fields: dict, sockets: _Sockets) -> shading.Material:
         roughness=unit(f["roughness"]), ior=max(float(f["ior"]), _MIN_IOR), transmission=unit(f["transmission"]),
         alpha=unit(f["alpha"]), emission=tuple(max(float(c), 0.0) for c in f["emission"]),
         specular_level=max(float(f["specular_level"]), 0.0), use_point_colour=bool(f["use_point_colour"]),
-        use_point_alpha=bool(f["use_point_alpha"]))
+        use_point_alpha=bool(f["use_point_alpha"]),
+        metal_colour=None if f["metal_colour"] is None else tuple(max(float(c), 0.0) for c in f["metal_colour"]))
 
 
 def _viewport_material(bl_material, sockets: _Sockets) -> shading.Material:
@@ -389,8 +447,9 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict, object_sp
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets),
                        object_space)
-    _report_bump_correction(bl_material, sockets)
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
+    if not _bump_correction(bl_material):
+        material = dataclasses.replace(material, bump_correction=False)
     return dataclasses.replace(material, program=program) if program is not None else material
 
 
@@ -417,13 +476,10 @@ def _aov_outputs(tree, aovs: dict, sockets: _Sockets) -> list:
     return found
 
 
-def _report_bump_correction(bl_material, sockets: _Sockets) -> None:
-    """The core always applies Cycles' bump shadowing term where nodes drive the normal
-    (Cycles' default, Material > Settings > Bump Map Correction): said when it is off there."""
-    if getattr(getattr(bl_material, "cycles", None), "use_bump_map_correction", True):
-        return
-    if any(socket.name == "Normal" for socket in sockets.compiled):
-        sockets.say(": Bump Map Correction off is ignored (the bump shadowing term is applied, as with it on)")
+def _bump_correction(bl_material) -> bool:
+    """Cycles' Bump Map Correction (Material > Settings; on where there is none to read): the
+    core applies the bump shadowing term where nodes drive the normal only with it on."""
+    return bool(getattr(getattr(bl_material, "cycles", None), "use_bump_map_correction", True))
 
 
 def _program(shader, sockets: _Sockets, aovs=(), object_space=None):

@@ -637,7 +637,10 @@ void NodeProgram::validate() {
     }
     for (int k = 0; k < int(Output::Count); ++k) {
         const int32_t o = outputs[k];
-        const int width = (k == int(Output::Base) || k == int(Output::Emission) || k == int(Output::Normal)) ? 3 : 1;
+        const int width = (k == int(Output::Base) || k == int(Output::Emission) || k == int(Output::Normal) ||
+                           k == int(Output::MetalColour))
+                              ? 3
+                              : 1;
         if (o < -1 || (o >= 0 && int64_t(o) + width > n)) throw InputError(name + ": node output out of range");
     }
     aov_only = std::all_of(outputs, outputs + int(Output::Count), [](int32_t o) { return o < 0; });

@@ -78,7 +78,7 @@ enum class Global : int32_t {
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
 enum class Output : int32_t {
-    Base = 0, Metallic, Roughness, IOR, Transmission, Alpha, Emission, SpecularLevel, Normal, Count
+    Base = 0, Metallic, Roughness, IOR, Transmission, Alpha, Emission, SpecularLevel, Normal, MetalColour, Count
 };
 
 enum class Op : int32_t {

@@ -257,6 +257,11 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     };
     colour(Output::Base, out.base);
     colour(Output::Emission, out.emission);
+    if (prog.outputs[int(Output::MetalColour)] >= 0) {
+        if (!out.own_metal) out.metal_colour = out.base;
+        colour(Output::MetalColour, out.metal_colour);
+        out.own_metal = true;
+    }
     scalar(Output::Metallic, 0.f, 1.f, out.metallic);
     scalar(Output::Roughness, 0.f, 1.f, out.roughness);
     scalar(Output::Transmission, 0.f, 1.f, out.transmission);

@@ -122,8 +122,9 @@ struct SurfacePoint {
     int32_t prim = -1;   // splat or triangle id within the instance's geometry
     bool front = false;  // the side the normal points to faces the ray
     Vec3 p, ng, ns;      // point, geometric and shading normal (scene frame, unit)
-    // Whether a node program replaced ns (Bump, Normal Map), and the surface's own shading
-    // normal it replaced (Cycles' sd->N): what the bump shadowing term compares them by.
+    // Whether a node program replaced ns (Bump, Normal Map) in a material whose Bump Map
+    // Correction is on, and the surface's own shading normal it replaced (Cycles' sd->N):
+    // what the bump shadowing term compares them by.
     bool bumped = false;
     Vec3 ns_surface;
     float offset = 0;    // how far a secondary ray must start off the surface (triangles always;
@@ -167,7 +168,7 @@ class RenderScene {
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
         const Vec3 surface = sp.ns;
         Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
-        sp.bumped = sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z;
+        sp.bumped = out.bump_correction && (sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z);
         sp.ns_surface = surface;
         return out;
     }

@@ -127,8 +127,10 @@ struct Integrator::Lobes {
     float alpha;                  // GGX roughness
     bool delta;                   // mirror-smooth: specular lobes are traced, not sampled
     Vec3 base;
+    Vec3 metal_base;              // the metallic lobe's colour: the base colour, or its own
 
-    Lobes(const Material &m, Vec3 base_colour, bool entering) : base(base_colour) {
+    Lobes(const Material &m, Vec3 base_colour, bool entering)
+        : base(base_colour), metal_base(m.own_metal ? m.metal_colour : base_colour) {
         metal = m.metallic;
         glass = (1.f - m.metallic) * m.transmission;
         plastic = (1.f - m.metallic) * (1.f - m.transmission);
@@ -147,7 +149,7 @@ struct Integrator::Lobes {
     // Reflectance towards the mirror direction, for a half-vector cosine c.
     float plastic_fresnel(float c) const { return f0 > 0.f ? fresnel_dielectric(c, spec_eta) : 0.f; }
     Vec3 specular(float c) const {
-        return schlick(base, c) * metal + Vec3(1, 1, 1) * (plastic * plastic_fresnel(c) +
+        return schlick(metal_base, c) * metal + Vec3(1, 1, 1) * (plastic * plastic_fresnel(c) +
                                                              glass * fresnel_dielectric(c, eta));
     }
     // The diffuse under the specular layer keeps what the layer does not reflect: 1 minus the
@@ -182,7 +184,7 @@ struct Integrator::Lobes {
     // closures' albedo). Mirror-smooth, the Fresnel reflectance itself.
     Vec3 glossy_albedo(float cos_o) const {
         if (delta) return specular(cos_o);
-        return schlick(base, cos_o) * metal +
+        return schlick(metal_base, cos_o) * metal +
                Vec3(1, 1, 1) * (plastic * specular_albedo(cos_o) + glass * fresnel_dielectric(cos_o, eta));
     }
     // Cycles' bsdf_blur (Filter Glossy): the roughness (alpha) raised to at least `a`; a

@@ -12,7 +12,7 @@
 
 namespace splat {
 
-constexpr int kMaterialFields = 16;
+constexpr int kMaterialFields = 20;
 constexpr int kLightFields = 22;
 
 // Below this roughness a lobe is a perfect mirror or clear glass: traced by recursive
@@ -30,6 +30,12 @@ struct Material {
     // Cycles' Emission Sampling, Auto resolved by render/shading.py); 0: found by rays only.
     int emission_sides = 0;
     float pass_index = 0;  // Blender's material pass index: the Material Index pass
+    // The metallic lobe's own colour (own_metal; packed as -1s when it is the base colour's):
+    // a Mix Shader of a diffuse and a glossy keeps each closure's colour (render/shading.py).
+    Vec3 metal_colour;
+    bool own_metal = false;
+    // Cycles' Bump Map Correction: the bump shadowing term where a program tilts the normal.
+    bool bump_correction = true;
     // Its node program in the scene's table (RenderScene::material_at), or -1: the constant
     // values above are the material. Not part of the packed row (programs come apart).
     int program = -1;
@@ -42,6 +48,9 @@ struct Material {
         m.specular_level = r[11], m.use_point_colour = r[12] != 0.f, m.use_point_alpha = r[13] != 0.f;
         m.emission_sides = int(r[14]) & 3;
         m.pass_index = r[15];
+        m.own_metal = r[16] >= 0.f && r[17] >= 0.f && r[18] >= 0.f;
+        if (m.own_metal) m.metal_colour = Vec3(r[16], r[17], r[18]);
+        m.bump_correction = r[19] != 0.f;
         return m;
     }
     bool emits() const { return emission.x > 0.f || emission.y > 0.f || emission.z > 0.f; }
