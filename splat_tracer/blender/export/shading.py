@@ -370,7 +370,7 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict, object_sp
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets),
-                       object_space)
+                       object_space, float(getattr(bl_material, "pass_index", 0)))
     _report_bump_correction(bl_material, sockets)
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
     return dataclasses.replace(material, program=program) if program is not None else material
@@ -408,7 +408,7 @@ def _report_bump_correction(bl_material, sockets: _Sockets) -> None:
         sockets.say(": Bump Map Correction off is ignored (the bump shadowing term is applied, as with it on)")
 
 
-def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
+def _program(shader, sockets: _Sockets, aovs=(), object_space=None, material_index: float = 0.0):
     """The node program for the linked inputs of the material's shader (None: nothing feeds
     the Material Output) and its AOV Output nodes (_aov_outputs), or None (nothing needs
     one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
@@ -423,10 +423,11 @@ def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
             # readers here only give the constant fields the blend starts from.
             quiet = _Sockets("material", "", shading.Report())
             program, driven = shader_mix.compile_mix(shader, sockets.say, lambda node: _shader_node(node, quiet),
-                                                     _DEFAULTS, _IS_BSDF, aovs=aovs, object_space=object_space)
+                                                     _DEFAULTS, _IS_BSDF, aovs=aovs, object_space=object_space,
+                                                     material_index=material_index)
         else:
             program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs,
-                                                   object_space=object_space)
+                                                   object_space=object_space, material_index=material_index)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None

@@ -82,6 +82,8 @@ const Layout &layout(Op op) {
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
+        /* ObjectValue (the output's width checked apart; first kMaxObjectValues: never carried, 0) */ {{kNone, kEnum, kEnum}, {0, kMaxObjectValues + 1, 5}},
+        /* LightPath */ {{kRW}, {kLightPathFloats}},
     };
     return table[int(op)];
 }
@@ -616,6 +618,8 @@ void NodeProgram::validate() {
             bump_depth[row] = depth;
             uses_bump = true;
         }
+        if (op == Op::ObjectValue && (c[3] < 1 || c[1] < 0 || int64_t(c[1]) + c[3] > n)) fail("bad object value");
+        if (op == Op::LightPath) uses_light_path = true;
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Global && c[2] == int32_t(Global::Window)) uses_window = true;
         if (op == Op::ImageTiles && (c[5] < 1 || c[4] < 0 || int64_t(c[4]) + 2 * int64_t(c[5]) > n))
@@ -1064,6 +1068,17 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 else n = n_in;
                 if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
                 store3(r, c[1], n);
+                break;
+            }
+            case Op::ObjectValue:
+                for (int k = 0; k < c[3]; ++k)
+                    r[c[1] + k] = c[2] + k < sg.object_value_count ? sg.object_values[c[2] + k] : 0.f;
+                break;
+            case Op::LightPath: {
+                // Without the integrator's word: a camera ray's first surface (depths 0).
+                static const float kCameraRay[kLightPathFloats] = {1.f};
+                const float *l = sg.light_path ? sg.light_path : kCameraRay;
+                for (int k = 0; k < kLightPathFloats; ++k) r[c[1] + k] = l[k];
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -1,0 +1,181 @@
+"""Object Info, Light Path and object-type Attribute nodes through Blender, side by side with Cycles.
+
+Per-object values (issue 24): tiles of one emissive material whose colour comes from Object
+Info (Random through a Color Ramp, Object Index, Location, Color) or an object attribute,
+each tile's colour read at its centre; objects, linked duplicates and a collection instance's
+copies (whose Random is Blender's per-instance id). Light Path: an emissive sphere red to the
+camera and green to every other ray over a white floor (the floor's tint), and a block whose
+material is transparent to shadow rays (no shadow). Orthographic camera straight down, black
+world, CPU Cycles without denoising.
+
+Tolerances (measured with bpy 5.0.1; each test also shows that a wrong render fails):
+- TILE_ATOL = 0.01: per tile colour of an emissive tile (no noise: emission seen directly) --
+  a Random off by one object (another tile's value) is far outside.
+- FLOOR_RTOL = 0.15: the floor's mean colour lit by the sphere (Monte Carlo noise at 64
+  samples, both engines) and its green-to-red ratio.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from blender_helpers import add_camera
+from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, stats
+
+SIZE = 64
+TILE_ATOL = 0.01
+FLOOR_RTOL = 0.15
+TILES = [(-0.75, -0.75), (0.0, -0.75), (0.75, -0.75), (-0.75, 0.0), (0.75, 0.0), (-0.75, 0.75), (0.0, 0.75)]
+
+
+def _square(bpy, name, size, location, material, collection=None):
+    import bmesh
+
+    def build(bm):
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=size / 2)
+
+    return mesh_object(bpy, name, build, location, [material], collection=collection)
+
+
+def _setup(bpy, scene, samples=4):
+    add_camera(bpy, scene, (0, 0, 5), (0, 0, 0), type="ORTHO", ortho_scale=2.4)
+    black_world(bpy, scene)
+    direct_light_only(scene)
+    c = scene.cycles
+    c.samples, c.device, c.use_denoising, c.use_adaptive_sampling = samples, "CPU", False, False
+
+
+def _emissive(bpy, name):
+    """A material whose Emission colour the caller links; (material, nodes, links, emission)."""
+    m = bpy.data.materials.new(name)
+    nodes, links = m.node_tree.nodes, m.node_tree.links
+    nodes.remove(nodes["Principled BSDF"])
+    emission = nodes.new("ShaderNodeEmission")
+    links.new(emission.outputs[0], nodes["Material Output"].inputs["Surface"])
+    return m, nodes, links, emission
+
+
+def _both(bpy, scene, tmp_path, name):
+    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    report = list(stats()["report"])
+    scene.render.engine = "CYCLES"
+    try:
+        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    finally:
+        scene.render.engine = "SPLAT_TRACER"
+    return ours, theirs, report
+
+
+def _at(image, x, y):
+    """The mean colour of a 3x3 block around the scene point (x, y) (the ortho view spans 2.4 m)."""
+    col = int((x / 2.4 + 0.5) * SIZE)
+    row = int((0.5 - y / 2.4) * SIZE)
+    return image[row - 1:row + 2, col - 1:col + 2].reshape(-1, 3).mean(0)
+
+
+def _tiles(bpy, material, count=len(TILES)):
+    objects = []
+    for i, (x, y) in enumerate(TILES[:count]):
+        obj = _square(bpy, f"Tile{i}", 0.5, (x, y, 0), material)
+        obj.pass_index = i + 1
+        obj.color = (0.1 * i, 1.0 - 0.1 * i, 0.5, 1.0)
+        objects.append(obj)
+    return objects
+
+
+def test_object_info_random_per_object_and_instance_matches_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "RandomRamp")
+    info = nodes.new("ShaderNodeObjectInfo")
+    ramp = nodes.new("ShaderNodeValToRGB")
+    ramp.color_ramp.elements[0].color = (0.0, 0.0, 1.0, 1.0)
+    ramp.color_ramp.elements[1].color = (1.0, 0.5, 0.0, 1.0)
+    links.new(info.outputs["Random"], ramp.inputs[0])
+    links.new(ramp.outputs["Color"], emission.inputs["Color"])
+    tiles = _tiles(bpy, m, count=4)
+    # A linked duplicate (same mesh, its own name) and two copies of a collection instance.
+    dup = tiles[0].copy()
+    dup.name = "LinkedDuplicate"
+    dup.location = TILES[4] + (0,)
+    scene.collection.objects.link(dup)
+    hidden = bpy.data.collections.new("Instanced")
+    _square(bpy, "InstancedTile", 0.5, (0, 0, 0), m, collection=hidden)
+    for k, (x, y) in enumerate(TILES[5:]):
+        empty = bpy.data.objects.new(f"Instancer{k}", None)
+        empty.instance_type, empty.instance_collection = "COLLECTION", hidden
+        empty.location = (x, y, 0)
+        scene.collection.objects.link(empty)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "random")
+    got = np.array([_at(ours, x, y) for x, y in TILES])
+    want = np.array([_at(theirs, x, y) for x, y in TILES])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    assert not [line for line in report if "RandomRamp" in line], report
+    # The tiles differ from one another (the test can see a wrong Random): shifting the
+    # values by one object puts them far outside.
+    assert np.abs(np.roll(got, 1, axis=0) - want).max() > 10 * TILE_ATOL
+
+
+def test_object_index_location_and_colour_match_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "IndexLocation")
+    info = nodes.new("ShaderNodeObjectInfo")
+    # Colour: (index / 10, location x + 1, location y + 1) + the object's colour / 4.
+    sep = nodes.new("ShaderNodeSeparateXYZ")
+    links.new(info.outputs["Location"], sep.inputs[0])
+    comb = nodes.new("ShaderNodeCombineXYZ")
+    div = nodes.new("ShaderNodeMath")
+    div.operation, div.inputs[1].default_value = "DIVIDE", 10.0
+    links.new(info.outputs["Object Index"], div.inputs[0])
+    links.new(div.outputs[0], comb.inputs[0])
+    for axis, name in ((1, "X"), (2, "Y")):
+        add = nodes.new("ShaderNodeMath")
+        add.operation, add.inputs[1].default_value = "ADD", 1.0
+        links.new(sep.outputs[name], add.inputs[0])
+        links.new(add.outputs[0], comb.inputs[axis])
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type, mix.blend_type = "RGBA", "ADD"
+    mix.inputs["Factor"].default_value = 0.25
+    links.new(comb.outputs[0], mix.inputs["A"])
+    links.new(info.outputs["Color"], mix.inputs["B"])
+    links.new(mix.outputs["Result"], emission.inputs["Color"])
+    _tiles(bpy, m)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "index")
+    got = np.array([_at(ours, x, y) for x, y in TILES])
+    want = np.array([_at(theirs, x, y) for x, y in TILES])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    expected = np.array([[(i + 1) / 10 + 0.025 * i, x + 1 + 0.25 * (1 - 0.1 * i), y + 1 + 0.125]
+                         for i, (x, y) in enumerate(TILES)])
+    np.testing.assert_allclose(got, expected, atol=TILE_ATOL)
+    assert not [line for line in report if "IndexLocation" in line], report
+
+
+def test_an_object_attribute_reads_a_custom_property_as_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "CustomProperty")
+    attr = nodes.new("ShaderNodeAttribute")
+    attr.attribute_type, attr.attribute_name = "OBJECT", "tint"
+    links.new(attr.outputs["Color"], emission.inputs["Color"])
+    strength = nodes.new("ShaderNodeAttribute")  # a built-in path, through Fac
+    strength.attribute_type, strength.attribute_name = "OBJECT", "pass_index"
+    scale = nodes.new("ShaderNodeMath")
+    scale.operation, scale.inputs[1].default_value = "MULTIPLY", 0.25
+    links.new(strength.outputs["Fac"], scale.inputs[0])
+    links.new(scale.outputs[0], emission.inputs["Strength"])
+    tiles = _tiles(bpy, m, count=5)
+    tiles[0]["tint"] = 0.5                 # a float: grey
+    tiles[1]["tint"] = (1.0, 0.25, 0.0)    # a vector
+    tiles[2]["tint"] = 2                   # an integer
+    tiles[3].data["tint"] = (0.0, 0.5, 1.0, 1.0)  # on the mesh: found there
+    # tiles[4] has none: black, as in Cycles
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "attribute")
+    got = np.array([_at(ours, x, y) for x, y in TILES[:5]])
+    want = np.array([_at(theirs, x, y) for x, y in TILES[:5]])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    np.testing.assert_allclose(got[0], [0.125] * 3, atol=TILE_ATOL)  # 0.5 x pass index 1 x 0.25
+    np.testing.assert_allclose(got[4], [0, 0, 0], atol=TILE_ATOL)
+    assert not [line for line in report if "CustomProperty" in line], report
+
