@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from blender_helpers import add_camera
-from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, stats
+from test_scene_export import black_world, cube, direct_light_only, lamp, mesh_object, plane, principled, render, stats, uv_sphere
 
 SIZE = 64
 TILE_ATOL = 0.01
@@ -179,3 +179,92 @@ def test_an_object_attribute_reads_a_custom_property_as_cycles(blender, empty_sc
     np.testing.assert_allclose(got[4], [0, 0, 0], atol=TILE_ATOL)
     assert not [line for line in report if "CustomProperty" in line], report
 
+
+
+def _light_path_sphere(bpy, scene, use_light_path=True):
+    """A white floor under an emissive sphere: red to camera rays, green to all others
+    (Light Path > Is Camera Ray into a Mix's factor), or red to every ray."""
+    m, nodes, links, emission = _emissive(bpy, "RedToCamera")
+    emission.inputs["Strength"].default_value = 4.0
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    mix.inputs["A"].default_value = (0.0, 1.0, 0.0, 1.0)
+    mix.inputs["B"].default_value = (1.0, 0.0, 0.0, 1.0)
+    mix.inputs["Factor"].default_value = 1.0
+    if use_light_path:
+        path = nodes.new("ShaderNodeLightPath")
+        links.new(path.outputs["Is Camera Ray"], mix.inputs["Factor"])
+    links.new(mix.outputs["Result"], emission.inputs["Color"])
+    plane(bpy, "Floor", 2.4, (0, 0, 0), principled(bpy, "White", base=(1.0, 1.0, 1.0)))
+    uv_sphere(bpy, "Sphere", 0.25, (0, 0, 0.5), m)
+    _setup(bpy, scene, samples=64)
+
+
+def test_a_sphere_red_to_the_camera_lights_the_floor_green_as_in_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    _light_path_sphere(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "light_path")
+    # The sphere seen by the camera: red in both.
+    np.testing.assert_allclose(_at(ours, 0, 0), [4, 0, 0], atol=TILE_ATOL)
+    np.testing.assert_allclose(_at(theirs, 0, 0), [4, 0, 0], atol=TILE_ATOL)
+    # The floor around it (a ring 0.35-1 m from the centre): lit green, as Cycles lights it.
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    r = np.hypot((xx + 0.5) / SIZE * 2.4 - 1.2, (yy + 0.5) / SIZE * 2.4 - 1.2)
+    ring = (r > 0.35) & (r < 1.0)
+    floor, cycles_floor = ours[ring].mean(0), theirs[ring].mean(0)
+    np.testing.assert_allclose(floor[1], cycles_floor[1], rtol=FLOOR_RTOL)
+    assert floor[0] < 0.02 * floor[1] and cycles_floor[0] < 0.02 * cycles_floor[1], (floor, cycles_floor)
+    assert not [line for line in report if "RedToCamera" in line], report
+    # Without the Light Path node the floor is lit red: outside the tolerance.
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "SPLAT_TRACER"
+    _light_path_sphere(bpy, scene, use_light_path=False)
+    wrong = render(bpy, scene, tmp_path / "red_everywhere.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    assert wrong[ring].mean(0)[1] < 0.1 * cycles_floor[1]
+
+
+def _shadowless_block(bpy, scene, use_light_path=True):
+    """A diffuse block over a white floor under a sun 30 degrees off the vertical; its
+    material is transparent to shadow rays (Light Path > Is Shadow Ray into a Mix Shader of
+    it and a Transparent BSDF), or an ordinary diffuse one."""
+    m = principled(bpy, "NoShadow", base=(0.8, 0.2, 0.2))
+    if use_light_path:
+        nodes, links = m.node_tree.nodes, m.node_tree.links
+        mix = nodes.new("ShaderNodeMixShader")
+        path = nodes.new("ShaderNodeLightPath")
+        transparent = nodes.new("ShaderNodeBsdfTransparent")
+        links.new(path.outputs["Is Shadow Ray"], mix.inputs["Fac"])
+        links.new(nodes["Principled BSDF"].outputs[0], mix.inputs[1])
+        links.new(transparent.outputs[0], mix.inputs[2])
+        links.new(mix.outputs[0], nodes["Material Output"].inputs["Surface"])
+    plane(bpy, "Floor", 2.4, (0, 0, 0), principled(bpy, "White", base=(0.8, 0.8, 0.8)))
+    cube(bpy, "Block", 0.4, (0, 0, 1), m)
+    lamp(bpy, "SUN", rotation=(math.radians(30), 0, 0), energy=3.0)
+    _setup(bpy, scene, samples=16)
+    scene.cycles.transparent_max_bounces = 8  # Cycles walks shadow rays through transparency by these
+
+
+def test_a_block_transparent_to_shadow_rays_casts_no_shadow_as_in_cycles(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    _shadowless_block(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "no_shadow")
+    # The block's shadow would fall 1 m x tan 30 = 0.58 m along +y (down the image).
+    shadow = np.array([_at(ours, dx, 0.577 + dy) for dx in (-0.1, 0.1) for dy in (-0.1, 0.1)]).mean(0)
+    cycles_shadow = np.array([_at(theirs, dx, 0.577 + dy) for dx in (-0.1, 0.1) for dy in (-0.1, 0.1)]).mean(0)
+    open_floor = _at(ours, 0.8, -0.8)
+    np.testing.assert_allclose(shadow, cycles_shadow, rtol=FLOOR_RTOL)
+    np.testing.assert_allclose(shadow, open_floor, rtol=0.02)  # no shadow at all
+    # The block itself is seen (opaque to the camera), in both.
+    np.testing.assert_allclose(_at(ours, 0, 0), _at(theirs, 0, 0), rtol=FLOOR_RTOL)
+    assert _at(ours, 0, 0)[0] > 2 * _at(ours, 0, 0)[1]
+    # (The Mix Shader's blend is said, as for any Mix Shader; nothing of the Light Path.)
+    assert not [line for line in report if "Light Path" in line], report
+    # An ordinary block casts its shadow: far outside the tolerance.
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "SPLAT_TRACER"
+    _shadowless_block(bpy, scene, use_light_path=False)
+    wrong = render(bpy, scene, tmp_path / "shadowed.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    shadowed = np.array([_at(wrong, dx, 0.577 + dy) for dx in (-0.1, 0.1) for dy in (-0.1, 0.1)]).mean(0)
+    assert shadowed.max() < 0.1 * cycles_shadow.max()
