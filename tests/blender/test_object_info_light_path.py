@@ -268,3 +268,21 @@ def test_a_block_transparent_to_shadow_rays_casts_no_shadow_as_in_cycles(blender
     wrong = render(bpy, scene, tmp_path / "shadowed.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
     shadowed = np.array([_at(wrong, dx, 0.577 + dy) for dx in (-0.1, 0.1) for dy in (-0.1, 0.1)]).mean(0)
     assert shadowed.max() < 0.1 * cycles_shadow.max()
+
+
+def test_a_lamp_tree_reads_light_path_as_cycles_evaluates_the_light_it_sends(blender, empty_scene, tmp_path):
+    """Cycles evaluates a lamp's tree for the light it sends with no ray kind set: a Strength
+    of 1 - Is Camera Ray lights the floor fully (read as a camera ray it would be dark)."""
+    bpy, scene = blender, empty_scene
+    plane(bpy, "Floor", 2.4, (0, 0, 0), principled(bpy, "White", base=(0.8, 0.8, 0.8)))
+    sun = lamp(bpy, "SUN", energy=2.0)
+    sun.data.use_nodes = True
+    nodes, links = sun.data.node_tree.nodes, sun.data.node_tree.links
+    path, invert = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeMath")
+    invert.operation, invert.inputs[0].default_value = "SUBTRACT", 1.0
+    links.new(path.outputs["Is Camera Ray"], invert.inputs[1])
+    links.new(invert.outputs[0], nodes["Emission"].inputs["Strength"])
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "lamp_light_path")
+    np.testing.assert_allclose(ours.mean((0, 1)), theirs.mean((0, 1)), rtol=0.02)
+    assert ours.mean() > 0.3, ours.mean()  # 0.8 x 2 / pi: lit, not dark

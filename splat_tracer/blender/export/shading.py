@@ -490,6 +490,7 @@ def _lamp_emission(light, position, direction, say):
         return colour
     from ...render import nodes as programs
 
+    program = _as_lamp_light(program, say)
     reads = {programs.GLOBALS[row[2]] for row in np.array(program.code).reshape(-1, programs.WIDTH)
              if row[0] == programs.OPS.index("GLOBAL")}
     if reads:
@@ -500,6 +501,24 @@ def _lamp_emission(light, position, direction, say):
     out = program.outputs[list(programs.OUTPUTS).index("emission")]
     value = np.asarray(regs[0, out:out + 3], np.float64)
     return np.where(np.isfinite(value), np.maximum(value, 0.0), 0.0)
+
+
+def _as_lamp_light(program, say):
+    """A lamp's program as Cycles evaluates it for the light the lamp sends: Light Path with
+    PATH_RAY_EMISSION alone (every output 0: its LIGHT_PATH rows become no-ops, leaving their
+    registers at 0); Object Info and object attributes have no instance here (0, said)."""
+    from ...render import nodes as programs
+
+    code = np.array(program.code, np.int32).reshape(-1, programs.WIDTH)
+    if (code[:, 0] == programs.OPS.index("OBJECT_VALUE")).any():
+        say("its node tree's Object Info and object attributes read 0 (a lamp is no instance here)")
+    rows = code[:, 0] == programs.OPS.index("LIGHT_PATH")
+    if not rows.any():
+        return program
+    code[rows, 0] = programs.OPS.index("COPY")
+    code[rows, 2], code[rows, 3] = code[rows, 1], 1  # a register onto itself
+    code[rows, 4:] = 0
+    return dataclasses.replace(program, code=tuple(map(tuple, code.tolist())))
 
 
 # Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.
