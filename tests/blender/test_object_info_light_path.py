@@ -286,3 +286,38 @@ def test_a_lamp_tree_reads_light_path_as_cycles_evaluates_the_light_it_sends(ble
     ours, theirs, report = _both(bpy, scene, tmp_path, "lamp_light_path")
     np.testing.assert_allclose(ours.mean((0, 1)), theirs.mean((0, 1)), rtol=0.02)
     assert ours.mean() > 0.3, ours.mean()  # 0.8 x 2 / pi: lit, not dark
+
+
+def test_instancer_and_view_layer_attributes_match_cycles(blender, empty_scene, tmp_path):
+    """Instancer: the instancing Empty's property first, else the object's own; View Layer:
+    the view layer's, else the scene's. Colour = (instancer's, view layer's, 0)."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "Instancer")
+    by_instancer, by_layer = nodes.new("ShaderNodeAttribute"), nodes.new("ShaderNodeAttribute")
+    by_instancer.attribute_type, by_instancer.attribute_name = "INSTANCER", "shade"
+    by_layer.attribute_type, by_layer.attribute_name = "VIEW_LAYER", "level"
+    comb = nodes.new("ShaderNodeCombineXYZ")
+    links.new(by_instancer.outputs["Fac"], comb.inputs[0])
+    links.new(by_layer.outputs["Fac"], comb.inputs[1])
+    links.new(comb.outputs[0], emission.inputs["Color"])
+    hidden = bpy.data.collections.new("Instanced")
+    inner = _square(bpy, "InstancedTile", 0.5, (0, 0, 0), m, collection=hidden)
+    inner["shade"] = 0.9  # read where no instancer has it
+    for k, (x, y) in enumerate(TILES[:3]):
+        empty = bpy.data.objects.new(f"Instancer{k}", None)
+        empty.instance_type, empty.instance_collection = "COLLECTION", hidden
+        empty.location = (x, y, 0)
+        if k < 2:
+            empty["shade"] = 0.2 + 0.3 * k
+        scene.collection.objects.link(empty)
+    plain = _square(bpy, "Plain", 0.5, TILES[3] + (0,), m)
+    plain["shade"] = 0.4
+    scene["level"] = 0.6
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "instancer")
+    got = np.array([_at(ours, x, y) for x, y in TILES[:4]])
+    want = np.array([_at(theirs, x, y) for x, y in TILES[:4]])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    np.testing.assert_allclose(got[:, 0], [0.2, 0.5, 0.9, 0.4], atol=TILE_ATOL)
+    np.testing.assert_allclose(got[:, 1], 0.6, atol=TILE_ATOL)
+    assert not [line for line in report if "Instancer" in line], report
