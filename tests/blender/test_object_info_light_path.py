@@ -321,3 +321,31 @@ def test_instancer_and_view_layer_attributes_match_cycles(blender, empty_scene, 
     np.testing.assert_allclose(got[:, 0], [0.2, 0.5, 0.9, 0.4], atol=TILE_ATOL)
     np.testing.assert_allclose(got[:, 1], 0.6, atol=TILE_ATOL)
     assert not [line for line in report if "Instancer" in line], report
+
+
+def test_a_mirror_ray_is_glossy_singular_reflection_at_depth_one_as_in_cycles(blender, empty_scene, tmp_path):
+    """An emissive ceiling behind the camera, seen only in a mirror floor: its colour says the
+    ray that met it -- (Is Singular Ray, Ray Depth / 2, Is Reflection Ray / 4 + Is
+    Transmission Ray) = (1, 0.5, 0.25) from a sharp mirror, as in Cycles."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "Ceiling")
+    path, comb = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeCombineXYZ")
+    half, quarter = nodes.new("ShaderNodeMath"), nodes.new("ShaderNodeMath")
+    half.operation, half.inputs[1].default_value = "MULTIPLY", 0.5
+    quarter.operation, quarter.inputs[1].default_value = "MULTIPLY_ADD", 0.25
+    links.new(path.outputs["Is Singular Ray"], comb.inputs[0])
+    links.new(path.outputs["Ray Depth"], half.inputs[0])
+    links.new(half.outputs[0], comb.inputs[1])
+    links.new(path.outputs["Is Reflection Ray"], quarter.inputs[0])
+    links.new(path.outputs["Is Transmission Ray"], quarter.inputs[2])
+    links.new(quarter.outputs[0], comb.inputs[2])
+    links.new(comb.outputs[0], emission.inputs["Color"])
+    mirror = principled(bpy, "Mirror", base=(1.0, 1.0, 1.0), roughness=0.0, metallic=1.0)
+    plane(bpy, "Floor", 2.4, (0, 0, 0), mirror)
+    plane(bpy, "Ceiling", 4.0, (0, 0, 6), m)
+    _setup(bpy, scene)
+    c = scene.cycles
+    c.max_bounces = c.glossy_bounces = 2
+    ours, theirs, report = _both(bpy, scene, tmp_path, "mirror")
+    np.testing.assert_allclose(_at(ours, 0, 0), _at(theirs, 0, 0), atol=TILE_ATOL)
+    np.testing.assert_allclose(_at(ours, 0, 0), [1.0, 0.5, 0.25], atol=TILE_ATOL)
