@@ -75,3 +75,15 @@ def test_a_camera_ray_is_a_camera_ray_and_depth_zero():
         img = _render([scene.Instance(_square(1.0), materials=(shading.Material(base_colour=(0, 0, 0),
                                                                                 program=b.program()),))])
         assert img[16, 16] == pytest.approx([want] * 3, abs=1e-6), output
+
+
+def test_the_core_refuses_bad_object_values():
+    """Not finite, too many per instance, or not one row per instance: a ValueError, never a crash."""
+    square = _square()
+    row = scene.InstanceRow(0, np.eye(4)[:3].ravel(), np.eye(4)[:3].ravel(), (0, 1), 31, False, 0.0, False, None)
+    material = shading.Material(program=_info())
+    args = ([square._mesh], [row], [material.pack()], [], 1, [material.program.native()])
+    scene.native_scene(*args, object_values=np.zeros((1, nodes.OBJECT_INFO_FLOATS)))
+    for bad in (np.full((1, nodes.OBJECT_INFO_FLOATS), np.nan), np.zeros((1, 200)), np.zeros((2, 9))):
+        with pytest.raises(ValueError):
+            scene.native_scene(*args, object_values=bad)
