@@ -349,3 +349,35 @@ def test_a_mirror_ray_is_glossy_singular_reflection_at_depth_one_as_in_cycles(bl
     ours, theirs, report = _both(bpy, scene, tmp_path, "mirror")
     np.testing.assert_allclose(_at(ours, 0, 0), _at(theirs, 0, 0), atol=TILE_ATOL)
     np.testing.assert_allclose(_at(ours, 0, 0), [1.0, 0.5, 0.25], atol=TILE_ATOL)
+
+
+def test_object_info_random_of_geometry_nodes_instances_matches_cycles(blender, empty_scene, tmp_path):
+    """A tile and Geometry Nodes' Instance on Points copies of it: each copy's Random is its own
+    (Blender's per-instance id), as in Cycles."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "RandomCopies")
+    info = nodes.new("ShaderNodeObjectInfo")
+    links.new(info.outputs["Random"], emission.inputs["Color"])
+    tile = _square(bpy, "Tile", 0.5, TILES[0] + (0,), m)
+    mesh = bpy.data.meshes.new("Spots")
+    mesh.from_pydata([p + (0,) for p in TILES[1:]], [], [])
+    holder = bpy.data.objects.new("Spots", mesh)
+    scene.collection.objects.link(holder)
+    group = bpy.data.node_groups.new("Copies", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    gn, gl = group.nodes, group.links
+    inp, out = gn.new("NodeGroupInput"), gn.new("NodeGroupOutput")
+    obj_info, on_points = gn.new("GeometryNodeObjectInfo"), gn.new("GeometryNodeInstanceOnPoints")
+    obj_info.inputs["Object"].default_value = tile
+    obj_info.inputs["As Instance"].default_value = True
+    gl.new(inp.outputs[0], on_points.inputs["Points"])
+    gl.new(obj_info.outputs["Geometry"], on_points.inputs["Instance"])
+    gl.new(on_points.outputs["Instances"], out.inputs[0])
+    holder.modifiers.new("Copies", "NODES").node_group = group
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "gn_random")
+    got = np.array([_at(ours, x, y) for x, y in TILES])
+    want = np.array([_at(theirs, x, y) for x, y in TILES])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    assert got.max() > 0 and len(np.unique(np.round(got[:, 0], 3))) == len(TILES), got[:, 0]
