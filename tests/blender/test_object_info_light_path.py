@@ -94,6 +94,7 @@ def test_object_info_random_per_object_and_instance_matches_cycles(blender, empt
     links.new(info.outputs["Random"], ramp.inputs[0])
     links.new(ramp.outputs["Color"], emission.inputs["Color"])
     tiles = _tiles(bpy, m, count=4)
+    tiles[3].name = "Tuile grisée"  # non-ASCII bytes in the name's hash
     # A linked duplicate (same mesh, its own name) and two copies of a collection instance.
     dup = tiles[0].copy()
     dup.name = "LinkedDuplicate"

@@ -13,7 +13,8 @@ import numpy as np
 
 
 def _hash_string(text: str) -> int:
-    """Cycles' hash_string: a multiplicative hash of the name's bytes (UTF-8), 32-bit."""
+    """Cycles' hash_string: a multiplicative hash of the name's bytes (UTF-8), 32-bit, each
+    byte unsigned (a non-ASCII name matches Cycles 5.0.1 so; read as signed it does not)."""
     h = 0
     for byte in text.encode("utf-8"):
         h = (h * 37 + byte) & 0xFFFFFFFF
