@@ -9,7 +9,8 @@ material is transparent to shadow rays (no shadow). Orthographic camera straight
 world, CPU Cycles without denoising.
 
 Tolerances (measured with bpy 5.0.1; each test also shows that a wrong render fails):
-- TILE_ATOL = 0.01: per tile colour of an emissive tile (no noise: emission seen directly) --
+- TILE_ATOL = 0.01: per tile colour of an emissive tile (no noise: emission seen directly; measured
+  equal to 4 decimals) --
   a Random off by one object (another tile's value) is far outside.
 - FLOOR_RTOL = 0.15: the floor's mean colour lit by the sphere (Monte Carlo noise at 64
   samples, both engines) and its green-to-red ratio.
@@ -404,3 +405,25 @@ def test_is_diffuse_ray_splits_a_sphere_light_between_sampling_and_bounces_as_in
     for f in (floor, cycles_floor):
         assert 0.05 * f[1] < f[0] < 0.5 * f[1], (floor, cycles_floor)
     assert not [line for line in report if "RedToCamera" in line], report
+
+
+def test_material_index_and_alpha_match_cycles(blender, empty_scene, tmp_path):
+    """Object Info's Material Index is the material's pass index, Alpha the object colour's."""
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "MaterialIndex")
+    m.pass_index = 4
+    info, comb = nodes.new("ShaderNodeObjectInfo"), nodes.new("ShaderNodeCombineXYZ")
+    tenth = nodes.new("ShaderNodeMath")
+    tenth.operation, tenth.inputs[1].default_value = "MULTIPLY", 0.1
+    links.new(info.outputs["Material Index"], tenth.inputs[0])
+    links.new(tenth.outputs[0], comb.inputs[0])
+    links.new(info.outputs["Alpha"], comb.inputs[1])
+    links.new(comb.outputs[0], emission.inputs["Color"])
+    tiles = _tiles(bpy, m, count=2)
+    tiles[1].color = (1.0, 1.0, 1.0, 0.3)
+    _setup(bpy, scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "material_index")
+    got = np.array([_at(ours, x, y) for x, y in TILES[:2]])
+    want = np.array([_at(theirs, x, y) for x, y in TILES[:2]])
+    np.testing.assert_allclose(got, want, atol=TILE_ATOL)
+    np.testing.assert_allclose(got, [[0.4, 1.0, 0.0], [0.4, 0.3, 0.0]], atol=TILE_ATOL)
