@@ -25,19 +25,18 @@ def _rot(x: int, k: int) -> int:
     return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
 
 
+# lookup3's final(): (word changed, word mixed in, rotation), in order.
+_FINAL = (("c", "b", 14), ("a", "c", 11), ("b", "a", 25), ("c", "b", 16), ("a", "c", 4), ("b", "a", 14),
+          ("c", "b", 24))
+
+
 def hash_uint2(kx: int, ky: int) -> int:
-    """Bob Jenkins' lookup3 final mix of two 32-bit words (Cycles' hash_uint2)."""
-    m = 0xFFFFFFFF
-    a = b = c = (0xDEADBEEF + (2 << 2) + 13) & m
-    a, b = (a + kx) & m, (b + ky) & m
-    c ^= b; c = (c - _rot(b, 14)) & m  # noqa: E702 -- lookup3's final(), step by step
-    a ^= c; a = (a - _rot(c, 11)) & m  # noqa: E702
-    b ^= a; b = (b - _rot(a, 25)) & m  # noqa: E702
-    c ^= b; c = (c - _rot(b, 16)) & m  # noqa: E702
-    a ^= c; a = (a - _rot(c, 4)) & m  # noqa: E702
-    b ^= a; b = (b - _rot(a, 14)) & m  # noqa: E702
-    c ^= b; c = (c - _rot(b, 24)) & m  # noqa: E702
-    return c
+    """Bob Jenkins' lookup3 hash of two 32-bit words (Cycles' hash_uint2)."""
+    start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
+    w = {"a": (start + kx) & 0xFFFFFFFF, "b": (start + ky) & 0xFFFFFFFF, "c": start}
+    for x, y, k in _FINAL:
+        w[x] = ((w[x] ^ w[y]) - _rot(w[y], k)) & 0xFFFFFFFF
+    return w["c"]
 
 
 def random_of(inst, obj) -> float:
