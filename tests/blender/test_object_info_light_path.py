@@ -428,3 +428,29 @@ def test_material_index_and_alpha_match_cycles(blender, empty_scene, tmp_path):
     want = np.array([_at(theirs, x, y) for x, y in TILES[:2]])
     np.testing.assert_allclose(got, want, atol=TILE_ATOL)
     np.testing.assert_allclose(got, [[0.4, 1.0, 0.0], [0.4, 0.3, 0.0]], atol=TILE_ATOL)
+
+
+def test_more_object_attributes_than_carried_are_said(blender, empty_scene, tmp_path):
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emissive(bpy, "ManyProperties")
+    total = None
+    for k in range(17):
+        attr = nodes.new("ShaderNodeAttribute")
+        attr.attribute_type, attr.attribute_name = "OBJECT", f"p{k:02d}"
+        if total is None:
+            total = attr.outputs["Fac"]
+            continue
+        add = nodes.new("ShaderNodeMath")
+        links.new(total, add.inputs[0])
+        links.new(attr.outputs["Fac"], add.inputs[1])
+        total = add.outputs[0]
+    links.new(total, emission.inputs["Strength"])
+    tile = _tiles(bpy, m, count=1)[0]
+    for k in range(17):
+        tile[f"p{k:02d}"] = 0.01
+    _setup(bpy, scene)
+    image = render(bpy, scene, tmp_path / "many.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    said = [line for line in stats()["report"] if "more than 16" in line]
+    assert said == ["the materials read more than 16 object, instancer or view-layer attributes; these read 0: p16"]
+    # The first 16 are read (the tile's colour is white x 16 x 0.01).
+    np.testing.assert_allclose(_at(image, *TILES[0]), [0.16] * 3, atol=TILE_ATOL)

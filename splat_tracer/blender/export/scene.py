@@ -473,6 +473,10 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
                                threads=threads)
+    left_out = render_scene.object_attribute_layout[nodes.MAX_OBJECT_ATTRIBUTES:]
+    if left_out:
+        report.once(f"the materials read more than {nodes.MAX_OBJECT_ATTRIBUTES} object, instancer or view-layer "
+                    f"attributes; these read 0: {', '.join(name for _, name in left_out)}")
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report, keys)
