@@ -27,10 +27,21 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
        "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM", "VECTOR_ROTATE", "RGB_TO_HSL", "HSL_TO_RGB",
-       "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR")
+       "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR", "OBJECT_VALUE", "LIGHT_PATH")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12
+# An instance's own values as OBJECT_VALUE reads them (native ShaderGlobals::object_values):
+# Object Info's outputs at these offsets (offset, width), then RGBA per object attribute
+# (Attribute node of type object, instancer or view layer) in the scene's order, at most
+# MAX_OBJECT_ATTRIBUTES (native kObjectInfoFloats, kMaxObjectAttributes).
+OBJECT_INFO = {"Location": (0, 3), "Color": (3, 3), "Alpha": (6, 1), "Object Index": (7, 1), "Random": (8, 1)}
+OBJECT_INFO_FLOATS = 9
+MAX_OBJECT_ATTRIBUTES = 16
+# Light Path's outputs in the order LIGHT_PATH writes them (native kLightPathFloats).
+LIGHT_PATH = ("Is Camera Ray", "Is Shadow Ray", "Is Diffuse Ray", "Is Glossy Ray", "Is Singular Ray",
+              "Is Reflection Ray", "Is Transmission Ray", "Is Volume Scatter Ray", "Ray Length", "Ray Depth",
+              "Diffuse Depth", "Glossy Depth", "Transparent Depth", "Transmission Depth")
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW")
@@ -117,22 +128,38 @@ class Program:
     # The point attributes its Attribute nodes read: (name, width) in the order their
     # ATTRIBUTE instructions number them (width 1: float, 3: vector or colour).
     attributes: tuple = ()
+    # The object attributes its Attribute nodes of type object, instancer or view layer read:
+    # (type, name) in the order their OBJECT_VALUE instructions number them.
+    object_attributes: tuple = ()
 
-    def native(self, aov_keys: Optional[dict] = None, attribute_columns: Optional[dict] = None) -> tuple:
+    def native(self, aov_keys: Optional[dict] = None, attribute_columns: Optional[dict] = None,
+               object_slots: Optional[dict] = None) -> tuple:
         """(code, data, outputs, images[, aovs]) as the core takes them; aovs: (k, 3) int32
         rows (key, colour, value) for the AOV Output nodes whose name aov_keys numbers.
         attribute_columns: {name: first column} of the scene's point attributes
-        (attribute_layout); without it the program's own order (columns_of)."""
+        (attribute_layout); without it the program's own order (columns_of). object_slots:
+        {(type, name): slot} of the scene's object attributes (object_attribute_layout);
+        without it the program's own order."""
         code = np.array(self.code, np.int32).reshape(-1, WIDTH)
         if self.attributes:
             columns = attribute_columns if attribute_columns is not None else columns_of(self.attributes)
             for i in np.flatnonzero(code[:, 0] == OPS.index("ATTRIBUTE")):
                 # A name the scene's clouds do not carry (past the limit): a column no point has, 0.
                 code[i, 3] = columns.get(self.attributes[code[i, 3]][0], MAX_POINT_ATTRIBUTES)
+        if self.object_attributes and object_slots is not None:
+            never = OBJECT_INFO_FLOATS + 4 * MAX_OBJECT_ATTRIBUTES  # no instance carries it: reads 0
+            for i in np.flatnonzero((code[:, 0] == OPS.index("OBJECT_VALUE")) & (code[:, 2] >= OBJECT_INFO_FLOATS)):
+                key = self.object_attributes[(code[i, 2] - OBJECT_INFO_FLOATS) // 4]
+                slot = object_slots.get(key, MAX_OBJECT_ATTRIBUTES)
+                code[i, 2] = OBJECT_INFO_FLOATS + 4 * slot if slot < MAX_OBJECT_ATTRIBUTES else never
         out = (code, np.array(self.data, np.float32),
                np.array(self.outputs, np.int32), tuple(image.native for image in self.images))
         rows = [(aov_keys[name], c, v) for name, c, v in self.aovs if aov_keys and name in aov_keys]
         return out + (np.array(rows, np.int32).reshape(-1, 3),) if rows else out
+
+    def reads_object(self) -> bool:
+        """Whether the program reads its instance's values (Object Info, object attributes)."""
+        return OPS.index("OBJECT_VALUE") in (row[0] for row in self.code)
 
     def writes_only_aovs(self) -> bool:
         """Whether the program drives no material input (it exists for its AOV Output nodes)."""
@@ -179,6 +206,12 @@ def attribute_layout(programs) -> tuple:
     return tuple(layout)
 
 
+def object_attribute_layout(programs) -> tuple:
+    """The object attributes ((type, name), sorted) a scene's programs read: each instance
+    carries their values in this order (the first MAX_OBJECT_ATTRIBUTES; the others read 0)."""
+    return tuple(sorted({key for p in programs if p is not None for key in p.object_attributes}))
+
+
 def attribute_columns(layout, values: dict, n: int) -> Optional[np.ndarray]:
     """The (n, k) float32 array a cloud carries for `layout` (attribute_layout), from its
     `values` ({name: (n,) or (n, 3) array}); a name it lacks is 0, as a missing attribute
@@ -208,6 +241,7 @@ class Builder:
         self.images: list = []
         self.aovs: list = []
         self.attributes: list = []
+        self.object_attributes: list = []
 
     def image(self, image: Image) -> int:
         """The index of an image in this program (added once)."""
@@ -257,6 +291,29 @@ class Builder:
         self.emit("ATTRIBUTE", colour, fac, self.attributes.index(entry), width)
         return colour, fac
 
+    def object_info(self, name: str) -> int:
+        """One of Object Info's outputs (OBJECT_INFO) of the instance being shaded."""
+        first, width = OBJECT_INFO[name]
+        out = self.register(width=width)
+        self.emit("OBJECT_VALUE", out, first, width)
+        return out
+
+    def object_attribute(self, kind: str, name: str) -> int:
+        """An object, instancer or view-layer attribute (`kind`) of the instance being shaded:
+        a 4-wide register block (R, G, B, A)."""
+        key = (str(kind), str(name))
+        if key not in self.object_attributes:
+            self.object_attributes.append(key)
+        out = self.register(width=4)
+        self.emit("OBJECT_VALUE", out, OBJECT_INFO_FLOATS + 4 * self.object_attributes.index(key), 4)
+        return out
+
+    def light_path(self) -> int:
+        """Light Path's outputs (LIGHT_PATH order) for the ray that met the point: the first register."""
+        out = self.register(width=len(LIGHT_PATH))
+        self.emit("LIGHT_PATH", out)
+        return out
+
     def output(self, name: str, reg: int) -> None:
         self.outputs[name] = reg
 
@@ -266,7 +323,7 @@ class Builder:
 
     def program(self) -> Program:
         return Program(tuple(self.code), tuple(self.data), tuple(self.outputs[n] for n in OUTPUTS), tuple(self.images),
-                       tuple(self.aovs), tuple(self.attributes))
+                       tuple(self.aovs), tuple(self.attributes), tuple(self.object_attributes))
 
 
 def run(program: Program, n: int = 1, point_alpha=1.0, backfacing=0.0, tangent_sign=1.0, attributes=None,

@@ -13,7 +13,7 @@ from ..util import matrices
 from ..util.arrays import as_f32
 from .camera import Camera, window_rect
 from .method import Method
-from .nodes import attribute_layout, columns_of
+from .nodes import MAX_OBJECT_ATTRIBUTES, OBJECT_INFO_FLOATS, attribute_layout, columns_of, object_attribute_layout
 from .shading import (LIGHT_FIELDS, LIGHT_GROUP_PREFIX, LIGHT_PASSES, MATERIAL_FIELDS, MAX_LIGHT_GROUPS, PASSES, Light,
                       Material, RenderSettings, World)
 from .splats import MAX_COORDINATE, SplatCloud
@@ -57,11 +57,14 @@ class InstanceRow(NamedTuple):
 
 
 def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: Sequence, lights: Sequence,
-                 threads: int = 0, programs: Optional[Sequence] = None) -> "_core.RenderScene":
+                 threads: int = 0, programs: Optional[Sequence] = None,
+                 object_values: Optional[np.ndarray] = None) -> "_core.RenderScene":
     """The core's RenderScene over native geometries (SplatCloud._scene, Mesh._mesh), one
     row per instance, materials and lights as their pack() rows, and per material its node
     program (nodes.Program.native()) or None -- None for all: no programs. Nothing is checked
-    here: RenderScene checks first, and the fuzz harness passes unchecked rows on purpose."""
+    here: RenderScene checks first, and the fuzz harness passes unchecked rows on purpose.
+    object_values: (n, k) per instance what its programs read of it (Object Info, object
+    attributes: nodes.OBJECT_INFO), or None when no program reads any."""
     n = len(rows)
     col = lambda name, dtype, width=(): np.ascontiguousarray(
         np.array([getattr(r, name) for r in rows], dtype).reshape((n, *width)))
@@ -85,7 +88,8 @@ def native_scene(geometries: Sequence, rows: Sequence[InstanceRow], materials: S
         shadow_catcher=col("shadow_catcher", np.uint8) if any(r.shadow_catcher for r in rows) else None,
         motion=motion, motion_range=motion_range,
         # Only materials with node programs pay for them: without any, the core's path is as before.
-        programs=programs if programs is not None and any(p is not None for p in programs) else None)
+        programs=programs if programs is not None and any(p is not None for p in programs) else None,
+        object_values=None if object_values is None else np.ascontiguousarray(object_values, np.float32))
 
 
 class Mesh:
@@ -149,6 +153,32 @@ class Instance:
     name: str = ""
     asset: str = ""
     light_group: str = ""  # its emission's light group (Object > Shading > Light Group; "": none)
+    # What Object Info gives of it: location (world space: the local frame's origin added
+    # back), colour (RGBA: Object > Viewport Display > Color), pass index, random (0..1) --
+    # empty: its matrix's translation, white, pass_index, 0.
+    object_info: tuple = ()
+    # Attribute nodes of type object, instancer or view layer: ((type, name), (r, g, b, a))
+    # pairs; a pair its materials read and it lacks is 0, as Cycles gives a missing one.
+    object_attributes: tuple = ()
+
+
+def _object_values(inst: Instance, slots: dict) -> np.ndarray:
+    """An instance's row of object values (nodes.OBJECT_INFO, then its attributes by `slots`)."""
+    info = np.asarray(inst.object_info, np.float64).ravel()
+    if info.size == 0:
+        location = np.asarray(inst.matrix, np.float64).reshape(4, 4)[:3, 3]
+        info = np.array([*location, 1.0, 1.0, 1.0, 1.0, float(inst.pass_index), 0.0])
+    if info.size != OBJECT_INFO_FLOATS:
+        raise ValueError(f"instance '{inst.name}': object_info must hold {OBJECT_INFO_FLOATS} values, got {info.size}")
+    row = np.zeros(OBJECT_INFO_FLOATS + 4 * len(slots), np.float64)
+    row[:OBJECT_INFO_FLOATS] = info
+    for key, value in inst.object_attributes:
+        if tuple(key) in slots:
+            first = OBJECT_INFO_FLOATS + 4 * slots[tuple(key)]
+            row[first:first + 4] = np.asarray(value, np.float64).ravel()[:4]
+    if not np.isfinite(row).all():
+        raise ValueError(f"instance '{inst.name}': object values must be finite")
+    return row.astype(np.float32)
 
 
 class FrameResult(NamedTuple):
@@ -235,9 +265,16 @@ class RenderScene:
                                  f"the materials read {self.attribute_layout}")
         columns = columns_of(self.attribute_layout)
         self.instance_light_groups = tuple(inst.light_group for inst in instances)
+        programs = [m.program for m in materials]
+        self.object_attribute_layout = object_attribute_layout(programs)
+        slots = {key: i for i, key in enumerate(self.object_attribute_layout[:MAX_OBJECT_ATTRIBUTES])}
+        # Only a scene whose programs read their instance's values carries them.
+        object_values = None
+        if any(p is not None and p.reads_object() for p in programs):
+            object_values = np.stack([_object_values(inst, slots) for inst in instances])
         self._scene = native_scene(geometries, rows, [m.pack() for m in materials], [l.pack() for l in lights],
-                                   threads, [m.program.native(keys, columns) if m.program is not None else None
-                                             for m in materials])
+                                   threads, [p.native(keys, columns, slots) if p is not None else None
+                                             for p in programs], object_values)
         self.geometry_count = len(geometries)
         self.shadow_catchers = sum(bool(r.shadow_catcher) for r in rows)  # instances that are shadow catchers
         self.moving = sum(r.motion is not None for r in rows)  # instances that move over the shutter

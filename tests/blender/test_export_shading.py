@@ -110,9 +110,10 @@ def test_an_object_attribute_is_not_a_point_colour(blender, empty_scene, es, rep
     attribute = material.node_tree.nodes.new("ShaderNodeAttribute")
     attribute.attribute_type, attribute.attribute_name = "OBJECT", "color"
     material.node_tree.links.new(attribute.outputs["Color"], principled.inputs["Base Color"])
-    assert not es.material_of(material, report).use_point_colour
-    assert report.lines == ["material 'Tinted': the 'Attribute (object attributes)' node is not supported; "
-                            "Base Color uses its unlinked value (0.8, 0.8, 0.8)"]
+    m = es.material_of(material, report)
+    assert not m.use_point_colour
+    assert m.program is not None and m.program.object_attributes == (("OBJECT", "color"),)
+    assert report.lines == []
 
 
 def test_an_unsupported_texture_falls_back_to_the_default_with_one_report_line(blender, empty_scene, es, report):

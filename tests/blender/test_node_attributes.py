@@ -89,8 +89,9 @@ def test_a_missing_attribute_reads_zero_as_in_cycles(blender, empty_scene, tmp_p
         np.testing.assert_allclose(mine, cycles, rtol=COLOUR_RTOL, atol=0.01)
 
 
-def test_object_attributes_are_still_said(blender, empty_scene):
-    """An Attribute node of the object (not the geometry) kind is not evaluated: said once."""
+def test_object_attributes_are_compiled_not_read_from_the_points(blender, empty_scene):
+    """An Attribute node of the object (not the geometry) kind reads the instance's value
+    (tests/blender/test_object_info_light_path.py), not a point attribute: nothing said."""
     bpy = blender
     from splat_tracer.blender.export import shading as export_shading
     from splat_tracer.render import shading
@@ -98,10 +99,10 @@ def test_object_attributes_are_still_said(blender, empty_scene):
     m = _ramped(bpy, "intensity")
     m.node_tree.nodes["Attribute"].attribute_type = "OBJECT"
     report = shading.Report()
-    export_shading.material_of(m, report)
-    said = [line for line in report.lines if "Attribute" in line]
-    assert said == ["material 'Ramped': the 'Attribute (object attributes)' node is not supported; "
-                    "Factor uses its unlinked value 0.5"], report.lines
+    material = export_shading.material_of(m, report)
+    assert not [line for line in report.lines if "Attribute" in line], report.lines
+    assert material.program.object_attributes == (("OBJECT", "intensity"),)
+    assert material.program.attributes == ()
 
 
 def test_an_attribute_linked_straight_into_the_colour_is_read_not_the_point_colours(blender, empty_scene,

@@ -60,8 +60,9 @@ class Compiler:
     into world space; object_space itself None where it is not known (a lamp's tree: its
     positions are read in the local frame)."""
 
-    def __init__(self, say, object_space=None):
+    def __init__(self, say, object_space=None, material_index: float = 0.0):
         self.b = Builder()
+        self.material_index = float(material_index)  # the material's pass index (Object Info)
         self.say = say
         self.object_space = object_space
         self.memo: dict = {}
@@ -311,7 +312,40 @@ class Compiler:
     def _vertex_color(self, node, stack):
         return self._point_data(node, False)
 
+    def _object_info(self, node, stack):
+        """Object Info: the instance's own values (export/object_info.py), read only where
+        linked; Material Index is the material's pass index, as Cycles gives it."""
+        result = {}
+        for s in node.outputs:
+            if not s.is_linked:
+                continue
+            if s.name in nodes.OBJECT_INFO:
+                result[s.identifier] = self.b.object_info(s.name)
+            elif s.name == "Material Index":
+                result[s.identifier] = self.const(self.material_index, 1)
+        return result
+
+    def _light_path(self, node, stack):
+        """Light Path: what the ray that met the point is (the integrator's word, per ray)."""
+        first = self.b.light_path()
+        result = {}
+        for s in node.outputs:
+            if s.name in nodes.LIGHT_PATH:
+                result[s.identifier] = first + nodes.LIGHT_PATH.index(s.name)
+            elif s.name == "Portal Depth":  # no portals here: Cycles' count is 0 without them
+                result[s.identifier] = self.const(0.0, 1)
+        return result
+
+    def _object_attribute(self, node):
+        """An Attribute node of type object, instancer or view layer: the instance's value
+        (export/object_info.py looks it up as Cycles does); Fac the colour's average."""
+        rgba = self.b.object_attribute(node.attribute_type, node.attribute_name)
+        fac = self.convert(rgba, "VECTOR", 1)
+        return self._ids(node, {"Color": rgba, "Vector": rgba, "Fac": fac, "Alpha": rgba + 3})
+
     def _attribute(self, node, stack):
+        if node.attribute_type in ("OBJECT", "INSTANCER", "VIEW_LAYER"):
+            return self._object_attribute(node)
         if node.attribute_type != "GEOMETRY":
             raise Unsupported(node, f"{node.attribute_type.lower()} attributes")
         if node.attribute_name in COLOUR_ATTRIBUTE_NAMES:
@@ -1050,15 +1084,15 @@ SHADER_INPUTS = {
 }
 
 
-def compile_shader(node, say, skip=(), aovs=(), object_space=None) -> tuple:
+def compile_shader(node, say, skip=(), aovs=(), object_space=None, material_index: float = 0.0) -> tuple:
     """(Program or None, the input sockets it drives) for a shader node's linked inputs
     (those in SHADER_INPUTS, but not the sockets in `skip`, which the constant path reads)
     and for AOV Output nodes: `aovs`, (AOV name, width, the node's Color or Value socket)
     each. None when nothing needs a program: such a material costs nothing more to render.
-    node: None when nothing feeds the Material Output (AOVs only). object_space: see
-    Compiler."""
+    node: None when nothing feeds the Material Output (AOVs only). object_space,
+    material_index: see Compiler."""
     fields = SHADER_INPUTS.get(node.type, {}) if node is not None else {}
-    compiler = Compiler(say, object_space)
+    compiler = Compiler(say, object_space, material_index)
     driven = []
     for field, names in fields.items():
         if isinstance(names, tuple):  # emission: colour x strength

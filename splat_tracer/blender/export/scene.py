@@ -30,6 +30,7 @@ from ...util.columns import finite_rows, nonzero_rows, rows_within
 from .motion import instance_key
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import nodes as export_nodes
+from . import object_info
 from . import shading as export_shading
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
@@ -468,14 +469,34 @@ def export_scene(depsgraph: bpy.types.Depsgraph, geometry_cache, origin, radius_
             geometry, matrix, materials,
             visibility=frozenset(k for k in RAY_VISIBILITY if vis[k]), holdout=vis["holdout"],
             pass_index=_source(obj).pass_index, shadow_catcher=vis["shadow_catcher"], motion=steps, name=obj.name,
-            asset=asset_name(obj), light_group=getattr(_source(obj), "lightgroup", "")))
+            asset=asset_name(obj), light_group=getattr(_source(obj), "lightgroup", ""),
+            **_object_values(inst, obj, parent, materials, depsgraph)))
         counts[kind] += 1
         counts["closed"] += id(geometry) in frame.closed
     render_scene = RenderScene(instances, lights, export_shading.world_of(depsgraph.scene, report),
                                threads=threads)
+    left_out = render_scene.object_attribute_layout[nodes.MAX_OBJECT_ATTRIBUTES:]
+    if left_out:
+        report.once(f"the materials read more than {nodes.MAX_OBJECT_ATTRIBUTES} object, instancer or view-layer "
+                    f"attributes; these read 0: {', '.join(name for _, name in left_out)}")
     emission = any(any(c > 0 for c in m.emission) for m in frame.materials.values())
     return ExportedScene(render_scene, origin, len(instances), counts["cloud"], counts["closed"], counts["mesh"],
                          frame.splats, frame.triangles, len(lights), emission, report, keys)
+
+
+def _object_values(inst, obj, parent, materials, depsgraph) -> dict:
+    """Instance's object_info and object_attributes: what the node programs of its materials
+    read of its object (Object Info; Attribute nodes of type object, instancer or view layer:
+    export/object_info.py), looked up while the depsgraph instance is valid (its iterator
+    reuses it); nothing when no program reads any."""
+    programs = [m.program for m in materials if m.program is not None]
+    if not any(p.reads_object() for p in programs):
+        return {}
+    info = object_info.object_info(inst, obj, np.array(inst.matrix_world, np.float64), _source(obj).pass_index)
+    keys = nodes.object_attribute_layout(programs)
+    values = tuple((key, object_info.attribute(*key, obj, parent, depsgraph.view_layer, depsgraph.scene))
+                   for key in keys)
+    return {"object_info": info, "object_attributes": values}
 
 
 def _object_space(depsgraph, origin):

@@ -309,13 +309,14 @@ def needs_program(node, direct: Callable) -> bool:
     return any(not direct(s) for leaf in _leaves(node) for s in _linked_inputs(leaf))
 
 
-def compile_mix(node, say, leaf_fields: Callable, defaults: dict, is_bsdf: str, aovs=(), object_space=None) -> tuple:
+def compile_mix(node, say, leaf_fields: Callable, defaults: dict, is_bsdf: str, aovs=(), object_space=None,
+                material_index: float = 0.0) -> tuple:
     """(Program, the sockets it drives) for a Mix or Add Shader `node` whose Fac or branches
     have linked inputs (needs_program): its outputs are the blended fields some link reaches.
     leaf_fields(node): shading's constant fields of a shader node (None: nothing connected);
     defaults: the Material's; is_bsdf: the key marking a reflecting branch. Raises
     nodes.ProgramTooLarge as compile_shader does."""
-    compiler = nodes.Compiler(say, object_space)
+    compiler = nodes.Compiler(say, object_space, material_index)
     blender = _Blender(compiler, leaf_fields, defaults, is_bsdf)
     blender.normals = any(s.name == "Normal" for leaf in _leaves(node) for s in _linked_inputs(leaf))
     fields = blender.shader(node)

@@ -446,7 +446,7 @@ def _surface_material(bl_material, report: shading.Report, aovs: dict, object_sp
     if source is None:
         sockets.say(": nothing is connected to the Material Output's Surface; rendered black, as Cycles does")
     program = _program(source[0] if source is not None else None, sockets, _aov_outputs(tree, aovs, sockets),
-                       object_space)
+                       object_space, float(getattr(bl_material, "pass_index", 0)))
     material = _clamped(_shader(output.inputs["Surface"], sockets), sockets)
     if not _bump_correction(bl_material):
         material = dataclasses.replace(material, bump_correction=False)
@@ -482,7 +482,7 @@ def _bump_correction(bl_material) -> bool:
     return bool(getattr(getattr(bl_material, "cycles", None), "use_bump_map_correction", True))
 
 
-def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
+def _program(shader, sockets: _Sockets, aovs=(), object_space=None, material_index: float = 0.0):
     """The node program for the linked inputs of the material's shader (None: nothing feeds
     the Material Output) and its AOV Output nodes (_aov_outputs), or None (nothing needs
     one). Colour Attribute and Attribute nodes linked straight into the colour or alpha keep
@@ -492,15 +492,16 @@ def _program(shader, sockets: _Sockets, aovs=(), object_space=None):
     try:
         if shader is not None and shader.type in shader_mix.MIX_SHADERS:
             if not shader_mix.needs_program(shader, lambda s: s.node.type != "EMISSION" and _reads_points(s)):
-                return _program(None, sockets, aovs, object_space)  # a constant blend (AOVs only, if any)
+                return _program(None, sockets, aovs, object_space, material_index)  # a constant blend (AOVs only)
             # The shader readers' own lines are said when _shader reads the tree next; the
             # readers here only give the constant fields the blend starts from.
             quiet = _Sockets("material", "", shading.Report())
             program, driven = shader_mix.compile_mix(shader, sockets.say, lambda node: _shader_node(node, quiet),
-                                                     _DEFAULTS, _IS_BSDF, aovs=aovs, object_space=object_space)
+                                                     _DEFAULTS, _IS_BSDF, aovs=aovs, object_space=object_space,
+                                                     material_index=material_index)
         else:
             program, driven = nodes.compile_shader(shader, sockets.say, skip=direct, aovs=aovs,
-                                                   object_space=object_space)
+                                                   object_space=object_space, material_index=material_index)
     except nodes.ProgramTooLarge as e:
         sockets.say(f": the node tree is too large to evaluate ({e}); linked inputs use their unlinked values")
         return None
@@ -563,6 +564,7 @@ def _lamp_emission(light, position, direction, say):
         return colour
     from ...render import nodes as programs
 
+    program = _as_lamp_light(program, say)
     reads = {programs.GLOBALS[row[2]] for row in np.array(program.code).reshape(-1, programs.WIDTH)
              if row[0] == programs.OPS.index("GLOBAL")}
     if reads:
@@ -573,6 +575,24 @@ def _lamp_emission(light, position, direction, say):
     out = program.outputs[list(programs.OUTPUTS).index("emission")]
     value = np.asarray(regs[0, out:out + 3], np.float64)
     return np.where(np.isfinite(value), np.maximum(value, 0.0), 0.0)
+
+
+def _as_lamp_light(program, say):
+    """A lamp's program as Cycles evaluates it for the light the lamp sends: Light Path with
+    PATH_RAY_EMISSION alone (every output 0: its LIGHT_PATH rows become no-ops, leaving their
+    registers at 0); Object Info and object attributes have no instance here (0, said)."""
+    from ...render import nodes as programs
+
+    code = np.array(program.code, np.int32).reshape(-1, programs.WIDTH)
+    if (code[:, 0] == programs.OPS.index("OBJECT_VALUE")).any():
+        say("its node tree's Object Info and object attributes read 0 (a lamp is no instance here)")
+    rows = code[:, 0] == programs.OPS.index("LIGHT_PATH")
+    if not rows.any():
+        return program
+    code[rows, 0] = programs.OPS.index("COPY")
+    code[rows, 2], code[rows, 3] = code[rows, 1], 1  # a register onto itself
+    code[rows, 4:] = 0
+    return dataclasses.replace(program, code=tuple(map(tuple, code.tolist())))
 
 
 # Cycles' default (and largest useful) Max Bounces of a lamp or the world: below it, the limit acts.

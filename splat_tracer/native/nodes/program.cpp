@@ -90,6 +90,8 @@ const Layout &layout(Op op) {
         /* ObjectSpace */ {{kR3, kR3, kEnum}, {0, 0, 6}},
         /* VectorMapRange */ {{kR3, kR3, kRW, kEnum, kEnum}, {0, 0, 15, 4, 2}},
         /* Gabor */ {{kR3, kR3, kRW, kR3, kEnum}, {0, 0, 4, 0, 2}},
+        /* ObjectValue (the output's width checked apart; first kMaxObjectValues: never carried, 0) */ {{kNone, kEnum, kEnum}, {0, kMaxObjectValues + 1, 5}},
+        /* LightPath */ {{kRW}, {kLightPathFloats}},
     };
     return table[int(op)];
 }
@@ -624,6 +626,8 @@ void NodeProgram::validate() {
             bump_depth[row] = depth;
             uses_bump = true;
         }
+        if (op == Op::ObjectValue && (c[3] < 1 || c[1] < 0 || int64_t(c[1]) + c[3] > n)) fail("bad object value");
+        if (op == Op::LightPath) uses_light_path = true;
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Global && c[2] == int32_t(Global::Window)) uses_window = true;
         if (op == Op::ImageTiles && (c[5] < 1 || c[4] < 0 || int64_t(c[4]) + 2 * int64_t(c[5]) > n))
@@ -1203,6 +1207,17 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 const float *p = r + c[3];
                 const GaborOutputs g = gabor_texture(load3(r, c[2]), p[0], p[1], p[2], p[3], load3(r, c[4]), c[5] != 0);
                 store3(r, c[1], {g.value, g.phase, g.intensity});
+                break;
+            }
+            case Op::ObjectValue:
+                for (int k = 0; k < c[3]; ++k)
+                    r[c[1] + k] = c[2] + k < sg.object_value_count ? sg.object_values[c[2] + k] : 0.f;
+                break;
+            case Op::LightPath: {
+                // Without the integrator's word: a camera ray's first surface (depths 0).
+                static const float kCameraRay[kLightPathFloats] = {1.f};
+                const float *l = sg.light_path ? sg.light_path : kCameraRay;
+                for (int k = 0; k < kLightPathFloats; ++k) r[c[1] + k] = l[k];
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -26,6 +26,16 @@ namespace splat {
 
 constexpr int kNodeWidth = 8;          // int32 per instruction
 constexpr int kMaxNodeRegisters = 4096;  // a program's registers live on the stack (16 KiB)
+// An instance's own values (Instance::object_values, render/nodes.py OBJECT_INFO): Object
+// Info's location (3), colour (3), alpha, pass index and random, then 4 floats (RGBA) per
+// object, instancer or view-layer attribute the scene's programs read, at most this many.
+constexpr int kObjectInfoFloats = 9;
+constexpr int kMaxObjectAttributes = 16;
+constexpr int kMaxObjectValues = kObjectInfoFloats + 4 * kMaxObjectAttributes;
+// Light Path: what the ray that met the point is (render/nodes.py LIGHT_PATH, the node's
+// outputs in order): is camera, shadow, diffuse, glossy, singular, reflection, transmission,
+// volume scatter; ray length; ray, diffuse, glossy, transparent, transmission depth.
+constexpr int kLightPathFloats = 14;
 
 // What a program reads from the shading point (Texture Coordinate, Geometry, Attribute).
 struct ShaderGlobals {
@@ -51,6 +61,11 @@ struct ShaderGlobals {
     Vec3 window;             // Cycles' Window coordinates (0..1 over the camera's frame, z 0), 0 without a camera
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
+    // The instance's values (kObjectInfoFloats and its object attributes); null: none, read as 0.
+    const float *object_values = nullptr;
+    int object_value_count = 0;
+    // The ray that met this point (kLightPathFloats); null: a camera ray's first surface.
+    const float *light_path = nullptr;
     // The Bump node's two nearby shading points: for each, how far every position-dependent
     // global moves from this point (all zero when the program has no Bump node).
     struct Offset {
@@ -149,6 +164,9 @@ enum class Op : int32_t {
     VectorMapRange, // out, vector, params (15: from_min from_max to_min to_max steps, vec3 each), mode, clamp
     Gabor,          // out (3: value, phase, intensity), vector, params (4: scale frequency anisotropy orientation_2d),
                     // orientation_3d, dimensions (0: 2-D, 1: 3-D) (nodes/gabor.h)
+    ObjectValue,    // out, first, width (1-4): ShaderGlobals::object_values[first, first + width) (Object Info,
+                    // Attribute of type object / instancer / view layer); past object_value_count: 0
+    LightPath,      // out (kLightPathFloats registers): ShaderGlobals::light_path
     Count
 };
 
@@ -170,6 +188,7 @@ struct NodeProgram {
     bool uses_window = false;   // a Texture Coordinate reads Window (set by validate)
     bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
     bool uses_bump = false;     // a Bump node needs ShaderGlobals::bump (set by validate)
+    bool uses_light_path = false;  // a Light Path node reads ShaderGlobals::light_path (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),

@@ -293,13 +293,13 @@ bool motion_keys(const double *rows, Py_ssize_t count, const char *what, Py_ssiz
 PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) {
     static const char *kwlist[] = {"geometries", "geometry_index", "to_world", "to_object", "material_range",
                                    "visibility", "holdout", "pass_index", "materials", "lights", "threads",
-                                   "shadow_catcher", "motion", "motion_range", "programs", nullptr};
+                                   "shadow_catcher", "motion", "motion_range", "programs", "object_values", nullptr};
     PyObject *ogeo, *oidx, *ow, *oo, *orange, *ovis, *ohold, *opass, *omat, *olight, *ocatch = Py_None,
-             *omotion = Py_None, *omrange = Py_None, *oprog = Py_None;
+             *omotion = Py_None, *omrange = Py_None, *oprog = Py_None, *oobj = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOO|iOOOOO", const_cast<char **>(kwlist), &ogeo, &oidx, &ow,
                                      &oo, &orange, &ovis, &ohold, &opass, &omat, &olight, &threads, &ocatch, &omotion,
-                                     &omrange, &oprog))
+                                     &omrange, &oprog, &oobj))
         return nullptr;
     if (!check_threads(threads)) return nullptr;
     PyObject *geometries = PySequence_Tuple(ogeo);
@@ -328,6 +328,12 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
     if (omotion != Py_None && (!get_array(omotion, "motion", 'd', 2, sm12, false, motion) ||
                                !get_array(omrange, "motion_range", 'i', 2, s2, false, mrange)))
         return nullptr;
+    // Object Info and object attributes: one row per instance (ShaderGlobals::object_values).
+    View objv;
+    Py_ssize_t sobj[2] = {n, -1};
+    if (oobj != Py_None && !get_array(oobj, "object_values", 'f', 2, sobj, false, objv)) return nullptr;
+    if (objv.held && objv.dim(1) > kMaxObjectValues)
+        return PyErr_Format(PyExc_ValueError, "object_values: at most %d per instance", kMaxObjectValues);
     const Py_ssize_t n_mat = mat.dim(0), n_light = light.dim(0);
 
     std::vector<Instance> instances(static_cast<size_t>(n));
@@ -354,6 +360,13 @@ PyObject *RenderScene_new(PyTypeObject *type, PyObject *args, PyObject *kwargs) 
         inst.holdout = holdout.data<uint8_t>()[i] != 0;
         inst.shadow_catcher = catcher.held && catcher.data<uint8_t>()[i] != 0;
         inst.pass_index = pass.data<float>()[i];
+        if (objv.held) {
+            const float *row = objv.data<float>() + objv.dim(1) * i;
+            for (Py_ssize_t k = 0; k < objv.dim(1); ++k)
+                if (!std::isfinite(row[k]))
+                    return PyErr_Format(PyExc_ValueError, "instance %zd: object value %zd is not finite", i, k);
+            inst.object_values.assign(row, row + objv.dim(1));
+        }
         if (mrange.held) {
             const int32_t mfirst = mrange.data<int32_t>()[2 * i], mcount = mrange.data<int32_t>()[2 * i + 1];
             if (mcount == 0) continue;
@@ -912,10 +925,12 @@ PyType_Slot RenderScene_slots[] = {
     {Py_tp_getset, RenderScene_getset},
     {Py_tp_doc, const_cast<char *>("RenderScene(geometries, geometry_index, to_world, to_object, material_range, "
                                    "visibility, holdout, pass_index, materials, lights, threads=0, shadow_catcher=None, "
-                                   "motion=None, motion_range=None, programs=None)\n\nmotion: (M, 12) float64 to_world rows of "
+                                   "motion=None, motion_range=None, programs=None, object_values=None)\n\nmotion: (M, 12) float64 to_world rows of "
                                    "the moving instances at evenly spaced times over the shutter; motion_range: "
                                    "(n, 2) int32 each instance's (first row, count), count 0 when it does not move; "
-                                   "programs: per material its node program (render/nodes.py Program.native()) or None.")},
+                                   "programs: per material its node program (render/nodes.py Program.native()) or None; "
+                                   "object_values: (n, k) float32, each instance's Object Info and object attributes "
+                                   "(render/nodes.py OBJECT_INFO), k <= 73.")},
     {0, nullptr},
 };
 

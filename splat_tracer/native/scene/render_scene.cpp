@@ -48,7 +48,7 @@ RenderScene::RenderScene(std::vector<Instance> instances, std::vector<Material> 
     : instances_(std::move(instances)), materials_(std::move(materials)), lights_(std::move(lights)),
       programs_(std::move(programs)) {
     if (materials_.empty()) materials_.push_back(Material());
-    for (NodeProgram &p : programs_) p.validate();
+    for (NodeProgram &p : programs_) p.validate(), any_light_path_ |= p.uses_light_path;
     for (Material &m : materials_) {
         if (m.program >= int(programs_.size())) m.program = -1;
         const bool programmed_alpha = m.program >= 0 && programs_[m.program].outputs[int(Output::Alpha)] >= 0;
@@ -98,12 +98,16 @@ Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float
     sp.p = inst.to_world.point(inst.mesh->point(h));
     sp.material = inst.material_of(inst.mesh->material(tri));
     const Material &m = materials_[size_t(sp.material)];
-    const Material out = m.program >= 0 ? evaluate_program(m, sp, wo, nullptr, camera, time, nullptr) : m;
+    // Cycles evaluates a sampled emitter's shader with PATH_RAY_EMISSION alone: every Light
+    // Path output 0 (its depths too, where Cycles gives the path's).
+    static const float kEmissionRay[kLightPathFloats] = {};
+    const Material out = m.program >= 0 ? evaluate_program(m, sp, wo, nullptr, camera, time, nullptr, kEmissionRay) : m;
     return out.emission * out.alpha;
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera, float time, const AovSink *aov) const {
+                                       const Camera *camera, float time, const AovSink *aov,
+                                       const float *light_path) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     // A moving instance's object space is where it is at the ray's time: the point was found
@@ -195,6 +199,8 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
     sg.attributes = sp.attributes, sg.attribute_count = sp.n_attributes;
+    sg.object_values = inst.object_values.data(), sg.object_value_count = int(inst.object_values.size());
+    sg.light_path = light_path;
     float mesh_attributes[kMaxPointAttributes];
     if (inst.mesh && inst.mesh->attribute_count() > 0) {  // interpolated over the triangle, as Cycles does
         inst.mesh->attributes(sp.prim, sp.b1, sp.b2, mesh_attributes);

@@ -83,6 +83,9 @@ struct Instance {
     // reflections but is itself left out of Combined (the integrator's write_catcher).
     bool shadow_catcher = false;
     float pass_index = 0;        // Object Index pass
+    // What its node programs read of it (Object Info, object and instancer attributes): laid
+    // out as ShaderGlobals::object_values; empty when no program reads any (costs nothing).
+    std::vector<float> object_values;
     AABB bounds;                 // in the scene frame
 
     bool moves() const { return !motion.empty(); }
@@ -161,13 +164,15 @@ class RenderScene {
     // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
     // `camera`: the render's, for the Camera texture coordinate. `aov`: where the program's
     // AOV Output nodes write (a camera ray still writing its shader AOVs), or null.
+    // `light_path`: the ray's kind and depths for a Light Path node (kLightPathFloats; null: a
+    // camera ray's first surface); only needed where any_light_path().
     Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f,
-                         const AovSink *aov = nullptr) const {
+                         const AovSink *aov = nullptr, const float *light_path = nullptr) const {
         const Material &m = materials_[sp.material];
         // A program written for its AOVs alone runs only where they are written.
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
         const Vec3 surface = sp.ns;
-        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
+        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov, light_path);
         sp.bumped = out.bump_correction && (sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z);
         sp.ns_surface = surface;
         return out;
@@ -191,6 +196,7 @@ class RenderScene {
     bool any_emission() const { return any_emission_; }  // a material emits light
     bool any_catcher() const { return any_catcher_; }    // an instance is a shadow catcher
     bool any_motion() const { return any_motion_; }      // an instance moves over the shutter
+    bool any_light_path() const { return any_light_path_; }  // a node program has a Light Path node
     // The point is an open cloud's back (SplatScene::open_back); never a mesh's.
     bool open_back(const SurfacePoint &sp) const {
         const Instance &inst = instances_[sp.instance];
@@ -216,7 +222,8 @@ class RenderScene {
 
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                              const Camera *camera, float time, const AovSink *aov) const;
+                              const Camera *camera, float time, const AovSink *aov,
+                              const float *light_path = nullptr) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
@@ -234,6 +241,7 @@ class RenderScene {
     MeshLights mesh_lights_;
     BVH top_;
     bool any_transparent_ = false, any_emission_ = false, any_catcher_ = false, any_motion_ = false;
+    bool any_light_path_ = false;
 };
 
 }  // namespace splat

@@ -28,6 +28,7 @@ struct Integrator::PathState {
     Origin from;
     float throughput = 1.f;
     bool specular = true;  // camera, mirror or clear-glass ray: it may see the lamps themselves
+    bool singular = false;  // sampled from a mirror or clear glass (Light Path's Is Singular Ray)
     // A sampled reflection from `mis_from`, with density `mis_pdf`, where mesh lights were
     // sampled too: emission it meets on them is weighed by MIS. 0: emission counts in full.
     float mis_pdf = 0.f;
@@ -40,6 +41,28 @@ struct Integrator::PathState {
     LightSums *split = nullptr;
     int lobe = kLobeNone;
 };
+
+namespace {
+
+// Light Path's view of a ray (program.h kLightPathFloats), as Cycles' path flags and bounce
+// counts give it: a camera ray stays one through transparent surfaces; a bounce is a
+// reflection (diffuse or glossy) or a transmission (glossy), a mirror's or clear glass's also
+// singular; a shadow ray is only that (Cycles evaluates shadows with PATH_RAY_SHADOW alone),
+// with the path's depths and its own transparent crossings. `t`: the ray's length to the point.
+template <class State>
+void light_path_of(const State &st, float t, bool shadow, int transparent, float *out) {
+    const bool camera = !shadow && st.camera, diffuse = !shadow && !st.camera && st.kind == kVisDiffuse;
+    const bool glossy = !shadow && !st.camera && (st.kind == kVisGlossy || st.kind == kVisTransmission);
+    const bool transmission = !shadow && !st.camera && st.kind == kVisTransmission;
+    const float v[kLightPathFloats] = {float(camera), float(shadow), float(diffuse), float(glossy),
+                                       float(glossy && st.singular), float(diffuse || (glossy && !transmission)),
+                                       float(transmission), 0.f /* volume scatter: no volumes */, t,
+                                       float(st.bounces), float(st.diffuse), float(st.glossy), float(transparent),
+                                       float(st.transmission)};
+    std::copy(v, v + kLightPathFloats, out);
+}
+
+}  // namespace
 
 struct Integrator::Primary {
     bool hit = false;
@@ -681,7 +704,10 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr);
+        float path[kLightPathFloats];
+        if (scene_.any_light_path()) light_path_of(st, sp.t, false, st.transparent, path);
+        mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr,
+                                 scene_.any_light_path() ? path : nullptr);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
         if (aov_writing && film_.aov.done_after(opacity)) aov_writing = false;
@@ -844,6 +870,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         // sampling cannot find and which would only add fireflies (not traced, like the
         // glass's shadow).
         next.specular = st.specular && specular;
+        next.singular = specular;
         next.mis_pdf = mis_pdf, next.mis_from = sp.p;
         if (next.throughput < kRouletteThroughput) {
             const float survive = next.throughput / kRouletteThroughput;
@@ -999,7 +1026,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             Vec3 visible(1, 1, 1);
             if (light.cast_shadow) {
                 ++tally.shadow;
-                visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+                visible = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally, &st);
             }
             if (clamp) lamp = lamp + c * visible;
             else L = L + c * visible;
@@ -1048,7 +1075,7 @@ Vec3 Integrator::direct_light(const SurfacePoint &sp, const Origin &from, Vec3 n
             ++tally.shadow;
             // Not in the Shadow pass, which is the lamps' (a closed emitter's far side, shadowed
             // by its near side, would darken it everywhere).
-            const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally);
+            const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, ls.wi, ls.distance), from, tally, &st);
             const Vec3 lit = c * through;
             // Clamped, each sample is one of Cycles' shadow rays (one emitter picked, its light
             // weighed by MIS, then film_clamp_light): the whole estimate it is, k times its share.
@@ -1104,7 +1131,7 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
         const Vec3 c = f * es.radiance * (cos_i * w / light_pdf);
         if (!(luminance(c) > 0.f)) continue;
         ++tally.shadow;
-        const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally);
+        const Vec3 through = shadow_transmittance(shadow_ray(sp, ng, es.wi, kInfinity), from, tally, &st);
         const Vec3 lit = c * through;
         const Vec3 added = clamp ? clamped(lit * float(k), weight, indirect) * share : lit;
         L = L + added;
@@ -1138,7 +1165,7 @@ Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 
     return open * (1.f / float(k));
 }
 
-Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const {
+Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally, const PathState *st) const {
     const Method &method = settings_.method;
     if (!scene_.any_transparent()) return scene_.occluded(ray, method, from, &tally.stats) ? Vec3() : Vec3(1, 1, 1);
     // Some materials are partly transparent: walk the blockers, attenuating by their alpha.
@@ -1147,7 +1174,11 @@ Vec3 Integrator::shadow_transmittance(Ray ray, Origin from, Tally &tally) const 
     for (int k = 0; k <= settings_.transparent_bounces; ++k) {
         sp = scene_.intersect(ray, method, kVisShadow, from, nullptr, &tally.stats);
         if (!sp.valid()) return t;
-        const Material m = scene_.material_at(sp, ray.d * -1.f, &camera_, from.time);
+        float path[kLightPathFloats];
+        const bool light_path = st && scene_.any_light_path();
+        if (light_path) light_path_of(*st, sp.t, true, st->transparent + k, path);
+        const Material m = scene_.material_at(sp, ray.d * -1.f, &camera_, from.time, nullptr,
+                                              light_path ? path : nullptr);
         const float a = m.alpha * (m.use_point_alpha ? sp.point_alpha : 1.f);
         if (a >= 1.f) return Vec3();
         t = t * (1.f - a);
