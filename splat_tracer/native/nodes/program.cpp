@@ -31,7 +31,9 @@ constexpr int32_t kNoiseParams = int32_t(sizeof(NoiseParams) / sizeof(float));
 constexpr int kMathOps = 41, kVectorOps = 29, kBlends = 19;  // render/nodes.py MATH_OPS, VECTOR_OPS, BLENDS
 
 const Layout &layout(Op op) {
-    static const Layout table[int(Op::Count)] = {
+    // Unsized, and counted below: a missing row would otherwise be a row of kNone, an
+    // opcode whose operands go unchecked.
+    static const Layout table[] = {
         /* Global */ {{kR3, kEnum}, {0, int32_t(Global::Count)}},
         /* Copy */ {{kR1, kR1, kEnum}, {0, 0, 4}},
         /* Math */ {{kR1, kR1, kR1, kR1, kEnum, kEnum}, {0, 0, 0, 0, kMathOps, 2}},
@@ -83,6 +85,7 @@ const Layout &layout(Op op) {
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
     };
+    static_assert(sizeof(table) / sizeof(table[0]) == size_t(Op::Count), "one operand layout per opcode, in Op order");
     return table[int(op)];
 }
 
