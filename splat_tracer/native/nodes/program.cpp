@@ -604,6 +604,8 @@ void NodeProgram::validate() {
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
         if (op == Op::NormalMap) uses_tangent = true;
         if (op == Op::Attribute && (c[4] != 1 && c[4] != 3)) fail("attribute width must be 1 or 3");
+        // Noise keeps the dimension count itself (Voronoi keeps it less one): 0 is no count.
+        if (op == Op::Noise && c[5] < 1) fail("noise dimensions must be 1 to 4");
         if (op == Op::Bump) {
             // The height's rows come before the Bump's, and any Bump among them keeps its own
             // rows inside them: ranges nest, at most kMaxBumpDepth deep (each level costs 3x).
