@@ -294,3 +294,17 @@ def test_non_finite_points_give_zero_noise():
     for dims in (1, 2, 3, 4):
         fac, _ = run_noise(bad, bad[:, 0], dims, "FBM", 1.0, 2.0, 0.5, 2.0, 0.0, 1.0, 0.5, False)
         assert np.isfinite(fac).all()
+
+
+@pytest.mark.parametrize("dims", [0, 5, -1])
+def test_a_noise_row_outside_one_to_four_dimensions_is_refused(dims):
+    """The NOISE instruction keeps the dimension count itself, 1-4 (the compiler's encoding;
+    Voronoi keeps it less one): a hand-built program with any other count is refused,
+    naming its row, not run as 3-D noise (0 did before) or read past the block."""
+    b = nodes.Builder()
+    params = b.register((1.0, 2.0, 0.5, 2.0, 0.0, 0.0, 0.0, 1.0), len(nodes.NOISE_PARAMS))
+    vector = b.global_("OBJECT")  # row 0
+    fac, col = b.register(), b.register(width=3)
+    b.emit("NOISE", fac, col, vector, params, dims, 0, 0)  # row 1
+    with pytest.raises(ValueError, match=r"node instruction 1: (noise dimensions must be 1 to 4|value out of range)"):
+        nodes.run(b.program(), 2, object=POINTS[:2])

@@ -103,3 +103,32 @@ def test_a_mesh_beyond_the_estimate_budget_shares_estimates_and_stays_reachable(
     cell = np.floor(centre * 2.0 * 0.999999).astype(int)  # Blender's parity, as test_nodes.py
     bright = (cell[:, 0] % 2 == cell[:, 1] % 2) == (cell[:, 2] % 2 == 1)
     assert p[bright].sum() > 0.9
+
+
+def test_a_moving_programmed_emitter_lights_alike_by_shadow_rays_and_by_rays():
+    """Motion blur: a panel sliding by its own width each side of the frame's placement
+    (x -1 -> +1 over the shutter), emitting where its Object x > 0.3 (a strip at one edge).
+    Shadow rays aim at the panel where it is at the frame's time (docs/ALGORITHM.md) and its
+    program must see that triangle's own point there; rays meet it where it is at their
+    time, at the same object-space point. So the strip is the same strip either way, and
+    the mean over a floor wide enough to catch nearly all the light (12 x 12 under a panel
+    1 high) agrees: within 4 % at 1024 samples (measured 1.0 %; BSDF rays' own noise about 1 %).
+    Placing the program at the ray's time instead slid the strip by the motion (its object
+    x by up to 1), which made shadow rays 75 % brighter (measured 0.0228 against 0.0132)."""
+    b = nodes.Builder()
+    x, fac, strength, colour = b.global_("OBJECT"), b.register(), b.register(), b.register(width=3)
+    zero = b.register(0.0)
+    b.emit("MATH", fac, x, b.register(0.3), zero, nodes.MATH_OPS.index("GREATER_THAN"), 0)  # x: OBJECT's first
+    b.emit("MATH", strength, fac, b.register(BRIGHT), zero, nodes.MATH_OPS.index("MULTIPLY"), 0)
+    b.emit("COMBINE", colour, strength, strength, strength)
+    b.output("emission", colour)
+    strip = Material(base_colour=(0.0, 0.0, 0.0), specular_level=0.0, emission_sampling="FRONT_BACK",
+                     program=b.program())
+    steps = [np.eye(4), np.eye(4)]
+    steps[0][0, 3], steps[1][0, 3] = -1.0, 1.0
+    panel = Instance(panel_mesh(), materials=(strip,), visibility=HIDDEN_FROM_CAMERA, motion=tuple(steps))
+    means = {k: floor_render(panel, w=32, h=32, view=12.0, samples=1024, mesh_light_strategy=k)[0].mean()
+             for k in ("LIGHT", "BSDF")}
+    print(means)
+    assert means["LIGHT"] > 0
+    assert abs(means["LIGHT"] / means["BSDF"] - 1) < 0.04, means

@@ -22,7 +22,6 @@ inline void final_mix(uint32_t &a, uint32_t &b, uint32_t &c) {  // Bob Jenkins' 
 
 inline float fade(float t) { return t * t * t * (t * (t * 6.f - 15.f) + 10.f); }
 inline float flip(float v, uint32_t bit) { return bit ? -v : v; }
-inline float mix(float a, float b, float t) { return a + t * (b - a); }  // Cycles' mix()
 // The fBm blend as the 3-D node has always computed it (kept: its renders stay bit for bit).
 inline float lerp(float a, float b, float t) { return (1.f - t) * a + t * b; }
 

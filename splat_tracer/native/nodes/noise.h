@@ -25,6 +25,9 @@ inline uint32_t float_bits(float f) {
     return u;
 }
 inline float to_unit(uint32_t h) { return float(h) * (1.f / float(0xFFFFFFFFu)); }
+// Cycles' mix(a, b, t) = a + t (b - a) (not (1 - t) a + t b: the rounding differs).
+inline float mix(float a, float b, float t) { return a + t * (b - a); }
+inline Vec3 mix(Vec3 a, Vec3 b, float t) { return a + (b - a) * t; }
 
 // Blender's Perlin noise in 3-D, signed (about -1..1) and its fractal sum; Cycles' definitions.
 float perlin_signed(Vec3 p);

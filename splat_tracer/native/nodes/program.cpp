@@ -32,7 +32,9 @@ constexpr int32_t kNoiseParams = int32_t(sizeof(NoiseParams) / sizeof(float));
 constexpr int kMathOps = 41, kVectorOps = 29, kBlends = 19;  // render/nodes.py MATH_OPS, VECTOR_OPS, BLENDS
 
 const Layout &layout(Op op) {
-    static const Layout table[int(Op::Count)] = {
+    // Unsized, and counted below: a missing row would otherwise be a row of kNone, an
+    // opcode whose operands go unchecked.
+    static const Layout table[] = {
         /* Global */ {{kR3, kEnum}, {0, int32_t(Global::Count)}},
         /* Copy */ {{kR1, kR1, kEnum}, {0, 0, 4}},
         /* Math */ {{kR1, kR1, kR1, kR1, kEnum, kEnum}, {0, 0, 0, 0, kMathOps, 2}},
@@ -93,6 +95,7 @@ const Layout &layout(Op op) {
         /* ObjectValue (the output's width checked apart; first kMaxObjectValues: never carried, 0) */ {{kNone, kEnum, kEnum}, {0, kMaxObjectValues + 1, 5}},
         /* LightPath */ {{kRW}, {kLightPathFloats}},
     };
+    static_assert(sizeof(table) / sizeof(table[0]) == size_t(Op::Count), "one operand layout per opcode, in Op order");
     return table[int(op)];
 }
 
@@ -611,6 +614,8 @@ void NodeProgram::validate() {
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
         if (op == Op::NormalMap) uses_tangent = true;
         if (op == Op::Attribute && (c[4] != 1 && c[4] != 3)) fail("attribute width must be 1 or 3");
+        // Noise keeps the dimension count itself (Voronoi keeps it less one): 0 is no count.
+        if (op == Op::Noise && c[5] < 1) fail("noise dimensions must be 1 to 4");
         if (op == Op::Bump) {
             // The height's rows come before the Bump's, and any Bump among them keeps its own
             // rows inside them: ranges nest, at most kMaxBumpDepth deep (each level costs 3x).

@@ -5,7 +5,6 @@
 
 #include <cfloat>
 #include <cmath>
-#include <cstring>
 
 #include "nodes/noise.h"
 #include "nodes/program.h"
@@ -37,9 +36,9 @@ struct Off {
     int operator[](int i) const { return v[i]; }
 };
 
-// Cycles' mix(a, b, t) = a + t (b - a) (not (1 - t) a + t b: the rounding differs).
-inline float mix(float a, float b, float t) { return a + t * (b - a); }
-inline Vec3 mix(Vec3 a, Vec3 b, float t) { return a + (b - a) * t; }
+// Cycles' mix (noise.h) for the grid's points too; the using-declaration keeps noise.h's
+// float and Vec3 ones in view beside it.
+using splat::mix;
 template <int N> V<N> mix(const V<N> &a, const V<N> &b, float t) { return a + (b - a) * t; }
 
 inline float smoothstep01(float x) {
@@ -47,13 +46,6 @@ inline float smoothstep01(float x) {
     if (x >= 1.f) return 1.f;
     return (3.f - 2.f * x) * (x * x);
 }
-
-inline uint32_t float_bits(float f) {
-    uint32_t u;
-    std::memcpy(&u, &f, 4);
-    return u;
-}
-inline float to_unit_incl(uint32_t h) { return float(h) * (1.f / float(0xFFFFFFFFu)); }
 
 // Blender's PCG 2-D, 3-D and 4-D hashes (Jarzynski and Olano, "Hash Functions for GPU
 // Rendering", 2020) as it runs them on signed integers: wrapping products, an arithmetic
@@ -112,7 +104,7 @@ struct Grid {
     V<N> point(const Off<N> &offset, float randomness) const {
         V<N> h;
         if constexpr (N == 1) {
-            h[0] = to_unit_incl(hash_uint(float_bits(cell[0] + float(offset[0]))));
+            h[0] = to_unit(hash_uint(float_bits(cell[0] + float(offset[0]))));
         } else {
             int32_t k[N];
             for (int a = 0; a < N; ++a) k[a] = icell[a] + offset[a];
@@ -127,8 +119,8 @@ struct Grid {
     Vec3 colour(const Off<N> &offset) const {
         if constexpr (N == 1) {
             const uint32_t k = float_bits(cell[0] + float(offset[0]));
-            return {to_unit_incl(hash_uint(k)), to_unit_incl(hash_uint2(k, float_bits(1.f))),
-                    to_unit_incl(hash_uint2(k, float_bits(2.f)))};
+            return {to_unit(hash_uint(k)), to_unit(hash_uint2(k, float_bits(1.f))),
+                    to_unit(hash_uint2(k, float_bits(2.f)))};
         } else {
             int32_t k[4] = {0, 0, 0, 0};  // 2-D: the 3-D hash of (x, y, 0)
             for (int a = 0; a < N; ++a) k[a] = icell[a] + offset[a];

@@ -90,6 +90,12 @@ Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float
     const Instance &inst = instances_[size_t(instance)];
     MeshHit h;
     h.tri = tri, h.b1 = b1, h.b2 = b2;
+    // The point, its normals and its program all in the frame's placement: that is where
+    // MeshLights put the triangle, where the shadow ray is aimed and what the pdf was measured
+    // on (a moving emitter is lit from there, docs/ALGORITHM.md). Its object-space point is
+    // then exactly the triangle's own, so that Object, Generated and UV -- what a textured
+    // emitter is laid out by -- are those a ray meeting the same point at any time reads.
+    const Placement frame{&inst.to_world, &inst.to_object};
     SurfacePoint sp;
     sp.t = 0.f, sp.instance = instance, sp.prim = tri, sp.b1 = b1, sp.b2 = b2;
     sp.ng = normalize(inst.to_object.transposed_vector(inst.mesh->geometric_normal(tri)));
@@ -101,20 +107,22 @@ Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float
     // Cycles evaluates a sampled emitter's shader with PATH_RAY_EMISSION alone: every Light
     // Path output 0 (its depths too, where Cycles gives the path's).
     static const float kEmissionRay[kLightPathFloats] = {};
-    const Material out = m.program >= 0 ? evaluate_program(m, sp, wo, nullptr, camera, time, nullptr, kEmissionRay) : m;
+    const Material out = m.program >= 0 ? evaluate_program(m, sp, wo, nullptr, camera, time, nullptr, kEmissionRay,
+                                                           &frame)
+                                        : m;
     return out.emission * out.alpha;
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
                                        const Camera *camera, float time, const AovSink *aov,
-                                       const float *light_path) const {
+                                       const float *light_path, const Placement *placement) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     // A moving instance's object space is where it is at the ray's time: the point was found
     // there (take_mesh_hit, take_splat_hit), so its object and Generated coordinates are the
     // same at every time, as Cycles' are.
     PlacementScratch scratch;
-    const Placement at = inst.at(time, scratch.a);
+    const Placement at = placement ? *placement : inst.at(time, scratch.a);
     const Affine &to_world = *at.to_world, &to_object = *at.to_object;
     ShaderGlobals sg;
     sg.P = sp.p, sg.I = wo;
@@ -225,7 +233,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         for (int k = 0; k < 2; ++k) {
             ShaderGlobals::Offset &d = sg.bump[k];
             d.P = tangents[k] * (eps > 0.f ? eps : 1e-6f);
-            d.object = inst.to_object.vector(d.P);
+            d.object = to_object.vector(d.P);
             if (!box.empty())
                 for (int i = 0; i < 3; ++i) {
                     const float extent = box.hi[i] - box.lo[i];

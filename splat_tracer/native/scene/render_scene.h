@@ -186,8 +186,9 @@ class RenderScene {
     }
     // What a ray from direction `wo` (towards the viewer) takes away at the point of triangle
     // `tri` of mesh instance `instance` with barycentrics (b1, b2) of its vertices 1 and 2:
-    // emission x opacity, its node program run there (in the frame's placement, as MeshLights
-    // places the triangles). For emitters sampled as lights (MeshLights).
+    // emission x opacity, its node program run there in the frame's placement at every
+    // `time` (MeshLights places the triangles there; `time` only moves a moving camera, for
+    // the Camera coordinate). For emitters sampled as lights (MeshLights).
     Vec3 emitted_on_triangle(int instance, int32_t tri, float b1, float b2, Vec3 wo, const Camera *camera = nullptr,
                              float time = 0.f) const;
     const std::vector<Light> &lights() const { return lights_; }
@@ -221,9 +222,11 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
 
   private:
+    // `placement`: where the instance is for the program (object space, normals, tangent);
+    // null: where it is at `time`. A moving camera is where it is at `time` either way.
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
                               const Camera *camera, float time, const AovSink *aov,
-                              const float *light_path = nullptr) const;
+                              const float *light_path = nullptr, const Placement *placement = nullptr) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;

@@ -1147,6 +1147,9 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
 
 // The fraction of the sky the point sees, by cosine-distributed occlusion rays: with the
 // cosine in the pdf, the diffuse integral of a uniform sky is albedo x world x that fraction.
+// Each open direction weighed by the bump shadowing term, as the diffuse bounce this replaces
+// is (and as Cycles' own replacement, Fast GI's AO bounces, samples and evaluates the BSDF
+// with it); Cycles' AO pass and additive AO skip it, and so does ao_term.
 Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
                                Tally &tally) const {
     Vec3 open;
@@ -1160,7 +1163,7 @@ Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 
         r.o = sp.p + ng * sp.offset;
         r.d = wi;
         ++tally.diffuse;
-        open = open + shadow_transmittance(r, from, tally);
+        open = open + shadow_transmittance(r, from, tally) * bump_shadowing(sp, wi);
     }
     return open * (1.f / float(k));
 }
