@@ -26,13 +26,22 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "RAMP", "HUE_SAT_VAL", "INVERT", "BRIGHT_CONTRAST", "GAMMA", "RGB_TO_BW", "COMBINE", "RGB_TO_HSV",
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
-       "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM")
+       "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM", "TANGENT")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12
+# Attributes the export derives from a mesh, as Cycles does, for the nodes that read them
+# (read like a named attribute; a geometry without them -- a cloud -- reads 0, as Cycles
+# reads a missing one). The leading dot keeps them apart from a user's attribute names,
+# which Blender keeps for its own.
+POINTINESS = ".splat_tracer.pointiness"            # Geometry > Pointiness (render/mesh_attributes.py)
+RANDOM_PER_ISLAND = ".splat_tracer.random_per_island"  # Geometry > Random Per Island
+# A colour attribute's transparency (1 - alpha), named by this prefix and the attribute's
+# name: the Color Attribute node's Alpha, 0 where the geometry lacks it.
+TRANSPARENCY_OF = ".splat_tracer.transparency:"
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
-           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW")
+           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW", "PARAMETRIC")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
            "emission": 3, "specular_level": 1, "normal": 3}
@@ -61,6 +70,9 @@ VORONOI_FEATURES = ("F1", "F2", "SMOOTH_F1", "DISTANCE_TO_EDGE", "N_SPHERE_RADIU
 WAVE_KINDS = ("BANDS_X", "BANDS_Y", "BANDS_Z", "BANDS_DIAGONAL", "RINGS_X", "RINGS_Y", "RINGS_Z", "RINGS_SPHERICAL")
 WAVE_PROFILES = ("SIN", "SAW", "TRI")
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
+# TANGENT's kinds: the Tangent node's radial directions about an axis of the generated
+# coordinates (Geometry > Tangent is RADIAL_Z), and the UV map's tangent.
+TANGENT_KINDS = ("RADIAL_X", "RADIAL_Y", "RADIAL_Z", "UV_MAP")
 # Noise Texture: Blender's noise_type identifiers (native NoiseType), and the node's inputs in
 # the order of the NOISE instruction's register block (native NoiseParams).
 NOISE_TYPES = ("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN")

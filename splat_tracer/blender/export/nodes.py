@@ -15,6 +15,7 @@ import numpy as np
 
 from ...render import nodes
 from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised through compile_shader)
+from ..cloud_object import COLOUR as CLOUD_COLOUR
 from . import images
 from .sockets import live_link as _live_link
 
@@ -30,6 +31,8 @@ COLOUR_ATTRIBUTE_NAMES = ("", "splat_color", "Col", "Color", "color", "colour", 
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 # Images read from Blender, by what identifies their pixels (see _image_pixels).
 _IMAGES: dict = {}
+# Sky Textures baked for materials: {id(model): (model, Image)}, the last few settings.
+_SKY_IMAGES: dict = {}
 
 
 class Unsupported(Exception):
@@ -273,7 +276,29 @@ class Compiler:
             result[node.outputs["Position"].identifier] = self._world_position()
         if node.outputs["Backfacing"].is_linked:
             result[node.outputs["Backfacing"].identifier] = self.b.global_("BACKFACING")
+        result.update(self._lazy(node, {"Parametric": "PARAMETRIC"}))
+        if node.outputs["Tangent"].is_linked:  # Cycles': radial about Z of the generated coordinates
+            result[node.outputs["Tangent"].identifier] = self._tangent_of("RADIAL_Z")
+        # Derived by the export from the mesh as Cycles derives them (render/mesh_attributes.py),
+        # read as attributes: a cloud has neither and reads 0, as Cycles reads a missing one.
+        for name, attribute in (("Pointiness", nodes.POINTINESS), ("Random Per Island", nodes.RANDOM_PER_ISLAND)):
+            if node.outputs[name].is_linked:
+                result[node.outputs[name].identifier] = self.b.attribute(attribute, 1)[1]
         return result
+
+    def _tangent_of(self, kind: str) -> int:
+        out = self.b.register(width=3)
+        self.b.emit("TANGENT", out, nodes.TANGENT_KINDS.index(kind))
+        return out
+
+    def _tangent(self, node, stack):
+        """The Tangent node: radial about an axis, or the active UV map's tangent (per
+        triangle; Cycles interpolates MikkTSpace tangents, the same on flat faces)."""
+        if node.direction_type == "RADIAL":
+            return self._ids(node, {"Tangent": self._tangent_of("RADIAL_" + node.axis)})
+        if node.uv_map:  # Cycles reads that map's own MikkTSpace tangents, which meshes do not carry here
+            raise Unsupported(node, f"the UV map '{node.uv_map}' (only the active render map's tangent)")
+        return self._ids(node, {"Tangent": self._tangent_of("UV_MAP")})
 
     def _uvmap(self, node, stack):
         if getattr(node, "from_instancer", False):
@@ -296,7 +321,32 @@ class Compiler:
         return result
 
     def _vertex_color(self, node, stack):
-        return self._point_data(node, False)
+        name = node.layer_name
+        if name in ("", CLOUD_COLOUR):
+            return self._point_data(node, False)
+        # A named colour attribute, read as the Attribute node reads one (any domain, byte or
+        # float); its Alpha from the attribute's transparency, which a geometry lacking it
+        # reads as 0. A usual colour name also still means a cloud's own colours (clouds do
+        # not carry those names as attributes: scene.py), as it did before.
+        own = name in COLOUR_ATTRIBUTE_NAMES
+        result = {}
+        colour = None
+        if any(s.is_linked for s in node.outputs if s.name == "Color"):
+            colour, _ = self.b.attribute(name, 3)
+            if own:
+                summed, unused = self.b.register(width=3), self.b.register()
+                self.b.emit("VECTOR_MATH", summed, unused, colour, self.b.global_("POINT_COLOUR"), colour,
+                            self.const(1.0, 1), nodes.VECTOR_OPS.index("ADD"))
+                colour = summed
+        if any(s.is_linked for s in node.outputs if s.name == "Alpha"):
+            _, transparency = self.b.attribute(nodes.TRANSPARENCY_OF + name, 1)
+            alpha = self.b.register()
+            base = self.b.global_("POINT_ALPHA") if own else self.const(1.0, 1)
+            self.b.emit("MATH", alpha, base, transparency, transparency, nodes.MATH_OPS.index("SUBTRACT"), 0)
+            result.update(self._ids(node, {"Alpha": alpha}))
+        if colour is not None:
+            result.update(self._ids(node, {"Color": colour}))
+        return result
 
     def _attribute(self, node, stack):
         if node.attribute_type != "GEOMETRY":
@@ -595,6 +645,33 @@ class Compiler:
         self.b.emit("IMAGE", colour, alpha, uv, self.b.image(texture), self._interpolation(node),
                     nodes.EXTENSIONS.index("REPEAT"))
         return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _tex_sky(self, node, stack):
+        """Sky Texture in a material: the sky baked once per settings into an equirectangular
+        image (render/sky.py sky_image), looked up at the Vector's direction as the
+        Environment Texture is (unlinked: the generated coordinates, Cycles' default for it)."""
+        from ...render import sky
+        from .world import _sky_model
+
+        model = _sky_model(node)
+        width = sky.MATERIAL_SKY_WIDTH
+        # A sun disc under two pixels of the bake would be a pixel or two at most: left out.
+        drawn = isinstance(model, sky.Sky) and model.size / 2 >= 2 * np.pi / width
+        if isinstance(model, sky.Sky) and model.sun_disc and model.size > 0 and not drawn:
+            self.say(f": the Sky Texture's sun disc ({np.degrees(model.size):.2g} degrees) is smaller than two "
+                     f"pixels of its {width} x {width // 2} bake; left out")
+        key = id(model)
+        if key not in _SKY_IMAGES or _SKY_IMAGES[key][0] is not model:
+            while len(_SKY_IMAGES) >= 4:
+                _SKY_IMAGES.pop(next(iter(_SKY_IMAGES)))
+            _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width, with_sun=drawn)))
+        image = _SKY_IMAGES[key][1]
+        vector = self._vector_or(node, stack)
+        uv, colour, alpha = self.b.register(width=3), self.b.register(width=3), self.b.register()
+        self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index("EQUIRECTANGULAR"))
+        self.b.emit("IMAGE", colour, alpha, uv, self.b.image(image), nodes.INTERPOLATIONS.index("Linear"),
+                    nodes.EXTENSIONS.index("REPEAT"))
+        return self._ids(node, {"Color": colour})
 
     def _tex_checker(self, node, stack):
         vector = self._vector_or(node, stack)

@@ -21,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from ...render import nodes, shading
+from ...render import mesh_attributes, nodes, shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
@@ -30,6 +30,7 @@ from ...util.columns import finite_rows, nonzero_rows, rows_within
 from .motion import instance_key
 from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_problem, mesh_positions
 from . import shading as export_shading
+from .nodes import COLOUR_ATTRIBUTE_NAMES
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
 _MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
@@ -162,27 +163,30 @@ def _point_attributes(obj, attrs, n, layout: tuple, report: shading.Report, doma
     values = {}
     kind = "point cloud" if domains == ("POINT",) else "mesh"
     for name, _ in layout:
-        a = attrs.get(name)
-        if a is None:
-            continue
+        transparency = name.startswith(nodes.TRANSPARENCY_OF)
+        a = attrs.get(name[len(nodes.TRANSPARENCY_OF):] if transparency else name)
+        if a is None or (transparency and a.data_type not in ("FLOAT_COLOR", "BYTE_COLOR")):
+            continue  # the Color Attribute's Alpha of something not a colour: as a missing one
         read = _ATTRIBUTE_READS.get(a.data_type)
         if read is None or a.domain not in domains:
             report.once(f"{kind} '{obj.name}': attribute '{name}' is {a.data_type} on {a.domain}, not a "
                         f"number on its {' or '.join(d.lower() for d in domains)}s; its Attribute nodes read 0")
             continue
-        if isinstance(n, dict):
-            values[a.domain, name] = _attribute_values(a, read, n[a.domain])
-        else:
-            values[name] = _attribute_values(a, read, n)
+        size = n[a.domain] if isinstance(n, dict) else n
+        v = _attribute_values(a, read, size, alpha=transparency)
+        values[(a.domain, name) if isinstance(n, dict) else name] = 1.0 - v if transparency else v
     return values
 
 
-def _attribute_values(a, read, n: int) -> np.ndarray:
-    """An attribute's values as (n, 3) float32 (a float in every component, NaN as 0)."""
+def _attribute_values(a, read, n: int, alpha: bool = False) -> np.ndarray:
+    """An attribute's values as (n, 3) float32 (a float in every component, NaN as 0); with
+    `alpha`, a colour's alpha in every component."""
     key, width = read
     buf = np.empty(n * width, np.int32 if a.data_type == "INT32_2D" else np.float32)
     a.data.foreach_get(key, buf)
     v = buf.astype(np.float32).reshape(n, width)
+    if alpha:
+        v, width = v[:, 3:4], 1
     out = np.zeros((n, 3), np.float32)
     if width == 1:
         out[:] = v
@@ -206,7 +210,22 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
     read = _point_attributes(obj, mesh.attributes, sizes, layout, report, domains=tuple(sizes))
     index = {"POINT": tris, "CORNER": loops, "FACE": np.repeat(faces, 3)}
     values = {name: v[index[domain]] for (domain, name), v in read.items()}
+    names = {name for name, _ in layout}
+    if nodes.POINTINESS in names:  # per vertex, as Cycles derives it at export
+        normals = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertex_normals.foreach_get("vector", normals)
+        values[nodes.POINTINESS] = mesh_attributes.pointiness(mesh_positions(mesh), normals, _edges(mesh))[tris]
+    if nodes.RANDOM_PER_ISLAND in names:  # per triangle, from its first corner's vertex
+        per_triangle = mesh_attributes.random_per_island(len(mesh.vertices), _edges(mesh), tris[::3])
+        values[nodes.RANDOM_PER_ISLAND] = np.repeat(per_triangle, 3)
     return nodes.attribute_columns(layout, values, nt * 3).reshape(nt, 3, sum(w for _, w in layout))
+
+
+def _edges(mesh) -> np.ndarray:
+    """(E, 2) vertex indices of a mesh's edges, in Blender's stored order."""
+    edges = np.empty(len(mesh.edges) * 2, np.int32)
+    mesh.edges.foreach_get("vertices", edges)
+    return edges.reshape(-1, 2)
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
@@ -288,7 +307,10 @@ class _Frame:
             self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
         layout = self.attribute_layout
-        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()}
+        # The usual colour names are the points' own colour on a cloud (a Color Attribute
+        # node naming one reads it as POINT_COLOUR), not carried again.
+        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()
+                  if k.removeprefix(nodes.TRANSPARENCY_OF) not in COLOUR_ATTRIBUTE_NAMES}
         columns = nodes.attribute_columns(layout, values, len(pos))
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor, layout, columns))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",

@@ -82,8 +82,23 @@ const Layout &layout(Op op) {
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
+        /* Tangent */ {{kR3, kEnum}, {0, 4}},
     };
     return table[int(op)];
+}
+
+// The Tangent node (Geometry > Tangent: kind 2), as Cycles' svm_node_tangent: kinds 0-2 the
+// direction around the X, Y or Z axis through the middle of the generated coordinates,
+// taken from object space as a normal is and made perpendicular to the shading normal; kind
+// 3 the UV map's tangent (already perpendicular to it), 0 without a UV map.
+Vec3 tangent(const ShaderGlobals &sg, int32_t kind) {
+    if (kind == 3) return sg.tangent;
+    const Vec3 g = sg.generated - Vec3(0.5f, 0.5f, 0.5f);
+    const Vec3 t = kind == 0 ? Vec3(0.f, -g.z, g.y) : kind == 1 ? Vec3(-g.z, 0.f, g.x) : Vec3(-g.y, g.x, 0.f);
+    const Vec3 side = cross(sg.object_to_world_normal(t), sg.N);
+    const float len = length(side);
+    if (!(len > 0.f)) return Vec3();  // on the axis or along the normal: no direction (Cycles' safe 0)
+    return cross(sg.N, side * (1.f / len));
 }
 
 inline float saturate(float x) { return std::fmin(std::fmax(x, 0.f), 1.f); }
@@ -599,7 +614,7 @@ void NodeProgram::validate() {
         if (op == Op::Copy && int64_t(c[2]) + c[3] > n) fail("copy out of range");
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
-        if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::NormalMap || (op == Op::Tangent && c[2] == 3)) uses_tangent = true;
         if (op == Op::Attribute && (c[4] != 1 && c[4] != 3)) fail("attribute width must be 1 or 3");
         if (op == Op::Bump) {
             // The height's rows come before the Bump's, and any Bump among them keeps its own
@@ -761,6 +776,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                     case Global::Reflection: v = sg.N * (2.f * dot(sg.N, sg.I)) - sg.I; break;
                     case Global::Camera: v = sg.camera; break;
                     case Global::Window: v = sg.window; break;
+                    case Global::Parametric: v = sg.parametric; break;
                     default: v = Vec3(sg.backfacing, sg.backfacing, sg.backfacing); break;
                 }
                 store3(r, c[1], v);
@@ -927,6 +943,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::ImageProject: store3(r, c[1], image_projection(load3(r, c[2]), c[3])); break;
+            case Op::Tangent: store3(r, c[1], tangent(sg, c[2])); break;
             case Op::ImageBox: {
                 const RGBA t = image_box(*images[size_t(c[4])], load3(r, c[3]), sg.object_normal, r[c[7]],
                                          ImageInterpolation(c[5]), ImageExtension(c[6]));

@@ -49,6 +49,7 @@ struct ShaderGlobals {
     Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
     Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
     Vec3 window;             // Cycles' Window coordinates (0..1 over the camera's frame, z 0), 0 without a camera
+    Vec3 parametric;         // Geometry > Parametric: Cycles' (1 - u - v, u, 0) of the triangle's corners; 0 off meshes
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     // The Bump node's two nearby shading points: for each, how far every position-dependent
@@ -73,7 +74,7 @@ struct ShaderGlobals {
 
 enum class Global : int32_t {
     Position = 0, Normal, TrueNormal, Incoming, Object, ObjectNormal, Generated, UV, PointColour, PointAlpha,
-    Reflection, Backfacing, Camera, Window, Count
+    Reflection, Backfacing, Camera, Window, Parametric, Count
 };
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
@@ -138,6 +139,8 @@ enum class Op : int32_t {
                     // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
     Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
                     // as a point (Texture Coordinate's Object output with another object chosen)
+    Tangent,        // out, kind (0-2 radial about X Y Z of the generated coordinates, 3 the UV map's tangent):
+                    // the Tangent node, and Geometry > Tangent (radial Z), as Cycles' svm_node_tangent
     Count
 };
 
