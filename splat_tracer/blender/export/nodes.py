@@ -666,12 +666,33 @@ class Compiler:
                 _SKY_IMAGES.pop(next(iter(_SKY_IMAGES)))
             _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width, with_sun=drawn)))
         image = _SKY_IMAGES[key][1]
-        vector = self._vector_or(node, stack)
+        vector = self._sky_direction(self._vector_or(node, stack))
         uv, colour, alpha = self.b.register(width=3), self.b.register(width=3), self.b.register()
         self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index("EQUIRECTANGULAR"))
         self.b.emit("IMAGE", colour, alpha, uv, self.b.image(image), nodes.INTERPOLATIONS.index("Linear"),
                     nodes.EXTENSIONS.index("REPEAT"))
         return self._ids(node, {"Color": colour})
+
+    def _sky_direction(self, vector: int) -> int:
+        """The direction Cycles' Sky Texture reads from a vector it does not normalise: the
+        elevation asin(z) of its z clamped to -1..1, the azimuth atan2(y, x) (Cycles'
+        direction_to_spherical), as a unit vector for the equirectangular lookup."""
+        math_op = nodes.MATH_OPS.index
+        x, y, z = vector, vector + 1, vector + 2  # a vector's components are consecutive registers
+        one, minus_one = self.const(1.0, 1), self.const(-1.0, 1)
+        zc, zz, h, phi, c, s_, hx, hy = (self.b.register() for _ in range(8))
+        self.b.emit("CLAMP", zc, z, minus_one, one, 0)
+        self.b.emit("MATH", zz, zc, zc, zc, math_op("MULTIPLY"), 0)
+        self.b.emit("MATH", h, one, zz, zz, math_op("SUBTRACT"), 0)
+        self.b.emit("MATH", h, h, h, h, math_op("SQRT"), 0)
+        self.b.emit("MATH", phi, y, x, x, math_op("ARCTAN2"), 0)
+        self.b.emit("MATH", c, phi, phi, phi, math_op("COSINE"), 0)
+        self.b.emit("MATH", s_, phi, phi, phi, math_op("SINE"), 0)
+        self.b.emit("MATH", hx, h, c, c, math_op("MULTIPLY"), 0)
+        self.b.emit("MATH", hy, h, s_, s_, math_op("MULTIPLY"), 0)
+        out = self.b.register(width=3)
+        self.b.emit("COMBINE", out, hx, hy, zc)
+        return out
 
     def _tex_checker(self, node, stack):
         vector = self._vector_or(node, stack)
