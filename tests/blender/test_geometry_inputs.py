@@ -218,3 +218,39 @@ def test_sky_texture_in_a_material_matches_cycles(blender, empty_scene, tmp_path
     np.testing.assert_allclose(ours[inside].mean(0), theirs[inside].mean(0), rtol=0.02)
     assert rel <= 0.05, rel
     assert float(np.abs(np.flip(ours, 0)[inside] - theirs[inside]).mean() / theirs[inside].mean()) > 0.1
+
+
+@pytest.mark.parametrize("output", ["Pointiness", "Random Per Island", "Parametric", "Tangent"])
+def test_on_a_point_cloud(blender, empty_scene, tmp_path, output):
+    """A scan (the importer's points, which Cycles renders as spheres) with the Geometry
+    output as its emitted colour: Pointiness and Random Per Island are 0 on points in both
+    (Cycles derives them for meshes only), Parametric (1, 0, 0) (a point's u = v = 0).
+    Cycles' Tangent on a point is its zero dPdu normalised, not a number (black); here the
+    radial tangent as on a mesh (a unit vector perpendicular to the splat's normal)."""
+    from test_node_materials import _flat_cloud
+
+    bpy, scene = blender, empty_scene
+    m, nodes, links, emission = _emission(bpy, "OnPoints")
+    geometry = nodes.new("ShaderNodeNewGeometry")
+    if output in ("Parametric", "Tangent"):
+        _as_colour(nodes, links, geometry.outputs[output], emission)
+    else:
+        links.new(geometry.outputs[output], emission.inputs["Color"])
+    _flat_cloud(bpy, m)
+    _view(bpy, scene)
+    ours, theirs, report = _render(bpy, scene, tmp_path, f"points_{output}")
+    centre = slice(SIZE // 4, 3 * SIZE // 4)
+    mine, cycles = ours[centre, centre].reshape(-1, 3), theirs[centre, centre].reshape(-1, 3)
+    print(output, "ours", mine.mean(0), mine.std(0), "Cycles", cycles.mean(0), cycles.std(0))
+    assert not _said(report, m.name), report
+    if output in ("Pointiness", "Random Per Island"):
+        assert np.abs(mine).max() == 0 and np.abs(cycles).max() < 1e-6
+    elif output == "Parametric":
+        np.testing.assert_allclose(mine, cycles, atol=1e-3)
+        np.testing.assert_allclose(cycles.mean(0), [1.0, 0.5, 0.5], atol=1e-3)
+    else:
+        assert np.abs(cycles).max() < 1e-6  # Cycles: not a number
+        tangent = mine * 2 - 1  # the splats face +Z: a unit vector in the plane
+        # (but at the middle, where a radial direction has none: 0 there, as Cycles' safe 0)
+        assert np.percentile(np.abs(np.linalg.norm(tangent, axis=1) - 1.0), 98) < 0.02
+        assert np.abs(tangent[:, 2]).max() < 0.02

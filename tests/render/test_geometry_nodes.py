@@ -118,9 +118,9 @@ def test_uv_map_tangent_is_the_shading_points_and_zero_without_one():
     np.testing.assert_allclose(t, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.0]])
 
 
-def test_parametric_is_zero_off_meshes():
+def test_parametric_off_meshes_is_cycles_on_its_points():
     # The barycentrics come from a mesh hit (render_scene.cpp); a shading point without one
-    # (a splat) reads 0, as the Blender test renders show for meshes against Cycles.
+    # (a splat) reads (1, 0, 0), Cycles' on a point (u = v = 0): test_geometry_inputs.py.
     b = nodes.Builder()
     out = b.global_("PARAMETRIC")
-    np.testing.assert_array_equal(nodes.run(b.program(), 1)[:, out:out + 3], 0)
+    np.testing.assert_array_equal(nodes.run(b.program(), 1)[:, out:out + 3], [[1, 0, 0]])

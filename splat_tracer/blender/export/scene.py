@@ -199,9 +199,9 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
     """(T, 3, k) float32: the attributes `layout` names at each loop triangle's corners, from
     the vertex, face or face-corner domain (Blender's; an edge's is said and reads 0), laid
     out as nodes.attribute_columns does; None for no layout."""
-    if not layout:
-        return None
     nt = len(mesh.loop_triangles)
+    if not layout or nt == 0:  # nothing read, or nothing to carry it (the mesh is left out)
+        return None
     tris, loops, faces = (np.empty(nt * 3, np.int32), np.empty(nt * 3, np.int32), np.empty(nt, np.int32))
     mesh.loop_triangles.foreach_get("vertices", tris)
     mesh.loop_triangles.foreach_get("loops", loops)

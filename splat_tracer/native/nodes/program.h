@@ -49,7 +49,9 @@ struct ShaderGlobals {
     Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
     Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
     Vec3 window;             // Cycles' Window coordinates (0..1 over the camera's frame, z 0), 0 without a camera
-    Vec3 parametric;         // Geometry > Parametric: Cycles' (1 - u - v, u, 0) of the triangle's corners; 0 off meshes
+    // Geometry > Parametric: Cycles' (1 - u - v, u, 0) of the triangle's corners; elsewhere (a
+    // splat) what Cycles gives on its points, whose u and v are 0.
+    Vec3 parametric = Vec3(1.f, 0.f, 0.f);
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     // The Bump node's two nearby shading points: for each, how far every position-dependent
