@@ -154,13 +154,14 @@ def test_pointiness_matches_cycles(blender, empty_scene, tmp_path):
     assert _mad(wrong[inside], theirs[inside]) > 2 * EXACT_ATOL, _mad(wrong[inside], theirs[inside])
 
 
-def test_colour_attribute_layer_matches_cycles(blender, empty_scene, tmp_path):
+@pytest.mark.parametrize("layer", ["Paint", "Color"])  # "Color": a name that also means a scan's colours
+def test_colour_attribute_layer_matches_cycles(blender, empty_scene, tmp_path, layer):
     import bmesh
 
     bpy, scene = blender, empty_scene
     m, nodes, links, emission = _emission(bpy, "Painted")
     node = nodes.new("ShaderNodeVertexColor")
-    node.layer_name = "Paint"
+    node.layer_name = layer
     mix = nodes.new("ShaderNodeMix")
     mix.data_type = "RGBA"
     mix.inputs["B"].default_value = (0.0, 0.0, 1.0, 1.0)
@@ -175,14 +176,14 @@ def test_colour_attribute_layer_matches_cycles(blender, empty_scene, tmp_path):
     mesh = obj.data
     # Two layers: the one named (byte colours on corners, alpha varying) and another (float
     # colours on points, the active one) that must not be read.
-    paint = mesh.color_attributes.new("Paint", "BYTE_COLOR", "CORNER")
+    paint = mesh.color_attributes.new(layer, "BYTE_COLOR", "CORNER")
     other = mesh.color_attributes.new("Other", "FLOAT_COLOR", "POINT")
     rng = np.random.default_rng(3)
     paint.data.foreach_set("color", rng.uniform(0, 1, (len(mesh.loops), 4)).astype(np.float32).ravel())
     other.data.foreach_set("color", np.ones(len(mesh.vertices) * 4, np.float32))
     mesh.color_attributes.active_color = other
     _view(bpy, scene)
-    ours, theirs, report = _render(bpy, scene, tmp_path, "colour_layer")
+    ours, theirs, report = _render(bpy, scene, tmp_path, f"colour_layer_{layer}")
     d = _mad(ours, theirs)
     print("colour attribute mean abs difference", d)
     assert not _said(report, m.name), report
