@@ -634,14 +634,12 @@ def equirectangular_directions(width: int, height: int) -> np.ndarray:
     return np.stack(np.broadcast_arrays(c * np.cos(phi), c * np.sin(phi), np.sin(elevation) + 0 * phi), axis=-1)
 
 
-def sky_image(model, width: int = MATERIAL_SKY_WIDTH, with_sun: bool = True) -> np.ndarray:
+def sky_image(model, width: int = MATERIAL_SKY_WIDTH) -> np.ndarray:
     """(width / 2, width, 4) float32 RGBA, bottom row first: `model` (Sky or LegacySky) at
-    the pixels' directions, alpha 1. `with_sun`: a Sky's sun disc drawn in (its pixels)."""
+    the pixels' directions without a sun disc, alpha 1."""
     height = width // 2
     d = equirectangular_directions(width, height).reshape(-1, 3)
     out = np.ones((height * width, 4), np.float32)
     rgb = np.concatenate([model.sky(d[i:i + 65536]) for i in range(0, len(d), 65536)])
-    if with_sun and isinstance(model, Sky):
-        rgb = rgb + model.sun_radiance(d)
     out[:, :3] = rgb
     return out.reshape(height, width, 4)

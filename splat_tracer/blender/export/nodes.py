@@ -655,18 +655,24 @@ class Compiler:
 
         model = _sky_model(node)
         width = sky.MATERIAL_SKY_WIDTH
-        # A sun disc under two pixels of the bake would be a pixel or two at most: left out.
-        drawn = isinstance(model, sky.Sky) and model.size / 2 >= 2 * np.pi / width
-        if isinstance(model, sky.Sky) and model.sun_disc and model.size > 0 and not drawn:
-            self.say(f": the Sky Texture's sun disc ({np.degrees(model.size):.2g} degrees) is smaller than two "
-                     f"pixels of its {width} x {width // 2} bake; left out")
+        # The sun disc is left out: Cycles tests it by the angle of the raw vector (which, with
+        # the disc on, Blender makes the generated coordinates: not a unit vector), which a
+        # lookup by elevation and azimuth cannot reproduce.
+        if isinstance(model, sky.Sky) and model.sun_disc and model.size > 0 and model.intensity > 0:
+            self.say(": the Sky Texture's sun disc is not drawn in a material (the sky is)")
         key = id(model)
         if key not in _SKY_IMAGES or _SKY_IMAGES[key][0] is not model:
             while len(_SKY_IMAGES) >= 4:
                 _SKY_IMAGES.pop(next(iter(_SKY_IMAGES)))
-            _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width, with_sun=drawn)))
+            _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width)))
         image = _SKY_IMAGES[key][1]
-        vector = self._sky_direction(self._vector_or(node, stack))
+        socket = next(s for s in node.inputs if s.name == "Vector")
+        # Blender makes the Vector unavailable while a sun disc is on: a link to it is ignored.
+        if socket.enabled:
+            vector = self._vector_or(node, stack)
+        else:
+            vector = self.b.global_("GENERATED")
+        vector = self._sky_direction(vector)
         uv, colour, alpha = self.b.register(width=3), self.b.register(width=3), self.b.register()
         self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index("EQUIRECTANGULAR"))
         self.b.emit("IMAGE", colour, alpha, uv, self.b.image(image), nodes.INTERPOLATIONS.index("Linear"),
