@@ -214,11 +214,30 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
     if nodes.POINTINESS in names:  # per vertex, as Cycles derives it at export
         normals = np.empty(len(mesh.vertices) * 3, np.float32)
         mesh.vertex_normals.foreach_get("vector", normals)
-        values[nodes.POINTINESS] = mesh_attributes.pointiness(mesh_positions(mesh), normals, _edges(mesh))[tris]
+        positions, edges = mesh_positions(mesh), _edges(mesh)
+        per_vertex = _derived(("pointiness", positions, normals, edges),
+                              lambda: mesh_attributes.pointiness(positions, normals, edges))
+        values[nodes.POINTINESS] = per_vertex[tris]
     if nodes.RANDOM_PER_ISLAND in names:  # per triangle, from its first corner's vertex
-        per_triangle = mesh_attributes.random_per_island(len(mesh.vertices), _edges(mesh), tris[::3])
+        edges, first = _edges(mesh), tris[::3]
+        per_triangle = _derived(("islands", len(mesh.vertices), edges, first),
+                                lambda: mesh_attributes.random_per_island(len(mesh.vertices), edges, first))
         values[nodes.RANDOM_PER_ISLAND] = np.repeat(per_triangle, 3)
     return nodes.attribute_columns(layout, values, nt * 3).reshape(nt, 3, sum(w for _, w in layout))
+
+
+# Pointiness and islands of the last few meshes, by content: about a second per 100 000
+# vertices, not to be paid again on every frame of an unchanged mesh.
+_DERIVED: dict = {}
+
+
+def _derived(key: tuple, make):
+    digest = _digest(*key)
+    if digest not in _DERIVED:
+        while len(_DERIVED) >= 8:
+            _DERIVED.pop(next(iter(_DERIVED)))
+        _DERIVED[digest] = make()
+    return _DERIVED[digest]
 
 
 def _edges(mesh) -> np.ndarray:
