@@ -106,3 +106,16 @@ def pointiness(positions, vertex_normals, edges) -> np.ndarray:
     np.add.at(blurred, e[:, 1], raw[e[:, 0]])
     blurred /= count + 1
     return blurred[orig].astype(np.float32)
+
+
+def uv_tangents(corners, uvs) -> np.ndarray:
+    """(T, 3) float32: each triangle's unit tangent (the direction of increasing u) from its
+    corners' positions (T, 3, 3) and UVs (T, 3, 2); 0 where the UVs are degenerate."""
+    p = np.asarray(corners, np.float64)
+    t = np.nan_to_num(np.asarray(uvs, np.float64))
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    tangent = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * np.sign(det)[:, None]
+    length = np.linalg.norm(tangent, axis=1, keepdims=True)
+    return np.where(length > 0, tangent / np.where(length > 0, length, 1.0), 0.0).astype(np.float32)

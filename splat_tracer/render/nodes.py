@@ -39,6 +39,9 @@ RANDOM_PER_ISLAND = ".splat_tracer.random_per_island"  # Geometry > Random Per I
 # A colour attribute's transparency (1 - alpha), named by this prefix and the attribute's
 # name: the Color Attribute node's Alpha, 0 where the geometry lacks it.
 TRANSPARENCY_OF = ".splat_tracer.transparency:"
+# A UV map's tangent per triangle (object space), named by this prefix and the map's name:
+# the Tangent node naming a map other than the active render one; 0 where the mesh lacks it.
+TANGENT_OF = ".splat_tracer.tangent:"
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
            "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW", "PARAMETRIC")
@@ -72,7 +75,9 @@ WAVE_PROFILES = ("SIN", "SAW", "TRI")
 NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
 # TANGENT's kinds: the Tangent node's radial directions about an axis of the generated
 # coordinates (Geometry > Tangent is RADIAL_Z), and the UV map's tangent.
-TANGENT_KINDS = ("RADIAL_X", "RADIAL_Y", "RADIAL_Z", "UV_MAP")
+# OBJECT_VECTOR: an object-space tangent given in the third operand (a named map's, read as
+# an attribute), taken to the scene as Cycles takes a UV tangent.
+TANGENT_KINDS = ("RADIAL_X", "RADIAL_Y", "RADIAL_Z", "UV_MAP", "OBJECT_VECTOR")
 # Noise Texture: Blender's noise_type identifiers (native NoiseType), and the node's inputs in
 # the order of the NOISE instruction's register block (native NoiseParams).
 NOISE_TYPES = ("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN")

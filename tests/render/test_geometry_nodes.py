@@ -124,3 +124,20 @@ def test_parametric_off_meshes_is_cycles_on_its_points():
     b = nodes.Builder()
     out = b.global_("PARAMETRIC")
     np.testing.assert_array_equal(nodes.run(b.program(), 1)[:, out:out + 3], [[1, 0, 0]])
+
+
+def test_uv_tangents_point_along_increasing_u():
+    corners = np.array([[[0, 0, 0], [2, 0, 0], [0, 3, 0]]] * 3, float)
+    uvs = np.array([[[0, 0], [1, 0], [0, 1]],     # u along x
+                    [[0, 0], [0, 1], [1, 0]],     # u along y (mirrored map)
+                    [[0, 0], [0, 0], [0, 0]]], float)  # degenerate: 0
+    np.testing.assert_allclose(mesh_attributes.uv_tangents(corners, uvs), [[1, 0, 0], [0, 1, 0], [0, 0, 0]])
+
+
+def test_an_object_space_tangent_is_taken_as_a_normal_and_made_perpendicular():
+    b = nodes.Builder()
+    given = b.register((1.0, 0.0, 1.0), 3)
+    out = b.register(width=3)
+    b.emit("TANGENT", out, nodes.TANGENT_KINDS.index("OBJECT_VECTOR"), given)
+    t = nodes.run(b.program(), 1, N=[0.0, 0.0, 1.0])[0, out:out + 3]
+    np.testing.assert_allclose(t, [1, 0, 0], atol=1e-6)

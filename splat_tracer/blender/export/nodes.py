@@ -286,18 +286,20 @@ class Compiler:
                 result[node.outputs[name].identifier] = self.b.attribute(attribute, 1)[1]
         return result
 
-    def _tangent_of(self, kind: str) -> int:
+    def _tangent_of(self, kind: str, given: int = 0) -> int:
         out = self.b.register(width=3)
-        self.b.emit("TANGENT", out, nodes.TANGENT_KINDS.index(kind))
+        self.b.emit("TANGENT", out, nodes.TANGENT_KINDS.index(kind), given)
         return out
 
     def _tangent(self, node, stack):
-        """The Tangent node: radial about an axis, or the active UV map's tangent (per
-        triangle; Cycles interpolates MikkTSpace tangents, the same on flat faces)."""
+        """The Tangent node: radial about an axis, or a UV map's tangent, per triangle
+        (Cycles interpolates MikkTSpace tangents: the same on flat faces) -- the active
+        render map's from the mesh, another map's carried as an attribute."""
         if node.direction_type == "RADIAL":
             return self._ids(node, {"Tangent": self._tangent_of("RADIAL_" + node.axis)})
-        if node.uv_map:  # Cycles reads that map's own MikkTSpace tangents, which meshes do not carry here
-            raise Unsupported(node, f"the UV map '{node.uv_map}' (only the active render map's tangent)")
+        if node.uv_map:
+            given, _ = self.b.attribute(nodes.TANGENT_OF + node.uv_map, 3)
+            return self._ids(node, {"Tangent": self._tangent_of("OBJECT_VECTOR", given)})
         return self._ids(node, {"Tangent": self._tangent_of("UV_MAP")})
 
     def _uvmap(self, node, stack):

@@ -218,6 +218,14 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
         per_vertex = _derived(("pointiness", positions, normals, edges),
                               lambda: mesh_attributes.pointiness(positions, normals, edges))
         values[nodes.POINTINESS] = per_vertex[tris]
+    for name in names:  # a named UV map's tangent, per triangle (object space)
+        layer = mesh.uv_layers.get(name[len(nodes.TANGENT_OF):]) if name.startswith(nodes.TANGENT_OF) else None
+        if layer is not None:
+            flat = np.empty(len(mesh.loops) * 2, np.float32)
+            layer.uv.foreach_get("vector", flat)
+            per_triangle = mesh_attributes.uv_tangents(mesh_positions(mesh)[tris].reshape(nt, 3, 3),
+                                                       flat.reshape(-1, 2)[loops].reshape(nt, 3, 2))
+            values[name] = np.repeat(per_triangle, 3, axis=0)
     if nodes.RANDOM_PER_ISLAND in names:  # per triangle, from its first corner's vertex
         edges, first = _edges(mesh), tris[::3]
         per_triangle = _derived(("islands", len(mesh.vertices), edges, first),

@@ -82,7 +82,7 @@ const Layout &layout(Op op) {
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
-        /* Tangent */ {{kR3, kEnum}, {0, 4}},
+        /* Tangent */ {{kR3, kEnum, kR3}, {0, 5}},
     };
     return table[int(op)];
 }
@@ -90,11 +90,15 @@ const Layout &layout(Op op) {
 // The Tangent node (Geometry > Tangent: kind 2), as Cycles' svm_node_tangent: kinds 0-2 the
 // direction around the X, Y or Z axis through the middle of the generated coordinates,
 // taken from object space as a normal is and made perpendicular to the shading normal; kind
-// 3 the UV map's tangent (already perpendicular to it), 0 without a UV map.
-Vec3 tangent(const ShaderGlobals &sg, int32_t kind) {
+// 3 the UV map's tangent (already perpendicular to it), 0 without a UV map; 4 the object-space
+// tangent `given` (a named UV map's), 0 where it is 0 (a geometry without that map).
+Vec3 tangent(const ShaderGlobals &sg, int32_t kind, Vec3 given) {
     if (kind == 3) return sg.tangent;
     const Vec3 g = sg.generated - Vec3(0.5f, 0.5f, 0.5f);
-    const Vec3 t = kind == 0 ? Vec3(0.f, -g.z, g.y) : kind == 1 ? Vec3(-g.z, 0.f, g.x) : Vec3(-g.y, g.x, 0.f);
+    const Vec3 t = kind == 4 ? given
+                   : kind == 0 ? Vec3(0.f, -g.z, g.y)
+                   : kind == 1 ? Vec3(-g.z, 0.f, g.x)
+                               : Vec3(-g.y, g.x, 0.f);
     const Vec3 side = cross(sg.object_to_world_normal(t), sg.N);
     const float len = length(side);
     if (!(len > 0.f)) return Vec3();  // on the axis or along the normal: no direction (Cycles' safe 0)
@@ -943,7 +947,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::ImageProject: store3(r, c[1], image_projection(load3(r, c[2]), c[3])); break;
-            case Op::Tangent: store3(r, c[1], tangent(sg, c[2])); break;
+            case Op::Tangent: store3(r, c[1], tangent(sg, c[2], load3(r, c[3]))); break;
             case Op::ImageBox: {
                 const RGBA t = image_box(*images[size_t(c[4])], load3(r, c[3]), sg.object_normal, r[c[7]],
                                          ImageInterpolation(c[5]), ImageExtension(c[6]));

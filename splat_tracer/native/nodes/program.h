@@ -141,8 +141,9 @@ enum class Op : int32_t {
                     // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
     Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
                     // as a point (Texture Coordinate's Object output with another object chosen)
-    Tangent,        // out, kind (0-2 radial about X Y Z of the generated coordinates, 3 the UV map's tangent):
-                    // the Tangent node, and Geometry > Tangent (radial Z), as Cycles' svm_node_tangent
+    Tangent,        // out, kind, vector: kind 0-2 radial about X Y Z of the generated coordinates, 3 the UV
+                    // map's tangent, 4 the object-space tangent in `vector` (a named map's); the Tangent node
+                    // and Geometry > Tangent (radial Z), as Cycles' svm_node_tangent
     Count
 };
 
