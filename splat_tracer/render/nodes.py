@@ -27,7 +27,8 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "HSV_TO_RGB", "MAPPING", "CHECKER", "GRADIENT", "FRESNEL", "LAYER_WEIGHT", "NOISE", "WHITE_NOISE", "SCALE",
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
        "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM", "VECTOR_ROTATE", "RGB_TO_HSL", "HSL_TO_RGB",
-       "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR", "OBJECT_VALUE", "LIGHT_PATH")
+       "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR", "OBJECT_VALUE", "LIGHT_PATH",
+       "TANGENT")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12
@@ -42,9 +43,21 @@ MAX_OBJECT_ATTRIBUTES = 16
 LIGHT_PATH = ("Is Camera Ray", "Is Shadow Ray", "Is Diffuse Ray", "Is Glossy Ray", "Is Singular Ray",
               "Is Reflection Ray", "Is Transmission Ray", "Is Volume Scatter Ray", "Ray Length", "Ray Depth",
               "Diffuse Depth", "Glossy Depth", "Transparent Depth", "Transmission Depth")
+# Attributes the export derives from a mesh, as Cycles does, for the nodes that read them
+# (read like a named attribute; a geometry without them -- a cloud -- reads 0, as Cycles
+# reads a missing one). The leading dot keeps them apart from a user's attribute names,
+# which Blender keeps for its own.
+POINTINESS = ".splat_tracer.pointiness"            # Geometry > Pointiness (render/mesh_attributes.py)
+RANDOM_PER_ISLAND = ".splat_tracer.random_per_island"  # Geometry > Random Per Island
+# A colour attribute's transparency (1 - alpha), named by this prefix and the attribute's
+# name: the Color Attribute node's Alpha, 0 where the geometry lacks it.
+TRANSPARENCY_OF = ".splat_tracer.transparency:"
+# A UV map's tangent per triangle (object space), named by this prefix and the map's name:
+# the Tangent node naming a map other than the active render one; 0 where the mesh lacks it.
+TANGENT_OF = ".splat_tracer.tangent:"
 # What a program reads at the shading point (native Global), all vec3 registers.
 GLOBALS = ("POSITION", "NORMAL", "TRUE_NORMAL", "INCOMING", "OBJECT", "OBJECT_NORMAL", "GENERATED", "UV",
-           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW")
+           "POINT_COLOUR", "POINT_ALPHA", "REFLECTION", "BACKFACING", "CAMERA", "WINDOW", "PARAMETRIC")
 # The material inputs a program may drive (native Output), with their widths.
 OUTPUTS = {"base_colour": 3, "metallic": 1, "roughness": 1, "ior": 1, "transmission": 1, "alpha": 1,
            "emission": 3, "specular_level": 1, "normal": 3,
@@ -78,6 +91,11 @@ NORMAL_MAP_SPACES = ("TANGENT", "OBJECT", "WORLD")
 VECTOR_ROTATE_TYPES = ("AXIS_ANGLE", "X_AXIS", "Y_AXIS", "Z_AXIS", "EULER_XYZ")
 # Vector Transform's vector_type (native ObjectSpace kind; + 3 towards the render's frame).
 VECTOR_TRANSFORM_TYPES = ("POINT", "VECTOR", "NORMAL")
+# TANGENT's kinds: the Tangent node's radial directions about an axis of the generated
+# coordinates (Geometry > Tangent is RADIAL_Z), and the UV map's tangent.
+# OBJECT_VECTOR: an object-space tangent given in the third operand (a named map's, read as
+# an attribute), taken to the scene as Cycles takes a UV tangent.
+TANGENT_KINDS = ("RADIAL_X", "RADIAL_Y", "RADIAL_Z", "UV_MAP", "OBJECT_VECTOR")
 # Noise Texture: Blender's noise_type identifiers (native NoiseType), and the node's inputs in
 # the order of the NOISE instruction's register block (native NoiseParams).
 NOISE_TYPES = ("FBM", "MULTIFRACTAL", "RIDGED_MULTIFRACTAL", "HYBRID_MULTIFRACTAL", "HETERO_TERRAIN")

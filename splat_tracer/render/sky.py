@@ -610,3 +610,36 @@ class LegacySky:
             return np.array([0.0, 0.0, math.cos(self.sun_theta)])
         k = math.sin(self.sun_theta) / horizontal
         return np.array([s[0] * k, s[1] * k, math.cos(self.sun_theta)])
+
+
+# ------------------------------------------------------------------------------------------
+# A Sky Texture inside a material (a backdrop card, a sky seen in a mirror ball): baked once
+# into an equirectangular image, looked up at the node's vector as an Environment Texture is.
+
+# 1024 x 512 (~0.35 degree a pixel), as a world's bake: looked up with Linear interpolation,
+# the sky within 0.3 % of the model's own value everywhere above the horizon's band
+# (tests/render/test_sky_texture_node.py measures it).
+MATERIAL_SKY_WIDTH = 1024
+
+
+def equirectangular_directions(width: int, height: int) -> np.ndarray:
+    """(height, width, 3) unit directions of an equirectangular image's pixel centres, row 0
+    at the nadir, u = 0.5 along -X and increasing towards -Y: Cycles' layout of a world (and
+    of an Environment Texture's Equirectangular lookup)."""
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    phi = (0.5 - u)[None, :] * 2.0 * np.pi
+    elevation = (v - 0.5)[:, None] * np.pi
+    c = np.cos(elevation)
+    return np.stack(np.broadcast_arrays(c * np.cos(phi), c * np.sin(phi), np.sin(elevation) + 0 * phi), axis=-1)
+
+
+def sky_image(model, width: int = MATERIAL_SKY_WIDTH) -> np.ndarray:
+    """(width / 2, width, 4) float32 RGBA, bottom row first: `model` (Sky or LegacySky) at
+    the pixels' directions without a sun disc, alpha 1."""
+    height = width // 2
+    d = equirectangular_directions(width, height).reshape(-1, 3)
+    out = np.ones((height * width, 4), np.float32)
+    rgb = np.concatenate([model.sky(d[i:i + 65536]) for i in range(0, len(d), 65536)])
+    out[:, :3] = rgb
+    return out.reshape(height, width, 4)

@@ -18,6 +18,7 @@ import numpy as np
 
 from ...render import nodes
 from ...render.nodes import Builder, ProgramTooLarge  # noqa: F401 (raised through compile_shader)
+from ..cloud_object import COLOUR as CLOUD_COLOUR
 from . import images
 from .sockets import live_link as _live_link
 
@@ -43,6 +44,8 @@ def export_at(frame: int) -> None:
     """Node trees compiled from now on in this thread are read at scene frame `frame`
     (image sequences); the scene export calls it first."""
     _FRAME.set(int(frame))
+# Sky Textures baked for materials: {id(model): (model, Image)}, the last few settings.
+_SKY_IMAGES: dict = {}
 
 
 class Unsupported(Exception):
@@ -287,7 +290,31 @@ class Compiler:
             result[node.outputs["Position"].identifier] = self._world_position()
         if node.outputs["Backfacing"].is_linked:
             result[node.outputs["Backfacing"].identifier] = self.b.global_("BACKFACING")
+        result.update(self._lazy(node, {"Parametric": "PARAMETRIC"}))
+        if node.outputs["Tangent"].is_linked:  # Cycles': radial about Z of the generated coordinates
+            result[node.outputs["Tangent"].identifier] = self._tangent_of("RADIAL_Z")
+        # Derived by the export from the mesh as Cycles derives them (render/mesh_attributes.py),
+        # read as attributes: a cloud has neither and reads 0, as Cycles reads a missing one.
+        for name, attribute in (("Pointiness", nodes.POINTINESS), ("Random Per Island", nodes.RANDOM_PER_ISLAND)):
+            if node.outputs[name].is_linked:
+                result[node.outputs[name].identifier] = self.b.attribute(attribute, 1)[1]
         return result
+
+    def _tangent_of(self, kind: str, given: int = 0) -> int:
+        out = self.b.register(width=3)
+        self.b.emit("TANGENT", out, nodes.TANGENT_KINDS.index(kind), given)
+        return out
+
+    def _tangent(self, node, stack):
+        """The Tangent node: radial about an axis, or a UV map's tangent, per triangle
+        (Cycles interpolates MikkTSpace tangents: the same on flat faces) -- the active
+        render map's from the mesh, another map's carried as an attribute."""
+        if node.direction_type == "RADIAL":
+            return self._ids(node, {"Tangent": self._tangent_of("RADIAL_" + node.axis)})
+        if node.uv_map:
+            given, _ = self.b.attribute(nodes.TANGENT_OF + node.uv_map, 3)
+            return self._ids(node, {"Tangent": self._tangent_of("OBJECT_VECTOR", given)})
+        return self._ids(node, {"Tangent": self._tangent_of("UV_MAP")})
 
     def _uvmap(self, node, stack):
         if getattr(node, "from_instancer", False):
@@ -310,7 +337,32 @@ class Compiler:
         return result
 
     def _vertex_color(self, node, stack):
-        return self._point_data(node, False)
+        name = node.layer_name
+        if name in ("", CLOUD_COLOUR):
+            return self._point_data(node, False)
+        # A named colour attribute, read as the Attribute node reads one (any domain, byte or
+        # float); its Alpha from the attribute's transparency, which a geometry lacking it
+        # reads as 0. A usual colour name also still means a cloud's own colours (clouds do
+        # not carry those names as attributes: scene.py), as it did before.
+        own = name in COLOUR_ATTRIBUTE_NAMES
+        result = {}
+        colour = None
+        if any(s.is_linked for s in node.outputs if s.name == "Color"):
+            colour, _ = self.b.attribute(name, 3)
+            if own:
+                summed, unused = self.b.register(width=3), self.b.register()
+                self.b.emit("VECTOR_MATH", summed, unused, colour, self.b.global_("POINT_COLOUR"), colour,
+                            self.const(1.0, 1), nodes.VECTOR_OPS.index("ADD"))
+                colour = summed
+        if any(s.is_linked for s in node.outputs if s.name == "Alpha"):
+            _, transparency = self.b.attribute(nodes.TRANSPARENCY_OF + name, 1)
+            alpha = self.b.register()
+            base = self.b.global_("POINT_ALPHA") if own else self.const(1.0, 1)
+            self.b.emit("MATH", alpha, base, transparency, transparency, nodes.MATH_OPS.index("SUBTRACT"), 0)
+            result.update(self._ids(node, {"Alpha": alpha}))
+        if colour is not None:
+            result.update(self._ids(node, {"Color": colour}))
+        return result
 
     def _object_info(self, node, stack):
         """Object Info: the instance's own values (export/object_info.py), read only where
@@ -797,6 +849,60 @@ class Compiler:
         self.b.emit("IMAGE", colour, alpha, uv, self.b.image(texture), self._interpolation(node),
                     nodes.EXTENSIONS.index("REPEAT"))
         return self._ids(node, {"Color": colour, "Alpha": alpha})
+
+    def _tex_sky(self, node, stack):
+        """Sky Texture in a material: the sky baked once per settings into an equirectangular
+        image (render/sky.py sky_image), looked up at the Vector's direction as the
+        Environment Texture is (unlinked: the generated coordinates, Cycles' default for it)."""
+        from ...render import sky
+        from .world import _sky_model
+
+        model = _sky_model(node)
+        width = sky.MATERIAL_SKY_WIDTH
+        # The sun disc is left out: Cycles tests it by the angle of the raw vector (which, with
+        # the disc on, Blender makes the generated coordinates: not a unit vector), which a
+        # lookup by elevation and azimuth cannot reproduce.
+        if isinstance(model, sky.Sky) and model.sun_disc and model.size > 0 and model.intensity > 0:
+            self.say(": the Sky Texture's sun disc is not drawn in a material (the sky is)")
+        key = id(model)
+        if key not in _SKY_IMAGES or _SKY_IMAGES[key][0] is not model:
+            while len(_SKY_IMAGES) >= 4:
+                _SKY_IMAGES.pop(next(iter(_SKY_IMAGES)))
+            _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width)))
+        image = _SKY_IMAGES[key][1]
+        socket = next(s for s in node.inputs if s.name == "Vector")
+        # Blender makes the Vector unavailable while a sun disc is on: a link to it is ignored.
+        if socket.enabled:
+            vector = self._vector_or(node, stack)
+        else:
+            vector = self.b.global_("GENERATED")
+        vector = self._sky_direction(vector)
+        uv, colour, alpha = self.b.register(width=3), self.b.register(width=3), self.b.register()
+        self.b.emit("IMAGE_PROJECT", uv, vector, nodes.IMAGE_PROJECTIONS.index("EQUIRECTANGULAR"))
+        self.b.emit("IMAGE", colour, alpha, uv, self.b.image(image), nodes.INTERPOLATIONS.index("Linear"),
+                    nodes.EXTENSIONS.index("REPEAT"))
+        return self._ids(node, {"Color": colour})
+
+    def _sky_direction(self, vector: int) -> int:
+        """The direction Cycles' Sky Texture reads from a vector it does not normalise: the
+        elevation asin(z) of its z clamped to -1..1, the azimuth atan2(y, x) (Cycles'
+        direction_to_spherical), as a unit vector for the equirectangular lookup."""
+        math_op = nodes.MATH_OPS.index
+        x, y, z = vector, vector + 1, vector + 2  # a vector's components are consecutive registers
+        one, minus_one = self.const(1.0, 1), self.const(-1.0, 1)
+        zc, zz, h, phi, c, s_, hx, hy = (self.b.register() for _ in range(8))
+        self.b.emit("CLAMP", zc, z, minus_one, one, 0)
+        self.b.emit("MATH", zz, zc, zc, zc, math_op("MULTIPLY"), 0)
+        self.b.emit("MATH", h, one, zz, zz, math_op("SUBTRACT"), 0)
+        self.b.emit("MATH", h, h, h, h, math_op("SQRT"), 0)
+        self.b.emit("MATH", phi, y, x, x, math_op("ARCTAN2"), 0)
+        self.b.emit("MATH", c, phi, phi, phi, math_op("COSINE"), 0)
+        self.b.emit("MATH", s_, phi, phi, phi, math_op("SINE"), 0)
+        self.b.emit("MATH", hx, h, c, c, math_op("MULTIPLY"), 0)
+        self.b.emit("MATH", hy, h, s_, s_, math_op("MULTIPLY"), 0)
+        out = self.b.register(width=3)
+        self.b.emit("COMBINE", out, hx, hy, zc)
+        return out
 
     def _tex_checker(self, node, stack):
         vector = self._vector_or(node, stack)

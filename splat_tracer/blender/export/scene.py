@@ -21,7 +21,7 @@ from typing import Optional
 import bpy
 import numpy as np
 
-from ...render import nodes, shading
+from ...render import mesh_attributes, nodes, shading
 from ...render.camera import Camera, Lens, Panorama
 from ...render.scene import RAY_VISIBILITY, Instance, Mesh, RenderScene, transform_problem
 from ...render.splats import MAX_COORDINATE, SplatCloud
@@ -32,6 +32,7 @@ from ..cloud_object import ATTRIBUTE_TYPES, COLOUR, NORMAL, RADIUS, attribute_pr
 from . import nodes as export_nodes
 from . import object_info
 from . import shading as export_shading
+from .nodes import COLOUR_ATTRIBUTE_NAMES
 
 # Object types that evaluate to a mesh a ray tracer can render (Cycles renders them too).
 _MESH_LIKE = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES"}
@@ -164,27 +165,30 @@ def _point_attributes(obj, attrs, n, layout: tuple, report: shading.Report, doma
     values = {}
     kind = "point cloud" if domains == ("POINT",) else "mesh"
     for name, _ in layout:
-        a = attrs.get(name)
-        if a is None:
-            continue
+        transparency = name.startswith(nodes.TRANSPARENCY_OF)
+        a = attrs.get(name[len(nodes.TRANSPARENCY_OF):] if transparency else name)
+        if a is None or (transparency and a.data_type not in ("FLOAT_COLOR", "BYTE_COLOR")):
+            continue  # the Color Attribute's Alpha of something not a colour: as a missing one
         read = _ATTRIBUTE_READS.get(a.data_type)
         if read is None or a.domain not in domains:
             report.once(f"{kind} '{obj.name}': attribute '{name}' is {a.data_type} on {a.domain}, not a "
                         f"number on its {' or '.join(d.lower() for d in domains)}s; its Attribute nodes read 0")
             continue
-        if isinstance(n, dict):
-            values[a.domain, name] = _attribute_values(a, read, n[a.domain])
-        else:
-            values[name] = _attribute_values(a, read, n)
+        size = n[a.domain] if isinstance(n, dict) else n
+        v = _attribute_values(a, read, size, alpha=transparency)
+        values[(a.domain, name) if isinstance(n, dict) else name] = 1.0 - v if transparency else v
     return values
 
 
-def _attribute_values(a, read, n: int) -> np.ndarray:
-    """An attribute's values as (n, 3) float32 (a float in every component, NaN as 0)."""
+def _attribute_values(a, read, n: int, alpha: bool = False) -> np.ndarray:
+    """An attribute's values as (n, 3) float32 (a float in every component, NaN as 0); with
+    `alpha`, a colour's alpha in every component."""
     key, width = read
     buf = np.empty(n * width, np.int32 if a.data_type == "INT32_2D" else np.float32)
     a.data.foreach_get(key, buf)
     v = buf.astype(np.float32).reshape(n, width)
+    if alpha:
+        v, width = v[:, 3:4], 1
     out = np.zeros((n, 3), np.float32)
     if width == 1:
         out[:] = v
@@ -197,9 +201,9 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
     """(T, 3, k) float32: the attributes `layout` names at each loop triangle's corners, from
     the vertex, face or face-corner domain (Blender's; an edge's is said and reads 0), laid
     out as nodes.attribute_columns does; None for no layout."""
-    if not layout:
-        return None
     nt = len(mesh.loop_triangles)
+    if not layout or nt == 0:  # nothing read, or nothing to carry it (the mesh is left out)
+        return None
     tris, loops, faces = (np.empty(nt * 3, np.int32), np.empty(nt * 3, np.int32), np.empty(nt, np.int32))
     mesh.loop_triangles.foreach_get("vertices", tris)
     mesh.loop_triangles.foreach_get("loops", loops)
@@ -208,7 +212,49 @@ def _corner_attributes(obj, mesh, layout: tuple, report: shading.Report):
     read = _point_attributes(obj, mesh.attributes, sizes, layout, report, domains=tuple(sizes))
     index = {"POINT": tris, "CORNER": loops, "FACE": np.repeat(faces, 3)}
     values = {name: v[index[domain]] for (domain, name), v in read.items()}
+    names = {name for name, _ in layout}
+    if nodes.POINTINESS in names:  # per vertex, as Cycles derives it at export
+        normals = np.empty(len(mesh.vertices) * 3, np.float32)
+        mesh.vertex_normals.foreach_get("vector", normals)
+        positions, edges = mesh_positions(mesh), _edges(mesh)
+        per_vertex = _derived(("pointiness", positions, normals, edges),
+                              lambda: mesh_attributes.pointiness(positions, normals, edges))
+        values[nodes.POINTINESS] = per_vertex[tris]
+    for name in names:  # a named UV map's tangent, per triangle (object space)
+        layer = mesh.uv_layers.get(name[len(nodes.TANGENT_OF):]) if name.startswith(nodes.TANGENT_OF) else None
+        if layer is not None:
+            flat = np.empty(len(mesh.loops) * 2, np.float32)
+            layer.uv.foreach_get("vector", flat)
+            per_triangle = mesh_attributes.uv_tangents(mesh_positions(mesh)[tris].reshape(nt, 3, 3),
+                                                       flat.reshape(-1, 2)[loops].reshape(nt, 3, 2))
+            values[name] = np.repeat(per_triangle, 3, axis=0)
+    if nodes.RANDOM_PER_ISLAND in names:  # per triangle, from its first corner's vertex
+        edges, first = _edges(mesh), tris[::3]
+        per_triangle = _derived(("islands", len(mesh.vertices), edges, first),
+                                lambda: mesh_attributes.random_per_island(len(mesh.vertices), edges, first))
+        values[nodes.RANDOM_PER_ISLAND] = np.repeat(per_triangle, 3)
     return nodes.attribute_columns(layout, values, nt * 3).reshape(nt, 3, sum(w for _, w in layout))
+
+
+# Pointiness and islands of the last few meshes, by content: about a second per 100 000
+# vertices, not to be paid again on every frame of an unchanged mesh.
+_DERIVED: dict = {}
+
+
+def _derived(key: tuple, make):
+    digest = _digest(*key)
+    if digest not in _DERIVED:
+        while len(_DERIVED) >= 8:
+            _DERIVED.pop(next(iter(_DERIVED)))
+        _DERIVED[digest] = make()
+    return _DERIVED[digest]
+
+
+def _edges(mesh) -> np.ndarray:
+    """(E, 2) vertex indices of a mesh's edges, in Blender's stored order."""
+    edges = np.empty(len(mesh.edges) * 2, np.int32)
+    mesh.edges.foreach_get("vertices", edges)
+    return edges.reshape(-1, 2)
 
 
 def _mesh_arrays(mesh: bpy.types.Mesh):
@@ -290,7 +336,10 @@ class _Frame:
             self.report.once(f"point cloud '{obj.name}': none of its {n:,} points can be rendered; not rendered")
             return None
         layout = self.attribute_layout
-        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()}
+        # The usual colour names are the points' own colour on a cloud (a Color Attribute
+        # node naming one reads it as POINT_COLOUR), not carried again.
+        values = {k: v[ok] for k, v in _point_attributes(obj, attrs, n, layout, self.report).items()
+                  if k.removeprefix(nodes.TRANSPARENCY_OF) not in COLOUR_ATTRIBUTE_NAMES}
         columns = nodes.attribute_columns(layout, values, len(pos))
         key = ("cloud", _digest(pos, nrm, rad, col, alpha, closed, self.radius_factor, layout, columns))
         geometry = self._cached(key, f"point cloud '{obj.name}' ({len(pos):,} splats)",

@@ -99,8 +99,10 @@ def _is_point_data(source, output: str) -> bool:
         return False
     # An Attribute naming another attribute (a scan's intensity) is that attribute, read by a
     # node program, not the points' colour.
-    return node.type == "VERTEX_COLOR" or (node.attribute_type == "GEOMETRY" and
-                                           node.attribute_name in nodes.COLOUR_ATTRIBUTE_NAMES)
+    # A Color Attribute naming another layer (a mesh's colour attribute) is read by a program.
+    if node.type == "VERTEX_COLOR":
+        return node.layer_name in ("", nodes.CLOUD_COLOUR)
+    return node.attribute_type == "GEOMETRY" and node.attribute_name in nodes.COLOUR_ATTRIBUTE_NAMES
 
 
 class _Sockets:

@@ -94,9 +94,28 @@ const Layout &layout(Op op) {
         /* Gabor */ {{kR3, kR3, kRW, kR3, kEnum}, {0, 0, 4, 0, 2}},
         /* ObjectValue (the output's width checked apart; first kMaxObjectValues: never carried, 0) */ {{kNone, kEnum, kEnum}, {0, kMaxObjectValues + 1, 5}},
         /* LightPath */ {{kRW}, {kLightPathFloats}},
+        /* Tangent */ {{kR3, kEnum, kR3}, {0, 5}},
     };
     static_assert(sizeof(table) / sizeof(table[0]) == size_t(Op::Count), "one operand layout per opcode, in Op order");
     return table[int(op)];
+}
+
+// The Tangent node (Geometry > Tangent: kind 2), as Cycles' svm_node_tangent: kinds 0-2 the
+// direction around the X, Y or Z axis through the middle of the generated coordinates,
+// taken from object space as a normal is and made perpendicular to the shading normal; kind
+// 3 the UV map's tangent (already perpendicular to it), 0 without a UV map; 4 the object-space
+// tangent `given` (a named UV map's), 0 where it is 0 (a geometry without that map).
+Vec3 tangent(const ShaderGlobals &sg, int32_t kind, Vec3 given) {
+    if (kind == 3) return sg.tangent;
+    const Vec3 g = sg.generated - Vec3(0.5f, 0.5f, 0.5f);
+    const Vec3 t = kind == 4 ? given
+                   : kind == 0 ? Vec3(0.f, -g.z, g.y)
+                   : kind == 1 ? Vec3(-g.z, 0.f, g.x)
+                               : Vec3(-g.y, g.x, 0.f);
+    const Vec3 side = cross(sg.object_to_world_normal(t), sg.N);
+    const float len = length(side);
+    if (!(len > 0.f)) return Vec3();  // on the axis or along the normal: no direction (Cycles' safe 0)
+    return cross(sg.N, side * (1.f / len));
 }
 
 inline float saturate(float x) { return std::fmin(std::fmax(x, 0.f), 1.f); }
@@ -612,7 +631,7 @@ void NodeProgram::validate() {
         if (op == Op::Copy && int64_t(c[2]) + c[3] > n) fail("copy out of range");
         if (op == Op::Copy && int64_t(c[1]) + c[3] > n) fail("copy out of range");
         if (op == Op::Ramp && (c[5] < 2 || c[4] < 0 || int64_t(c[4]) + 4 * int64_t(c[5]) > n)) fail("bad ramp table");
-        if (op == Op::NormalMap) uses_tangent = true;
+        if (op == Op::NormalMap || (op == Op::Tangent && c[2] == 3)) uses_tangent = true;
         if (op == Op::Attribute && (c[4] != 1 && c[4] != 3)) fail("attribute width must be 1 or 3");
         // Noise keeps the dimension count itself (Voronoi keeps it less one): 0 is no count.
         if (op == Op::Noise && c[5] < 1) fail("noise dimensions must be 1 to 4");
@@ -892,6 +911,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                     case Global::Reflection: v = sg.N * (2.f * dot(sg.N, sg.I)) - sg.I; break;
                     case Global::Camera: v = sg.camera; break;
                     case Global::Window: v = sg.window; break;
+                    case Global::Parametric: v = sg.parametric; break;
                     default: v = Vec3(sg.backfacing, sg.backfacing, sg.backfacing); break;
                 }
                 store3(r, c[1], v);
@@ -1054,6 +1074,7 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::ImageProject: store3(r, c[1], image_projection(load3(r, c[2]), c[3])); break;
+            case Op::Tangent: store3(r, c[1], tangent(sg, c[2], load3(r, c[3]))); break;
             case Op::ImageBox: {
                 const RGBA t = image_box(*images[size_t(c[4])], load3(r, c[3]), sg.object_normal, r[c[7]],
                                          ImageInterpolation(c[5]), ImageExtension(c[6]));

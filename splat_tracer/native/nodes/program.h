@@ -59,6 +59,9 @@ struct ShaderGlobals {
     Vec3 surface_normal;     // the surface's shading normal, not turned towards the viewer
     Vec3 camera;             // position in the camera's space (Cycles': +Z along the view), 0 without a camera
     Vec3 window;             // Cycles' Window coordinates (0..1 over the camera's frame, z 0), 0 without a camera
+    // Geometry > Parametric: Cycles' (1 - u - v, u, 0) of the triangle's corners; elsewhere (a
+    // splat) what Cycles gives on its points, whose u and v are 0.
+    Vec3 parametric = Vec3(1.f, 0.f, 0.f);
     // Object-space normals to the scene's: the transpose of the world-to-object matrix, by rows.
     float normal_matrix[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};
     // The instance's values (kObjectInfoFloats and its object attributes); null: none, read as 0.
@@ -88,7 +91,7 @@ struct ShaderGlobals {
 
 enum class Global : int32_t {
     Position = 0, Normal, TrueNormal, Incoming, Object, ObjectNormal, Generated, UV, PointColour, PointAlpha,
-    Reflection, Backfacing, Camera, Window, Count
+    Reflection, Backfacing, Camera, Window, Parametric, Count
 };
 
 // The material inputs a program may drive (render/nodes.py OUTPUTS, same order).
@@ -167,6 +170,9 @@ enum class Op : int32_t {
     ObjectValue,    // out, first, width (1-4): ShaderGlobals::object_values[first, first + width) (Object Info,
                     // Attribute of type object / instancer / view layer); past object_value_count: 0
     LightPath,      // out (kLightPathFloats registers): ShaderGlobals::light_path
+    Tangent,        // out, kind, vector: kind 0-2 radial about X Y Z of the generated coordinates, 3 the UV
+                    // map's tangent, 4 the object-space tangent in `vector` (a named map's); the Tangent node
+                    // and Geometry > Tangent (radial Z), as Cycles' svm_node_tangent
     Count
 };
 

@@ -194,6 +194,7 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
         for (int col = 0; col < 3; ++col) sg.normal_matrix[3 * row + col] = to_object.m[4 * col + row];
     if (inst.mesh) {
         sg.uv = inst.mesh->uv(sp.prim, sp.b1, sp.b2);
+        sg.parametric = Vec3(1.f - sp.b1 - sp.b2, sp.b1, 0.f);  // Cycles' u, v are our b1, b2
         Vec3 t;
         float sign;
         if (prog.uses_tangent && inst.mesh->uv_tangent(sp.prim, &t, &sign)) {
