@@ -118,13 +118,14 @@ def test_an_object_attribute_is_not_a_point_colour(blender, empty_scene, es, rep
 
 def test_an_unsupported_texture_falls_back_to_the_default_with_one_report_line(blender, empty_scene, es, report):
     material, principled = new_material(blender, "Floor", "ShaderNodeBsdfPrincipled")
-    texture = material.node_tree.nodes.new("ShaderNodeTexSky")
-    material.node_tree.links.new(texture.outputs["Color"], principled.inputs["Base Color"])
+    texture = material.node_tree.nodes.new("ShaderNodeParticleInfo")
+    material.node_tree.links.new(texture.outputs["Velocity"], principled.inputs["Base Color"])
     m = es.material_of(material, report)
     es.material_of(material, report)  # the same material twice: still one line
     assert m.base_colour == approx((0.8, 0.8, 0.8)) and not m.use_point_colour
     assert report.lines == [
-        "material 'Floor': the 'Sky Texture' node is not supported; Base Color uses its unlinked value (0.8, 0.8, 0.8)"]
+        "material 'Floor': the 'Particle Info' node is not supported; Base Color uses its unlinked value "
+        "(0.8, 0.8, 0.8)"]
 
 
 def test_what_a_bump_or_normal_map_cannot_read_is_said(blender, empty_scene, es, report):

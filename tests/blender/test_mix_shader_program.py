@@ -19,7 +19,8 @@ def report():
     return shading.Report()
 
 
-FIELDS = ("base_colour", "metallic", "roughness", "ior", "transmission", "alpha", "emission", "specular_level")
+FIELDS = ("base_colour", "metallic", "roughness", "ior", "transmission", "alpha", "emission", "specular_level",
+          "metal_colour")
 
 
 def fields_at(material, n=1, **globals_):
@@ -33,6 +34,8 @@ def fields_at(material, n=1, **globals_):
         if regs is not None and material.program.drives(name):
             reg = material.program.outputs[list(nodes.OUTPUTS).index(name)]
             out[name] = regs[:, reg:reg + width].astype(np.float64)
+        elif name == "metal_colour" and material.metal_colour is None:  # the base colour's, as the core reads it
+            out[name] = out["base_colour"]
         else:
             out[name] = np.broadcast_to(np.asarray(getattr(material, name), np.float64).reshape(1, width), (n, width))
     return out
@@ -115,7 +118,8 @@ def test_a_wrong_fac_would_differ(blender, empty_scene, es, report):
 
 
 def test_the_fac_varies_per_shading_point(blender, empty_scene, es, report):
-    """Fac = the generated x coordinate: at each point the blend of that Fac."""
+    """Fac = the generated x coordinate: at each point the fields the constant blend gives
+    for that Fac (clamped to 0..1, as Cycles does)."""
     material, nodes, links, output = _tree(blender, "Ramp")
     diffuse, glossy = nodes.new("ShaderNodeBsdfDiffuse"), nodes.new("ShaderNodeBsdfGlossy")
     diffuse.inputs["Color"].default_value = (1.0, 0.0, 0.0, 1.0)
@@ -131,11 +135,9 @@ def test_the_fac_varies_per_shading_point(blender, empty_scene, es, report):
     m = es.material_of(material, report)
     x = np.array([-0.5, 0.0, 0.3, 0.75, 1.0, 2.0])
     got = fields_at(m, len(x), generated=np.stack([x, 0 * x, 0 * x], 1))
-    f = np.clip(x, 0, 1)
-    np.testing.assert_allclose(got["base_colour"], np.stack([1 - f, 0 * f, f], 1), atol=1e-6)
-    np.testing.assert_allclose(got["metallic"][:, 0], f, atol=1e-6)
-    np.testing.assert_allclose(got["roughness"][:, 0], (1 - f) * 0.5 + f * 0.2, atol=1e-6)
-    np.testing.assert_allclose(got["specular_level"][:, 0], f * 0.5, atol=1e-6)
+    for i, f in enumerate(np.clip(x, 0, 1)):
+        constant = es.material_of(diffuse_glossy(blender, f"Constant{i}", float(f), False), report)
+        assert_same_fields({k: v[i:i + 1] for k, v in got.items()}, fields_at(constant))
     assert not m.program.drives("alpha") and not m.program.drives("emission")  # constant: the constant path
 
 
@@ -225,7 +227,10 @@ def test_point_colours_under_a_mix_with_a_linked_fac(blender, empty_scene, es, r
     links.new(mix.outputs[0], output.inputs["Surface"])
     m = es.material_of(material, report)
     got = fields_at(m, 1, point_colour=(0.2, 0.4, 0.8))
-    np.testing.assert_allclose(got["base_colour"][0], (0.75 * 0.2, 0.75 * 0.4, 0.75 * 0.8 + 0.25), rtol=1e-6)
+    # The two lobes kept apart: the diffuse share the points' colours, the metallic one the Glossy's.
+    np.testing.assert_allclose(got["base_colour"][0], (0.2, 0.4, 0.8), rtol=1e-6)
+    np.testing.assert_allclose(got["metal_colour"][0], (0.0, 0.0, 1.0), atol=1e-6)
+    np.testing.assert_allclose(got["metallic"][0], 0.25, rtol=1e-6)
     # Without the Fac's link nothing needs a program: the constant path, as before.
     links.remove(mix.inputs[0].links[0])
     assert es.material_of(material, report).program is None
