@@ -529,6 +529,22 @@ class Compiler:
         self.b.emit("BLACKBODY", out, self._in(node, "Temperature", 1, stack))
         return {node.outputs[0].identifier: out}
 
+    def _ambient_occlusion(self, node, stack):
+        """Cycles' Ambient Occlusion node: the core traces its rays from the shading point
+        (ShadingQueries in nodes/program.h)."""
+        colour, ao = self.b.register(width=3), self.b.register()
+        normal = self._vector_or(node, stack, "NORMAL", "Normal")
+        samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        self.b.emit("AMBIENT_OCCLUSION", colour, ao, self._in(node, "Color", 3, stack),
+                    self._in(node, "Distance", 1, stack), normal, samples,
+                    int(node.inside) | (2 if node.only_local else 0))
+        return self._ids(node, {"Color": colour, "AO": ao})
+
+    def _wireframe(self, node, stack):
+        out = self.b.register()
+        self.b.emit("WIREFRAME", out, self._in(node, "Size", 1, stack), int(node.use_pixel_size))
+        return self._ids(node, {"Fac": out})
+
     # Textures
     def _tex_image(self, node, stack):
         image = node.image

@@ -103,7 +103,8 @@ Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float
 }
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                                       const Camera *camera, float time, const AovSink *aov) const {
+                                       const Camera *camera, float time, const AovSink *aov,
+                                       const ShadingQueries *queries) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     // A moving instance's object space is where it is at the ray's time: the point was found
@@ -191,6 +192,12 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             t = t - sp.ns * dot(sp.ns, t);
             if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
         }
+    }
+    sg.queries = queries;
+    if (prog.uses_triangle && inst.mesh) {  // Wireframe: the triangle where it is at the ray's time
+        inst.mesh->vertices(sp.prim, &sg.triangle[0], &sg.triangle[1], &sg.triangle[2]);
+        for (Vec3 &v : sg.triangle) v = to_world.point(v);
+        sg.has_triangle = true;
     }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
@@ -517,11 +524,13 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
     }
 }
 
-bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {
+bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
+                           int only_instance) const {
     bool blocked = false;
     const float limit = ray.tmax;
     for_each_instance(ray, limit, kVisShadow, from, stats,
                       [&](int index, const Instance &inst, Placement, Ray &local, float, bool self) {
+                          if (only_instance >= 0 && index != only_instance) return false;
                           if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
                           // Splats block only where the visibility rules put a surface: a fringe
                           // disc (far phase) or the splats the ray starts from never cast a shadow.

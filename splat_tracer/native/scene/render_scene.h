@@ -160,13 +160,14 @@ class RenderScene {
     // material's inputs. A program that drives the normal (Normal Map) replaces sp.ns with it.
     // `camera`: the render's, for the Camera texture coordinate. `aov`: where the program's
     // AOV Output nodes write (a camera ray still writing its shader AOVs), or null.
+    // `queries`: the rays a program may trace from the point (Ambient Occlusion), or null.
     Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f,
-                         const AovSink *aov = nullptr) const {
+                         const AovSink *aov = nullptr, const ShadingQueries *queries = nullptr) const {
         const Material &m = materials_[sp.material];
         // A program written for its AOVs alone runs only where they are written.
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
         const Vec3 surface = sp.ns;
-        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov);
+        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov, queries);
         sp.bumped = sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z;
         sp.ns_surface = surface;
         return out;
@@ -210,12 +211,15 @@ class RenderScene {
     // in the shutter (null: 0).
     void intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
                           SurfacePoint *out, TraversalStats *stats, const float *times = nullptr) const;
-    // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
-    bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
+    // Whether anything visible to shadow rays blocks the ray in (tmin, tmax); only instance
+    // `only_instance` when >= 0 (the Ambient Occlusion node's Only Local).
+    bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
+                  int only_instance = -1) const;
 
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
-                              const Camera *camera, float time, const AovSink *aov) const;
+                              const Camera *camera, float time, const AovSink *aov,
+                              const ShadingQueries *queries = nullptr) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;
