@@ -15,7 +15,7 @@ the box's. Tolerances (measured with bpy 5.0.1):
   scene (the node's unlinked value, 1 everywhere) or Only Local (the floor alone: 1) is
   outside the tolerance in the rings.
 
-Wireframe: a UV sphere's and a cube's emission is the node's Fac (Size 0.05 m, then 2 px
+Wireframe: a coarse UV sphere's (12 x 6) and a turned cube's emission is the node's Fac (Size 0.05 m, then 2 px
 with Pixel Size), correlation of the images >= WIRE_CORRELATION = 0.9 and the wire's coverage
 (the share of lit pixels) within WIRE_COVERAGE_RTOL = 0.1 of Cycles'. Edges of a triangle
 mesh: Cycles draws every triangle's edges (a quad's diagonal too) and so does this engine.
@@ -28,8 +28,8 @@ import numpy as np
 import pytest
 
 from blender_helpers import add_camera
-from test_scene_export import black_world, cloud_sphere, cube, direct_light_only, plane, principled, render, stats, \
-    uv_sphere
+from test_scene_export import black_world, cloud_sphere, cube, direct_light_only, mesh_object, plane, principled, \
+    render, stats, uv_sphere
 
 SIZE = 96
 AO_ATOL = 0.01
@@ -151,7 +151,9 @@ def _wire_material(bpy, size, pixel_size):
 def test_wireframe_matches_cycles(blender, empty_scene, tmp_path, size, pixel_size):
     bpy, scene = blender, empty_scene
     m = _wire_material(bpy, size, pixel_size)
-    ball = uv_sphere(bpy, "Ball", 0.8, (-1, 0, 0), m)
+    import bmesh
+    mesh_object(bpy, "Ball", lambda bm: bmesh.ops.create_uvsphere(bm, u_segments=12, v_segments=6, radius=0.8),
+                (-1, 0, 0), [m])
     box = cube(bpy, "Box", 1.2, (1, 0, 0), m)
     box.rotation_euler = (math.radians(30), math.radians(20), 0)
     add_camera(bpy, scene, (0, -6, 2), (math.radians(72), 0, 0), lens=35)

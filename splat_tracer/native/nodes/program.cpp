@@ -765,7 +765,17 @@ float ambient_occlusion(const ShaderGlobals &sg, Vec3 n, float distance, int sam
 float wireframe(const ShaderGlobals &sg, float size, bool pixel_size) {
     if (!sg.has_triangle) return 0.f;
     float width = 1.f;
-    if (pixel_size) width = sg.queries ? sg.queries->pixel_width(sg.P) : 0.f;
+    if (pixel_size) {
+        // Cycles spreads the footprint along the surface (two perpendicular tangents of its
+        // geometric normal, Cycles' make_orthonormals) and measures them across the view.
+        const float w = sg.queries ? sg.queries->pixel_width(sg.P) : 0.f;
+        const Vec3 n = sg.Ng;
+        Vec3 a = (n.x != n.y || n.x != n.z) ? Vec3(n.z - n.y, n.x - n.z, n.y - n.x)   // (1,1,1) x n
+                                            : Vec3(n.z - n.y, n.x + n.z, -n.y - n.x);  // (-1,1,1) x n
+        a = normalize(a);
+        const Vec3 b = cross(n, a);
+        width = w * 0.5f * (length(a - sg.I * dot(a, sg.I)) + length(b - sg.I * dot(b, sg.I)));
+    }
     width *= 0.5f * size;
     width *= width;
     for (int i = 0; i < 3; ++i) {

@@ -955,19 +955,34 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     return L;
 }
 
-// A camera pixel's footprint at p: the frustum's extent at p's depth over the image's pixels
-// (x and y averaged, as Cycles averages its two differentials), the distance standing for the
-// depth in a panorama. Cycles carries ray differentials along the path; here every ray's
-// point gets the footprint the camera would see there.
+// A camera pixel's footprint at p, as Cycles' ray differential gives it at a camera ray's hit
+// (camera.h, differential.h): the distance from the camera times the angle between the ray
+// through p and its neighbours one pixel over (x and y averaged); an orthographic pixel's own
+// size. A panorama: the distance times the pixel's extent in its image coordinates (an
+// approximation). Cycles carries differentials along the path; here every point gets the
+// footprint the camera would see there.
 float Integrator::pixel_width(Vec3 p) const {
     const Camera &c = camera_;
-    const double d[3] = {p.x - c.position[0], p.y - c.position[1], p.z - c.position[2]};
-    double depth = 1.0;
-    if (c.panoramic()) depth = std::sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-    else if (!c.orthographic) depth = std::fabs(d[0] * c.forward[0] + d[1] * c.forward[1] + d[2] * c.forward[2]);
-    const double x = (c.frustum[1] - c.frustum[0]) / std::max(film_.width, 1);
-    const double y = (c.frustum[3] - c.frustum[2]) / std::max(film_.height, 1);
-    return float(depth * 0.5 * (std::fabs(x) + std::fabs(y)));
+    const double *m = c.local_from_camera;
+    const double d[3] = {double(p.x) - m[3], double(p.y) - m[7], double(p.z) - m[11]};
+    double q[3];  // p in camera space (looking down -Z)
+    for (int k = 0; k < 3; ++k) {
+        const double len = std::sqrt(m[k] * m[k] + m[4 + k] * m[4 + k] + m[8 + k] * m[8 + k]);
+        q[k] = (m[k] * d[0] + m[4 + k] * d[1] + m[8 + k] * d[2]) / (len > 0 ? len : 1.0);
+    }
+    const double px = std::fabs(c.frustum[1] - c.frustum[0]) / std::max(film_.width, 1);
+    const double py = std::fabs(c.frustum[3] - c.frustum[2]) / std::max(film_.height, 1);
+    if (c.orthographic && !c.panoramic()) return float(0.5 * (px + py));
+    const double distance = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    if (c.panoramic() || !(-q[2] > 0.0)) return float(distance * 0.5 * (px + py));
+    // The directions through p and one pixel over on the unit plane, normalised, apart.
+    const double u = q[0] / -q[2], v = q[1] / -q[2];
+    auto apart = [&](double du, double dv) {
+        const double a = std::sqrt(u * u + v * v + 1.0), b = std::sqrt((u + du) * (u + du) + (v + dv) * (v + dv) + 1.0);
+        const double x = (u + du) / b - u / a, y = (v + dv) / b - v / a, z = 1.0 / b - 1.0 / a;
+        return std::sqrt(x * x + y * y + z * z);
+    };
+    return float(distance * 0.5 * (apart(px, 0.0) + apart(0.0, py)));
 }
 
 Origin Integrator::leaving(const SurfacePoint &sp, const Origin &path, float *offset) const {
