@@ -545,6 +545,16 @@ class Compiler:
         self.b.emit("WIREFRAME", out, self._in(node, "Size", 1, stack), int(node.use_pixel_size))
         return self._ids(node, {"Fac": out})
 
+    def _bevel(self, node, stack):
+        """Cycles' Bevel node: the core traces rays to the point's own mesh around it."""
+        out = self.b.register(width=3)
+        socket = next(s for s in node.inputs if s.name == "Normal")
+        linked = self.source(socket, stack) is not None
+        normal = self.input(socket, 3, stack) if linked else self.b.global_("NORMAL")
+        samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        self.b.emit("BEVEL", out, self._in(node, "Radius", 1, stack), normal, samples, int(linked))
+        return {node.outputs[0].identifier: out}
+
     # Textures
     def _tex_image(self, node, stack):
         image = node.image

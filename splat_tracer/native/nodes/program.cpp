@@ -10,7 +10,7 @@
 #include "base/errors.h"
 #include "nodes/noise.h"
 #include "nodes/cie1931.h"
-#include "shade/sampling.h"
+#include "nodes/raytrace.h"
 
 namespace splat {
 
@@ -85,6 +85,7 @@ const Layout &layout(Op op) {
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
         /* AmbientOcclusion */ {{kR3, kR1, kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, 0, 0, kMaxAoSamples + 1, 4}},
         /* Wireframe */ {{kR1, kR1, kEnum}, {0, 0, 2}},
+        /* Bevel */ {{kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, kMaxAoSamples + 1, 2}},
     };
     return table[int(op)];
 }
@@ -619,7 +620,7 @@ void NodeProgram::validate() {
             bump_depth[row] = depth;
             uses_bump = true;
         }
-        if (op == Op::Wireframe) uses_triangle = true;
+        if (op == Op::Wireframe || op == Op::Bevel) uses_triangle = true;
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Global && c[2] == int32_t(Global::Window)) uses_window = true;
         if (op == Op::ImageTiles && (c[5] < 1 || c[4] < 0 || int64_t(c[4]) + 2 * int64_t(c[5]) > n))
@@ -739,52 +740,6 @@ void table_lookup(const float *t, int size, float f, bool interpolate, float *rg
 }
 
 }  // namespace
-
-// Cycles' Ambient Occlusion node (svm_ao): the share of `samples` cosine-distributed rays about
-// the normal (turned inwards for Inside) that meet nothing within `distance`. Without a scene
-// to trace (ShadingQueries absent), 1: unoccluded, as Cycles gives where it cannot trace.
-float ambient_occlusion(const ShaderGlobals &sg, Vec3 n, float distance, int samples, int flags, uint32_t key) {
-    if (!sg.queries || !(distance > 0.f) || samples < 1) return 1.f;
-    const float len2 = dot(n, n);
-    n = len2 > 0.f && std::isfinite(len2) ? n * (1.f / std::sqrt(len2)) : sg.N;
-    if (flags & 1) n = n * -1.f;
-    int open = 0;
-    for (int i = 0; i < samples; ++i) {
-        float u[2];
-        sg.queries->random(key, u, 2, uint32_t(i), uint32_t(samples));
-        if (!sg.queries->occluded(sample_cosine(n, u[0], u[1]), distance, (flags & 2) != 0)) ++open;
-    }
-    return float(open) / float(samples);
-}
-
-// Cycles' Wireframe node: 1 where the point lies within size / 2 of one of its triangle's
-// edges (every edge of the triangle: a triangulated quad shows its diagonal, as in Cycles),
-// size in scene units or, with Pixel Size, in pixels of the camera's footprint there. Cycles
-// compares the squared distance, |edge x (P - corner)|^2 < |edge|^2 (size / 2)^2: so does this.
-// Not a mesh's triangle (a point cloud's splat): 0, as Cycles gives off triangles.
-float wireframe(const ShaderGlobals &sg, float size, bool pixel_size) {
-    if (!sg.has_triangle) return 0.f;
-    float width = 1.f;
-    if (pixel_size) {
-        // Cycles spreads the footprint along the surface (two perpendicular tangents of its
-        // geometric normal, Cycles' make_orthonormals) and measures them across the view.
-        const float w = sg.queries ? sg.queries->pixel_width(sg.P) : 0.f;
-        const Vec3 n = sg.Ng;
-        Vec3 a = (n.x != n.y || n.x != n.z) ? Vec3(n.z - n.y, n.x - n.z, n.y - n.x)   // (1,1,1) x n
-                                            : Vec3(n.z - n.y, n.x + n.z, -n.y - n.x);  // (-1,1,1) x n
-        a = normalize(a);
-        const Vec3 b = cross(n, a);
-        width = w * 0.5f * (length(a - sg.I * dot(a, sg.I)) + length(b - sg.I * dot(b, sg.I)));
-    }
-    width *= 0.5f * size;
-    width *= width;
-    for (int i = 0; i < 3; ++i) {
-        const Vec3 &a = sg.triangle[i], &b = sg.triangle[i ? i - 1 : 2];
-        const Vec3 edge = a - b, crs = cross(edge, sg.P - a);
-        if (dot(crs, crs) < dot(edge, edge) * width) return 1.f;
-    }
-    return 0.f;
-}
 
 void NodeProgram::run(const ShaderGlobals &sg, float *r) const {
     std::memcpy(r, data.data(), data.size() * sizeof(float));
@@ -1123,6 +1078,14 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 break;
             }
             case Op::Wireframe: r[c[1]] = wireframe(sg, r[c[2]], c[3] != 0); break;
+            case Op::Bevel: {
+                Vec3 n = bevel(sg, r[c[2]], c[4], uint32_t(row));
+                // A linked Normal: Cycles adds the bevel's change of the normal to it.
+                if (c[5]) n = normalize(load3(r, c[3]) + (n - sg.N));
+                if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
+                store3(r, c[1], n);
+                break;
+            }
             default: break;  // unreachable: validate() refused it
         }
     }

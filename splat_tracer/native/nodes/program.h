@@ -44,6 +44,18 @@ class ShadingQueries {
     virtual bool occluded(Vec3 d, float distance, bool only_local) const = 0;
     // The width of a pixel's footprint at `p` across the camera ray (scene units).
     virtual float pixel_width(Vec3 p) const = 0;
+    // A surface of the shading point's own object (Bevel): point, geometric and shading
+    // normal, scene frame, unit, as the geometry has them (not turned towards anything).
+    struct LocalHit {
+        Vec3 p, ng, n;
+    };
+    // Up to `max` surfaces of the shading point's own mesh along the segment from `o` along
+    // unit `d` within `distance`, nearest first (Cycles' local intersection); a point
+    // cloud's: none. Returns how many.
+    virtual int local_hits(Vec3 o, Vec3 d, float distance, LocalHit *out, int max) const = 0;
+    // The smallest pdf of the directions the path took so far (Cycles' min_ray_pdf; infinite
+    // at the camera and after mirror-like bounces).
+    virtual float min_ray_pdf() const = 0;
 };
 
 // What a program reads from the shading point (Texture Coordinate, Geometry, Attribute).
@@ -166,6 +178,8 @@ enum class Op : int32_t {
                     // Cycles' AO node, `samples` cosine-distributed rays about the normal (ShadingQueries)
     Wireframe,      // out_fac, size, pixel_size (0 world units, 1 pixels): 1 within size / 2 of the mesh
                     // triangle's edges (Cycles' wireframe), 0 elsewhere and on point clouds
+    Bevel,          // out, radius, normal, samples, normal_linked: Cycles' bevel normal from the surfaces of
+                    // the point's own mesh within radius (ShadingQueries::local_hits)
     Count
 };
 

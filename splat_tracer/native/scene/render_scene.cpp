@@ -524,6 +524,28 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
     }
 }
 
+int RenderScene::local_hits(int index, Ray ray, float time, ShadingQueries::LocalHit *out, int max,
+                            TraversalStats *stats) const {
+    if (index < 0 || size_t(index) >= instances_.size() || !instances_[size_t(index)].mesh) return 0;
+    const Instance &inst = instances_[size_t(index)];
+    PlacementScratch scratch;
+    const Placement at = inst.at(time, scratch.a);
+    float s;
+    Ray local = to_object(*at.to_object, ray, &s);
+    int n = 0;
+    int32_t skip = -1;
+    while (n < max) {  // each next surface beyond the last (its triangle skipped)
+        const MeshHit h = inst.mesh->intersect(local, skip, stats);
+        if (!h.valid()) break;
+        out[n].p = at.to_world->point(inst.mesh->point(h));
+        out[n].ng = normalize(at.to_object->transposed_vector(inst.mesh->geometric_normal(h.tri)));
+        out[n].n = normalize(at.to_object->transposed_vector(inst.mesh->shading_normal(h)));
+        ++n;
+        local.tmin = h.t, skip = h.tri;
+    }
+    return n;
+}
+
 bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
                            int only_instance) const {
     bool blocked = false;

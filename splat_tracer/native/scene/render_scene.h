@@ -216,6 +216,12 @@ class RenderScene {
     bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
                   int only_instance = -1) const;
 
+    // Up to `max` surfaces of instance `index` along the ray (scene frame) within its
+    // (tmin, tmax), nearest first, where the instance is at `time`: Cycles' local intersection
+    // (the Bevel node). A mesh's only; a cloud has none.
+    int local_hits(int index, Ray ray, float time, ShadingQueries::LocalHit *out, int max,
+                   TraversalStats *stats) const;
+
   private:
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
                               const Camera *camera, float time, const AovSink *aov,

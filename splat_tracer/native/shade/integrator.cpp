@@ -49,6 +49,14 @@ class Integrator::NodeQueries final : public ShadingQueries {
         return in_.scene_.occluded(r, in_.settings_.method, from, &tally_.stats, only_local ? sp_.instance : -1);
     }
     float pixel_width(Vec3 p) const override { return in_.pixel_width(p); }
+    int local_hits(Vec3 o, Vec3 d, float distance, LocalHit *out, int max) const override {
+        Ray r;
+        r.o = o, r.d = d, r.tmin = 0.f, r.tmax = distance;
+        ++tally_.shadow;
+        return in_.scene_.local_hits(sp_.instance, r, path_.time, out, max, &tally_.stats);
+    }
+    float min_ray_pdf() const override { return min_pdf_; }
+    float min_pdf_ = kInfinity;
 
   private:
     const Integrator &in_;
@@ -716,7 +724,8 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        const NodeQueries queries(*this, sp, st.from, rng, tally);
+        NodeQueries queries(*this, sp, st.from, rng, tally);
+        queries.min_pdf_ = st.min_pdf;
         mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr, &queries);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
