@@ -15,6 +15,8 @@ the box's. Tolerances (measured with bpy 5.0.1):
   scene (the node's unlinked value, 1 everywhere) or Only Local (the floor alone: 1) is
   outside the tolerance in the rings.
 
+Inside (the rays into a 1 m box, Distance 0.6): the box's mean AO within AO_ATOL.
+
 Wireframe: a coarse UV sphere's (12 x 6) and a turned cube's emission is the node's Fac (Size 0.05 m, then 2 px
 with Pixel Size), correlation of the images >= WIRE_CORRELATION = 0.9 and the wire's coverage
 (the share of lit pixels) within WIRE_COVERAGE_RTOL = 0.1 of Cycles'. Edges of a triangle
@@ -126,6 +128,9 @@ def test_ambient_occlusion_matches_cycles(blender, empty_scene, tmp_path, ball):
     # Rays that saw nothing (the unlinked value's 1) are far outside the tolerance.
     for region in ("box_ring", "ball_ring"):
         assert 1.0 - b[region] > 3 * CLOUD_AO_ATOL, (region, b)
+    # The node's rays draw on the path's sampler: the same frame again is the same pixels.
+    again = render(bpy, scene, tmp_path / f"ao_{ball}_again.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
+    np.testing.assert_array_equal(again.mean(-1), ours)
 
 
 def test_ambient_occlusion_only_local_sees_the_floor_alone(blender, empty_scene, tmp_path):
@@ -211,3 +216,30 @@ def test_bevel_matches_cycles(blender, empty_scene, tmp_path):
     assert r >= BEVEL_CORRELATION, r
     assert d_ours <= BEVEL_EDGE_ATOL
     assert d_plain > 2 * BEVEL_EDGE_ATOL
+
+
+def test_ambient_occlusion_inside_matches_cycles(blender, empty_scene, tmp_path):
+    """Inside: the rays turn into the object. A 1 m box whose emission is its own AO Inside
+    with Distance 0.6: near its edges and corners the rays meet the other faces within reach,
+    at the middle of a face they do not (the opposite face is 1 m away). The box's mean against
+    Cycles' within AO_ATOL (measured 0.0001); the outward AO (1 on a lone box) is outside it."""
+    bpy, scene = blender, empty_scene
+
+    def build(nodes, links):
+        ao = nodes.new("ShaderNodeAmbientOcclusion")
+        ao.samples, ao.inside = 16, True
+        ao.inputs["Distance"].default_value = 0.6
+        return ao.outputs["Color"]
+
+    box = cube(bpy, "Box", 1.0, (0, 0, 0), _emission_of(bpy, "AOInside", build))
+    box.rotation_euler = (0, 0, math.radians(30))
+    add_camera(bpy, scene, (0, -3, 2.2), (math.radians(55), 0, 0), lens=35)
+    black_world(bpy, scene)
+    direct_light_only(scene)
+    ours, theirs, report = _both(bpy, scene, tmp_path, "ao_inside")
+    assert not [line for line in report if "AOInside" in line], report
+    on_box = theirs > 1e-3
+    a, b = float(ours[on_box].mean()), float(theirs[on_box].mean())
+    print("AO inside: box mean ours", a, "Cycles", b, "pixels", int(on_box.sum()))
+    assert abs(a - b) <= AO_ATOL, (a, b)
+    assert 1.0 - b > 3 * AO_ATOL, b
