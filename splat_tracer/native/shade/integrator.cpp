@@ -29,8 +29,10 @@ struct Integrator::Tally {
 // surface but only asked when a program has such a node.
 class Integrator::NodeQueries final : public ShadingQueries {
   public:
-    NodeQueries(const Integrator &in, const SurfacePoint &sp, const Origin &path, const Sampler &rng, Tally &tally)
-        : in_(in), sp_(sp), path_(path), rng_(rng), tally_(tally) {}
+    // `min_pdf`: the path's (PathState::min_pdf), for Bevel.
+    NodeQueries(const Integrator &in, const SurfacePoint &sp, const Origin &path, const Sampler &rng, Tally &tally,
+                float min_pdf)
+        : in_(in), sp_(sp), path_(path), rng_(rng), tally_(tally), min_pdf_(min_pdf) {}
     void random(uint32_t key, float *u, int count, uint32_t sub, uint32_t subs) const override {
         rng_.get(Sampler::kShaderAo + Sampler::kDimStride * key, u, count, sub, subs);
     }
@@ -56,7 +58,6 @@ class Integrator::NodeQueries final : public ShadingQueries {
         return in_.scene_.local_hits(sp_.instance, r, path_.time, out, max, &tally_.stats);
     }
     float min_ray_pdf() const override { return min_pdf_; }
-    float min_pdf_ = kInfinity;
 
   private:
     const Integrator &in_;
@@ -64,6 +65,7 @@ class Integrator::NodeQueries final : public ShadingQueries {
     const Origin &path_;
     const Sampler &rng_;
     Tally &tally_;
+    float min_pdf_;
 };
 
 struct Integrator::PathState {
@@ -724,8 +726,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
             if (primary) primary->alpha = 0.f, primary->hit = true, primary->t = sp.t;
             return Vec3();
         }
-        NodeQueries queries(*this, sp, st.from, rng, tally);
-        queries.min_pdf_ = st.min_pdf;
+        const NodeQueries queries(*this, sp, st.from, rng, tally, st.min_pdf);
         mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr, &queries);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
