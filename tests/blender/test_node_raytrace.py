@@ -243,3 +243,19 @@ def test_ambient_occlusion_inside_matches_cycles(blender, empty_scene, tmp_path)
     print("AO inside: box mean ours", a, "Cycles", b, "pixels", int(on_box.sum()))
     assert abs(a - b) <= AO_ATOL, (a, b)
     assert 1.0 - b > 3 * AO_ATOL, b
+
+
+def test_ambient_occlusion_distance_zero_reaches_the_worlds_distance(blender, empty_scene, tmp_path):
+    """Distance 0 (unlinked): Cycles' rays reach World > Light Settings > Distance (0.5 here);
+    the regions within AO_ATOL of Cycles', and far from Distance 0 read as no reach (AO 1)."""
+    bpy, scene = blender, empty_scene
+    _ao_scene(bpy, scene, ball="mesh")
+    bpy.data.materials["AOFloor"].node_tree.nodes["Ambient Occlusion"].inputs["Distance"].default_value = 0.0
+    scene.world.light_settings.distance = 0.5
+    ours, theirs, _ = _both(bpy, scene, tmp_path, "ao_world_distance")
+    a, b = _ao_regions(ours), _ao_regions(theirs)
+    print("AO world distance ours", a, "Cycles", b)
+    for region in a:
+        assert abs(a[region] - b[region]) <= AO_ATOL, (region, a, b)
+        if region != "open":
+            assert 1.0 - b[region] > 3 * CLOUD_AO_ATOL, (region, b)

@@ -39,7 +39,7 @@ def test_bevel_without_a_scene_keeps_the_normal(linked):
 
 @pytest.mark.parametrize("op,operands,what", [
     ("AMBIENT_OCCLUSION", (0, 3, 0, 4, 0, nodes.MAX_AO_SAMPLES + 1, 0), "value out of range"),
-    ("AMBIENT_OCCLUSION", (0, 3, 0, 4, 0, 1, 4), "value out of range"),
+    ("AMBIENT_OCCLUSION", (0, 3, 0, 4, 0, 1, 8), "value out of range"),
     ("WIREFRAME", (0, 3, 2), "value out of range"),
     ("BEVEL", (0, 4, 3, 8, 0), "register out of range"),  # the normal, registers 3-5 of 0-4
 ])

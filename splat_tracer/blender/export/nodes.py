@@ -535,9 +535,12 @@ class Compiler:
         colour, ao = self.b.register(width=3), self.b.register()
         normal = self._vector_or(node, stack, "NORMAL", "Normal")
         samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        distance = node.inputs["Distance"]
+        # Distance 0 and unlinked: Cycles reaches as far as World > Light Settings > Distance.
+        world = self.source(distance, stack) is None and float(distance.default_value) == 0.0
         self.b.emit("AMBIENT_OCCLUSION", colour, ao, self._in(node, "Color", 3, stack),
-                    self._in(node, "Distance", 1, stack), normal, samples,
-                    int(node.inside) | (2 if node.only_local else 0))
+                    self.input(distance, 1, stack), normal, samples,
+                    int(node.inside) | (2 if node.only_local else 0) | (4 if world else 0))
         return self._ids(node, {"Color": colour, "AO": ao})
 
     def _wireframe(self, node, stack):

@@ -83,7 +83,7 @@ const Layout &layout(Op op) {
         {{kR3, kR1, kR3, kNone, kNone, kEnum, kEnum}, {0, 0, 0, 0, 0, int32_t(ImageInterpolation::Count),
                                                        int32_t(ImageExtension::Count)}},
         /* Transform */ {{kR3, kR3, kRW}, {0, 0, 12}},
-        /* AmbientOcclusion */ {{kR3, kR1, kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, 0, 0, kMaxAoSamples + 1, 4}},
+        /* AmbientOcclusion */ {{kR3, kR1, kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, 0, 0, kMaxAoSamples + 1, 8}},
         /* Wireframe */ {{kR1, kR1, kEnum}, {0, 0, 2}},
         /* Bevel */ {{kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, kMaxAoSamples + 1, 2}},
     };

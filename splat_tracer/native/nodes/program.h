@@ -53,6 +53,9 @@ class ShadingQueries {
     // unit `d` within `distance`, nearest first (Cycles' local intersection); a point
     // cloud's: none. Returns how many.
     virtual int local_hits(Vec3 o, Vec3 d, float distance, LocalHit *out, int max) const = 0;
+    // World > Light Settings > Distance (Cycles' ao_bounces_distance): an AO node's reach
+    // when its Distance is 0 and unlinked.
+    virtual float ao_distance() const = 0;
     // The smallest pdf of the directions the path took so far (Cycles' min_ray_pdf; infinite
     // at the camera and after mirror-like bounces).
     virtual float min_ray_pdf() const = 0;
@@ -174,7 +177,8 @@ enum class Op : int32_t {
                     // the tile from the vector's integer part, magenta outside the tiles (as Cycles)
     Transform,      // out, vector, matrix (12 registers: a row-major 3x4 affine map), applied to the vector
                     // as a point (Texture Coordinate's Object output with another object chosen)
-    AmbientOcclusion,  // out_colour, out_ao, colour, distance, normal, samples, flags (1 inside, 2 only local):
+    AmbientOcclusion,  // out_colour, out_ao, colour, distance, normal, samples, flags (1 inside, 2 only local,
+                    // 4 the world's distance: Distance 0 and unlinked):
                     // Cycles' AO node, `samples` cosine-distributed rays about the normal (ShadingQueries)
     Wireframe,      // out_fac, size, pixel_size (0 world units, 1 pixels): 1 within size / 2 of the mesh
                     // triangle's edges (Cycles' wireframe), 0 elsewhere and on point clouds

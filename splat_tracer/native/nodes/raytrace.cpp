@@ -12,6 +12,7 @@ namespace splat {
 // the normal (turned inwards for Inside) that meet nothing within `distance`. Without a scene
 // to trace (ShadingQueries absent), 1: unoccluded, as Cycles gives where it cannot trace.
 float ambient_occlusion(const ShaderGlobals &sg, Vec3 n, float distance, int samples, int flags, uint32_t key) {
+    if (sg.queries && (flags & 4)) distance = sg.queries->ao_distance();  // Cycles' global radius
     if (!sg.queries || !(distance > 0.f) || samples < 1) return 1.f;
     const float len2 = dot(n, n);
     n = len2 > 0.f && std::isfinite(len2) ? n * (1.f / std::sqrt(len2)) : sg.N;

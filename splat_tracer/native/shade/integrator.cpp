@@ -57,6 +57,7 @@ class Integrator::NodeQueries final : public ShadingQueries {
         ++tally_.shadow;
         return in_.scene_.local_hits(sp_.instance, r, path_.time, out, max, &tally_.stats);
     }
+    float ao_distance() const override { return in_.settings_.ao_distance; }
     float min_ray_pdf() const override { return min_pdf_; }
 
   private:
