@@ -545,6 +545,9 @@ class Compiler:
 
     def _wireframe(self, node, stack):
         out = self.b.register()
+        if node.use_pixel_size:
+            self.say(f": the {node.bl_label}'s Pixel Size is the camera's pixel footprint at each point, also "
+                     "on reflected and refracted rays (Cycles widens it along the path)")
         self.b.emit("WIREFRAME", out, self._in(node, "Size", 1, stack), int(node.use_pixel_size))
         return self._ids(node, {"Fac": out})
 
@@ -555,6 +558,8 @@ class Compiler:
         linked = self.source(socket, stack) is not None
         normal = self.input(socket, 3, stack) if linked else self.b.global_("NORMAL")
         samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        self.say(f": the {node.bl_label} node keeps the nearest 4 surfaces along each of its rays (Cycles: a "
+                 "random 4 of all)")
         self.b.emit("BEVEL", out, self._in(node, "Radius", 1, stack), normal, samples, int(linked))
         return {node.outputs[0].identifier: out}
 
