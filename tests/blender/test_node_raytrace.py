@@ -262,3 +262,29 @@ def test_ambient_occlusion_distance_zero_reaches_the_worlds_distance(blender, em
         assert abs(a[region] - b[region]) <= AO_ATOL, (region, a, b)
         if region != "open":
             assert 1.0 - b[region] > 3 * CLOUD_AO_ATOL, (region, b)
+
+
+def test_wireframe_on_a_point_cloud_is_zero(blender, empty_scene, tmp_path):
+    """Cycles' wireframe is a triangle's (svm/wireframe.h tests the primitive for a triangle):
+    on a cloud's points its Fac is 0, and here on the splats too. The ball's emission is
+    1 - Fac: the whole ball lit at 1 (a wrong Fac 1 would leave it black). (Not beside Cycles:
+    this scene's cloud did not show in Cycles' camera rays, even with a constant emission.)"""
+    bpy, scene = blender, empty_scene
+
+    def build(nodes, links):
+        wire, invert = nodes.new("ShaderNodeWireframe"), nodes.new("ShaderNodeMath")
+        wire.inputs["Size"].default_value = 0.5
+        invert.operation = "SUBTRACT"
+        invert.inputs[0].default_value = 1.0
+        links.new(wire.outputs["Fac"], invert.inputs[1])
+        return invert.outputs["Value"]
+
+    cloud_sphere(bpy, "Ball", 1500, 0.8, (0, 0, 0), _emission_of(bpy, "WireCloud", build))
+    add_camera(bpy, scene, (0, -4, 0), (math.radians(90), 0, 0), lens=35)
+    black_world(bpy, scene)
+    direct_light_only(scene)
+    ours = render(bpy, scene, tmp_path / "wire_cloud.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3].mean(-1)
+    ball = ours > 0.5
+    assert ball.sum() > 0.1 * SIZE * SIZE
+    # Inside the silhouette every pixel is 1 (its edge pixels are partly covered).
+    assert float(np.median(ours[ball])) == pytest.approx(1.0, abs=1e-6) and float(ours.max()) <= 1.0 + 1e-6
