@@ -8,6 +8,19 @@
 
 namespace splat {
 
+namespace {
+
+// Two unit tangents of unit n, as Cycles' make_orthonormals picks them (the Wireframe's
+// footprint and the Bevel's axes are measured along them, so the same pair as Cycles').
+void cycles_orthonormals(Vec3 n, Vec3 *a, Vec3 *b) {
+    const Vec3 t = (n.x != n.y || n.x != n.z) ? Vec3(n.z - n.y, n.x - n.z, n.y - n.x)   // (1,1,1) x n
+                                              : Vec3(n.z - n.y, n.x + n.z, -n.y - n.x);  // (-1,1,1) x n
+    *a = normalize(t);
+    *b = cross(n, *a);
+}
+
+}  // namespace
+
 // Cycles' Ambient Occlusion node (svm_ao): the share of `samples` cosine-distributed rays about
 // the normal (turned inwards for Inside) that meet nothing within `distance`. Without a scene
 // to trace (ShadingQueries absent), 1: unoccluded, as Cycles gives where it cannot trace.
@@ -38,11 +51,8 @@ float wireframe(const ShaderGlobals &sg, float size, bool pixel_size) {
         // Cycles spreads the footprint along the surface (two perpendicular tangents of its
         // geometric normal, Cycles' make_orthonormals) and measures them across the view.
         const float w = sg.queries ? sg.queries->pixel_width(sg.P) : 0.f;
-        const Vec3 n = sg.Ng;
-        Vec3 a = (n.x != n.y || n.x != n.z) ? Vec3(n.z - n.y, n.x - n.z, n.y - n.x)   // (1,1,1) x n
-                                            : Vec3(n.z - n.y, n.x + n.z, -n.y - n.x);  // (-1,1,1) x n
-        a = normalize(a);
-        const Vec3 b = cross(n, a);
+        Vec3 a, b;
+        cycles_orthonormals(sg.Ng, &a, &b);
         width = w * 0.5f * (length(a - sg.I * dot(a, sg.I)) + length(b - sg.I * dot(b, sg.I)));
     }
     width *= 0.5f * size;
@@ -86,12 +96,10 @@ Vec3 bevel(const ShaderGlobals &sg, float radius, int samples, uint32_t key) {
         }
         return x;
     };
-    // The frame about the geometric normal (Cycles' make_orthonormals, so the axes match).
+    // The frame about the geometric normal, Cycles' pair, so that the axes match.
     const Vec3 ng = sg.Ng;
-    Vec3 t0 = (ng.x != ng.y || ng.x != ng.z) ? Vec3(ng.z - ng.y, ng.x - ng.z, ng.y - ng.x)
-                                             : Vec3(ng.z - ng.y, ng.x + ng.z, -ng.y - ng.x);
-    t0 = normalize(t0);
-    const Vec3 b0 = cross(ng, t0);
+    Vec3 t0, b0;
+    cycles_orthonormals(ng, &t0, &b0);
     Vec3 sum;
     for (int i = 0; i < samples; ++i) {
         float u[2];
