@@ -20,6 +20,7 @@ import numpy as np
 WIDTH = 8            # int32 per instruction (native kNodeWidth)
 MAX_REGISTERS = 4096  # native kMaxNodeRegisters: a larger program is refused at export
 MAX_BUMP_DEPTH = 3   # native kMaxBumpDepth: Bump nodes within a Bump's height, each level 3x the cost
+MAX_AO_SAMPLES = 128  # native kMaxAoSamples: the Ambient Occlusion node's Samples (Blender's limit)
 
 # Opcodes, in the native Op order; the operand layout of each is in program.h.
 OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_COLOUR", "MAP_RANGE", "CLAMP",
@@ -28,7 +29,7 @@ OPS = ("GLOBAL", "COPY", "MATH", "VECTOR_MATH", "MIX_FLOAT", "MIX_VECTOR", "MIX_
        "CURVES", "IMAGE", "VORONOI", "WAVE", "MAGIC", "NORMAL_MAP", "BRICK", "BLACKBODY", "BUMP", "ATTRIBUTE",
        "IMAGE_PROJECT", "IMAGE_BOX", "IMAGE_TILES", "TRANSFORM", "VECTOR_ROTATE", "RGB_TO_HSL", "HSL_TO_RGB",
        "WAVELENGTH", "OBJECT_SPACE", "VECTOR_MAP_RANGE", "GABOR", "OBJECT_VALUE", "LIGHT_PATH",
-       "TANGENT")
+       "TANGENT", "AMBIENT_OCCLUSION", "WIREFRAME", "BEVEL")
 # The most point-attribute floats a scene's programs read (native kMaxPointAttributes): a
 # float attribute takes one, a vector or colour three.
 MAX_POINT_ATTRIBUTES = 12

@@ -454,8 +454,9 @@ def render_arguments(camera: Camera, width: int, height: int, settings: RenderSe
         kwargs["camera_motion"] = np.ascontiguousarray(np.asarray(camera.motion, np.float64)[:, :3].reshape(-1, 12))
     if "Mist" in passes:  # read by the Mist pass alone
         kwargs["mist_settings"] = world.mist()
-    if "AO" in passes:
-        kwargs["ao_distance"] = float(world.ao_distance)
+    # Read by the AO pass and by Ambient Occlusion nodes whose Distance is 0 (Cycles' global
+    # radius): a setting, which changes nothing else.
+    kwargs["ao_distance"] = float(world.ao_distance)
     light = [name for name in LIGHT_PASSES if name in passes and name != "DiffCol"]
     if light:
         # All nine planes or none (the direct and indirect passes are divided by the colours'

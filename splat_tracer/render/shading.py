@@ -241,7 +241,8 @@ class World:
     mist_start: float = 0.0
     mist_depth: float = 100.0
     mist_falloff: str = "LINEAR"
-    # World > Light Settings > Distance: how far the AO pass's rays look (Cycles' ao_distance).
+    # World > Light Settings > Distance: how far the AO pass's rays look (Cycles' ao_distance),
+    # and an Ambient Occlusion node's whose Distance is 0.
     ao_distance: float = 10.0
     light_group: str = ""  # World > Settings > Light Group ("": none)
     environment: Optional[np.ndarray] = field(default=None, compare=False, repr=False)

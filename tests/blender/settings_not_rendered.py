@@ -234,7 +234,8 @@ ENTRIES = (
           "own settings"),
     Entry("world.light_settings", ("distance",), D,
           "The Ambient Occlusion pass's distance: read when that pass is on (off in the audit's scene; "
-          "tests/blender/test_light_passes.py)"),
+          "tests/blender/test_light_passes.py), and by an Ambient Occlusion node whose Distance is 0 and "
+          "unlinked, as Cycles (tests/blender/test_node_raytrace.py)"),
     Entry("world.mist_settings", ("use_mist", "intensity", "height"), C,
           "Not read by Cycles either: its Mist pass takes Start, Depth and Falloff"),
     Entry("world.cycles_visibility", ("name",), V, "The property group's name, not a setting"),

@@ -177,16 +177,16 @@ def test_an_unknown_node_says_one_line_and_uses_the_unlinked_value(blender, empt
     bpy, scene = blender, empty_scene
     m, nodes, links, shader = _material(bpy, "Bricks")
     shader.inputs["Base Color"].default_value = (0.2, 0.6, 0.3, 1)
-    brick = nodes.new("ShaderNodeAmbientOcclusion")  # not evaluated (docs/nodes.md)
-    links.new(brick.outputs["Color"], shader.inputs["Base Color"])
-    links.new(brick.outputs["AO"], shader.inputs["Roughness"])
+    brick = nodes.new("ShaderNodeParticleInfo")  # not evaluated (docs/nodes.md)
+    links.new(brick.outputs["Location"], shader.inputs["Base Color"])
+    links.new(brick.outputs["Random"], shader.inputs["Roughness"])
     plane(bpy, "Floor", 2.0, (0, 0, 0), m)
     _setup(bpy, scene)
     scene.view_layers[0].use_pass_diffuse_color = True
     out = render(bpy, scene, tmp_path / "brick.exr", (SIZE, SIZE))["ViewLayer"]
     lines = [line for line in stats()["report"] if "Bricks" in line]
-    assert lines == ["material 'Bricks': the 'Ambient Occlusion' node is not supported; Base Color uses its "
-                     "unlinked value (0.2, 0.6, 0.3)", "material 'Bricks': the 'Ambient Occlusion' node is not "
+    assert lines == ["material 'Bricks': the 'Particle Info' node is not supported; Base Color uses its "
+                     "unlinked value (0.2, 0.6, 0.3)", "material 'Bricks': the 'Particle Info' node is not "
                      "supported; Roughness uses its unlinked value 1"], lines
     # The unlinked colour, times the (1 - F0) a Principled BSDF's diffuse keeps.
     np.testing.assert_allclose(out["Diffuse Color"].reshape(-1, 3).mean(0), (0.2, 0.6, 0.3), rtol=0.01)

@@ -777,6 +777,40 @@ class Compiler:
         self.b.emit("OBJECT_SPACE", out, v, kind + 3 * int(to_world))
         return out
 
+    def _ambient_occlusion(self, node, stack):
+        """Cycles' Ambient Occlusion node: the core traces its rays from the shading point
+        (ShadingQueries in nodes/program.h)."""
+        colour, ao = self.b.register(width=3), self.b.register()
+        normal = self._vector_or(node, stack, "NORMAL", "Normal")
+        samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        distance = node.inputs["Distance"]
+        # Distance 0 and unlinked: Cycles reaches as far as World > Light Settings > Distance.
+        world = self.source(distance, stack) is None and float(distance.default_value) == 0.0
+        self.b.emit("AMBIENT_OCCLUSION", colour, ao, self._in(node, "Color", 3, stack),
+                    self.input(distance, 1, stack), normal, samples,
+                    int(node.inside) | (2 if node.only_local else 0) | (4 if world else 0))
+        return self._ids(node, {"Color": colour, "AO": ao})
+
+    def _wireframe(self, node, stack):
+        out = self.b.register()
+        if node.use_pixel_size:
+            self.say(f": the {node.bl_label}'s Pixel Size is the camera's pixel footprint at each point, also "
+                     "on reflected and refracted rays (Cycles widens it along the path)")
+        self.b.emit("WIREFRAME", out, self._in(node, "Size", 1, stack), int(node.use_pixel_size))
+        return self._ids(node, {"Fac": out})
+
+    def _bevel(self, node, stack):
+        """Cycles' Bevel node: the core traces rays to the point's own mesh around it."""
+        out = self.b.register(width=3)
+        socket = next(s for s in node.inputs if s.name == "Normal")
+        linked = self.source(socket, stack) is not None
+        normal = self.input(socket, 3, stack) if linked else self.b.global_("NORMAL")
+        samples = min(max(int(node.samples), 1), nodes.MAX_AO_SAMPLES)
+        self.say(f": the {node.bl_label} node keeps the nearest 4 surfaces along each of its rays (Cycles: a "
+                 "random 4 of all)")
+        self.b.emit("BEVEL", out, self._in(node, "Radius", 1, stack), normal, samples, int(linked))
+        return {node.outputs[0].identifier: out}
+
     # Textures
     def _tex_image(self, node, stack):
         image = node.image

@@ -11,6 +11,7 @@
 #include "nodes/noise.h"
 #include "nodes/cie1931.h"
 #include "nodes/gabor.h"
+#include "nodes/raytrace.h"
 
 namespace splat {
 
@@ -95,6 +96,9 @@ const Layout &layout(Op op) {
         /* ObjectValue (the output's width checked apart; first kMaxObjectValues: never carried, 0) */ {{kNone, kEnum, kEnum}, {0, kMaxObjectValues + 1, 5}},
         /* LightPath */ {{kRW}, {kLightPathFloats}},
         /* Tangent */ {{kR3, kEnum, kR3}, {0, 5}},
+        /* AmbientOcclusion */ {{kR3, kR1, kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, 0, 0, kMaxAoSamples + 1, 8}},
+        /* Wireframe */ {{kR1, kR1, kEnum}, {0, 0, 2}},
+        /* Bevel */ {{kR3, kR1, kR3, kEnum, kEnum}, {0, 0, 0, kMaxAoSamples + 1, 2}},
     };
     static_assert(sizeof(table) / sizeof(table[0]) == size_t(Op::Count), "one operand layout per opcode, in Op order");
     return table[int(op)];
@@ -652,6 +656,7 @@ void NodeProgram::validate() {
         }
         if (op == Op::ObjectValue && (c[3] < 1 || c[1] < 0 || int64_t(c[1]) + c[3] > n)) fail("bad object value");
         if (op == Op::LightPath) uses_light_path = true;
+        if (op == Op::Wireframe || op == Op::Bevel) uses_triangle = true;
         if (op == Op::Global && c[2] == int32_t(Global::Camera)) uses_camera = true;
         if (op == Op::Global && c[2] == int32_t(Global::Window)) uses_window = true;
         if (op == Op::ImageTiles && (c[5] < 1 || c[4] < 0 || int64_t(c[4]) + 2 * int64_t(c[5]) > n))
@@ -1244,6 +1249,21 @@ void NodeProgram::run_rows(const ShaderGlobals &sg, float *r, size_t begin, size
                 static const float kCameraRay[kLightPathFloats] = {1.f};
                 const float *l = sg.light_path ? sg.light_path : kCameraRay;
                 for (int k = 0; k < kLightPathFloats; ++k) r[c[1] + k] = l[k];
+                break;
+            }
+            case Op::AmbientOcclusion: {
+                const float ao = ambient_occlusion(sg, load3(r, c[5]), r[c[4]], c[6], c[7], uint32_t(row));
+                store3(r, c[1], load3(r, c[3]) * ao);
+                r[c[2]] = ao;
+                break;
+            }
+            case Op::Wireframe: r[c[1]] = wireframe(sg, r[c[2]], c[3] != 0); break;
+            case Op::Bevel: {
+                Vec3 n = bevel(sg, r[c[2]], c[4], uint32_t(row));
+                // A linked Normal: Cycles adds the bevel's change of the normal to it.
+                if (c[5]) n = normalize(load3(r, c[3]) + (n - sg.N));
+                if (!(dot(n, n) > 0.f) || !std::isfinite(dot(n, n))) n = sg.N;
+                store3(r, c[1], n);
                 break;
             }
             default: break;  // unreachable: validate() refused it

@@ -37,6 +37,40 @@ constexpr int kMaxObjectValues = kObjectInfoFloats + 4 * kMaxObjectAttributes;
 // volume scatter; ray length; ray, diffuse, glossy, transparent, transmission depth.
 constexpr int kLightPathFloats = 14;
 
+// What a program asks of the scene beyond the shading point (the Ambient Occlusion node's
+// rays, the Wireframe node's pixel footprint): supplied by the integrator for the surface a
+// path's ray meets, so that the nodes depend on this and not on the integrator. Where there
+// is none (shadow rays through partly transparent surfaces, emitters sampled as lights, as
+// Cycles evaluates those shaders without ray tracing), AO reads 1 and the footprint is 0.
+class ShadingQueries {
+  public:
+    virtual ~ShadingQueries() = default;
+    // `count` (<= 4) numbers in [0, 1) of the path's sampler for the purpose `key` (the
+    // instruction's row), the `sub`-th of `subs` draws per sample: converging, deterministic.
+    virtual void random(uint32_t key, float *u, int count, uint32_t sub, uint32_t subs) const = 0;
+    // Whether a ray from the shading point along unit `d` meets a surface (the scene's shadow
+    // rays' rules: splats by the paper's visibility rules, meshes off their own triangle)
+    // within `distance`; `only_local`: only the shading point's own object counts.
+    virtual bool occluded(Vec3 d, float distance, bool only_local) const = 0;
+    // The width of a pixel's footprint at `p` across the camera ray (scene units).
+    virtual float pixel_width(Vec3 p) const = 0;
+    // A surface of the shading point's own object (Bevel): point, geometric and shading
+    // normal, scene frame, unit, as the geometry has them (not turned towards anything).
+    struct LocalHit {
+        Vec3 p, ng, n;
+    };
+    // Up to `max` surfaces of the shading point's own mesh along the segment from `o` along
+    // unit `d` within `distance`, nearest first (Cycles' local intersection); a point
+    // cloud's: none. Returns how many.
+    virtual int local_hits(Vec3 o, Vec3 d, float distance, LocalHit *out, int max) const = 0;
+    // World > Light Settings > Distance (Cycles' ao_bounces_distance): an AO node's reach
+    // when its Distance is 0 and unlinked.
+    virtual float ao_distance() const = 0;
+    // The smallest pdf of the directions the path took so far (Cycles' min_ray_pdf; infinite
+    // at the camera and after mirror-like bounces).
+    virtual float min_ray_pdf() const = 0;
+};
+
 // What a program reads from the shading point (Texture Coordinate, Geometry, Attribute).
 struct ShaderGlobals {
     Vec3 P;          // position, scene frame
@@ -75,6 +109,11 @@ struct ShaderGlobals {
         Vec3 P, object, generated, uv, camera, window;
     };
     Offset bump[2];
+    const ShadingQueries *queries = nullptr;  // null: none (see ShadingQueries)
+    // The mesh triangle's corners in the scene frame (Wireframe; set when the program
+    // uses_triangle and the point is a mesh's).
+    bool has_triangle = false;
+    Vec3 triangle[3];
     ShaderGlobals offset(int k) const {
         ShaderGlobals s = *this;
         const Offset &d = bump[k];
@@ -173,6 +212,13 @@ enum class Op : int32_t {
     Tangent,        // out, kind, vector: kind 0-2 radial about X Y Z of the generated coordinates, 3 the UV
                     // map's tangent, 4 the object-space tangent in `vector` (a named map's); the Tangent node
                     // and Geometry > Tangent (radial Z), as Cycles' svm_node_tangent
+    AmbientOcclusion,  // out_colour, out_ao, colour, distance, normal, samples, flags (1 inside, 2 only local,
+                    // 4 the world's distance: Distance 0 and unlinked):
+                    // Cycles' AO node, `samples` cosine-distributed rays about the normal (ShadingQueries)
+    Wireframe,      // out_fac, size, pixel_size (0 world units, 1 pixels): 1 within size / 2 of the mesh
+                    // triangle's edges (Cycles' wireframe), 0 elsewhere and on point clouds
+    Bevel,          // out, radius, normal, samples, normal_linked: Cycles' bevel normal from the surfaces of
+                    // the point's own mesh within radius (ShadingQueries::local_hits)
     Count
 };
 
@@ -195,6 +241,7 @@ struct NodeProgram {
     bool aov_only = false;      // drives no material input: runs only for its AOVs (set by validate)
     bool uses_bump = false;     // a Bump node needs ShaderGlobals::bump (set by validate)
     bool uses_light_path = false;  // a Light Path node reads ShaderGlobals::light_path (set by validate)
+    bool uses_triangle = false;  // a Wireframe node reads ShaderGlobals::triangle (set by validate)
     std::string name;           // the material's, for errors
 
     // Checks every instruction's operands against the register file (and enumerations),
@@ -216,5 +263,6 @@ Vec3 hsv_to_rgb(Vec3 hsv);
 Vec3 blackbody_rec709(float kelvin);
 
 constexpr int kMaxBumpDepth = 3;  // Bump nodes inside a Bump's height: each level triples its cost
+constexpr int kMaxAoSamples = 128;  // the Ambient Occlusion node's Samples: Blender's limit
 
 }  // namespace splat

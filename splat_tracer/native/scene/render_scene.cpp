@@ -115,7 +115,8 @@ Vec3 RenderScene::emitted_on_triangle(int instance, int32_t tri, float b1, float
 
 Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
                                        const Camera *camera, float time, const AovSink *aov,
-                                       const float *light_path, const Placement *placement) const {
+                                       const float *light_path, const Placement *placement,
+                                       const ShadingQueries *queries) const {
     const NodeProgram &prog = programs_[m.program];
     const Instance &inst = instances_[sp.instance];
     // A moving instance's object space is where it is at the ray's time: the point was found
@@ -204,6 +205,12 @@ Material RenderScene::evaluate_program(const Material &m, const SurfacePoint &sp
             t = t - sp.ns * dot(sp.ns, t);
             if (dot(t, t) > 0.f) sg.tangent = normalize(t), sg.tangent_sign = sign;
         }
+    }
+    sg.queries = queries;
+    if (prog.uses_triangle && inst.mesh) {  // Wireframe: the triangle where it is at the ray's time
+        inst.mesh->vertices(sp.prim, &sg.triangle[0], &sg.triangle[1], &sg.triangle[2]);
+        for (Vec3 &v : sg.triangle) v = to_world.point(v);
+        sg.has_triangle = true;
     }
     if (sp.has_point_colour) sg.point_colour = sp.point_colour;
     sg.point_alpha = sp.point_alpha;
@@ -537,11 +544,35 @@ void RenderScene::intersect_camera(const Ray *rays, int n, const Method &method,
     }
 }
 
-bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const {
+int RenderScene::local_hits(int index, Ray ray, float time, ShadingQueries::LocalHit *out, int max,
+                            TraversalStats *stats) const {
+    if (index < 0 || size_t(index) >= instances_.size() || !instances_[size_t(index)].mesh) return 0;
+    const Instance &inst = instances_[size_t(index)];
+    PlacementScratch scratch;
+    const Placement at = inst.at(time, scratch.a);
+    float s;
+    Ray local = to_object(*at.to_object, ray, &s);
+    int n = 0;
+    int32_t skip = -1;
+    while (n < max) {  // each next surface beyond the last (its triangle skipped)
+        const MeshHit h = inst.mesh->intersect(local, skip, stats);
+        if (!h.valid()) break;
+        out[n].p = at.to_world->point(inst.mesh->point(h));
+        out[n].ng = normalize(at.to_object->transposed_vector(inst.mesh->geometric_normal(h.tri)));
+        out[n].n = normalize(at.to_object->transposed_vector(inst.mesh->shading_normal(h)));
+        ++n;
+        local.tmin = h.t, skip = h.tri;
+    }
+    return n;
+}
+
+bool RenderScene::occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
+                           int only_instance) const {
     bool blocked = false;
     const float limit = ray.tmax;
     for_each_instance(ray, limit, kVisShadow, from, stats,
                       [&](int index, const Instance &inst, Placement, Ray &local, float, bool self) {
+                          if (only_instance >= 0 && index != only_instance) return false;
                           if (inst.mesh) return blocked = inst.mesh->occluded(local, self ? from.triangle : -1, stats);
                           // Splats block only where the visibility rules put a surface: a fringe
                           // disc (far phase) or the splats the ray starts from never cast a shadow.

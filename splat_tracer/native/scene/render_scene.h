@@ -165,14 +165,16 @@ class RenderScene {
     // `camera`: the render's, for the Camera texture coordinate. `aov`: where the program's
     // AOV Output nodes write (a camera ray still writing its shader AOVs), or null.
     // `light_path`: the ray's kind and depths for a Light Path node (kLightPathFloats; null: a
-    // camera ray's first surface); only needed where any_light_path().
+    // camera ray's first surface); only needed where any_light_path(). `queries`: the rays a
+    // program may trace from the point (Ambient Occlusion), or null.
     Material material_at(SurfacePoint &sp, Vec3 wo, const Camera *camera = nullptr, float time = 0.f,
-                         const AovSink *aov = nullptr, const float *light_path = nullptr) const {
+                         const AovSink *aov = nullptr, const float *light_path = nullptr,
+                         const ShadingQueries *queries = nullptr) const {
         const Material &m = materials_[sp.material];
         // A program written for its AOVs alone runs only where they are written.
         if (m.program < 0 || (!aov && programs_[size_t(m.program)].aov_only)) return m;
         const Vec3 surface = sp.ns;
-        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov, light_path);
+        Material out = evaluate_program(m, sp, wo, &sp.ns, camera, time, aov, light_path, nullptr, queries);
         sp.bumped = out.bump_correction && (sp.ns.x != surface.x || sp.ns.y != surface.y || sp.ns.z != surface.z);
         sp.ns_surface = surface;
         return out;
@@ -218,15 +220,24 @@ class RenderScene {
     // in the shutter (null: 0).
     void intersect_camera(const Ray *rays, int n, const Method &method, const uint8_t *camera_inside,
                           SurfacePoint *out, TraversalStats *stats, const float *times = nullptr) const;
-    // Whether anything visible to shadow rays blocks the ray in (tmin, tmax).
-    bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats) const;
+    // Whether anything visible to shadow rays blocks the ray in (tmin, tmax); only instance
+    // `only_instance` when >= 0 (the Ambient Occlusion node's Only Local).
+    bool occluded(const Ray &ray, const Method &method, const Origin &from, TraversalStats *stats,
+                  int only_instance = -1) const;
+
+    // Up to `max` surfaces of instance `index` along the ray (scene frame) within its
+    // (tmin, tmax), nearest first, where the instance is at `time`: Cycles' local intersection
+    // (the Bevel node). A mesh's only; a cloud has none.
+    int local_hits(int index, Ray ray, float time, ShadingQueries::LocalHit *out, int max,
+                   TraversalStats *stats) const;
 
   private:
     // `placement`: where the instance is for the program (object space, normals, tangent);
     // null: where it is at `time`. A moving camera is where it is at `time` either way.
     Material evaluate_program(const Material &m, const SurfacePoint &sp, Vec3 wo, Vec3 *normal_out,
                               const Camera *camera, float time, const AovSink *aov,
-                              const float *light_path = nullptr, const Placement *placement = nullptr) const;
+                              const float *light_path = nullptr, const Placement *placement = nullptr,
+                              const ShadingQueries *queries = nullptr) const;
     template <class Visit>
     void for_each_instance(const Ray &ray, const float &limit, uint32_t ray_kind, const Origin &from,
                            TraversalStats *stats, Visit &&visit) const;

@@ -21,6 +21,54 @@ struct Integrator::Tally {
     uint64_t camera = 0, shadow = 0, reflection = 0, refraction = 0, diffuse = 0, transparent = 0;
 };
 
+// The node programs' questions at a surface a path meets (ShadingQueries): the Ambient
+// Occlusion node's rays leave the point as the path's own shadow rays do (leaving(): the
+// splats that formed it excluded, a triangle's point moved off the surface) and see what
+// shadow rays see, and draw their directions from the path's sampler at this vertex, so that
+// they converge over the pixel's samples and render the same every time. Made for each
+// surface but only asked when a program has such a node.
+class Integrator::NodeQueries final : public ShadingQueries {
+  public:
+    // `min_pdf`: the path's (PathState::min_pdf), for Bevel.
+    NodeQueries(const Integrator &in, const SurfacePoint &sp, const Origin &path, const Sampler &rng, Tally &tally,
+                float min_pdf)
+        : in_(in), sp_(sp), path_(path), rng_(rng), tally_(tally), min_pdf_(min_pdf) {}
+    void random(uint32_t key, float *u, int count, uint32_t sub, uint32_t subs) const override {
+        rng_.get(Sampler::kShaderAo + Sampler::kDimStride * key, u, count, sub, subs);
+    }
+    bool occluded(Vec3 d, float distance, bool only_local) const override {
+        float offset;
+        Origin from = in_.leaving(sp_, path_, &offset);
+        const bool behind = dot(d, sp_.ng) < 0.f;
+        // Into a cloud (the node's Inside): the ray travels inside it, as a refracted one does.
+        if (behind == sp_.front) from.inside = in_.inside_after_crossing(sp_, from.inside);
+        Ray r;
+        r.o = sp_.p + (behind ? sp_.ng * -1.f : sp_.ng) * offset;
+        r.d = d;
+        r.tmin = 0.f;
+        r.tmax = distance;
+        ++tally_.shadow;
+        return in_.scene_.occluded(r, in_.settings_.method, from, &tally_.stats, only_local ? sp_.instance : -1);
+    }
+    float pixel_width(Vec3 p) const override { return in_.pixel_width(p); }
+    int local_hits(Vec3 o, Vec3 d, float distance, LocalHit *out, int max) const override {
+        Ray r;
+        r.o = o, r.d = d, r.tmin = 0.f, r.tmax = distance;
+        ++tally_.shadow;
+        return in_.scene_.local_hits(sp_.instance, r, path_.time, out, max, &tally_.stats);
+    }
+    float ao_distance() const override { return in_.settings_.ao_distance; }
+    float min_ray_pdf() const override { return min_pdf_; }
+
+  private:
+    const Integrator &in_;
+    const SurfacePoint &sp_;
+    const Origin &path_;
+    const Sampler &rng_;
+    Tally &tally_;
+    float min_pdf_;
+};
+
 struct Integrator::PathState {
     int bounces = 0, diffuse = 0, glossy = 0, transmission = 0, transparent = 0;
     uint32_t kind = kVisCamera;  // which ray visibility applies
@@ -706,8 +754,9 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         }
         float path[kLightPathFloats];
         if (scene_.any_light_path()) light_path_of(st, sp.t, false, st.transparent, path);
+        const NodeQueries queries(*this, sp, st.from, rng, tally, st.min_pdf);
         mat = scene_.material_at(sp, ray.d * -1.f, &camera_, st.from.time, aov_writing ? &aov : nullptr,
-                                 scene_.any_light_path() ? path : nullptr);
+                                 scene_.any_light_path() ? path : nullptr, &queries);
         base = mat.use_point_colour && sp.has_point_colour ? sp.point_colour : mat.base;
         opacity = mat.alpha * (mat.use_point_alpha ? sp.point_alpha : 1.f);
         if (aov_writing && film_.aov.done_after(opacity)) aov_writing = false;
@@ -796,27 +845,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     Vec3 L = emission + clamped(lamps, st.weight, st.bounces > 1);
     if (cfg.headlight) return L + base * std::fabs(dot(sp.ns, wo));
 
-    // Where rays leave this point from: the splats that formed it are excluded (the paper's
-    // wrong-reflection rule), and a triangle's point is moved off the surface on the side
-    // the new ray goes. Without wrong-hit elimination (the general method, the baseline of
-    // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
-    // the origin moved off the disc by a small fraction of its radius -- and they do hit the
-    // neighbouring discs, which is what the paper's wrong shadows and reflections are.
-    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, st.from.inside, false, st.from.catcher_only,
-                st.from.time};
-    if (!cfg.method.wrong_hit_elimination && sp.n_members > 0) {
-        here.members = nullptr, here.n_members = 0;
-        sp.offset = kPlainSplatOffset * sp.radius;
-    } else if (open_back) {
-        // Rays leaving an open sheet's back on that side (lamps, sky, reflection, diffuse:
-        // every ray but the refracted one) meet the neighbouring discs from their front.
-        // Wrong-hit elimination, which ignores back-facing discs only, would take those for
-        // a surface: the sheet shadowed itself (a depth frame oriented away from its sensor,
-        // lit from the sensor's side: 35-40 % of its pixels black). On this side the sheet's
-        // back is its outside: these rays query it with the facing swapped (Origin::back), the
-        // mirror image of what rays leaving its front see.
-        here.back = true;
-    }
+    Origin here = leaving(sp, st.from, &sp.offset);
     if (primary && st.camera && film_.ao) primary->ao = ao_term(sp, here, n, ng, rng, tally);
     auto spawn = [&](Vec3 dir) {
         Ray r;
@@ -964,6 +993,61 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
         }
     }
     return L;
+}
+
+// A camera pixel's footprint at p, as Cycles' ray differential gives it at a camera ray's hit
+// (camera.h, differential.h): the distance from the camera times the angle between the ray
+// through p and its neighbours one pixel over (x and y averaged); an orthographic pixel's own
+// size. A panorama: the distance times the pixel's extent in its image coordinates (an
+// approximation). Cycles carries differentials along the path; here every point gets the
+// footprint the camera would see there.
+float Integrator::pixel_width(Vec3 p) const {
+    const Camera &c = camera_;
+    const double *m = c.local_from_camera;
+    const double d[3] = {double(p.x) - m[3], double(p.y) - m[7], double(p.z) - m[11]};
+    double q[3];  // p in camera space (looking down -Z)
+    for (int k = 0; k < 3; ++k) {
+        const double len = std::sqrt(m[k] * m[k] + m[4 + k] * m[4 + k] + m[8 + k] * m[8 + k]);
+        q[k] = (m[k] * d[0] + m[4 + k] * d[1] + m[8 + k] * d[2]) / (len > 0 ? len : 1.0);
+    }
+    const double px = std::fabs(c.frustum[1] - c.frustum[0]) / std::max(film_.width, 1);
+    const double py = std::fabs(c.frustum[3] - c.frustum[2]) / std::max(film_.height, 1);
+    if (c.orthographic && !c.panoramic()) return float(0.5 * (px + py));
+    const double distance = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2]);
+    if (c.panoramic() || !(-q[2] > 0.0)) return float(distance * 0.5 * (px + py));
+    // The directions through p and one pixel over on the unit plane, normalised, apart.
+    const double u = q[0] / -q[2], v = q[1] / -q[2];
+    auto apart = [&](double du, double dv) {
+        const double a = std::sqrt(u * u + v * v + 1.0), b = std::sqrt((u + du) * (u + du) + (v + dv) * (v + dv) + 1.0);
+        const double x = (u + du) / b - u / a, y = (v + dv) / b - v / a, z = 1.0 / b - 1.0 / a;
+        return std::sqrt(x * x + y * y + z * z);
+    };
+    return float(distance * 0.5 * (apart(px, 0.0) + apart(0.0, py)));
+}
+
+Origin Integrator::leaving(const SurfacePoint &sp, const Origin &path, float *offset) const {
+    // Where rays leave this point from: the splats that formed it are excluded (the paper's
+    // wrong-reflection rule), and a triangle's point is moved off the surface on the side
+    // the new ray goes. Without wrong-hit elimination (the general method, the baseline of
+    // the A/B comparison) splat rays leave as in plain splat ray tracing: nothing excluded,
+    // the origin moved off the disc by a small fraction of its radius -- and they do hit the
+    // neighbouring discs, which is what the paper's wrong shadows and reflections are.
+    Origin here{sp.instance, sp.prim, sp.members, sp.n_members, path.inside, false, path.catcher_only, path.time};
+    *offset = sp.offset;
+    if (!settings_.method.wrong_hit_elimination && sp.n_members > 0) {
+        here.members = nullptr, here.n_members = 0;
+        *offset = kPlainSplatOffset * sp.radius;
+    } else if (scene_.open_back(sp)) {
+        // Rays leaving an open sheet's back on that side (lamps, sky, reflection, diffuse:
+        // every ray but the refracted one) meet the neighbouring discs from their front.
+        // Wrong-hit elimination, which ignores back-facing discs only, would take those for
+        // a surface: the sheet shadowed itself (a depth frame oriented away from its sensor,
+        // lit from the sensor's side: 35-40 % of its pixels black). On this side the sheet's
+        // back is its outside: these rays query it with the facing swapped (Origin::back), the
+        // mirror image of what rays leaving its front see.
+        here.back = true;
+    }
+    return here;
 }
 
 Ray Integrator::shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance) {

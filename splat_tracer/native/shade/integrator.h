@@ -120,6 +120,7 @@ class Integrator {
     struct Lobes;       // a material's lobes at one point
     struct LobePicks;   // how the path goes on from a point: the sampled lobes' weights
     struct Pixel;       // one pixel's sums over its samples
+    class NodeQueries;  // what node programs ask of the scene at a path's surface (ShadingQueries)
     // With shadow catchers (Cycles' film passes of the same names): the samples whose first
     // surface is not a catcher (the matte: colour, alpha); the catcher's samples shaded with
     // everything and as if only catchers were there; their count; the world seen by the
@@ -196,6 +197,12 @@ class Integrator {
     // and a mirror-smooth surface's reflection and refraction.
     static constexpr uint32_t kSampled = 0, kMirror = 1, kGlass = 2;
     int inside_after_crossing(const SurfacePoint &sp, int inside_before) const;
+    // Where rays leave surface point `sp` of a path that arrived from `path`: its Origin, and
+    // in *offset how far off the surface they start.
+    Origin leaving(const SurfacePoint &sp, const Origin &path, float *offset) const;
+    // The width of a camera pixel's footprint at scene point p, across the ray (Wireframe's
+    // Pixel Size).
+    float pixel_width(Vec3 p) const;
     // The world's radiance for a ray of `kind` that leaves the scene (0 if hidden from it).
     Vec3 world_seen(uint32_t kind) const {
         return (settings_.world_visibility & kind) ? settings_.world : Vec3();

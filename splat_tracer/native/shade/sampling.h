@@ -148,6 +148,7 @@ class Sampler {
         kTransparent = 7,  // + kDimStride x layer: passing a partly transparent surface
         kTime = 8,         // the camera ray's time in the shutter (motion blur)
         kAoPass = 9,       // the AO pass's direction u1, u2 (camera vertex only)
+        kShaderAo = 10,    // + kDimStride x row: an Ambient Occlusion node's directions u1, u2
         kEnvironment = 13,  // the environment light's direction u1, u2 (a value no other Dim takes)
     };
     // Added per lamp or layer to a Dim: any constant above the Dims keeps the keys apart.
