@@ -367,7 +367,7 @@ def test_point_colours_render_and_a_texture_falls_back_with_one_report_line(blen
     'Splat Cloud' material (Attribute node -> Base Color): the Diffuse Color pass is each
     point's colour x (1 - F0) = 0.96 within 2 %, and the lit colour keeps the hue (the
     other two channels below a fifth of the dominant one). Two quads sharing a material
-    whose Base Color is fed by a Sky Texture (not evaluated) render the socket's default, and the
+    whose Base Color is fed by a Particle Info node (not evaluated) render the socket's default, and the
     report says so in exactly one line."""
     bpy = blender
     scene = empty_scene
@@ -379,8 +379,8 @@ def test_point_colours_render_and_a_texture_falls_back_with_one_report_line(blen
                                              colours, location=(-1.2, 0, 0))
     textured = principled(bpy, "Textured", base=TEXTURED_DEFAULT)
     nodes = textured.node_tree.nodes
-    bricks = nodes.new("ShaderNodeTexSky")  # a texture materials do not evaluate (docs/nodes.md)
-    textured.node_tree.links.new(bricks.outputs["Color"], nodes["Principled BSDF"].inputs["Base Color"])
+    unknown = nodes.new("ShaderNodeParticleInfo")  # a node materials do not evaluate (docs/nodes.md)
+    textured.node_tree.links.new(unknown.outputs["Velocity"], nodes["Principled BSDF"].inputs["Base Color"])
     plane(bpy, "Quad1", 0.8, (1.2, 0.6, 0), textured)
     plane(bpy, "Quad2", 0.8, (1.2, -0.6, 0), textured)
     top_down_sun_scene(bpy, scene, 5.0)
@@ -405,7 +405,7 @@ def test_point_colours_render_and_a_texture_falls_back_with_one_report_line(blen
         np.testing.assert_allclose(diffcol[patch(1.2, y)].reshape(-1, 3), np.tile(TEXTURED_DEFAULT, (25, 1)),
                                    rtol=1e-3)
     lines = [line for line in stats()["report"] if "Textured" in line]
-    assert lines == ["material 'Textured': the 'Sky Texture' node is not supported; Base Color uses its unlinked "
+    assert lines == ["material 'Textured': the 'Particle Info' node is not supported; Base Color uses its unlinked "
                      "value (0.2, 0.6, 0.3)"], stats()["report"]
 
 
