@@ -559,6 +559,28 @@ class SPLAT_TRACER_PT_material(SplatTracerPanel, bpy.types.Panel):
         _draw_surface(self.layout, context.material, "OUTPUT_MATERIAL", "Surface")
 
 
+class SPLAT_TRACER_PT_material_settings(SplatTracerPanel, bpy.types.Panel):
+    """Material > Settings: the material's Pass Index and the Cycles settings the engine
+    reads where Cycles keeps them (material.cycles): Emission Sampling and Bump Map
+    Correction."""
+    bl_label = "Settings"
+    bl_context = "material"
+    bl_options = {"DEFAULT_CLOSED"}
+    context_member = "material"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        material = context.material
+        col = layout.column()
+        col.prop(material, "pass_index")
+        cycles = getattr(material, "cycles", None)
+        if cycles is not None:
+            col.prop(cycles, "emission_sampling")
+            if hasattr(cycles, "use_bump_map_correction"):  # Cycles' setting from Blender 4.1 on
+                col.prop(cycles, "use_bump_map_correction")
+
+
 class SPLAT_TRACER_PT_world(SplatTracerPanel, bpy.types.Panel):
     bl_label = "Surface"
     bl_context = "world"
@@ -595,6 +617,7 @@ classes = (SPLAT_TRACER_PT_render, SPLAT_TRACER_PT_sampling, SPLAT_TRACER_PT_vis
            SPLAT_TRACER_PT_passes_cryptomatte,
            SPLAT_TRACER_PT_light, SPLAT_TRACER_PT_motion_blur, SPLAT_TRACER_PT_motion_blur_curve,
            SPLAT_TRACER_PT_object_motion_blur, SPLAT_TRACER_PT_camera_panorama, SPLAT_TRACER_PT_material,
+           SPLAT_TRACER_PT_material_settings,
            SPLAT_TRACER_PT_world,
            SPLAT_TRACER_PT_world_ray_visibility, SPLAT_TRACER_PT_viewport_ab,
            SPLAT_TRACER_PT_passes_light_groups, SPLAT_TRACER_PT_object_light_group,
