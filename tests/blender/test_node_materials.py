@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from blender_helpers import add_camera, extension_module
-from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, stats
+from test_scene_export import black_world, direct_light_only, lamp, mesh_object, render, render_both, stats
 
 SIZE = 80
 TEXTURE_CORRELATION = 0.95
@@ -58,14 +58,8 @@ def _material(bpy, name):
 
 def _both(bpy, scene, tmp_path, name):
     """(ours, Cycles') Combined RGB."""
-    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    report = list(stats()["report"])
-    scene.render.engine = "CYCLES"
-    try:
-        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    finally:
-        scene.render.engine = "SPLAT_TRACER"
-    return ours, theirs, report
+    ours, theirs, report = render_both(bpy, scene, tmp_path, name, (SIZE, SIZE))
+    return ours["Combined"][..., :3], theirs["Combined"][..., :3], report
 
 
 def _floor_both(bpy, scene, tmp_path, material, name):

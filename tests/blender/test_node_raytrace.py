@@ -31,7 +31,7 @@ import pytest
 
 from blender_helpers import add_camera
 from test_scene_export import black_world, cloud_sphere, cube, direct_light_only, mesh_object, plane, principled, \
-    render, stats, uv_sphere
+    render, render_both, uv_sphere
 
 SIZE = 96
 AO_ATOL = 0.01
@@ -69,14 +69,8 @@ def _ao_material(bpy, only_local=False):
 def _both(bpy, scene, tmp_path, name):
     c = scene.cycles
     c.samples, c.device, c.use_denoising, c.use_adaptive_sampling, c.seed = 16, "CPU", False, False, 0
-    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    report = list(stats()["report"])
-    scene.render.engine = "CYCLES"
-    try:
-        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    finally:
-        scene.render.engine = "SPLAT_TRACER"
-    return ours.mean(-1), theirs.mean(-1), report
+    ours, theirs, report = render_both(bpy, scene, tmp_path, name, (SIZE, SIZE))
+    return ours["Combined"][..., :3].mean(-1), theirs["Combined"][..., :3].mean(-1), report
 
 
 # The top-down view of the AO scene: 4 m across, the box centred at x = -1, the ball at x = +1.

@@ -23,7 +23,8 @@ import math
 import numpy as np
 
 from blender_helpers import add_camera
-from test_scene_export import black_world, cube, direct_light_only, lamp, mesh_object, plane, principled, render, stats, uv_sphere
+from test_scene_export import black_world, cube, direct_light_only, lamp, mesh_object, plane, principled, render, \
+    render_both, stats, uv_sphere
 
 SIZE = 64
 TILE_ATOL = 0.01
@@ -59,14 +60,8 @@ def _emissive(bpy, name):
 
 
 def _both(bpy, scene, tmp_path, name):
-    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    report = list(stats()["report"])
-    scene.render.engine = "CYCLES"
-    try:
-        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]["Combined"][..., :3]
-    finally:
-        scene.render.engine = "SPLAT_TRACER"
-    return ours, theirs, report
+    ours, theirs, report = render_both(bpy, scene, tmp_path, name, (SIZE, SIZE))
+    return ours["Combined"][..., :3], theirs["Combined"][..., :3], report
 
 
 def _at(image, x, y):

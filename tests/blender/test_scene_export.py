@@ -148,6 +148,19 @@ def render(bpy, scene, path: Path, size=(W, H)) -> dict:
     return out
 
 
+def render_both(bpy, scene, tmp_path: Path, name: str, size=(W, H)) -> tuple:
+    """The same scene rendered by this engine, then by Cycles (then this engine selected
+    again): (ours, Cycles') passes of the first view layer, and our render report."""
+    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", size)["ViewLayer"]
+    report = list(stats()["report"])
+    scene.render.engine = "CYCLES"
+    try:
+        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", size)["ViewLayer"]
+    finally:
+        scene.render.engine = "SPLAT_TRACER"
+    return ours, theirs, report
+
+
 def keep_png(name: str, out: dict) -> None:
     """Saves each layer's Combined as a PNG when SPLAT_TRACER_TEST_IMAGES names a folder."""
     folder = os.environ.get("SPLAT_TRACER_TEST_IMAGES")

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from test_node_materials import HALVES, SIZE, _flat_cloud, _setup, correlation, plane
-from test_scene_export import render, stats
+from test_scene_export import render_both, stats
 
 AOV_CORRELATION = 0.95
 AOV_ATOL = 0.005
@@ -31,14 +31,7 @@ def _aov(scene, name, kind):
 
 def _both(bpy, scene, tmp_path, name):
     """(ours, Cycles') passes of the view layer, and our report."""
-    ours = render(bpy, scene, tmp_path / f"{name}_ours.exr", (SIZE, SIZE))["ViewLayer"]
-    report = list(stats()["report"])
-    scene.render.engine = "CYCLES"
-    try:
-        theirs = render(bpy, scene, tmp_path / f"{name}_cycles.exr", (SIZE, SIZE))["ViewLayer"]
-    finally:
-        scene.render.engine = "SPLAT_TRACER"
-    return ours, theirs, report
+    return render_both(bpy, scene, tmp_path, name, (SIZE, SIZE))
 
 
 def _checker_floor(bpy, aov_name="Mask"):
