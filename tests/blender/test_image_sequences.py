@@ -114,8 +114,10 @@ def test_sequence_frames_and_paths_are_blenders(blender, empty_scene, tmp_path):
 
 def test_read_file_gives_blenders_pixels(blender, empty_scene, tmp_path):
     """images.read_file of a file is images.read of that file loaded by Blender: 8-bit files
-    exactly, deeper ones (16-bit PNG and TIFF, float EXR; alpha below 1) within 1e-4, in the
-    sRGB, linear and data colour spaces."""
+    exactly (one step of 1/255 when un-premultiplied), deeper ones (16-bit PNG and TIFF,
+    float EXR; alpha below 1) within 1e-4, in the sRGB, linear and data colour spaces and
+    every Alpha mode of the image (the tiles and frames follow the image's, as Blender loads
+    them)."""
     from splat_tracer.blender.export import images
 
     bpy, scene = blender, empty_scene
@@ -132,14 +134,22 @@ def test_read_file_gives_blenders_pixels(blender, empty_scene, tmp_path):
         made.save_render(str(tmp_path / name), scene=scene)
         bpy.data.images.remove(made)
         for space in ("sRGB", "Linear Rec.709", "Non-Color"):
-            loaded = bpy.data.images.load(str(tmp_path / name), check_existing=False)
-            loaded.colorspace_settings.name = space
-            theirs = images.read(loaded, print)
-            ours = images.read_file(str(tmp_path / name), space, loaded.name, print)
-            assert (ours.srgb, ours.is_float) == (theirs.srgb, theirs.is_float) == (ours.srgb, depth != "8")
-            np.testing.assert_allclose(ours.values, theirs.values, atol=0.0 if depth == "8" else 1e-4,
-                                       err_msg=f"{name} {space}")
-            bpy.data.images.remove(loaded)
+            # The image's Alpha mode as Blender loads it (None: the one a loaded image gets).
+            for alpha_mode in (None, "STRAIGHT", "PREMUL", "CHANNEL_PACKED", "NONE"):
+                loaded = bpy.data.images.load(str(tmp_path / name), check_existing=False)
+                loaded.colorspace_settings.name = space
+                if alpha_mode is not None:
+                    loaded.alpha_mode = alpha_mode
+                    loaded.reload()
+                theirs = images.read(loaded, print)
+                ours = images.read_file(str(tmp_path / name), space, loaded.name, print, loaded.alpha_mode)
+                assert (ours.srgb, ours.is_float) == (theirs.srgb, theirs.is_float) == (ours.srgb, depth != "8")
+                # Bytes exactly, except that Blender's byte un-premultiply rounds a few values the
+                # other way: one step of 1/255 at most there.
+                atol = (1.0 / 255 + 1e-6 if loaded.alpha_mode == "PREMUL" else 0.0) if depth == "8" else 1e-4
+                np.testing.assert_allclose(ours.values, theirs.values, atol=atol,
+                                           err_msg=f"{name} {space} {loaded.alpha_mode}")
+                bpy.data.images.remove(loaded)
     assert images.read_file(str(tmp_path / "none.png"), "sRGB", "none", print) is None
     (tmp_path / "bad.png").write_bytes(b"not a png")
     assert images.read_file(str(tmp_path / "bad.png"), "sRGB", "bad", print) is None

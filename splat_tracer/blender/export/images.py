@@ -67,7 +67,7 @@ def _by_rule(px: np.ndarray, is_float: bool, space: str, name: str, say) -> Pixe
     return Pixels(px, space not in LINEAR)
 
 
-def read_file(path: str, space: str, name: str, say) -> Optional[Pixels]:
+def read_file(path: str, space: str, name: str, say, alpha_mode: str = "STRAIGHT") -> Optional[Pixels]:
     """The image file at `path` (a UDIM tile, a frame of a sequence) read as Blender would
     load it into an image in colour space `space`, then by the rule above -- without
     creating a Blender image: this runs inside a render, where adding and removing IDs is not
@@ -79,7 +79,11 @@ def read_file(path: str, space: str, name: str, say) -> Optional[Pixels]:
     stored bytes, alpha straight; a deeper one becomes floats converted from `space` to
     scene linear with alpha premultiplied (a straight-alpha file's colour decoded then
     multiplied by alpha; a premultiplied one's divided by alpha first), except in a data
-    space (Non-Color), where the values are left as stored."""
+    space (Non-Color), where the values are left as stored. Which of the two the file is
+    comes from the image's Alpha mode (`alpha_mode`), as Blender loads it: Straight and
+    Premultiplied as said, Channel Packed decoded without touching alpha, None decoded with
+    alpha 1; an 8-bit file in a colour space gets alpha 1 under None, and its colour divided
+    by alpha (held to 1) under Premultiplied (measured, Blender 5.0.1)."""
     oiio = _oiio()
     if oiio is None:
         say(f": image '{name}': Blender's OpenImageIO module is not available to read '{path}'")
@@ -104,17 +108,27 @@ def read_file(path: str, space: str, name: str, say) -> Optional[Pixels]:
     px = np.ascontiguousarray(px[::-1], np.float32)  # bottom row first, as Blender holds it
     if channels == 2:  # grey and alpha
         px = np.concatenate([px[..., :1].repeat(3, -1), px[..., 1:]], axis=-1)
-    if is_float and px.shape[2] == 4:
+    colour = space not in DATA  # Blender leaves data (non-colour) values alone
+    if is_float and px.shape[2] == 4 and colour:
         alpha = px[..., 3:]
-        straight = bool(spec.get_int_attribute("oiio:UnassociatedAlpha", 0))
+        if alpha_mode == "PREMUL":  # premultiplied in the file: the colour apart from alpha first
+            px[..., :3] = np.divide(px[..., :3], alpha, out=np.zeros_like(px[..., :3]), where=alpha > 0)
         if space in SRGB:
-            if not straight:  # premultiplied in the file: the colour apart from alpha first
-                px[..., :3] = np.divide(px[..., :3], alpha, out=np.zeros_like(px[..., :3]), where=alpha > 0)
-            px[..., :3] = srgb_to_linear(px[..., :3]) * alpha
-        elif straight and space not in DATA:  # Blender leaves data (non-colour) values alone
+            px[..., :3] = srgb_to_linear(px[..., :3])
+        if alpha_mode in ("STRAIGHT", "PREMUL"):
             px[..., :3] *= alpha
+        elif alpha_mode == "NONE":
+            px[..., 3] = 1.0
     elif is_float and space in SRGB:
         px[..., :3] = srgb_to_linear(px[..., :3])
+    elif not is_float and px.shape[2] == 4 and colour:
+        if alpha_mode == "NONE":
+            px[..., 3] = 1.0
+        elif alpha_mode == "PREMUL":
+            alpha = px[..., 3:]
+            # Blender un-premultiplies the bytes into bytes: held to 1, rounded to 1/255.
+            rgb = np.minimum(np.divide(px[..., :3], alpha, out=np.zeros_like(px[..., :3]), where=alpha > 0), 1.0)
+            px[..., :3] = np.round(rgb * 255.0) / 255.0
     return _by_rule(px, is_float, space, name, say)
 
 

@@ -1109,7 +1109,7 @@ def _file_pixels(image, slot, path: str, say):
         return None
     key = (image.name_full, slot, path, stamp, image.colorspace_settings.name, image.alpha_mode)
     if key not in _FILES:
-        read = images.read_file(path, image.colorspace_settings.name, image.name, say)
+        read = images.read_file(path, image.colorspace_settings.name, image.name, say, image.alpha_mode)
         for old in [k for k in _FILES if k[:2] == key[:2]]:
             del _FILES[old]
         _FILES[key] = _texture(read, read.is_float, image.alpha_mode) if read is not None else None
