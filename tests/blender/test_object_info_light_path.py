@@ -449,3 +449,30 @@ def test_more_object_attributes_than_carried_are_said(blender, empty_scene, tmp_
     assert said == ["the materials read more than 16 object, instancer or view-layer attributes; these read 0: p16"]
     # The first 16 are read (the tile's colour is white x 16 x 0.01).
     np.testing.assert_allclose(_at(image, *TILES[0]), [0.16] * 3, atol=TILE_ATOL)
+
+
+def test_sky_occlusion_rays_are_shadow_rays_to_a_light_path_node(blender, empty_scene, tmp_path):
+    """Sky Light: Ambient Occlusion lights the floor by occlusion rays to the world: a block
+    transparent to shadow rays (Light Path > Is Shadow Ray) lets them through, as every
+    shadow ray. (They reached its program with no ray kind, read as a camera ray: blocked.)"""
+    bpy = blender
+
+    def floor_beside_block(use_light_path):
+        bpy.ops.wm.read_homefile(use_empty=True)
+        scene = bpy.context.scene
+        scene.render.engine = "SPLAT_TRACER"
+        _shadowless_block(bpy, scene, use_light_path)
+        bpy.data.objects["Block"].location.z = 0.3  # low over the floor: it hides much of the sky
+        bpy.data.objects.remove(next(o for o in bpy.data.objects if o.type == "LIGHT"))
+        scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+        scene.cycles.max_bounces = scene.cycles.diffuse_bounces = 1
+        scene.splat_tracer.sky_light, scene.cycles.samples = "AO", 64
+        image = render(bpy, scene, tmp_path / f"sky_ao_{use_light_path}.exr", (SIZE, SIZE))["ViewLayer"]
+        image = image["Combined"][..., :3]
+        beside = np.array([_at(image, x, y) for x in (-0.3, 0.3) for y in (-0.3, 0.3)]).mean(0)
+        return beside, _at(image, 0.9, -0.9)
+
+    through, open_floor = floor_beside_block(True)
+    np.testing.assert_allclose(through, open_floor, rtol=0.05)  # the block hides nothing
+    blocked, open_floor = floor_beside_block(False)
+    assert blocked.mean() < 0.9 * open_floor.mean(), (blocked, open_floor)  # an ordinary block does (0.86)

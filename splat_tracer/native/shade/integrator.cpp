@@ -933,7 +933,7 @@ Vec3 Integrator::radiance(Ray ray, PathState st, const Sampler &rng, Primary *pr
     const Vec3 sky = world_seen(kVisDiffuse);
     if (cfg.sky_ao && luminance(diffuse_albedo) > 0.f && luminance(sky) > 0.f) {
         const Vec3 skylight =
-            clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally), st.weight, st.bounces > 0);
+            clamped(diffuse_albedo * sky * sky_occlusion(sp, here, n, ng, rng, tally, st), st.weight, st.bounces > 0);
         L = L + skylight;
         if (st.split) tap(st, skylight, cfg.light_groups.world, false, kLobeDiffuse);
     }
@@ -1235,7 +1235,7 @@ Vec3 Integrator::environment_light(const SurfacePoint &sp, const Origin &from, V
 // is (and as Cycles' own replacement, Fast GI's AO bounces, samples and evaluates the BSDF
 // with it); Cycles' AO pass and additive AO skip it, and so does ao_term.
 Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng,
-                               Tally &tally) const {
+                               Tally &tally, const PathState &st) const {
     Vec3 open;
     const int k = settings_.ao_samples;
     for (int i = 0; i < k; ++i) {
@@ -1247,7 +1247,8 @@ Vec3 Integrator::sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 
         r.o = sp.p + ng * sp.offset;
         r.d = wi;
         ++tally.diffuse;
-        open = open + shadow_transmittance(r, from, tally) * bump_shadowing(sp, wi);
+        // A Light Path node on a blocker sees a shadow ray of this path, as on every shadow ray.
+        open = open + shadow_transmittance(r, from, tally, &st) * bump_shadowing(sp, wi);
     }
     return open * (1.f / float(k));
 }

@@ -153,7 +153,8 @@ class Integrator {
     static Ray shadow_ray(const SurfacePoint &sp, Vec3 ng, Vec3 wi, float distance);
     // `st`: the path the shadow ray leaves from (Light Path nodes on the way read it); null: none.
     Vec3 shadow_transmittance(Ray ray, Origin from, Tally &tally, const PathState *st = nullptr) const;
-    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng, Tally &tally) const;
+    Vec3 sky_occlusion(const SurfacePoint &sp, const Origin &from, Vec3 n, Vec3 ng, const Sampler &rng, Tally &tally,
+                       const PathState &st) const;
     void write_catcher(const CatcherSums &sums, float inv, float alpha, size_t p) const;
     // A pixel's passes finished from their sums (shade_block's and finish()'s one way).
     void finish_pixel(size_t p, float inv, float alpha_sum, const CatcherSums *catcher,
