@@ -163,7 +163,7 @@ def _oiio():
                 module = importlib.util.module_from_spec(spec)
                 sys.modules["OpenImageIO"] = module
                 spec.loader.exec_module(module)
-            except ImportError:
+            except Exception:  # noqa: BLE001 - any failure: no half-loaded module left for others
                 sys.modules.pop("OpenImageIO", None)
                 module = None
             break

@@ -901,7 +901,7 @@ class Compiler:
         key = id(model)
         if key not in _SKY_IMAGES or _SKY_IMAGES[key][0] is not model:
             while len(_SKY_IMAGES) >= 4:
-                _SKY_IMAGES.pop(next(iter(_SKY_IMAGES)))
+                _SKY_IMAGES.pop(next(iter(list(_SKY_IMAGES))), None)  # (another thread may take it first)
             _SKY_IMAGES[key] = (model, nodes.Image(sky.sky_image(model, width)))
         image = _SKY_IMAGES[key][1]
         socket = next(s for s in node.inputs if s.name == "Vector")
@@ -1076,8 +1076,9 @@ def _image_pixels(image, say):
         return None
     texture = _texture(read, image.is_float, image.alpha_mode)
     # Keep only the current version of each image (its old pixels are garbage).
-    for old in [k for k in _IMAGES if k[:2] == key[:2]]:
-        del _IMAGES[old]
+    # (A snapshot of the keys: the viewport's and a final render's threads both read images.)
+    for old in [k for k in list(_IMAGES) if k[:2] == key[:2]]:
+        _IMAGES.pop(old, None)
     _IMAGES[key] = texture
     return texture
 
@@ -1110,8 +1111,8 @@ def _file_pixels(image, slot, path: str, say):
     key = (image.name_full, slot, path, stamp, image.colorspace_settings.name, image.alpha_mode)
     if key not in _FILES:
         read = images.read_file(path, image.colorspace_settings.name, image.name, say, image.alpha_mode)
-        for old in [k for k in _FILES if k[:2] == key[:2]]:
-            del _FILES[old]
+        for old in [k for k in list(_FILES) if k[:2] == key[:2]]:  # a snapshot: another thread may add
+            _FILES.pop(old, None)
         _FILES[key] = _texture(read, read.is_float, image.alpha_mode) if read is not None else None
     return _FILES[key]
 

@@ -245,7 +245,7 @@ def _derived(key: tuple, make):
     digest = _digest(*key)
     if digest not in _DERIVED:
         while len(_DERIVED) >= 8:
-            _DERIVED.pop(next(iter(_DERIVED)))
+            _DERIVED.pop(next(iter(list(_DERIVED))), None)  # (another thread may take it first)
         _DERIVED[digest] = make()
     return _DERIVED[digest]
 
