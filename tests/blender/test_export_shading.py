@@ -142,8 +142,16 @@ def test_what_a_bump_or_normal_map_cannot_read_is_said(blender, empty_scene, es,
     attribute.attribute_name = "height"
     tree.links.new(attribute.outputs["Fac"], bump.inputs["Height"])
     es.material_of(material, report)
-    assert report.lines == ["material 'Bumpy': the Bump's height reads an attribute (an Attribute or a named UV Map "
-                            "node), which is not offset along the surface: it adds no slope"]
+    assert report.lines == ["material 'Bumpy': the Bump's height reads an attribute (an Attribute, Color Attribute "
+                            "or named UV Map node, Pointiness, Random Per Island), which is not offset along the "
+                            "surface: it adds no slope"]
+    ao = tree.nodes.new("ShaderNodeAmbientOcclusion")
+    tree.links.new(ao.outputs["AO"], bump.inputs["Height"])
+    es.material_of(material, report)
+    assert report.lines[1:] == ["material 'Bumpy': the Bump's height reads an Ambient Occlusion node (its rays "
+                                "leave from the shading point), which is not offset along the surface: it adds "
+                                "no slope"]
+    del report.lines[1:]
     normal_map = tree.nodes.new("ShaderNodeNormalMap")
     normal_map.uv_map = "Second"
     tree.links.new(noise.outputs["Color"], normal_map.inputs["Color"])

@@ -630,10 +630,19 @@ class Compiler:
             h = self.input(height, 1, stack)
         finally:
             self.memo, self.bump_depth = outer, self.bump_depth - 1
-        if any(row[0] == nodes.OPS.index("ATTRIBUTE") for row in self.b.code[first:]):
-            # The two nearby points move the position-dependent globals only (ShaderGlobals::bump).
-            self.say(f": the Bump's height reads an attribute (an Attribute or a named UV Map node), which "
-                     f"is not offset along the surface: it adds no slope")
+        # The two nearby points move the position-dependent globals only (ShaderGlobals::bump):
+        # what else the height reads is the same at all three points, and adds no slope.
+        still = [what for what, read in (
+            ("an attribute (an Attribute, Color Attribute or named UV Map node, Pointiness, Random Per Island)",
+             lambda row: row[0] == nodes.OPS.index("ATTRIBUTE")),
+            ("Geometry > Parametric",
+             lambda row: row[0] == nodes.OPS.index("GLOBAL") and row[2] == nodes.GLOBALS.index("PARAMETRIC")),
+            ("an Ambient Occlusion node (its rays leave from the shading point)",
+             lambda row: row[0] == nodes.OPS.index("AMBIENT_OCCLUSION")))
+            if any(read(row) for row in self.b.code[first:])]
+        if still:
+            self.say(f": the Bump's height reads {' and '.join(still)}, which is not offset along the surface: "
+                     f"it adds no slope")
         self.b.emit("BUMP", out, h, strength, distance, normal, first, int(node.invert))
         return {node.outputs[0].identifier: out}
 
