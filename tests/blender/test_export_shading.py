@@ -422,6 +422,13 @@ def test_lamp_node_trees_are_evaluated_once(blender, empty_scene, es, report):
     linked.light_linking.receiver_collection = bpy.data.collections.new("Receivers")
     lamp_of(bpy, es, linked, report)
     assert report.lines == [f"light '{linked.name}': light linking is ignored"]
+    # A node that reads a surface: the tree runs at the lamp's centre with none, said.
+    shaded, nodes_, links, emission = _lamp_tree(bpy, empty_scene)
+    ao = nodes_.new("ShaderNodeAmbientOcclusion")
+    links.new(ao.outputs["AO"], emission.inputs["Strength"])
+    lamp_of(bpy, es, shaded, report)
+    assert f"light '{shaded.name}': its node tree is evaluated with no surface: Ambient Occlusion reads 1" \
+        in report.lines[1:], report.lines
 
 
 def test_blackbody_node_beside_blenders_own(blender, empty_scene):

@@ -588,6 +588,13 @@ def _as_lamp_light(program, say):
     code = np.array(program.code, np.int32).reshape(-1, programs.WIDTH)
     if (code[:, 0] == programs.OPS.index("OBJECT_VALUE")).any():
         say("its node tree's Object Info and object attributes read 0 (a lamp is no instance here)")
+    # Nodes that read a surface: the tree runs once at the lamp's centre, with no geometry.
+    surface = [label for op, label in (("AMBIENT_OCCLUSION", "Ambient Occlusion reads 1"),
+                                       ("WIREFRAME", "Wireframe reads 0"), ("BEVEL", "Bevel keeps the normal"),
+                                       ("ATTRIBUTE", "geometry attributes read 0"))
+               if (code[:, 0] == programs.OPS.index(op)).any()]
+    if surface:
+        say(f"its node tree is evaluated with no surface: {', '.join(surface)}")
     rows = code[:, 0] == programs.OPS.index("LIGHT_PATH")
     if not rows.any():
         return program
