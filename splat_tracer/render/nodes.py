@@ -218,11 +218,30 @@ def attribute_layout(programs) -> tuple:
     sorted by name, each once, as many as fit in MAX_POINT_ATTRIBUTES floats (the others read
     0: attributes_read tells which were left out)."""
     layout, used = [], 0
-    for name, width in sorted(attributes_read(programs).items()):
+    # The user's own names first: the ones the export derives (POINTINESS, ...) after them.
+    for name, width in sorted(attributes_read(programs).items(), key=lambda item: (_is_derived(item[0]), item[0])):
         if used + width <= MAX_POINT_ATTRIBUTES:
             layout.append((name, width))
             used += width
     return tuple(layout)
+
+
+def _is_derived(name: str) -> bool:
+    return name in (POINTINESS, RANDOM_PER_ISLAND) or name.startswith((TRANSPARENCY_OF, TANGENT_OF))
+
+
+def attribute_label(name: str) -> str:
+    """How the render report names an attribute a program reads: the user's own by its name,
+    one the export derives by what it is."""
+    if name == POINTINESS:
+        return "Geometry > Pointiness"
+    if name == RANDOM_PER_ISLAND:
+        return "Geometry > Random Per Island"
+    if name.startswith(TRANSPARENCY_OF):
+        return f"the alpha of colour attribute {name[len(TRANSPARENCY_OF):]!r}"
+    if name.startswith(TANGENT_OF):
+        return f"the tangent of UV map {name[len(TANGENT_OF):]!r}"
+    return f"attribute {name!r}"
 
 
 def object_attribute_layout(programs) -> tuple:

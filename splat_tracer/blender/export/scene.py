@@ -590,7 +590,8 @@ def _attribute_layout(depsgraph, frame: _Frame, report: shading.Report, aovs: di
     left_out = sorted(set(nodes.attributes_read(programs)) - {name for name, _ in layout})
     if left_out:
         report.once(f"the materials read more point attributes than the renderer carries ({len(layout)} of them, "
-                    f"by name); attribute {', '.join(repr(n) for n in left_out)} reads 0")
+                    f"by name); {', '.join(nodes.attribute_label(n) for n in left_out)} "
+                    f"{'reads' if len(left_out) == 1 else 'read'} 0")
     return layout
 
 
