@@ -16,14 +16,18 @@ def _rot(x, k):
     return ((x << np.uint32(k)) | (x >> np.uint32(32 - k))) & np.uint32(_U32)
 
 
-def hash_uint_to_float(k) -> np.ndarray:
-    """Cycles' hash_uint_to_float of uint32 words: Jenkins' lookup3 of one word (seeded
-    0xdeadbeef + 4 + 13), its last word over 0xFFFFFFFF, in float32 as Cycles computes it."""
+def lookup3(*words) -> np.ndarray:
+    """Bob Jenkins' lookup3 hash of 1-3 uint32 words (arrays alike), seeded as Blender and
+    Cycles seed it (0xdeadbeef + 4 x the word count + 13): Cycles' hash_uint .. hash_uint3."""
     with np.errstate(over="ignore"):
-        k = np.asarray(k, np.uint64).astype(np.uint32)
-        a = np.full(k.shape, (0xDEADBEEF + (1 << 2) + 13) & _U32, np.uint32)
-        b, c = a.copy(), a.copy()
-        a = a + k
+        words = [np.asarray(w, np.uint64).astype(np.uint32) for w in words]
+        start = np.uint32((0xDEADBEEF + (len(words) << 2) + 13) & _U32)
+        a, b, c = (np.full(np.broadcast(*words).shape, start, np.uint32) for _ in range(3))
+        a = a + words[0]
+        if len(words) > 1:
+            b = b + words[1]
+        if len(words) > 2:
+            c = c + words[2]
         # lookup3's final(a, b, c)
         c = (c ^ b) - _rot(b, 14)
         a = (a ^ c) - _rot(c, 11)
@@ -32,7 +36,13 @@ def hash_uint_to_float(k) -> np.ndarray:
         a = (a ^ c) - _rot(c, 4)
         b = (b ^ a) - _rot(a, 14)
         c = (c ^ b) - _rot(b, 24)
-    return c.astype(np.float32) * np.float32(1.0 / _U32)
+    return c
+
+
+def hash_uint_to_float(k) -> np.ndarray:
+    """Cycles' hash_uint_to_float of uint32 words: lookup3 of one word over 0xFFFFFFFF, in
+    float32 as Cycles computes it."""
+    return lookup3(k).astype(np.float32) * np.float32(1.0 / _U32)
 
 
 def island_roots(n_vertices: int, edges) -> np.ndarray:

@@ -624,7 +624,7 @@ MATERIAL_SKY_WIDTH = 1024
 
 def equirectangular_directions(width: int, height: int) -> np.ndarray:
     """(height, width, 3) unit directions of an equirectangular image's pixel centres, row 0
-    at the nadir, u = 0.5 along -X and increasing towards -Y: Cycles' layout of a world (and
+    at the nadir, u = 0.5 along +X and increasing towards -Y: Cycles' layout of a world (and
     of an Environment Texture's Equirectangular lookup)."""
     u = (np.arange(width) + 0.5) / width
     v = (np.arange(height) + 0.5) / height

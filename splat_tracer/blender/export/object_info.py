@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...render import mesh_attributes
+
 
 def _hash_string(text: str) -> int:
     """Cycles' hash_string: a multiplicative hash of the name's bytes (UTF-8), 32-bit, each
@@ -21,22 +23,9 @@ def _hash_string(text: str) -> int:
     return h
 
 
-def _rot(x: int, k: int) -> int:
-    return ((x << k) | (x >> (32 - k))) & 0xFFFFFFFF
-
-
-# lookup3's final(): (word changed, word mixed in, rotation), in order.
-_FINAL = (("c", "b", 14), ("a", "c", 11), ("b", "a", 25), ("c", "b", 16), ("a", "c", 4), ("b", "a", 14),
-          ("c", "b", 24))
-
-
 def hash_uint2(kx: int, ky: int) -> int:
-    """Bob Jenkins' lookup3 hash of two 32-bit words (Cycles' hash_uint2)."""
-    start = (0xDEADBEEF + (2 << 2) + 13) & 0xFFFFFFFF
-    w = {"a": (start + kx) & 0xFFFFFFFF, "b": (start + ky) & 0xFFFFFFFF, "c": start}
-    for x, y, k in _FINAL:
-        w[x] = ((w[x] ^ w[y]) - _rot(w[y], k)) & 0xFFFFFFFF
-    return w["c"]
+    """Cycles' hash_uint2: lookup3 of two 32-bit words."""
+    return int(mesh_attributes.lookup3(kx, ky))
 
 
 def random_of(inst, obj) -> float:

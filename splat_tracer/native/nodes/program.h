@@ -263,6 +263,6 @@ Vec3 hsv_to_rgb(Vec3 hsv);
 Vec3 blackbody_rec709(float kelvin);
 
 constexpr int kMaxBumpDepth = 3;  // Bump nodes inside a Bump's height: each level triples its cost
-constexpr int kMaxAoSamples = 128;  // the Ambient Occlusion node's Samples: Blender's limit
+constexpr int kMaxAoSamples = 128;  // the Ambient Occlusion and Bevel nodes' Samples: Blender's limit (both)
 
 }  // namespace splat
