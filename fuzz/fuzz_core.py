@@ -41,7 +41,10 @@ from splat_tracer.render.scene import RAY_VISIBILITY, InstanceRow, native_scene,
 from splat_tracer.render.shading import (PASSES, SETTINGS_FIELDS, Light, Material, RenderSettings,  # noqa: E402
                                          World)
 
-ALLOWED = (ValueError, TypeError, MemoryError)
+# A clean refusal: the core's ValueError (InputError), a wrong type, no memory, or CPython's
+# argument parsing refusing an integer beyond its C type (OverflowError: a fuzzed
+# adaptive_min_samples of 4.6e14 for an int, found by the fuzzer) -- never a crash.
+ALLOWED = (ValueError, TypeError, MemoryError, OverflowError)
 SPECIAL = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-45, 1.1754942e-38, 1e18, -1e18, 1.0000001e18, 1e19, -1e19,
            3.4028235e38, -3.4028235e38, 1.0, -1.0, 0.5, 2.0, 1e-7, 1e7]
 MAX_LAYER_HITS = _core.MAX_LAYER_HITS
