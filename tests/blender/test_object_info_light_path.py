@@ -23,8 +23,8 @@ import math
 import numpy as np
 
 from blender_helpers import add_camera
-from test_scene_export import black_world, cube, direct_light_only, lamp, mesh_object, plane, principled, render, \
-    render_both, stats, uv_sphere
+from test_scene_export import black_world, cube, direct_light_only, instance_with_geometry_nodes, lamp, mesh_object, \
+    plane, principled, render, render_both, stats, uv_sphere
 
 SIZE = 64
 TILE_ATOL = 0.01
@@ -357,22 +357,7 @@ def test_object_info_random_of_geometry_nodes_instances_matches_cycles(blender, 
     info = nodes.new("ShaderNodeObjectInfo")
     links.new(info.outputs["Random"], emission.inputs["Color"])
     tile = _square(bpy, "Tile", 0.5, TILES[0] + (0,), m)
-    mesh = bpy.data.meshes.new("Spots")
-    mesh.from_pydata([p + (0,) for p in TILES[1:]], [], [])
-    holder = bpy.data.objects.new("Spots", mesh)
-    scene.collection.objects.link(holder)
-    group = bpy.data.node_groups.new("Copies", "GeometryNodeTree")
-    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    gn, gl = group.nodes, group.links
-    inp, out = gn.new("NodeGroupInput"), gn.new("NodeGroupOutput")
-    obj_info, on_points = gn.new("GeometryNodeObjectInfo"), gn.new("GeometryNodeInstanceOnPoints")
-    obj_info.inputs["Object"].default_value = tile
-    obj_info.inputs["As Instance"].default_value = True
-    gl.new(inp.outputs[0], on_points.inputs["Points"])
-    gl.new(obj_info.outputs["Geometry"], on_points.inputs["Instance"])
-    gl.new(on_points.outputs["Instances"], out.inputs[0])
-    holder.modifiers.new("Copies", "NODES").node_group = group
+    instance_with_geometry_nodes(bpy, tile, [p + (0,) for p in TILES[1:]])
     _setup(bpy, scene)
     ours, theirs, report = _both(bpy, scene, tmp_path, "gn_random")
     got = np.array([_at(ours, x, y) for x, y in TILES])

@@ -429,10 +429,11 @@ INSTANCE_SPOTS = ((-1.2, 0.8, 0), (1.2, 0.8, 0), (-1.2, -0.8, 0), (1.2, -0.8, 0)
 BALL_R = 0.3
 
 
-def instance_with_geometry_nodes(bpy, ball):
-    """An object whose Geometry Nodes put an instance of `ball` on each of its vertices."""
+def instance_with_geometry_nodes(bpy, ball, spots=INSTANCE_SPOTS):
+    """An object whose Geometry Nodes put an instance of `ball` on each of its vertices, at
+    `spots` (x, y, z)."""
     mesh = bpy.data.meshes.new("Spots")
-    mesh.from_pydata(list(INSTANCE_SPOTS), [], [])
+    mesh.from_pydata(list(spots), [], [])
     holder = bpy.data.objects.new("Spots", mesh)
     bpy.context.scene.collection.objects.link(holder)
     group = bpy.data.node_groups.new("Instancer", "GeometryNodeTree")
