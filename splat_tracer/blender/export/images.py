@@ -184,7 +184,7 @@ def _loaded(image) -> bool:
     w, h = image.size
     if not w or not h:
         return False
-    if image.source == "FILE" and not image.has_data:
+    if image.source in ("FILE", "TILED") and not image.has_data:  # (a tiled one: its first tile)
         try:
             image.pixels[0]  # reading a pixel loads the buffer
         except (IndexError, RuntimeError):

@@ -1138,8 +1138,6 @@ def _tile_pixels(image, say) -> list:
     for k, tile in enumerate(image.tiles):
         number = int(tile.number)
         if k == 0:
-            if not image.has_data:
-                _try_load(image)
             out.append((number, _image_pixels(image, say)))
             if out[-1][1] is None:
                 missing.append(number)
@@ -1208,15 +1206,6 @@ def sequence_path(path: str, number: int) -> str:
         first = last = end
     digits = str(abs(number)).zfill(last - first) if (number or last > first) else ""
     return path[:cut] + name[:first] + ("-" if number < 0 else "") + digits + name[last:]
-
-
-def _try_load(image) -> bool:
-    """Asks Blender to load the image (from disk or its packed copy); whether it has pixels."""
-    try:
-        image.pixels[0]  # reading a pixel loads the buffer
-    except (IndexError, RuntimeError):
-        return False
-    return bool(image.has_data) and image.size[0] > 0
 
 
 # Which inputs of each shader feed which material field (the engine's Material fields).
